@@ -1,0 +1,374 @@
+//! Sparse sets of significant voxels on a regular grid (space skipping).
+//!
+//! A [`SparseGrid`] records which voxels of an `nx x ny x nz` grid are significant. Voxel ids are
+//! `x + nx * (y + ny * z)` as `u32`; a grid with more than 2^32 voxels is refused with
+//! [`GridError::TooLarge`] rather than wrapping. Besides a bitmap (with a rank index, so that the
+//! attributes of the significant voxels can be stored compactly), the grid keeps run-length rows
+//! along each of the three axes: the inner loop of every ordering walks runs, so empty space costs
+//! nothing there. A dense grid is the case where every voxel is significant.
+
+use thiserror::Error;
+
+/// Problems with a grid's size or with a list of voxel ids.
+#[derive(Debug, Error, Clone, PartialEq, Eq)]
+pub enum GridError {
+    /// An axis has no voxels.
+    #[error("grid {0:?} has an axis without voxels")]
+    EmptyAxis([u32; 3]),
+    /// The grid has more voxels than `u32` ids address.
+    #[error("grid {dims:?} has {count} voxels; u32 voxel ids address at most 4294967296")]
+    TooLarge {
+        /// The grid size.
+        dims: [u32; 3],
+        /// Its voxel count.
+        count: u64,
+    },
+    /// An id lies outside the grid.
+    #[error("voxel id {id} lies outside the {dims:?} grid")]
+    IdOutOfRange {
+        /// The offending id.
+        id: u32,
+        /// The grid size.
+        dims: [u32; 3],
+    },
+    /// Ids given as a list must be strictly increasing.
+    #[error("voxel ids must be strictly increasing; position {0} breaks that")]
+    Unsorted(usize),
+}
+
+/// A run of consecutive significant voxels along one axis: `start..start + len`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Run {
+    /// First coordinate of the run along the row's axis.
+    pub start: u32,
+    /// Number of voxels in the run (at least one).
+    pub len: u32,
+}
+
+impl Run {
+    /// One past the last coordinate of the run.
+    pub fn end(self) -> u32 {
+        self.start + self.len
+    }
+}
+
+/// Run-length rows along one axis. Row `r` holds `runs[offsets[r]..offsets[r + 1]]`, sorted by
+/// start. A row is named by the two other coordinates: `k_b + n_b * k_c` with `b < c`.
+#[derive(Debug, Clone, Default)]
+struct AxisRows {
+    offsets: Vec<u32>,
+    runs: Vec<Run>,
+}
+
+/// The significant voxels of a grid, with run-length rows along each axis.
+#[derive(Debug, Clone)]
+pub struct SparseGrid {
+    dims: [u32; 3],
+    count: u64,
+    bits: Vec<u64>,
+    /// Number of set bits before each word of `bits`.
+    word_rank: Vec<u32>,
+    rows: [AxisRows; 3],
+}
+
+/// The two axes other than `axis`, in increasing order.
+pub fn other_axes(axis: usize) -> (usize, usize) {
+    match axis {
+        0 => (1, 2),
+        1 => (0, 2),
+        _ => (0, 1),
+    }
+}
+
+/// Checks a grid size and returns its voxel count.
+pub fn voxel_count(dims: [u32; 3]) -> Result<u64, GridError> {
+    if dims.contains(&0) {
+        return Err(GridError::EmptyAxis(dims));
+    }
+    let count = dims.iter().map(|&n| u64::from(n)).product::<u64>();
+    if count > 1 << 32 {
+        return Err(GridError::TooLarge { dims, count });
+    }
+    Ok(count)
+}
+
+impl SparseGrid {
+    /// A grid where every voxel is significant.
+    pub fn dense(dims: [u32; 3]) -> Result<Self, GridError> {
+        let count = voxel_count(dims)?;
+        let words = count.div_ceil(64) as usize;
+        let mut bits = vec![u64::MAX; words];
+        if count % 64 != 0 {
+            bits[words - 1] = (1u64 << (count % 64)) - 1;
+        }
+        let word_rank = (0..words).map(|w| (w * 64) as u32).collect();
+        let rows = std::array::from_fn(|axis| {
+            let (b, c) = other_axes(axis);
+            let n_rows = dims[b] as usize * dims[c] as usize;
+            AxisRows {
+                offsets: (0..=n_rows as u32).collect(),
+                runs: vec![
+                    Run {
+                        start: 0,
+                        len: dims[axis]
+                    };
+                    n_rows
+                ],
+            }
+        });
+        Ok(Self {
+            dims,
+            count,
+            bits,
+            word_rank,
+            rows,
+        })
+    }
+
+    /// The voxels for which `significant(id)` holds.
+    pub fn from_mask(dims: [u32; 3], mut significant: impl FnMut(u32) -> bool) -> Result<Self, GridError> {
+        let count = voxel_count(dims)?;
+        let mut bits = vec![0u64; count.div_ceil(64) as usize];
+        for id in 0..count {
+            if significant(id as u32) {
+                bits[(id / 64) as usize] |= 1 << (id % 64);
+            }
+        }
+        Ok(Self::from_bits(dims, bits))
+    }
+
+    /// The voxels listed in `ids`, which must be strictly increasing and inside the grid.
+    pub fn from_sorted_ids(dims: [u32; 3], ids: &[u32]) -> Result<Self, GridError> {
+        let count = voxel_count(dims)?;
+        let mut bits = vec![0u64; count.div_ceil(64) as usize];
+        for (i, &id) in ids.iter().enumerate() {
+            if u64::from(id) >= count {
+                return Err(GridError::IdOutOfRange { id, dims });
+            }
+            if i > 0 && ids[i - 1] >= id {
+                return Err(GridError::Unsorted(i));
+            }
+            bits[(id / 64) as usize] |= 1 << (id % 64);
+        }
+        Ok(Self::from_bits(dims, bits))
+    }
+
+    fn from_bits(dims: [u32; 3], bits: Vec<u64>) -> Self {
+        let mut word_rank = Vec::with_capacity(bits.len());
+        let mut total = 0u64;
+        for w in &bits {
+            word_rank.push(total as u32);
+            total += u64::from(w.count_ones());
+        }
+        let mut grid = Self {
+            dims,
+            count: total,
+            bits,
+            word_rank,
+            rows: Default::default(),
+        };
+        for axis in 0..3 {
+            grid.rows[axis] = grid.build_rows(axis);
+        }
+        grid
+    }
+
+    /// Builds the run-length rows along `axis` in two passes over the bitmap: count the runs that
+    /// start in each row, then fill them in.
+    fn build_rows(&self, axis: usize) -> AxisRows {
+        let (b, c) = other_axes(axis);
+        let n_rows = self.dims[b] as usize * self.dims[c] as usize;
+        let strides = self.strides();
+        let stride = strides[axis];
+        let mut offsets = vec![0u32; n_rows + 1];
+        let row_of = |k: [u32; 3]| k[b] as usize + self.dims[b] as usize * k[c] as usize;
+        let is_start = |id: u32, k: [u32; 3]| {
+            self.contains(id) && (k[axis] == 0 || !self.contains(id - stride))
+        };
+        self.for_each_coord(|id, k| {
+            if is_start(id, k) {
+                offsets[row_of(k) + 1] += 1;
+            }
+        });
+        for r in 0..n_rows {
+            offsets[r + 1] += offsets[r];
+        }
+        let mut fill = offsets.clone();
+        let mut runs = vec![Run { start: 0, len: 0 }; offsets[n_rows] as usize];
+        let n = self.dims[axis];
+        self.for_each_coord(|id, k| {
+            if is_start(id, k) {
+                let mut len = 1;
+                while k[axis] + len < n && self.contains(id + len * stride) {
+                    len += 1;
+                }
+                let slot = &mut fill[row_of(k)];
+                runs[*slot as usize] = Run { start: k[axis], len };
+                *slot += 1;
+            }
+        });
+        AxisRows { offsets, runs }
+    }
+
+    fn for_each_coord(&self, mut f: impl FnMut(u32, [u32; 3])) {
+        let [nx, ny, nz] = self.dims;
+        let mut id = 0u32;
+        for z in 0..nz {
+            for y in 0..ny {
+                for x in 0..nx {
+                    f(id, [x, y, z]);
+                    id = id.wrapping_add(1);
+                }
+            }
+        }
+    }
+
+    /// Grid size in voxels along x, y and z.
+    pub fn dims(&self) -> [u32; 3] {
+        self.dims
+    }
+
+    /// Id steps along x, y and z.
+    pub fn strides(&self) -> [u32; 3] {
+        [1, self.dims[0], self.dims[0].wrapping_mul(self.dims[1])]
+    }
+
+    /// Number of significant voxels.
+    pub fn len(&self) -> usize {
+        self.count as usize
+    }
+
+    /// Whether no voxel is significant.
+    pub fn is_empty(&self) -> bool {
+        self.count == 0
+    }
+
+    /// Whether every voxel is significant.
+    pub fn is_dense(&self) -> bool {
+        self.count == self.dims.iter().map(|&n| u64::from(n)).product::<u64>()
+    }
+
+    /// Whether voxel `id` is significant (false outside the grid).
+    #[inline]
+    pub fn contains(&self, id: u32) -> bool {
+        self.bits
+            .get((id / 64) as usize)
+            .is_some_and(|w| w >> (id % 64) & 1 == 1)
+    }
+
+    /// Position of voxel `id` among the significant voxels in id order, if it is significant.
+    #[inline]
+    pub fn rank(&self, id: u32) -> Option<u32> {
+        let word = *self.bits.get((id / 64) as usize)?;
+        let bit = id % 64;
+        if word >> bit & 1 == 0 {
+            return None;
+        }
+        let below = word & ((1u64 << bit) - 1);
+        Some(self.word_rank[(id / 64) as usize] + below.count_ones())
+    }
+
+    /// Index coordinates of voxel `id`.
+    #[inline]
+    pub fn coords(&self, id: u32) -> [u32; 3] {
+        let [nx, ny, _] = self.dims;
+        [id % nx, (id / nx) % ny, id / nx / ny]
+    }
+
+    /// The runs of the row along `axis` whose other two coordinates are `k_b` and `k_c` (the
+    /// other axes in increasing order, see [`other_axes`]).
+    #[inline]
+    pub fn row(&self, axis: usize, k_b: u32, k_c: u32) -> &[Run] {
+        let (b, _) = other_axes(axis);
+        let rows = &self.rows[axis];
+        let r = k_b as usize + self.dims[b] as usize * k_c as usize;
+        &rows.runs[rows.offsets[r] as usize..rows.offsets[r + 1] as usize]
+    }
+
+    /// Significant voxel ids in increasing order.
+    pub fn ids(&self) -> impl Iterator<Item = u32> + '_ {
+        self.bits.iter().enumerate().flat_map(|(w, &word)| {
+            let mut rest = word;
+            std::iter::from_fn(move || {
+                (rest != 0).then(|| {
+                    let bit = rest.trailing_zeros();
+                    rest &= rest - 1;
+                    w as u32 * 64 + bit
+                })
+            })
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn rows_match_the_bitmap_on_every_axis() {
+        let dims = [5, 4, 3];
+        let ids: Vec<u32> = (0..60).filter(|i| (i * 7 + i / 5) % 3 != 0).collect();
+        let grid = SparseGrid::from_sorted_ids(dims, &ids).unwrap();
+        assert_eq!(grid.len(), ids.len());
+        let strides = grid.strides();
+        for axis in 0..3 {
+            let (b, c) = other_axes(axis);
+            let mut seen = Vec::new();
+            for kc in 0..dims[c] {
+                for kb in 0..dims[b] {
+                    let mut last_end = None;
+                    for run in grid.row(axis, kb, kc) {
+                        assert!(run.len > 0);
+                        // Runs are maximal: separated by at least one empty voxel.
+                        assert!(last_end.is_none_or(|e| run.start > e));
+                        last_end = Some(run.end());
+                        for k in run.start..run.end() {
+                            let mut coord = [0; 3];
+                            coord[axis] = k;
+                            coord[b] = kb;
+                            coord[c] = kc;
+                            seen.push(coord.iter().zip(strides).map(|(k, s)| k * s).sum::<u32>());
+                        }
+                    }
+                }
+            }
+            seen.sort_unstable();
+            assert_eq!(seen, ids, "axis {axis}");
+        }
+        for (rank, id) in grid.ids().enumerate() {
+            assert_eq!(grid.rank(id), Some(rank as u32));
+        }
+        assert_eq!(grid.rank(0), None);
+    }
+
+    #[test]
+    fn dense_grid_is_every_voxel() {
+        let grid = SparseGrid::dense([7, 3, 5]).unwrap();
+        assert!(grid.is_dense());
+        assert_eq!(grid.ids().collect::<Vec<_>>(), (0..105).collect::<Vec<_>>());
+        assert_eq!(grid.row(1, 6, 4), &[Run { start: 0, len: 3 }]);
+        assert_eq!(grid.rank(104), Some(104));
+        assert_eq!(grid.rank(105), None);
+        let masked = SparseGrid::from_mask([7, 3, 5], |_| true).unwrap();
+        assert!(masked.is_dense());
+        assert_eq!(masked.row(2, 1, 2), grid.row(2, 1, 2));
+    }
+
+    #[test]
+    fn sizes_that_do_not_fit_u32_ids_are_refused() {
+        assert!(matches!(
+            voxel_count([65536, 65536, 2]),
+            Err(GridError::TooLarge { count: 8589934592, .. })
+        ));
+        assert_eq!(voxel_count([65536, 65536, 1]), Ok(1 << 32));
+        assert_eq!(voxel_count([3, 0, 2]), Err(GridError::EmptyAxis([3, 0, 2])));
+        assert_eq!(
+            SparseGrid::from_sorted_ids([2, 2, 2], &[1, 8]).unwrap_err(),
+            GridError::IdOutOfRange { id: 8, dims: [2, 2, 2] }
+        );
+        assert_eq!(
+            SparseGrid::from_sorted_ids([2, 2, 2], &[3, 3]).unwrap_err(),
+            GridError::Unsorted(1)
+        );
+    }
+}

@@ -1,0 +1,25 @@
+//! splatscene: shoulder-prosthesis planning scenes, with CT volumes drawn as one splat per
+//! significant voxel in the IP-PBTF visibility order (Botha & Post 2005).
+//!
+//! The GPU-free core:
+//! - [`grid`]: sparse sets of significant voxels with run-length rows (space skipping);
+//! - [`order`]: the view case and every visibility ordering (BTF, WBTF, PBTF, IP-PBTF explicit
+//!   and implicit, the exact sort, and a bucketed distance order);
+//! - [`composite`]: a CPU reference compositor of Gaussian splats and the error measure.
+//!
+//! ```
+//! use splatscene::grid::SparseGrid;
+//! use splatscene::order::{order, OrderOptions, Ordering, ViewCase, VolumeGeometry};
+//! use glam::DVec3;
+//!
+//! let geometry = VolumeGeometry::axis_aligned([16, 16, 8], [0.7, 0.7, 2.5], [0.0; 3])?;
+//! let grid = SparseGrid::dense(geometry.dims())?;
+//! let eye = DVec3::new(5.0, 40.0, 9.0);
+//! let view = ViewCase::new(&geometry, eye, geometry.centre_world())?;
+//! let ids = order(&grid, &view, Ordering::IpPbtfImplicit, &OrderOptions::default())?;
+//! assert_eq!(ids.len(), 16 * 16 * 8);
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
+
+pub mod grid;
+pub mod order;

@@ -1,0 +1,51 @@
+//! World squared distances from the eye to voxel centres, computed the same way whatever order
+//! the voxels are visited in (so that two passes over the grid agree bit for bit).
+
+use glam::DMat3;
+
+use super::view::ViewCase;
+
+/// Whether a metric has (numerically) no cross terms: the grid axes are orthogonal in the world.
+pub(crate) fn is_orthogonal(g: &DMat3) -> bool {
+    let scale = g.x_axis.x.max(g.y_axis.y).max(g.z_axis.z);
+    [g.y_axis.x, g.z_axis.x, g.z_axis.y]
+        .iter()
+        .all(|v| v.abs() <= 1e-12 * scale)
+}
+
+/// Per-axis tables of squared distance terms when the grid axes are orthogonal in the world,
+/// the full quadratic form otherwise.
+#[derive(Debug, Clone, Default)]
+pub(crate) struct DistanceTable {
+    terms: [Vec<f64>; 3],
+    orthogonal: bool,
+    view: Option<ViewCase>,
+}
+
+impl DistanceTable {
+    pub(crate) fn prepare(&mut self, view: &ViewCase) {
+        let g = view.gram;
+        self.orthogonal = is_orthogonal(&g);
+        self.view = Some(*view);
+        for (a, terms) in self.terms.iter_mut().enumerate() {
+            terms.clear();
+            if self.orthogonal {
+                let axis = &view.axes[a];
+                let weight = g.col(a)[a];
+                terms.extend((0..axis.n).map(|k| {
+                    let d = f64::from(k) - axis.eye;
+                    weight * d * d
+                }));
+            }
+        }
+    }
+
+    #[inline]
+    pub(crate) fn distance_squared(&self, k: [u32; 3]) -> f64 {
+        if self.orthogonal {
+            (self.terms[0][k[0] as usize] + self.terms[1][k[1] as usize]) + self.terms[2][k[2] as usize]
+        } else {
+            self.view.as_ref().map_or(0.0, |v| v.distance_squared(k))
+        }
+    }
+}
