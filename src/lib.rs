@@ -21,5 +21,9 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
+pub mod camera;
+pub mod classify;
+pub mod composite;
 pub mod grid;
 pub mod order;
+pub mod volume;

@@ -33,7 +33,7 @@ fn eye_coord(n: u32) -> impl Strategy<Value = f64> {
 }
 
 fn case() -> impl Strategy<Value = Case> {
-    (1u32..9, 1u32..9, 1u32..9)
+    (1u32..14, 1u32..12, 1u32..10)
         .prop_flat_map(|(nx, ny, nz)| {
             (
                 Just([nx, ny, nz]),
@@ -73,7 +73,7 @@ fn view(case: &Case) -> Option<(VolumeGeometry, ViewCase)> {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig { cases: 400, ..ProptestConfig::default() })]
+    #![proptest_config(ProptestConfig { cases: 500, ..ProptestConfig::default() })]
 
     #[test]
     fn grid_orderings_equal_their_definitions(case in case()) {

@@ -117,9 +117,14 @@ pub enum AxisView {
     Below,
     /// The eye is above the grid (`e > n - 0.5`): the far end is `0`, walked upwards.
     Above,
-    /// The eye is within `[-0.5, n - 0.5]`. The lower side `0..kv` is walked upwards and the
-    /// upper side `kv..n` downwards, both toward the eye. `kv = floor(e + 0.5)` (halves round up);
-    /// at `e = -0.5` the lower side is empty and at `e = n - 0.5` the upper side is.
+    /// The eye is within `[-0.5, n - 0.5]`, so the plane through it cuts the grid's extent. The
+    /// lower side `0..kv` is walked upwards and the upper side `kv..n` downwards, both toward
+    /// the eye. The plane passes through the eye itself (paper section 3), so `kv = ceil(e)`:
+    /// the first voxel whose centre is not below the eye; a centre exactly on the plane goes to
+    /// the upper side. (The paper's Algorithm 1 rounds to the nearest voxel instead, which moves
+    /// the voxel holding the eye to the upper side even when its centre lies below the eye, and
+    /// makes PBTF jump as the eye crosses `n - 0.5`.) At `e <= 0` the lower side is empty and at
+    /// `e > n - 1` the upper side is.
     Split {
         /// First voxel of the upper side.
         kv: u32,
@@ -146,7 +151,7 @@ impl AxisCase {
             AxisView::Above
         } else {
             AxisView::Split {
-                kv: (eye + 0.5).floor() as u32,
+                kv: eye.ceil() as u32,
             }
         };
         Self { n, eye, view }
@@ -344,7 +349,7 @@ impl fmt::Display for ViewCase {
                 AxisView::Above => writeln!(f, "  {name}: not split, eye above, far to near 0..{}", axis.n - 1)?,
                 AxisView::Split { kv } => writeln!(
                     f,
-                    "  {name}: split at {kv} (round half up); lower side 0..{kv} walked up, upper side {kv}..{} walked down; ties: lower first",
+                    "  {name}: split by the plane through the eye, upper side from voxel {kv} (ceil; a centre on the plane is upper); lower side 0..{kv} walked up, upper side {kv}..{} walked down; equal distances: lower first",
                     axis.n
                 )?,
             }
@@ -373,7 +378,7 @@ mod tests {
         AxisCase::new(5, 2.0).far_to_near(&mut out);
         assert_eq!(out, [0, 4, 1, 3, 2]);
         out.clear();
-        // Half-way: kv rounds up; ties go lower first.
+        // Half-way: ties go lower first.
         AxisCase::new(4, 1.5).far_to_near(&mut out);
         assert_eq!(out, [0, 3, 1, 2]);
         out.clear();
@@ -399,13 +404,13 @@ mod tests {
     fn far_origin_keeps_the_split() {
         let geometry = VolumeGeometry::axis_aligned([8, 8, 8], [1.0; 3], [1e5; 3]).unwrap();
         let target = geometry.centre_world();
-        for (offset, kv) in [(3.4995, 3), (3.5005, 4)] {
+        for (offset, kv) in [(2.9995, 3), (3.0005, 4)] {
             let eye = DVec3::new(1e5 + offset, 1e5 - 1.0, 1e5 - 1.0);
             let view = ViewCase::new(&geometry, eye, target).unwrap();
             assert_eq!(view.axes[0].view, AxisView::Split { kv });
             assert_eq!(view.kind, CaseKind::EdgeOn);
         }
         // The same offsets in f32 collapse onto one value.
-        assert_eq!((1e5f32 + 3.4995) - 1e5, (1e5f32 + 3.5005) - 1e5);
+        assert_eq!((1e5f32 + 2.9995) - 1e5, (1e5f32 + 3.0005) - 1e5);
     }
 }

@@ -1,0 +1,310 @@
+//! The CPU reference compositor and the error measure.
+//!
+//! Each significant voxel is an ellipsoidal Gaussian whose axes follow the grid (so its extent
+//! is proportional to the spacing), projected in perspective with the local affine
+//! approximation of the projection (EWA): its screen footprint grows toward the eye. Fragments
+//! are composited with premultiplied "over", `dst = src + (1 - src.a) * dst`, in draw order,
+//! so the image depends on the ordering exactly as a GPU blend would.
+//!
+//! The error of an ordering is its frame compared with the exact order's frame:
+//! [`compare`] gives the RMSE over pixels and colour channels, the largest difference and the
+//! share of pixels with a channel off by more than 4/255; [`FragmentStats`] gives, over every
+//! pixel, the share of consecutive fragments drawn nearer-before-farther.
+
+use glam::{DMat3, DVec3};
+use rayon::prelude::*;
+use thiserror::Error;
+
+use crate::camera::{Camera, CameraError};
+use crate::grid::SparseGrid;
+use crate::order::VolumeGeometry;
+
+/// Why a frame could not be composited.
+#[derive(Debug, Error, Clone, PartialEq)]
+pub enum CompositeError {
+    /// The camera is unusable.
+    #[error(transparent)]
+    Camera(#[from] CameraError),
+    /// There must be one colour per significant voxel.
+    #[error("{colors} colours for {voxels} significant voxels")]
+    ColorCount {
+        /// Colours given.
+        colors: usize,
+        /// Significant voxels in the grid.
+        voxels: usize,
+    },
+    /// The draw order names a voxel that is not significant.
+    #[error("draw order entry {position} is voxel {id}, which is not a significant voxel")]
+    NotSignificant {
+        /// Position in the draw order.
+        position: usize,
+        /// The voxel id.
+        id: u32,
+    },
+    /// Grid and geometry disagree on the size.
+    #[error("grid size {grid:?} differs from the geometry's {geometry:?}")]
+    DimsMismatch {
+        /// Size of the voxel set.
+        grid: [u32; 3],
+        /// Size of the placement.
+        geometry: [u32; 3],
+    },
+    /// Images of different sizes cannot be compared.
+    #[error("cannot compare a {0}x{1} image with a {2}x{3} image")]
+    SizeMismatch(u32, u32, u32, u32),
+}
+
+/// Splat shape, in voxel units along each grid axis.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SplatStyle {
+    /// Standard deviation of the Gaussian (the original ShellSplatting used 0.7).
+    pub sigma: f64,
+    /// Footprint radius where the Gaussian is cut off (the original used 2.0).
+    pub cutoff: f64,
+    /// Screen-space variance in square pixels added to every footprint, so that splats smaller
+    /// than a pixel still cover one (the EWA low-pass filter).
+    pub pixel_variance: f64,
+}
+
+impl Default for SplatStyle {
+    fn default() -> Self {
+        Self {
+            sigma: 0.7,
+            cutoff: 2.0,
+            pixel_variance: 0.3,
+        }
+    }
+}
+
+/// A classified volume ready to splat: placement, significant voxels, and one premultiplied
+/// RGBA colour per significant voxel in id order.
+#[derive(Debug, Clone, Copy)]
+pub struct SplatVolume<'a> {
+    /// Placement in the world.
+    pub geometry: &'a VolumeGeometry,
+    /// Significant voxels.
+    pub grid: &'a SparseGrid,
+    /// Premultiplied RGBA per significant voxel, in id order (index = [`SparseGrid::rank`]).
+    pub colors: &'a [[f32; 4]],
+}
+
+/// A composited image: premultiplied RGBA, rows top to bottom, transparent background.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Frame {
+    /// Width in pixels.
+    pub width: u32,
+    /// Height in pixels.
+    pub height: u32,
+    /// Pixels, row-major.
+    pub pixels: Vec<[f32; 4]>,
+}
+
+/// Counts of consecutive fragment pairs per pixel.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct FragmentStats {
+    /// Fragments drawn.
+    pub fragments: u64,
+    /// Consecutive pairs of fragments on the same pixel.
+    pub pairs: u64,
+    /// Pairs where the first drawn was nearer than the second.
+    pub inversions: u64,
+}
+
+impl FragmentStats {
+    /// Share of consecutive fragment pairs drawn nearer-before-farther (0 when no pairs).
+    pub fn inversion_share(&self) -> f64 {
+        if self.pairs == 0 { 0.0 } else { self.inversions as f64 / self.pairs as f64 }
+    }
+}
+
+/// A splat projected to the screen.
+#[derive(Debug, Clone, Copy)]
+struct Footprint {
+    centre: [f64; 2],
+    /// Inverse 2D covariance (conic): `q = a dx^2 + 2 b dx dy + c dy^2`.
+    conic: [f64; 3],
+    /// Pixel bounds, inclusive.
+    bounds: [i64; 4],
+    color: [f32; 4],
+    depth: f64,
+}
+
+/// Composites `volume`'s splats in the order `order` as seen by `camera`.
+pub fn composite(
+    camera: &Camera,
+    volume: &SplatVolume<'_>,
+    order: &[u32],
+    style: &SplatStyle,
+) -> Result<(Frame, FragmentStats), CompositeError> {
+    let footprints = project(camera, volume, order, style)?;
+    let (width, height) = (camera.width as usize, camera.height as usize);
+    let limit = (style.cutoff / style.sigma).powi(2);
+    const BAND: usize = 16;
+    let mut pixels = vec![[0f32; 4]; width * height];
+    let stats = pixels
+        .par_chunks_mut(width * BAND)
+        .enumerate()
+        .map(|(band, chunk)| {
+            let y0 = (band * BAND) as i64;
+            let rows = (chunk.len() / width) as i64;
+            let mut last_depth = vec![f64::NAN; chunk.len()];
+            let mut stats = FragmentStats::default();
+            for f in &footprints {
+                let (ya, yb) = (f.bounds[2].max(y0), f.bounds[3].min(y0 + rows - 1));
+                for y in ya..=yb {
+                    let dy = y as f64 + 0.5 - f.centre[1];
+                    for x in f.bounds[0]..=f.bounds[1] {
+                        let dx = x as f64 + 0.5 - f.centre[0];
+                        let q = f.conic[0] * dx * dx + 2.0 * f.conic[1] * dx * dy + f.conic[2] * dy * dy;
+                        if q > limit {
+                            continue;
+                        }
+                        let w = (-0.5 * q).exp() as f32;
+                        let i = (y - y0) as usize * width + x as usize;
+                        let dst = &mut chunk[i];
+                        let src_a = f.color[3] * w;
+                        for c in 0..4 {
+                            dst[c] = f.color[c] * w + (1.0 - src_a) * dst[c];
+                        }
+                        let last = last_depth[i];
+                        if !last.is_nan() {
+                            stats.pairs += 1;
+                            if last < f.depth * (1.0 - 1e-12) {
+                                stats.inversions += 1;
+                            }
+                        }
+                        last_depth[i] = f.depth;
+                        stats.fragments += 1;
+                    }
+                }
+            }
+            stats
+        })
+        .reduce(FragmentStats::default, |a, b| FragmentStats {
+            fragments: a.fragments + b.fragments,
+            pairs: a.pairs + b.pairs,
+            inversions: a.inversions + b.inversions,
+        });
+    let frame = Frame {
+        width: camera.width,
+        height: camera.height,
+        pixels,
+    };
+    Ok((frame, stats))
+}
+
+/// Projects every splat of `order` (in order) to its screen footprint; splats whose centre is
+/// not in front of the eye by at least a tenth of a voxel are left out, as the local affine
+/// projection is meaningless there.
+fn project(
+    camera: &Camera,
+    volume: &SplatVolume<'_>,
+    order: &[u32],
+    style: &SplatStyle,
+) -> Result<Vec<Footprint>, CompositeError> {
+    let frame = camera.frame()?;
+    let grid = volume.grid;
+    if volume.colors.len() != grid.len() {
+        return Err(CompositeError::ColorCount {
+            colors: volume.colors.len(),
+            voxels: grid.len(),
+        });
+    }
+    if grid.dims() != volume.geometry.dims() {
+        return Err(CompositeError::DimsMismatch {
+            grid: grid.dims(),
+            geometry: volume.geometry.dims(),
+        });
+    }
+    // Camera coordinates of index point k: m * (k - eye_index); computed relative to the eye so
+    // that far-away volumes keep their precision.
+    let linear = volume.geometry.index_to_world().matrix3;
+    let rows = DMat3::from_cols(frame.right, frame.up, frame.forward).transpose();
+    let m = rows * linear;
+    let eye_index = volume.geometry.world_to_index(camera.eye);
+    let cov = m * m.transpose() * (style.sigma * style.sigma);
+    let near = 0.1 * volume.geometry.spacing().iter().copied().fold(f64::INFINITY, f64::min);
+    let radius = style.cutoff / style.sigma;
+    let (cx, cy, f) = (0.5 * f64::from(camera.width), 0.5 * f64::from(camera.height), frame.focal);
+    let (w, h) = (i64::from(camera.width), i64::from(camera.height));
+    let mut out = Vec::with_capacity(order.len());
+    for (position, &id) in order.iter().enumerate() {
+        let rank = grid.rank(id).ok_or(CompositeError::NotSignificant { position, id })?;
+        let color = volume.colors[rank as usize];
+        if color[3] <= 0.0 {
+            continue;
+        }
+        let k = DVec3::from(grid.coords(id).map(f64::from));
+        let p = m * (k - eye_index);
+        if p.z <= near {
+            continue;
+        }
+        let (iz, iz2) = (1.0 / p.z, 1.0 / (p.z * p.z));
+        let j0 = DVec3::new(f * iz, 0.0, -f * p.x * iz2);
+        let j1 = DVec3::new(0.0, -f * iz, f * p.y * iz2);
+        let a = j0.dot(cov * j0) + style.pixel_variance;
+        let b = j0.dot(cov * j1);
+        let c = j1.dot(cov * j1) + style.pixel_variance;
+        let det = a * c - b * b;
+        if !(det > 0.0) || !det.is_finite() {
+            continue;
+        }
+        let centre = [cx + f * p.x * iz, cy - f * p.y * iz];
+        let (ex, ey) = (radius * a.sqrt(), radius * c.sqrt());
+        let bounds = [
+            ((centre[0] - ex - 0.5).floor() as i64).max(0),
+            ((centre[0] + ex - 0.5).ceil() as i64).min(w - 1),
+            ((centre[1] - ey - 0.5).floor() as i64).max(0),
+            ((centre[1] + ey - 0.5).ceil() as i64).min(h - 1),
+        ];
+        if bounds[0] > bounds[1] || bounds[2] > bounds[3] {
+            continue;
+        }
+        out.push(Footprint {
+            centre,
+            conic: [c / det, -b / det, a / det],
+            bounds,
+            color,
+            depth: p.length(),
+        });
+    }
+    Ok(out)
+}
+
+/// Differences between two frames, over the colour channels of premultiplied RGBA (the image
+/// over a black background); alpha is left out because it does not depend on the order.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct ImageDifference {
+    /// Root mean square difference over pixels and the three colour channels.
+    pub rmse: f64,
+    /// Largest absolute difference of any channel.
+    pub max_abs: f64,
+    /// Share of pixels with any colour channel off by more than 4/255.
+    pub bad_pixel_share: f64,
+}
+
+/// Compares two frames of the same size.
+pub fn compare(a: &Frame, b: &Frame) -> Result<ImageDifference, CompositeError> {
+    if (a.width, a.height) != (b.width, b.height) {
+        return Err(CompositeError::SizeMismatch(a.width, a.height, b.width, b.height));
+    }
+    let mut sum = 0.0f64;
+    let mut max_abs = 0.0f64;
+    let mut bad = 0usize;
+    for (p, q) in a.pixels.iter().zip(&b.pixels) {
+        let mut worst = 0.0f64;
+        for c in 0..3 {
+            let d = f64::from(p[c] - q[c]).abs();
+            sum += d * d;
+            worst = worst.max(d);
+        }
+        max_abs = max_abs.max(worst);
+        bad += usize::from(worst > 4.0 / 255.0);
+    }
+    let n = a.pixels.len().max(1) as f64;
+    Ok(ImageDifference {
+        rmse: (sum / (3.0 * n)).sqrt(),
+        max_abs,
+        bad_pixel_share: bad as f64 / n,
+    })
+}
