@@ -80,7 +80,9 @@ impl Camera {
         if self.width == 0 || self.height == 0 {
             return Err(CameraError::EmptyImage(self.width, self.height));
         }
-        let forward = (self.target - self.eye).try_normalize().ok_or(CameraError::NoViewDirection)?;
+        let forward = (self.target - self.eye)
+            .try_normalize()
+            .ok_or(CameraError::NoViewDirection)?;
         let right = forward.cross(self.up);
         if right.length() <= 1e-9 * self.up.length() {
             return Err(CameraError::UpParallel);
@@ -100,6 +102,10 @@ impl Camera {
     /// nearly vertical, then +y.
     pub fn safe_up(eye: DVec3, target: DVec3) -> DVec3 {
         let forward = (target - eye).normalize_or_zero();
-        if forward.dot(DVec3::Z).abs() > 0.99 { DVec3::Y } else { DVec3::Z }
+        if forward.dot(DVec3::Z).abs() > 0.99 {
+            DVec3::Y
+        } else {
+            DVec3::Z
+        }
     }
 }

@@ -65,7 +65,11 @@ pub struct Classified {
 }
 
 /// Classifies every voxel; those with opacity at or below `min_opacity` are left out.
-pub fn classify(volume: &CpuVolume, tf: &TransferFunction, min_opacity: f32) -> Result<Classified, GridError> {
+pub fn classify(
+    volume: &CpuVolume,
+    tf: &TransferFunction,
+    min_opacity: f32,
+) -> Result<Classified, GridError> {
     let mut colors = Vec::new();
     let grid = SparseGrid::from_mask(volume.dims, |id| {
         let Some(&value) = volume.values.get(id as usize) else {
@@ -105,10 +109,21 @@ mod tests {
             direction: DMat3::IDENTITY,
             values,
         };
-        let classified = classify(&volume, &TransferFunction::ramp(100.0, 200.0, [1.0; 4]), 0.0).unwrap();
-        assert_eq!(classified.grid.ids().collect::<Vec<_>>(), (11..24).collect::<Vec<_>>());
+        let classified = classify(
+            &volume,
+            &TransferFunction::ramp(100.0, 200.0, [1.0; 4]),
+            0.0,
+        )
+        .unwrap();
+        assert_eq!(
+            classified.grid.ids().collect::<Vec<_>>(),
+            (11..24).collect::<Vec<_>>()
+        );
         assert_eq!(classified.colors.len(), 13);
         assert!((classified.colors[0][3] - 0.1).abs() < 1e-6);
-        assert!((classified.colors[0][0] - 0.1).abs() < 1e-6, "premultiplied");
+        assert!(
+            (classified.colors[0][0] - 0.1).abs() < 1e-6,
+            "premultiplied"
+        );
     }
 }

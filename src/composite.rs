@@ -99,6 +99,19 @@ pub struct Frame {
     pub pixels: Vec<[f32; 4]>,
 }
 
+impl Frame {
+    /// The frame over an opaque background colour, as 8-bit RGB.
+    pub fn to_rgb8(&self, background: [f32; 3]) -> image::RgbImage {
+        image::RgbImage::from_fn(self.width, self.height, |x, y| {
+            let p = self.pixels[(y * self.width + x) as usize];
+            image::Rgb(std::array::from_fn(|c| {
+                let v = p[c] + (1.0 - p[3]) * background[c];
+                (v.clamp(0.0, 1.0) * 255.0).round() as u8
+            }))
+        })
+    }
+}
+
 /// Counts of consecutive fragment pairs per pixel.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct FragmentStats {
@@ -113,7 +126,11 @@ pub struct FragmentStats {
 impl FragmentStats {
     /// Share of consecutive fragment pairs drawn nearer-before-farther (0 when no pairs).
     pub fn inversion_share(&self) -> f64 {
-        if self.pairs == 0 { 0.0 } else { self.inversions as f64 / self.pairs as f64 }
+        if self.pairs == 0 {
+            0.0
+        } else {
+            self.inversions as f64 / self.pairs as f64
+        }
     }
 }
 
@@ -155,7 +172,9 @@ pub fn composite(
                     let dy = y as f64 + 0.5 - f.centre[1];
                     for x in f.bounds[0]..=f.bounds[1] {
                         let dx = x as f64 + 0.5 - f.centre[0];
-                        let q = f.conic[0] * dx * dx + 2.0 * f.conic[1] * dx * dy + f.conic[2] * dy * dy;
+                        let q = f.conic[0] * dx * dx
+                            + 2.0 * f.conic[1] * dx * dy
+                            + f.conic[2] * dy * dy;
                         if q > limit {
                             continue;
                         }
@@ -163,8 +182,8 @@ pub fn composite(
                         let i = (y - y0) as usize * width + x as usize;
                         let dst = &mut chunk[i];
                         let src_a = f.color[3] * w;
-                        for c in 0..4 {
-                            dst[c] = f.color[c] * w + (1.0 - src_a) * dst[c];
+                        for (d, s) in dst.iter_mut().zip(f.color) {
+                            *d = s * w + (1.0 - src_a) * *d;
                         }
                         let last = last_depth[i];
                         if !last.is_nan() {
@@ -223,13 +242,25 @@ fn project(
     let m = rows * linear;
     let eye_index = volume.geometry.world_to_index(camera.eye);
     let cov = m * m.transpose() * (style.sigma * style.sigma);
-    let near = 0.1 * volume.geometry.spacing().iter().copied().fold(f64::INFINITY, f64::min);
+    let near = 0.1
+        * volume
+            .geometry
+            .spacing()
+            .iter()
+            .copied()
+            .fold(f64::INFINITY, f64::min);
     let radius = style.cutoff / style.sigma;
-    let (cx, cy, f) = (0.5 * f64::from(camera.width), 0.5 * f64::from(camera.height), frame.focal);
+    let (cx, cy, f) = (
+        0.5 * f64::from(camera.width),
+        0.5 * f64::from(camera.height),
+        frame.focal,
+    );
     let (w, h) = (i64::from(camera.width), i64::from(camera.height));
     let mut out = Vec::with_capacity(order.len());
     for (position, &id) in order.iter().enumerate() {
-        let rank = grid.rank(id).ok_or(CompositeError::NotSignificant { position, id })?;
+        let rank = grid
+            .rank(id)
+            .ok_or(CompositeError::NotSignificant { position, id })?;
         let color = volume.colors[rank as usize];
         if color[3] <= 0.0 {
             continue;
@@ -246,7 +277,7 @@ fn project(
         let b = j0.dot(cov * j1);
         let c = j1.dot(cov * j1) + style.pixel_variance;
         let det = a * c - b * b;
-        if !(det > 0.0) || !det.is_finite() {
+        if det.is_nan() || det <= 0.0 || det.is_infinite() {
             continue;
         }
         let centre = [cx + f * p.x * iz, cy - f * p.y * iz];
@@ -286,7 +317,9 @@ pub struct ImageDifference {
 /// Compares two frames of the same size.
 pub fn compare(a: &Frame, b: &Frame) -> Result<ImageDifference, CompositeError> {
     if (a.width, a.height) != (b.width, b.height) {
-        return Err(CompositeError::SizeMismatch(a.width, a.height, b.width, b.height));
+        return Err(CompositeError::SizeMismatch(
+            a.width, a.height, b.width, b.height,
+        ));
     }
     let mut sum = 0.0f64;
     let mut max_abs = 0.0f64;
@@ -307,4 +340,147 @@ pub fn compare(a: &Frame, b: &Frame) -> Result<ImageDifference, CompositeError> 
         max_abs,
         bad_pixel_share: bad as f64 / n,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::order::{OrderOptions, Ordering, ViewCase, order};
+
+    fn two_voxels() -> (VolumeGeometry, SparseGrid, Vec<[f32; 4]>) {
+        // Voxels 0 and 1 along x; the camera looks along +x so voxel 1 is behind voxel 0.
+        let geometry = VolumeGeometry::axis_aligned([2, 1, 1], [1.0; 3], [0.0; 3]).unwrap();
+        let grid = SparseGrid::dense([2, 1, 1]).unwrap();
+        let colors = vec![[0.5, 0.0, 0.0, 0.5], [0.0, 0.0, 0.8, 0.8]];
+        (geometry, grid, colors)
+    }
+
+    fn camera() -> Camera {
+        Camera::looking_at(
+            DVec3::new(-10.0, 0.0, 0.0),
+            DVec3::new(1.0, 0.0, 0.0),
+            33,
+            33,
+        )
+    }
+
+    #[test]
+    fn a_splat_is_a_gaussian_at_its_projected_centre() {
+        let (geometry, grid, colors) = two_voxels();
+        let volume = SplatVolume {
+            geometry: &geometry,
+            grid: &grid,
+            colors: &colors,
+        };
+        let style = SplatStyle {
+            pixel_variance: 0.0,
+            ..SplatStyle::default()
+        };
+        let (frame, stats) = composite(&camera(), &volume, &[1], &style).unwrap();
+        // Odd size: the view axis hits the centre of pixel (16, 16) where the weight is 1.
+        let centre = frame.pixels[16 * 33 + 16];
+        assert!(
+            (centre[2] - 0.8).abs() < 1e-6 && (centre[3] - 0.8).abs() < 1e-6,
+            "{centre:?}"
+        );
+        // One pixel to the right: sigma 0.7 voxel at distance 11 with focal f.
+        let f = 0.5 * 33.0 / 25f64.to_radians().tan();
+        let sigma_px = 0.7 * f / 11.0;
+        let expected = 0.8 * (-0.5 / (sigma_px * sigma_px)).exp();
+        assert!((f64::from(frame.pixels[16 * 33 + 17][3]) - expected).abs() < 1e-5);
+        assert_eq!(stats.pairs, 0);
+        assert!(stats.fragments > 1);
+    }
+
+    #[test]
+    fn over_is_order_dependent_and_inversions_are_counted() {
+        let (geometry, grid, colors) = two_voxels();
+        let volume = SplatVolume {
+            geometry: &geometry,
+            grid: &grid,
+            colors: &colors,
+        };
+        let style = SplatStyle::default();
+        let (back_to_front, good) = composite(&camera(), &volume, &[1, 0], &style).unwrap();
+        let (front_to_back, bad) = composite(&camera(), &volume, &[0, 1], &style).unwrap();
+        let c = back_to_front.pixels[16 * 33 + 16];
+        // Near red (a 0.5) over far blue (a 0.8): blue keeps half its weight.
+        assert!(
+            (c[0] - 0.5).abs() < 1e-5 && (c[2] - 0.4).abs() < 1e-5,
+            "{c:?}"
+        );
+        assert!(good.pairs > 0 && good.inversions == 0);
+        assert_eq!(bad.inversions, bad.pairs);
+        assert!(compare(&back_to_front, &front_to_back).unwrap().max_abs > 0.3);
+        assert_eq!(
+            compare(&back_to_front, &back_to_front).unwrap(),
+            ImageDifference::default()
+        );
+    }
+
+    #[test]
+    fn the_exact_order_has_no_inversions_and_transparent_voxels_change_nothing() {
+        let geometry = VolumeGeometry::axis_aligned([6, 5, 4], [0.7, 0.7, 2.5], [0.0; 3]).unwrap();
+        let grid = SparseGrid::dense([6, 5, 4]).unwrap();
+        let mut colors: Vec<[f32; 4]> = (0..120)
+            .map(|i| [0.1, 0.2, (i % 7) as f32 * 0.05, 0.3])
+            .collect();
+        let eye = DVec3::new(1.3, -6.0, 4.2);
+        let target = geometry.centre_world();
+        let view = ViewCase::new(&geometry, eye, target).unwrap();
+        let exact = order(&grid, &view, Ordering::Exact, &OrderOptions::default()).unwrap();
+        let camera = Camera::looking_at(eye, target, 48, 40);
+        let style = SplatStyle::default();
+        let volume = SplatVolume {
+            geometry: &geometry,
+            grid: &grid,
+            colors: &colors,
+        };
+        let (before, stats) = composite(&camera, &volume, &exact, &style).unwrap();
+        assert!(stats.pairs > 1000);
+        assert_eq!(stats.inversions, 0);
+        // A voxel made fully transparent contributes nothing.
+        colors[17] = [0.0; 4];
+        let volume = SplatVolume {
+            geometry: &geometry,
+            grid: &grid,
+            colors: &colors,
+        };
+        let without: Vec<u32> = exact.iter().copied().filter(|&id| id != 17).collect();
+        let (a, _) = composite(&camera, &volume, &exact, &style).unwrap();
+        let (b, _) = composite(&camera, &volume, &without, &style).unwrap();
+        assert_eq!(a, b);
+        assert_ne!(a, before);
+    }
+
+    #[test]
+    fn bad_input_is_a_typed_error() {
+        let (geometry, grid, colors) = two_voxels();
+        let volume = SplatVolume {
+            geometry: &geometry,
+            grid: &grid,
+            colors: &colors[..1],
+        };
+        let err = composite(&camera(), &volume, &[0], &SplatStyle::default()).unwrap_err();
+        assert_eq!(
+            err,
+            CompositeError::ColorCount {
+                colors: 1,
+                voxels: 2
+            }
+        );
+        let volume = SplatVolume {
+            geometry: &geometry,
+            grid: &grid,
+            colors: &colors,
+        };
+        let err = composite(&camera(), &volume, &[0, 7], &SplatStyle::default()).unwrap_err();
+        assert_eq!(err, CompositeError::NotSignificant { position: 1, id: 7 });
+        let mut cam = camera();
+        cam.target = cam.eye;
+        assert!(matches!(
+            composite(&cam, &volume, &[0], &SplatStyle::default()),
+            Err(CompositeError::Camera(CameraError::NoViewDirection))
+        ));
+    }
 }

@@ -126,7 +126,10 @@ impl SparseGrid {
     }
 
     /// The voxels for which `significant(id)` holds.
-    pub fn from_mask(dims: [u32; 3], mut significant: impl FnMut(u32) -> bool) -> Result<Self, GridError> {
+    pub fn from_mask(
+        dims: [u32; 3],
+        mut significant: impl FnMut(u32) -> bool,
+    ) -> Result<Self, GridError> {
         let count = voxel_count(dims)?;
         let mut bits = vec![0u64; count.div_ceil(64) as usize];
         for id in 0..count {
@@ -203,7 +206,10 @@ impl SparseGrid {
                     len += 1;
                 }
                 let slot = &mut fill[row_of(k)];
-                runs[*slot as usize] = Run { start: k[axis], len };
+                runs[*slot as usize] = Run {
+                    start: k[axis],
+                    len,
+                };
                 *slot += 1;
             }
         });
@@ -358,13 +364,19 @@ mod tests {
     fn sizes_that_do_not_fit_u32_ids_are_refused() {
         assert!(matches!(
             voxel_count([65536, 65536, 2]),
-            Err(GridError::TooLarge { count: 8589934592, .. })
+            Err(GridError::TooLarge {
+                count: 8589934592,
+                ..
+            })
         ));
         assert_eq!(voxel_count([65536, 65536, 1]), Ok(1 << 32));
         assert_eq!(voxel_count([3, 0, 2]), Err(GridError::EmptyAxis([3, 0, 2])));
         assert_eq!(
             SparseGrid::from_sorted_ids([2, 2, 2], &[1, 8]).unwrap_err(),
-            GridError::IdOutOfRange { id: 8, dims: [2, 2, 2] }
+            GridError::IdOutOfRange {
+                id: 8,
+                dims: [2, 2, 2]
+            }
         );
         assert_eq!(
             SparseGrid::from_sorted_ids([2, 2, 2], &[3, 3]).unwrap_err(),

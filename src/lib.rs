@@ -26,4 +26,5 @@ pub mod classify;
 pub mod composite;
 pub mod grid;
 pub mod order;
+pub mod report;
 pub mod volume;

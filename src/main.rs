@@ -1,1 +1,293 @@
-fn main(){}
+//! The `splatscene` command line.
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{Context, Result, bail};
+use clap::{Parser, Subcommand};
+use glam::DVec3;
+use indicatif::{ProgressBar, ProgressStyle};
+
+use splatscene::classify::{Classified, TransferFunction, classify};
+use splatscene::grid::SparseGrid;
+use splatscene::order::{OrderOptions, Orderer, Ordering, ViewCase, VolumeGeometry};
+use splatscene::report::{self, ReportSettings};
+use splatscene::volume::CpuVolume;
+use splatscene::volume::phantom::shoulder_phantom_default;
+use splatscene::volume::raw::{RawSpec, ScalarFormat, load_raw, load_raw_slices, slice_stack};
+
+#[derive(Parser)]
+#[command(
+    name = "splatscene",
+    version,
+    about = "Shoulder-prosthesis planning scenes: CT splats in IP-PBTF order"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Write the draw order of a dense grid as little-endian u32 voxel ids, first drawn first.
+    Order(OrderArgs),
+    /// Compare every ordering's run time and image error along a camera path.
+    Orderings(OrderingsArgs),
+}
+
+#[derive(clap::Args)]
+struct OrderArgs {
+    /// Grid size NX,NY,NZ.
+    #[arg(long, value_parser = parse_u32x3)]
+    dims: [u32; 3],
+    /// Voxel spacing SX,SY,SZ.
+    #[arg(long, value_parser = parse_f64x3, default_value = "1,1,1")]
+    spacing: [f64; 3],
+    /// Eye in voxel index coordinates (voxel centres at integers).
+    #[arg(long, value_parser = parse_f64x3, allow_hyphen_values = true)]
+    eye: [f64; 3],
+    /// Target in voxel index coordinates; the grid centre by default.
+    #[arg(long, value_parser = parse_f64x3, allow_hyphen_values = true)]
+    target: Option<[f64; 3]>,
+    /// btf, wbtf, pbtf, ip-pbtf, ip-pbtf-explicit, ip-pbtf-implicit, exact or bucketed.
+    #[arg(long)]
+    ordering: Ordering,
+    /// Output file; standard output when absent.
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Leave out voxels on or behind the plane through the eye.
+    #[arg(long)]
+    cull_behind_eye: bool,
+}
+
+#[derive(clap::Args)]
+struct OrderingsArgs {
+    /// A raw volume (needs --raw-dims and --raw-type) or the first file of a slice stack such
+    /// as CThead.1; the built-in shoulder phantom when absent.
+    volume: Option<PathBuf>,
+    /// Size of the raw volume NX,NY,NZ.
+    #[arg(long, value_parser = parse_u32x3)]
+    raw_dims: Option<[u32; 3]>,
+    /// Scalar type of the raw volume: u8, i16le, u16be, f32...
+    #[arg(long)]
+    raw_type: Option<ScalarFormat>,
+    /// Bytes to skip at the start of each raw file.
+    #[arg(long, default_value_t = 0)]
+    raw_header: u64,
+    /// Voxel spacing SX,SY,SZ of a raw volume.
+    #[arg(long, value_parser = parse_f64x3, default_value = "1,1,1")]
+    spacing: [f64; 3],
+    /// Scalar value where splats start to show (raw volumes; the phantom uses the CT bone preset).
+    #[arg(long)]
+    threshold: Option<f32>,
+    /// Views on the orbit.
+    #[arg(long, default_value_t = 16)]
+    orbit_views: usize,
+    /// Views on the fly-in.
+    #[arg(long, default_value_t = 8)]
+    fly_in_views: usize,
+    /// Image size WxH.
+    #[arg(long, value_parser = parse_size, default_value = "192x192")]
+    size: (u32, u32),
+    /// Folder for the plots (error against time, PNG and SVG).
+    #[arg(long, default_value = "orderings-report")]
+    out_dir: PathBuf,
+}
+
+fn main() -> Result<()> {
+    match Cli::parse().command {
+        Command::Order(args) => run_order(args),
+        Command::Orderings(args) => run_orderings(args),
+    }
+}
+
+fn run_order(args: OrderArgs) -> Result<()> {
+    let geometry = VolumeGeometry::axis_aligned(args.dims, args.spacing, [0.0; 3])?;
+    let to_world = |p: [f64; 3]| geometry.index_to_world_point(DVec3::from(p));
+    let target = args.target.map_or(geometry.centre_world(), to_world);
+    let view = ViewCase::new(&geometry, to_world(args.eye), target)?;
+    let grid = SparseGrid::dense(args.dims)?;
+    let options = OrderOptions {
+        cull_behind_eye: args.cull_behind_eye,
+        ..OrderOptions::default()
+    };
+    let mut ids = Vec::new();
+    let start = Instant::now();
+    Orderer::new().order(&grid, &view, args.ordering, &options, &mut ids)?;
+    let elapsed = start.elapsed();
+    let bytes: Vec<u8> = ids.iter().flat_map(|id| id.to_le_bytes()).collect();
+    match &args.out {
+        Some(path) => write_replacing(path, &bytes)?,
+        None => std::io::stdout()
+            .lock()
+            .write_all(&bytes)
+            .context("writing the order to standard output")?,
+    }
+    eprintln!("{view}");
+    eprintln!(
+        "ordering {}: {} voxels in {:.3} ms",
+        args.ordering,
+        ids.len(),
+        elapsed.as_secs_f64() * 1e3
+    );
+    Ok(())
+}
+
+/// Writes `bytes` to `path` through a temporary file and a rename, so that a failed write
+/// leaves any earlier file whole; says so when an existing file is replaced.
+fn write_replacing(path: &Path, bytes: &[u8]) -> Result<()> {
+    let existed = path.exists();
+    let name = path
+        .file_name()
+        .context("the output path has no file name")?;
+    let tmp = path.with_file_name(format!(".{}.partial", name.to_string_lossy()));
+    std::fs::write(&tmp, bytes).with_context(|| format!("writing {}", tmp.display()))?;
+    std::fs::rename(&tmp, path)
+        .with_context(|| format!("renaming {} to {}", tmp.display(), path.display()))?;
+    if existed {
+        eprintln!("replaced the existing {}", path.display());
+    }
+    Ok(())
+}
+
+fn run_orderings(args: OrderingsArgs) -> Result<()> {
+    let (name, volume, classified) = load_for_report(&args)?;
+    let geometry = volume.geometry()?;
+    eprintln!(
+        "{name}: {:?} voxels, spacing {:?}, {} significant",
+        volume.dims,
+        volume.spacing,
+        classified.grid.len()
+    );
+    let settings = ReportSettings {
+        orbit_views: args.orbit_views,
+        fly_in_views: args.fly_in_views,
+        size: args.size,
+        ..ReportSettings::default()
+    };
+    let path = report::camera_path(&geometry, settings.orbit_views, settings.fly_in_views);
+    let cases = report::case_views(&geometry);
+    let bar = progress(path.len() + cases.len());
+    let path_results =
+        report::measure_views(&geometry, &classified, &path, &settings, || bar.inc(1))?;
+    let case_results =
+        report::measure_views(&geometry, &classified, &cases, &settings, || bar.inc(1))?;
+    bar.finish_and_clear();
+    let summaries = report::summarise(&path_results);
+    println!("# Orderings on {name}\n");
+    println!(
+        "{} views ({} orbit, {} fly-in ending inside the volume), {}x{} pixels, splat sigma {} voxel cut at {} voxels; error against the exact order.\n",
+        path.len(),
+        settings.orbit_views,
+        settings.fly_in_views,
+        settings.size.0,
+        settings.size.1,
+        settings.style.sigma,
+        settings.style.cutoff
+    );
+    println!("{}", report::summary_table(&summaries));
+    println!("## Per view: image RMSE (share of pixels off by more than 4/255)\n");
+    println!("{}", report::per_view_table(&case_results));
+    println!("{}", report::per_view_table(&path_results));
+    std::fs::create_dir_all(&args.out_dir)
+        .with_context(|| format!("creating {}", args.out_dir.display()))?;
+    let png = args.out_dir.join("error-vs-time.png");
+    let svg = args.out_dir.join("error-vs-time.svg");
+    report::plot_error_against_time(&summaries, &format!("Orderings on {name}"), &png, &svg)?;
+    eprintln!("wrote {} and {}", png.display(), svg.display());
+    Ok(())
+}
+
+fn load_for_report(args: &OrderingsArgs) -> Result<(String, CpuVolume, Classified)> {
+    let Some(path) = &args.volume else {
+        let volume = shoulder_phantom_default();
+        let classified = classify(&volume, &TransferFunction::ct_bone(), 1.0 / 255.0)?;
+        return Ok(("the built-in shoulder phantom".into(), volume, classified));
+    };
+    let (Some(dims), Some(format)) = (args.raw_dims, args.raw_type) else {
+        bail!(
+            "{}: give --raw-dims and --raw-type for a raw volume",
+            path.display()
+        );
+    };
+    let spec = RawSpec {
+        header_bytes: args.raw_header,
+        spacing: args.spacing,
+        ..RawSpec::new(dims, format.scalar, format.order)
+    };
+    let is_stack = path.extension().is_some_and(|e| e == "1");
+    let volume = if is_stack {
+        load_raw_slices(&slice_stack(path)?, &spec)?
+    } else {
+        load_raw(path, &spec)?
+    };
+    let threshold = args
+        .threshold
+        .context("give --threshold for a raw volume")?;
+    let (lo, hi) = value_range(&volume.values);
+    let ramp_top = threshold + 0.25 * (hi - threshold).max(1.0);
+    let tf = TransferFunction::ramp(threshold, ramp_top, [1.0, 0.93, 0.85, 0.6]);
+    let classified = classify(&volume, &tf, 1.0 / 255.0)?;
+    eprintln!("values {lo} to {hi}; splats from {threshold}, fully opaque-ish from {ramp_top}");
+    Ok((path.display().to_string(), volume, classified))
+}
+
+fn value_range(values: &[f32]) -> (f32, f32) {
+    values
+        .iter()
+        .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &v| {
+            (lo.min(v), hi.max(v))
+        })
+}
+
+fn progress(len: usize) -> ProgressBar {
+    let bar = ProgressBar::new(len as u64);
+    if let Ok(style) =
+        ProgressStyle::with_template("{msg} [{bar:40}] {pos}/{len} views, {eta} left")
+    {
+        bar.set_style(style.progress_chars("=> "));
+    }
+    bar.set_message("ordering and compositing");
+    bar
+}
+
+fn parse_triple<T: std::str::FromStr>(s: &str) -> Result<[T; 3], String> {
+    let parts: Vec<&str> = s.split(',').map(str::trim).collect();
+    if parts.len() != 3 {
+        return Err(format!("expected three comma-separated numbers, got {s:?}"));
+    }
+    let mut out = Vec::with_capacity(3);
+    for p in parts {
+        out.push(
+            p.parse::<T>()
+                .map_err(|_| format!("{p:?} is not a valid number"))?,
+        );
+    }
+    out.try_into()
+        .map_err(|_| "expected three numbers".to_owned())
+}
+
+fn parse_u32x3(s: &str) -> Result<[u32; 3], String> {
+    parse_triple(s)
+}
+
+fn parse_f64x3(s: &str) -> Result<[f64; 3], String> {
+    parse_triple(s)
+}
+
+fn parse_size(s: &str) -> Result<(u32, u32), String> {
+    let (w, h) = s
+        .split_once(['x', 'X'])
+        .ok_or_else(|| format!("expected WxH, got {s:?}"))?;
+    let parse = |v: &str| {
+        v.trim()
+            .parse::<u32>()
+            .map_err(|_| format!("{v:?} is not a pixel count"))
+    };
+    let (w, h) = (parse(w)?, parse(h)?);
+    if w == 0 || h == 0 {
+        return Err("the image needs at least one pixel each way".into());
+    }
+    Ok((w, h))
+}

@@ -45,21 +45,26 @@ fn case() -> impl Strategy<Value = Case> {
                 any::<bool>(),
             )
         })
-        .prop_map(|(dims, spacing, (ex, ey, ez), target, keep, seed, cull)| Case {
-            dims,
-            spacing,
-            eye: [ex, ey, ez],
-            target,
-            keep,
-            seed,
-            cull,
-        })
+        .prop_map(
+            |(dims, spacing, (ex, ey, ez), target, keep, seed, cull)| Case {
+                dims,
+                spacing,
+                eye: [ex, ey, ez],
+                target,
+                keep,
+                seed,
+                cull,
+            },
+        )
 }
 
 /// A grid where about `keep`/4 of the voxels are significant, picked by a hash.
 fn grid(case: &Case) -> SparseGrid {
     SparseGrid::from_mask(case.dims, |id| {
-        let h = (id ^ case.seed).wrapping_mul(0x9E37_79B9).rotate_left(13).wrapping_mul(0x85EB_CA6B);
+        let h = (id ^ case.seed)
+            .wrapping_mul(0x9E37_79B9)
+            .rotate_left(13)
+            .wrapping_mul(0x85EB_CA6B);
         h % 4 < case.keep
     })
     .unwrap()
@@ -119,10 +124,17 @@ proptest! {
 fn every_ordering_is_a_permutation_of_a_dense_grid() {
     let geometry = VolumeGeometry::axis_aligned([13, 7, 9], [0.7, 0.7, 2.5], [0.0; 3]).unwrap();
     let grid = SparseGrid::dense(geometry.dims()).unwrap();
-    let view = ViewCase::new(&geometry, DVec3::new(3.3, 2.1, 30.0), geometry.centre_world()).unwrap();
+    let view = ViewCase::new(
+        &geometry,
+        DVec3::new(3.3, 2.1, 30.0),
+        geometry.centre_world(),
+    )
+    .unwrap();
     let mut out = Vec::new();
     for ordering in Ordering::ALL {
-        Orderer::new().order(&grid, &view, ordering, &OrderOptions::default(), &mut out).unwrap();
+        Orderer::new()
+            .order(&grid, &view, ordering, &OrderOptions::default(), &mut out)
+            .unwrap();
         let mut sorted = out.clone();
         sorted.sort_unstable();
         assert_eq!(sorted, (0..13 * 7 * 9).collect::<Vec<_>>(), "{ordering}");

@@ -28,7 +28,9 @@ fn all_orders(grid: &SparseGrid, view: &ViewCase) -> Vec<(Ordering, Vec<u32>)> {
         .iter()
         .map(|&o| {
             let mut out = Vec::new();
-            orderer.order(grid, view, o, &OrderOptions::default(), &mut out).unwrap();
+            orderer
+                .order(grid, view, o, &OrderOptions::default(), &mut out)
+                .unwrap();
             (o, out)
         })
         .collect()
@@ -44,7 +46,11 @@ fn check_all(grid: &SparseGrid, view: &ViewCase) -> Vec<(Ordering, Vec<u32>)> {
         sorted.sort_unstable();
         assert_eq!(sorted, ids, "{ordering} is not a permutation");
         if GRID_ORDERINGS.contains(ordering) {
-            assert_eq!(out, &reference::order(grid, view, *ordering, false), "{ordering}");
+            assert_eq!(
+                out,
+                &reference::order(grid, view, *ordering, false),
+                "{ordering}"
+            );
         }
     }
     orders
@@ -58,11 +64,24 @@ fn dense(dims: [u32; 3], spacing: [f64; 3]) -> (VolumeGeometry, SparseGrid) {
 #[test]
 fn eye_on_a_voxel_plane_and_half_way() {
     let (geometry, grid) = dense([9, 8, 7], [1.0, 1.0, 1.0]);
-    for eye in [[4.0, 3.0, -5.0], [4.5, 3.5, -5.0], [4.5, 3.0, 3.5], [0.0, 0.0, 0.0]] {
+    for eye in [
+        [4.0, 3.0, -5.0],
+        [4.5, 3.5, -5.0],
+        [4.5, 3.0, 3.5],
+        [0.0, 0.0, 0.0],
+    ] {
         let view = view_at(&geometry, eye);
         let orders = check_all(&grid, &view);
-        let explicit = &orders.iter().find(|(o, _)| *o == Ordering::IpPbtfExplicit).unwrap().1;
-        let implicit = &orders.iter().find(|(o, _)| *o == Ordering::IpPbtfImplicit).unwrap().1;
+        let explicit = &orders
+            .iter()
+            .find(|(o, _)| *o == Ordering::IpPbtfExplicit)
+            .unwrap()
+            .1;
+        let implicit = &orders
+            .iter()
+            .find(|(o, _)| *o == Ordering::IpPbtfImplicit)
+            .unwrap()
+            .1;
         assert_eq!(explicit, implicit, "eye {eye:?}");
     }
 }
@@ -78,14 +97,29 @@ fn eye_on_the_boundary_and_either_side_of_it() {
                 eye[axis] = edge + nudge;
                 let view = view_at(&geometry, eye);
                 let inside = (-0.5..=n - 0.5).contains(&eye[axis]);
-                let expected = if inside { CaseKind::VolumeOn } else { CaseKind::FaceOn };
+                let expected = if inside {
+                    CaseKind::VolumeOn
+                } else {
+                    CaseKind::FaceOn
+                };
                 assert_eq!(view.kind, expected, "axis {axis} at {}", eye[axis]);
                 orders.push(check_all(&grid, &view));
             }
             // Crossing the boundary changes the case but not a single voxel of the grid orders:
             // the split there has one empty side. (The exact order may swap near-ties.)
-            for ordering in [Ordering::Pbtf, Ordering::IpPbtfExplicit, Ordering::IpPbtfImplicit] {
-                let pick = |i: usize| orders[i].iter().find(|(o, _)| *o == ordering).unwrap().1.clone();
+            for ordering in [
+                Ordering::Pbtf,
+                Ordering::IpPbtfExplicit,
+                Ordering::IpPbtfImplicit,
+            ] {
+                let pick = |i: usize| {
+                    orders[i]
+                        .iter()
+                        .find(|(o, _)| *o == ordering)
+                        .unwrap()
+                        .1
+                        .clone()
+                };
                 assert_eq!(pick(0), pick(1), "{ordering} at axis {axis} edge {edge}");
                 assert_eq!(pick(1), pick(2), "{ordering} at axis {axis} edge {edge}");
             }
@@ -101,7 +135,13 @@ fn eye_inside_one_voxel_draws_that_voxel_last() {
     let inside = 5 + 10 * (4 + 10 * 4);
     for (ordering, out) in check_all(&grid, &view) {
         // PBTF ends with the nearest corner of its last subvolume, not necessarily this voxel.
-        if matches!(ordering, Ordering::IpPbtfImplicit | Ordering::IpPbtfExplicit | Ordering::Exact | Ordering::Bucketed) {
+        if matches!(
+            ordering,
+            Ordering::IpPbtfImplicit
+                | Ordering::IpPbtfExplicit
+                | Ordering::Exact
+                | Ordering::Bucketed
+        ) {
             assert_eq!(*out.last().unwrap(), inside, "{ordering}");
         }
     }
@@ -111,7 +151,12 @@ fn eye_inside_one_voxel_draws_that_voxel_last() {
 fn degenerate_grids() {
     for dims in [[1, 1, 1], [1, 7, 1], [7, 1, 1], [1, 1, 5]] {
         let (geometry, grid) = dense(dims, [1.0, 2.0, 0.5]);
-        for eye in [[0.0, 0.0, 0.0], [0.2, 3.1, -0.4], [-4.0, 9.0, 2.0], [0.5, 0.5, 0.5]] {
+        for eye in [
+            [0.0, 0.0, 0.0],
+            [0.2, 3.1, -0.4],
+            [-4.0, 9.0, 2.0],
+            [0.5, 0.5, 0.5],
+        ] {
             let view = ViewCase::new(
                 &geometry,
                 geometry.index_to_world_point(DVec3::from(eye)),
@@ -142,7 +187,11 @@ fn far_origin_orders_like_the_same_view_at_the_origin() {
     let dims = [12, 10, 8];
     let grid = SparseGrid::dense(dims).unwrap();
     let mut orderer = Orderer::new();
-    for offset in [[2.9995, 4.0, -1.0], [3.0005, 4.0, -1.0], [-0.4999, 4.5, 7.0]] {
+    for offset in [
+        [2.9995, 4.0, -1.0],
+        [3.0005, 4.0, -1.0],
+        [-0.4999, 4.5, 7.0],
+    ] {
         let mut runs = Vec::new();
         for origin in [0.0, 1e5] {
             let geometry = VolumeGeometry::axis_aligned(dims, [1.0; 3], [origin; 3]).unwrap();
@@ -152,25 +201,40 @@ fn far_origin_orders_like_the_same_view_at_the_origin() {
                 .iter()
                 .map(|&ordering| {
                     let mut out = Vec::new();
-                    orderer.order(&grid, &view, ordering, &OrderOptions::default(), &mut out).unwrap();
+                    orderer
+                        .order(&grid, &view, ordering, &OrderOptions::default(), &mut out)
+                        .unwrap();
                     out
                 })
                 .collect();
             runs.push((view, per));
         }
         let (near, far) = (&runs[0], &runs[1]);
-        assert_eq!(near.0.axes.map(|a| a.view), far.0.axes.map(|a| a.view), "split at {offset:?}");
+        assert_eq!(
+            near.0.axes.map(|a| a.view),
+            far.0.axes.map(|a| a.view),
+            "split at {offset:?}"
+        );
         for (i, ordering) in Ordering::ALL.iter().enumerate() {
             if GRID_ORDERINGS.contains(ordering) {
-                assert!(near.1[i] == far.1[i], "{ordering} differs at offset {offset:?}");
+                assert!(
+                    near.1[i] == far.1[i],
+                    "{ordering} differs at offset {offset:?}"
+                );
             }
         }
         // Exact ties (mirror-image voxels) fall to rounding, so compare the far volume's exact
         // order by the distances of the view at the origin.
-        let exact = Ordering::ALL.iter().position(|o| *o == Ordering::Exact).unwrap();
+        let exact = Ordering::ALL
+            .iter()
+            .position(|o| *o == Ordering::Exact)
+            .unwrap();
         let d = |id: u32| near.0.distance_squared(grid.coords(id));
         for pair in far.1[exact].windows(2) {
-            assert!(d(pair[1]) <= d(pair[0]) + 1e-9, "exact order at offset {offset:?}");
+            assert!(
+                d(pair[1]) <= d(pair[0]) + 1e-9,
+                "exact order at offset {offset:?}"
+            );
         }
     }
     // The split these offsets straddle is one f32 cannot see.
@@ -180,11 +244,19 @@ fn far_origin_orders_like_the_same_view_at_the_origin() {
 #[test]
 fn non_finite_eyes_are_errors() {
     let (geometry, _) = dense([4, 4, 4], [1.0; 3]);
-    for eye in [DVec3::new(f64::NAN, 0.0, 0.0), DVec3::new(0.0, f64::INFINITY, 0.0)] {
+    for eye in [
+        DVec3::new(f64::NAN, 0.0, 0.0),
+        DVec3::new(0.0, f64::INFINITY, 0.0),
+    ] {
         let err = ViewCase::new(&geometry, eye, DVec3::ZERO).unwrap_err();
         assert!(matches!(err, OrderError::NonFiniteEye(_)), "{err}");
     }
-    let err = ViewCase::new(&geometry, DVec3::ONE, DVec3::new(f64::NEG_INFINITY, 0.0, 0.0)).unwrap_err();
+    let err = ViewCase::new(
+        &geometry,
+        DVec3::ONE,
+        DVec3::new(f64::NEG_INFINITY, 0.0, 0.0),
+    )
+    .unwrap_err();
     assert!(matches!(err, OrderError::NonFiniteTarget(_)));
     assert_eq!(
         ViewCase::new(&geometry, DVec3::ONE, DVec3::ONE).unwrap_err(),
@@ -231,11 +303,13 @@ fn a_million_voxels_away_every_ordering_agrees_with_btf() {
     };
     let style = SplatStyle::default();
     let (btf, _) = composite(&camera, &volume, &get(Ordering::Btf), &style).unwrap();
-    assert!(btf.pixels.iter().any(|p| p[3] > 0.5), "the volume is on screen");
+    assert!(
+        btf.pixels.iter().any(|p| p[3] > 0.5),
+        "the volume is on screen"
+    );
     for ordering in Ordering::ALL {
         let (frame, _) = composite(&camera, &volume, &get(ordering), &style).unwrap();
         let d = compare(&frame, &btf).unwrap();
         assert!(d.rmse < 0.02, "{ordering}: rmse {} against BTF", d.rmse);
     }
 }
-

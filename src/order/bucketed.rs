@@ -83,7 +83,16 @@ impl Scratch {
                 self.scratch.cursors[b] += 1;
             }
         }
-        walk(grid, id_order, cull, &mut Count { scratch: self, k: [0; 3], axis: 0 });
+        walk(
+            grid,
+            id_order,
+            cull,
+            &mut Count {
+                scratch: self,
+                k: [0; 3],
+                axis: 0,
+            },
+        );
         // Farthest bucket first: each cursor starts after all farther buckets.
         let mut start = 0u32;
         for c in self.cursors.iter_mut().rev() {
@@ -126,7 +135,17 @@ impl Scratch {
                 *slot += 1;
             }
         }
-        walk(grid, plan, cull, &mut Scatter { scratch: self, out, k: [0; 3], axis: 0 });
+        walk(
+            grid,
+            plan,
+            cull,
+            &mut Scatter {
+                scratch: self,
+                out,
+                k: [0; 3],
+                axis: 0,
+            },
+        );
     }
 }
 
@@ -137,7 +156,13 @@ impl Scratch {
 fn distance_bounds(view: &ViewCase) -> (f64, f64) {
     let mut farthest = 0.0f64;
     for corner in 0..8 {
-        let k: [u32; 3] = std::array::from_fn(|a| if corner >> a & 1 == 0 { 0 } else { view.axes[a].n - 1 });
+        let k: [u32; 3] = std::array::from_fn(|a| {
+            if corner >> a & 1 == 0 {
+                0
+            } else {
+                view.axes[a].n - 1
+            }
+        });
         farthest = farthest.max(view.distance_squared(k));
     }
     let g = view.gram;

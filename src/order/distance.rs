@@ -43,7 +43,8 @@ impl DistanceTable {
     #[inline]
     pub(crate) fn distance_squared(&self, k: [u32; 3]) -> f64 {
         if self.orthogonal {
-            (self.terms[0][k[0] as usize] + self.terms[1][k[1] as usize]) + self.terms[2][k[2] as usize]
+            (self.terms[0][k[0] as usize] + self.terms[1][k[1] as usize])
+                + self.terms[2][k[2] as usize]
         } else {
             self.view.as_ref().map_or(0.0, |v| v.distance_squared(k))
         }

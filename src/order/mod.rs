@@ -208,7 +208,9 @@ impl Orderer {
             Ordering::Pbtf => self.pbtf(grid, view, cull, out),
             Ordering::IpPbtfImplicit | Ordering::IpPbtfExplicit => {
                 let explicit = ordering == Ordering::IpPbtfExplicit;
-                self.ip_pbtf(view, explicit, |plan| walk(grid, plan, cull, &mut Collect(out)));
+                self.ip_pbtf(view, explicit, |plan| {
+                    walk(grid, plan, cull, &mut Collect(out))
+                });
             }
             Ordering::Exact => {
                 let [s0, s1, _] = &mut self.sequences;
@@ -218,7 +220,13 @@ impl Orderer {
             Ordering::Bucketed => {
                 let width = bucketed::width(view, options.bucket_width)?;
                 let [s0, s1, s2] = &mut self.sequences;
-                let total = self.buckets.count(grid, view, width, &id_order_plan(grid.dims(), [s0, s1]), cull);
+                let total = self.buckets.count(
+                    grid,
+                    view,
+                    width,
+                    &id_order_plan(grid.dims(), [s0, s1]),
+                    cull,
+                );
                 let plan = ip_pbtf_plan(view, false, [s0, s1, s2]);
                 self.buckets.scatter(grid, &plan, cull, total, out);
             }
@@ -226,7 +234,14 @@ impl Orderer {
         Ok(())
     }
 
-    fn btf(&mut self, grid: &SparseGrid, view: &ViewCase, perm: [usize; 3], cull: Option<&ViewCase>, out: &mut Vec<u32>) {
+    fn btf(
+        &mut self,
+        grid: &SparseGrid,
+        view: &ViewCase,
+        perm: [usize; 3],
+        cull: Option<&ViewCase>,
+        out: &mut Vec<u32>,
+    ) {
         let [s0, s1, _] = &mut self.sequences;
         for (seq, axis) in [(&mut *s0, perm[0]), (&mut *s1, perm[1])] {
             seq.clear();
@@ -251,7 +266,13 @@ impl Orderer {
         walk(grid, &plan, cull, &mut Collect(out));
     }
 
-    fn pbtf(&mut self, grid: &SparseGrid, view: &ViewCase, cull: Option<&ViewCase>, out: &mut Vec<u32>) {
+    fn pbtf(
+        &mut self,
+        grid: &SparseGrid,
+        view: &ViewCase,
+        cull: Option<&ViewCase>,
+        out: &mut Vec<u32>,
+    ) {
         for part in pbtf_subvolumes(view) {
             let [s0, s1, _] = &mut self.sequences;
             // BTF nesting, z slowest: outer axes z and y, inner x.
@@ -265,7 +286,11 @@ impl Orderer {
                 }
             }
             let (lo, hi, down) = part[0];
-            let inner = if down { Inner::Down { lo, hi } } else { Inner::Up { lo, hi } };
+            let inner = if down {
+                Inner::Down { lo, hi }
+            } else {
+                Inner::Up { lo, hi }
+            };
             let plan = Plan {
                 perm: [2, 1, 0],
                 outer: [s0, s1],
@@ -286,7 +311,11 @@ impl Orderer {
 fn ip_pbtf_plan<'a>(view: &ViewCase, explicit: bool, seqs: [&'a mut Vec<u32>; 3]) -> Plan<'a> {
     let perm = view.permutation;
     let [s0, s1, s2] = seqs;
-    for (seq, axis) in [(&mut *s0, perm[0]), (&mut *s1, perm[1]), (&mut *s2, perm[2])] {
+    for (seq, axis) in [
+        (&mut *s0, perm[0]),
+        (&mut *s1, perm[1]),
+        (&mut *s2, perm[2]),
+    ] {
         seq.clear();
         view.axes[axis].far_to_near(seq);
     }
@@ -295,8 +324,14 @@ fn ip_pbtf_plan<'a>(view: &ViewCase, explicit: bool, seqs: [&'a mut Vec<u32>; 3]
         Inner::Explicit(s2)
     } else {
         match inner_axis.view {
-            AxisView::Below => Inner::Down { lo: 0, hi: inner_axis.n },
-            AxisView::Above => Inner::Up { lo: 0, hi: inner_axis.n },
+            AxisView::Below => Inner::Down {
+                lo: 0,
+                hi: inner_axis.n,
+            },
+            AxisView::Above => Inner::Up {
+                lo: 0,
+                hi: inner_axis.n,
+            },
             AxisView::Split { kv } => Inner::Merge {
                 kv,
                 c: inner_axis.merge_threshold(),
@@ -349,7 +384,13 @@ fn pbtf_subvolumes(view: &ViewCase) -> Vec<[(u32, u32, bool); 3]> {
     let farthest = |s: &[(u32, u32, bool); 3]| {
         let mut best = 0.0f64;
         for corner in 0..8 {
-            let k: [u32; 3] = std::array::from_fn(|a| if corner >> a & 1 == 0 { s[a].0 } else { s[a].1 - 1 });
+            let k: [u32; 3] = std::array::from_fn(|a| {
+                if corner >> a & 1 == 0 {
+                    s[a].0
+                } else {
+                    s[a].1 - 1
+                }
+            });
             best = best.max(view.distance_squared(k));
         }
         best

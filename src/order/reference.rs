@@ -17,7 +17,9 @@ pub fn order(grid: &SparseGrid, view: &ViewCase, ordering: Ordering, cull: bool)
     let key = |id: u32| grid.coords(id);
     match ordering {
         Ordering::Btf => ids.sort_by(|&a, &b| btf_cmp(view, [2, 1, 0], key(a), key(b))),
-        Ordering::Wbtf => ids.sort_by(|&a, &b| btf_cmp(view, view.wbtf_permutation, key(a), key(b))),
+        Ordering::Wbtf => {
+            ids.sort_by(|&a, &b| btf_cmp(view, view.wbtf_permutation, key(a), key(b)))
+        }
         Ordering::Pbtf => {
             let parts = pbtf_subvolumes(view);
             let part_of = |k: [u32; 3]| {
@@ -28,7 +30,9 @@ pub fn order(grid: &SparseGrid, view: &ViewCase, ordering: Ordering, cull: bool)
             };
             ids.sort_by(|&a, &b| {
                 let (ka, kb) = (key(a), key(b));
-                part_of(ka).cmp(&part_of(kb)).then_with(|| toward_eye_cmp(view, [2, 1, 0], ka, kb))
+                part_of(ka)
+                    .cmp(&part_of(kb))
+                    .then_with(|| toward_eye_cmp(view, [2, 1, 0], ka, kb))
             });
         }
         Ordering::IpPbtfExplicit | Ordering::IpPbtfImplicit => {
@@ -50,7 +54,11 @@ fn toward_eye_cmp(view: &ViewCase, perm: [usize; 3], a: [u32; 3], b: [u32; 3]) -
     for axis in perm {
         let (x, y) = (a[axis], b[axis]);
         if x != y {
-            return if view.axes[axis].farther(x, y) { Cmp::Less } else { Cmp::Greater };
+            return if view.axes[axis].farther(x, y) {
+                Cmp::Less
+            } else {
+                Cmp::Greater
+            };
         }
     }
     Cmp::Equal
@@ -62,7 +70,11 @@ fn btf_cmp(view: &ViewCase, perm: [usize; 3], a: [u32; 3], b: [u32; 3]) -> Cmp {
         let (x, y) = (a[axis], b[axis]);
         if x != y {
             let descending = view.btf_descending(axis);
-            return if (x > y) == descending { Cmp::Less } else { Cmp::Greater };
+            return if (x > y) == descending {
+                Cmp::Less
+            } else {
+                Cmp::Greater
+            };
         }
     }
     Cmp::Equal

@@ -78,7 +78,12 @@ pub(crate) struct Plan<'a> {
 
 /// Walks `plan` over the significant voxels of `grid`, leaving out voxels at or behind the eye
 /// plane of `cull` when given.
-pub(crate) fn walk<S: Sink>(grid: &SparseGrid, plan: &Plan<'_>, cull: Option<&ViewCase>, sink: &mut S) {
+pub(crate) fn walk<S: Sink>(
+    grid: &SparseGrid,
+    plan: &Plan<'_>,
+    cull: Option<&ViewCase>,
+    sink: &mut S,
+) {
     let axis = plan.perm[2];
     let (b, c) = other_axes(axis);
     let strides = grid.strides();
@@ -104,8 +109,12 @@ pub(crate) fn walk<S: Sink>(grid: &SparseGrid, plan: &Plan<'_>, cull: Option<&Vi
             sink.row(k, axis);
             match plan.inner {
                 Inner::Up { lo, hi } => walk_up(runs, base, stride, lo.max(clo), hi.min(chi), sink),
-                Inner::Down { lo, hi } => walk_down(runs, base, stride, lo.max(clo), hi.min(chi), sink),
-                Inner::Merge { kv, c } => merge(runs, base, stride, (clo, kv.clamp(clo, chi), chi), c, sink),
+                Inner::Down { lo, hi } => {
+                    walk_down(runs, base, stride, lo.max(clo), hi.min(chi), sink)
+                }
+                Inner::Merge { kv, c } => {
+                    merge(runs, base, stride, (clo, kv.clamp(clo, chi), chi), c, sink)
+                }
                 Inner::Explicit(seq) => {
                     for &kk in seq {
                         let id = base + kk * stride;
@@ -180,14 +189,25 @@ fn walk_down<S: Sink>(runs: &[Run], base: u32, stride: u32, lo: u32, hi: u32, si
 /// Merges the lower side `lo..kv` (walked up) with the upper side `kv..hi` (walked down).
 /// Each step emits the largest batch of one side that precedes the other side's next voxel.
 #[inline]
-fn merge<S: Sink>(runs: &[Run], base: u32, stride: u32, (lo, kv, hi): (u32, u32, u32), c: i64, sink: &mut S) {
+fn merge<S: Sink>(
+    runs: &[Run],
+    base: u32,
+    stride: u32,
+    (lo, kv, hi): (u32, u32, u32),
+    c: i64,
+    sink: &mut S,
+) {
     // Lower cursor: run index and next voxel; upper cursor: run index and one past next voxel.
     let mut li = runs.partition_point(|r| r.end() <= lo);
     let lower_runs_end = runs.partition_point(|r| r.start < kv);
     let mut lk = runs.get(li).map_or(kv, |r| r.start.max(lo));
     let mut ui = runs.partition_point(|r| r.start < hi);
     let upper_runs_start = runs.partition_point(|r| r.end() <= kv);
-    let mut uk = if ui > upper_runs_start { runs[ui - 1].end().min(hi) } else { kv };
+    let mut uk = if ui > upper_runs_start {
+        runs[ui - 1].end().min(hi)
+    } else {
+        kv
+    };
     loop {
         let lower_live = li < lower_runs_end && lk < kv;
         let upper_live = ui > upper_runs_start && uk > kv;
@@ -203,7 +223,11 @@ fn merge<S: Sink>(runs: &[Run], base: u32, stride: u32, (lo, kv, hi): (u32, u32,
                 let start = runs[ui - 1].start.max(kv);
                 sink.run_down(base, stride, start, uk);
                 ui -= 1;
-                uk = if ui > upper_runs_start { runs[ui - 1].end() } else { kv };
+                uk = if ui > upper_runs_start {
+                    runs[ui - 1].end()
+                } else {
+                    kv
+                };
             }
             (true, true) => {
                 let ku = i64::from(uk - 1);
@@ -225,7 +249,11 @@ fn merge<S: Sink>(runs: &[Run], base: u32, stride: u32, (lo, kv, hi): (u32, u32,
                     uk = start;
                     if uk == run_start {
                         ui -= 1;
-                        uk = if ui > upper_runs_start { runs[ui - 1].end() } else { kv };
+                        uk = if ui > upper_runs_start {
+                            runs[ui - 1].end()
+                        } else {
+                            kv
+                        };
                     }
                 }
             }

@@ -36,7 +36,11 @@ impl VolumeGeometry {
     }
 
     /// An axis-aligned grid: voxel `(i, j, k)` sits at `origin + spacing * (i, j, k)`.
-    pub fn axis_aligned(dims: [u32; 3], spacing: [f64; 3], origin: [f64; 3]) -> Result<Self, OrderError> {
+    pub fn axis_aligned(
+        dims: [u32; 3],
+        spacing: [f64; 3],
+        origin: [f64; 3],
+    ) -> Result<Self, OrderError> {
         if spacing.iter().any(|s| !s.is_finite() || *s <= 0.0) {
             return Err(OrderError::BadSpacing(spacing));
         }
@@ -345,8 +349,16 @@ impl fmt::Display for ViewCase {
         for (a, axis) in self.axes.iter().enumerate() {
             let name = AXIS_NAMES[a];
             match axis.view {
-                AxisView::Below => writeln!(f, "  {name}: not split, eye below, far to near {}..0", axis.n - 1)?,
-                AxisView::Above => writeln!(f, "  {name}: not split, eye above, far to near 0..{}", axis.n - 1)?,
+                AxisView::Below => writeln!(
+                    f,
+                    "  {name}: not split, eye below, far to near {}..0",
+                    axis.n - 1
+                )?,
+                AxisView::Above => writeln!(
+                    f,
+                    "  {name}: not split, eye above, far to near 0..{}",
+                    axis.n - 1
+                )?,
                 AxisView::Split { kv } => writeln!(
                     f,
                     "  {name}: split by the plane through the eye, upper side from voxel {kv} (ceil; a centre on the plane is upper); lower side 0..{kv} walked up, upper side {kv}..{} walked down; equal distances: lower first",

@@ -4,6 +4,17 @@ use glam::{DAffine3, DMat3};
 
 use crate::order::{OrderError, VolumeGeometry};
 
+pub mod phantom;
+pub mod raw;
+
+pub use phantom::{
+    ShoulderLandmarks, shoulder_landmarks, shoulder_phantom, shoulder_phantom_default,
+};
+pub use raw::{
+    ByteOrder, ParseScalarError, RawSpec, ScalarFormat, ScalarType, VolumeError, load_raw,
+    load_raw_slices, slice_stack,
+};
+
 /// Scalar values on an `nx x ny x nz` grid (x fastest), with their placement in the world:
 /// voxel `k` sits at `origin + direction * (spacing * k)`.
 #[derive(Debug, Clone, PartialEq)]
@@ -27,6 +38,9 @@ impl CpuVolume {
             return Err(OrderError::BadSpacing(self.spacing));
         }
         let linear = self.direction * DMat3::from_diagonal(self.spacing.into());
-        VolumeGeometry::new(self.dims, DAffine3::from_mat3_translation(linear, self.origin.into()))
+        VolumeGeometry::new(
+            self.dims,
+            DAffine3::from_mat3_translation(linear, self.origin.into()),
+        )
     }
 }

@@ -1,0 +1,320 @@
+//! The orderings report: every ordering's run time against its image error, along a camera
+//! path (an orbit and a fly-in that ends inside the volume) and at fixed views of each case.
+
+mod plot;
+
+pub use plot::{PlotError, plot_error_against_time};
+
+use std::time::Instant;
+
+use glam::DVec3;
+
+use crate::camera::Camera;
+use crate::classify::Classified;
+use crate::composite::{
+    CompositeError, FragmentStats, ImageDifference, SplatStyle, SplatVolume, compare, composite,
+};
+use crate::order::{
+    CaseKind, OrderError, OrderOptions, Orderer, Ordering, ViewCase, VolumeGeometry,
+};
+
+/// Settings of a report run.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ReportSettings {
+    /// Views on the orbit.
+    pub orbit_views: usize,
+    /// Views on the fly-in.
+    pub fly_in_views: usize,
+    /// Image width and height in pixels.
+    pub size: (u32, u32),
+    /// Vertical field of view in degrees.
+    pub fov_y_degrees: f64,
+    /// Splat shape.
+    pub style: SplatStyle,
+    /// Orderings to compare (the exact order is always computed as the reference).
+    pub orderings: Vec<Ordering>,
+}
+
+impl Default for ReportSettings {
+    fn default() -> Self {
+        Self {
+            orbit_views: 16,
+            fly_in_views: 8,
+            size: (192, 192),
+            fov_y_degrees: 50.0,
+            style: SplatStyle::default(),
+            orderings: Ordering::ALL.to_vec(),
+        }
+    }
+}
+
+/// Why a report could not be made.
+#[derive(Debug, thiserror::Error)]
+pub enum ReportError {
+    /// An ordering failed.
+    #[error(transparent)]
+    Order(#[from] OrderError),
+    /// Compositing failed.
+    #[error(transparent)]
+    Composite(#[from] CompositeError),
+}
+
+/// One view of the path: where the eye was, which case it made, and per ordering the order
+/// time, the image difference against the exact order and the fragment statistics.
+#[derive(Debug, Clone)]
+pub struct ViewResult {
+    /// Name of the view ("orbit 3", "fly-in 7", "face-on close").
+    pub name: String,
+    /// The view case.
+    pub kind: CaseKind,
+    /// Per ordering, in the order of [`ReportSettings::orderings`].
+    pub per_ordering: Vec<(Ordering, f64, ImageDifference, FragmentStats)>,
+}
+
+/// A named camera placement.
+#[derive(Debug, Clone, Copy)]
+pub struct View {
+    /// Display name.
+    pub name: &'static str,
+    /// Index of the view on its path (0 for fixed views).
+    pub index: usize,
+    /// Eye in world space.
+    pub eye: DVec3,
+    /// Target in world space.
+    pub target: DVec3,
+}
+
+/// The camera path: an orbit around the volume at twice its bounding radius, rising and
+/// falling in elevation, then a fly-in from outside to a point inside the volume.
+pub fn camera_path(
+    geometry: &VolumeGeometry,
+    orbit_views: usize,
+    fly_in_views: usize,
+) -> Vec<View> {
+    let centre = geometry.centre_world();
+    let radius = bounding_radius(geometry);
+    let mut views = Vec::with_capacity(orbit_views + fly_in_views);
+    for i in 0..orbit_views {
+        let t = i as f64 / orbit_views.max(1) as f64;
+        let azimuth = std::f64::consts::TAU * t + 0.3;
+        let elevation = 0.5 * (std::f64::consts::TAU * t).sin();
+        let dir = DVec3::new(
+            azimuth.cos() * elevation.cos(),
+            azimuth.sin() * elevation.cos(),
+            elevation.sin(),
+        );
+        views.push(View {
+            name: "orbit",
+            index: i,
+            eye: centre + dir * (2.0 * radius),
+            target: centre,
+        });
+    }
+    let start = centre + DVec3::new(0.8, -1.9, 0.6).normalize() * (2.5 * radius);
+    let end = centre + DVec3::new(0.13, -0.21, 0.17) * radius;
+    for i in 0..fly_in_views {
+        let t = (i as f64 + 1.0) / fly_in_views.max(1) as f64;
+        let eye = start.lerp(end, t);
+        views.push(View {
+            name: "fly-in",
+            index: i,
+            eye,
+            target: eye + (centre - start).normalize(),
+        });
+    }
+    views
+}
+
+/// Fixed views of the four cases, close enough that splats cover several pixels.
+pub fn case_views(geometry: &VolumeGeometry) -> Vec<View> {
+    let dims = geometry.dims().map(f64::from);
+    let at = |x: f64, y: f64, z: f64| {
+        geometry.index_to_world_point(DVec3::new(x * dims[0], y * dims[1], z * dims[2]))
+    };
+    let centre = geometry.centre_world();
+    let view = |name, eye: DVec3| View {
+        name,
+        index: 0,
+        eye,
+        target: centre,
+    };
+    vec![
+        view("face-on close", at(0.43, 0.56, -0.35)),
+        view("edge-on", at(0.47, -0.45, -0.4)),
+        view("volume-on", at(0.41, 0.37, 0.45)),
+        view("corner-on", at(-0.6, -0.5, -0.45)),
+    ]
+}
+
+/// Radius of the sphere around the grid's centre that holds every voxel centre.
+pub fn bounding_radius(geometry: &VolumeGeometry) -> f64 {
+    let centre = geometry.centre_world();
+    let dims = geometry.dims();
+    (0..8)
+        .map(|c| {
+            let k = DVec3::from(std::array::from_fn::<f64, 3, _>(|a| {
+                if c >> a & 1 == 0 {
+                    0.0
+                } else {
+                    f64::from(dims[a] - 1)
+                }
+            }));
+            geometry.index_to_world_point(k).distance(centre)
+        })
+        .fold(0.0, f64::max)
+}
+
+/// Orders and composites every ordering at each view; `progress` is called after each view.
+pub fn measure_views(
+    geometry: &VolumeGeometry,
+    classified: &Classified,
+    views: &[View],
+    settings: &ReportSettings,
+    mut progress: impl FnMut(),
+) -> Result<Vec<ViewResult>, ReportError> {
+    let volume = SplatVolume {
+        geometry,
+        grid: &classified.grid,
+        colors: &classified.colors,
+    };
+    let mut orderer = Orderer::new();
+    let mut list = Vec::new();
+    let mut results = Vec::with_capacity(views.len());
+    for view in views {
+        let case = ViewCase::new(geometry, view.eye, view.target)?;
+        let camera = Camera {
+            up: Camera::safe_up(view.eye, view.target),
+            fov_y_degrees: settings.fov_y_degrees,
+            ..Camera::looking_at(view.eye, view.target, settings.size.0, settings.size.1)
+        };
+        let options = OrderOptions {
+            cull_behind_eye: true,
+            ..OrderOptions::default()
+        };
+        orderer.order(
+            &classified.grid,
+            &case,
+            Ordering::Exact,
+            &options,
+            &mut list,
+        )?;
+        let (reference, _) = composite(&camera, &volume, &list, &settings.style)?;
+        let mut per_ordering = Vec::with_capacity(settings.orderings.len());
+        for &ordering in &settings.orderings {
+            let start = Instant::now();
+            orderer.order(&classified.grid, &case, ordering, &options, &mut list)?;
+            let seconds = start.elapsed().as_secs_f64();
+            let (frame, stats) = composite(&camera, &volume, &list, &settings.style)?;
+            per_ordering.push((ordering, seconds, compare(&frame, &reference)?, stats));
+        }
+        results.push(ViewResult {
+            name: if view.index == 0 && view.name != "orbit" && view.name != "fly-in" {
+                view.name.to_owned()
+            } else {
+                format!("{} {}", view.name, view.index)
+            },
+            kind: case.kind,
+            per_ordering,
+        });
+        progress();
+    }
+    Ok(results)
+}
+
+/// Per-ordering summary over a set of views.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Summary {
+    /// The ordering.
+    pub ordering: Ordering,
+    /// Order time in seconds: median, minimum, maximum over the views.
+    pub time: [f64; 3],
+    /// Mean image RMSE against the exact order.
+    pub rmse: f64,
+    /// Largest channel difference over all views.
+    pub max_abs: f64,
+    /// Mean share of pixels off by more than 4/255.
+    pub bad_pixel_share: f64,
+    /// Share of consecutive fragment pairs drawn nearer-before-farther, over all views.
+    pub inversion_share: f64,
+}
+
+/// Summarises each ordering over `results`.
+pub fn summarise(results: &[ViewResult]) -> Vec<Summary> {
+    let Some(first) = results.first() else {
+        return Vec::new();
+    };
+    let n = results.len() as f64;
+    (0..first.per_ordering.len())
+        .map(|i| {
+            let ordering = first.per_ordering[i].0;
+            let mut times: Vec<f64> = results.iter().map(|r| r.per_ordering[i].1).collect();
+            times.sort_by(f64::total_cmp);
+            let (mut rmse, mut max_abs, mut bad, mut pairs, mut inversions) =
+                (0.0, 0.0f64, 0.0, 0u64, 0u64);
+            for r in results {
+                let (_, _, d, s) = r.per_ordering[i];
+                rmse += d.rmse / n;
+                max_abs = max_abs.max(d.max_abs);
+                bad += d.bad_pixel_share / n;
+                pairs += s.pairs;
+                inversions += s.inversions;
+            }
+            Summary {
+                ordering,
+                time: [times[times.len() / 2], times[0], times[times.len() - 1]],
+                rmse,
+                max_abs,
+                bad_pixel_share: bad,
+                inversion_share: if pairs == 0 {
+                    0.0
+                } else {
+                    inversions as f64 / pairs as f64
+                },
+            }
+        })
+        .collect()
+}
+
+/// The summary as a Markdown table.
+pub fn summary_table(summaries: &[Summary]) -> String {
+    let mut s = String::from(
+        "| ordering | order time ms (median, min, max) | image RMSE | largest difference | bad pixels | adjacent inversions |\n|---|---|---|---|---|---|\n",
+    );
+    for m in summaries {
+        s += &format!(
+            "| {} | {:.2} ({:.2}, {:.2}) | {:.4} | {:.3} | {:.2}% | {:.3}% |\n",
+            m.ordering,
+            m.time[0] * 1e3,
+            m.time[1] * 1e3,
+            m.time[2] * 1e3,
+            m.rmse,
+            m.max_abs,
+            100.0 * m.bad_pixel_share,
+            100.0 * m.inversion_share
+        );
+    }
+    s
+}
+
+/// Image RMSE per view (rows) and ordering (columns), as a Markdown table, with the share of
+/// bad pixels in brackets.
+pub fn per_view_table(results: &[ViewResult]) -> String {
+    let Some(first) = results.first() else {
+        return String::new();
+    };
+    let mut s = String::from("| view | case |");
+    for (o, ..) in &first.per_ordering {
+        s += &format!(" {o} |");
+    }
+    s += "\n|---|---|";
+    s += &"---|".repeat(first.per_ordering.len());
+    s += "\n";
+    for r in results {
+        s += &format!("| {} | {} |", r.name, r.kind.name());
+        for (_, _, d, _) in &r.per_ordering {
+            s += &format!(" {:.4} ({:.1}%) |", d.rmse, 100.0 * d.bad_pixel_share);
+        }
+        s += "\n";
+    }
+    s
+}
