@@ -38,6 +38,9 @@ pub struct Camera {
     pub width: u32,
     /// Image height in pixels.
     pub height: u32,
+    /// Near plane distance in world units: splats whose centre is nearer along the view axis
+    /// are left out (a renderer's near clip).
+    pub near: f64,
 }
 
 /// Orthonormal camera frame: `right` and `up` span the image plane, `forward` points into the
@@ -55,7 +58,7 @@ pub struct CameraFrame {
 }
 
 impl Camera {
-    /// A camera with a 50 degree vertical field of view and +z up.
+    /// A camera with a 50 degree vertical field of view, +z up and no near plane.
     pub fn looking_at(eye: DVec3, target: DVec3, width: u32, height: u32) -> Self {
         Self {
             eye,
@@ -64,6 +67,7 @@ impl Camera {
             fov_y_degrees: 50.0,
             width,
             height,
+            near: 0.0,
         }
     }
 
@@ -76,6 +80,9 @@ impl Camera {
         }
         if !(self.fov_y_degrees > 0.0 && self.fov_y_degrees < 180.0) {
             return Err(CameraError::BadFieldOfView(self.fov_y_degrees));
+        }
+        if !(self.near.is_finite() && self.near >= 0.0) {
+            return Err(CameraError::NotFinite("near plane"));
         }
         if self.width == 0 || self.height == 0 {
             return Err(CameraError::EmptyImage(self.width, self.height));

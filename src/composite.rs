@@ -213,8 +213,8 @@ pub fn composite(
 }
 
 /// Projects every splat of `order` (in order) to its screen footprint; splats whose centre is
-/// not in front of the eye by at least a tenth of a voxel are left out, as the local affine
-/// projection is meaningless there.
+/// nearer than the camera's near plane, or than a tenth of a voxel (where the local affine
+/// projection is meaningless), are left out.
 fn project(
     camera: &Camera,
     volume: &SplatVolume<'_>,

@@ -220,15 +220,8 @@ impl Orderer {
             Ordering::Bucketed => {
                 let width = bucketed::width(view, options.bucket_width)?;
                 let [s0, s1, s2] = &mut self.sequences;
-                let total = self.buckets.count(
-                    grid,
-                    view,
-                    width,
-                    &id_order_plan(grid.dims(), [s0, s1]),
-                    cull,
-                );
                 let plan = ip_pbtf_plan(view, false, [s0, s1, s2]);
-                self.buckets.scatter(grid, &plan, cull, total, out);
+                self.buckets.order(grid, view, width, &plan, cull, out);
             }
         }
         Ok(())

@@ -31,6 +31,10 @@ pub struct ReportSettings {
     pub fov_y_degrees: f64,
     /// Splat shape.
     pub style: SplatStyle,
+    /// Near plane, in units of the largest voxel spacing: splats nearer to the eye are left
+    /// out, as a renderer's near clip would (a splat half a voxel from the eye covers the whole
+    /// image).
+    pub near_voxels: f64,
     /// Orderings to compare (the exact order is always computed as the reference).
     pub orderings: Vec<Ordering>,
 }
@@ -43,6 +47,7 @@ impl Default for ReportSettings {
             size: (192, 192),
             fov_y_degrees: 50.0,
             style: SplatStyle::default(),
+            near_voxels: 2.0,
             orderings: Ordering::ALL.to_vec(),
         }
     }
@@ -185,6 +190,7 @@ pub fn measure_views(
         let camera = Camera {
             up: Camera::safe_up(view.eye, view.target),
             fov_y_degrees: settings.fov_y_degrees,
+            near: settings.near_voxels * geometry.spacing().iter().copied().fold(0.0, f64::max),
             ..Camera::looking_at(view.eye, view.target, settings.size.0, settings.size.1)
         };
         let options = OrderOptions {

@@ -1,0 +1,134 @@
+//! The `order` command line as outside checks use it: output format, stderr report, errors.
+
+use std::process::Command;
+
+use glam::DVec3;
+use splatscene::grid::SparseGrid;
+use splatscene::order::{OrderOptions, Ordering, ViewCase, VolumeGeometry, order};
+
+fn splatscene(args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_splatscene"))
+        .args(args)
+        .output()
+        .expect("run splatscene")
+}
+
+fn temp_path(name: &str) -> std::path::PathBuf {
+    std::env::temp_dir().join(format!("splatscene-cli-{}-{name}", std::process::id()))
+}
+
+#[test]
+fn order_writes_little_endian_ids_matching_the_library() {
+    let out = temp_path("order.bin");
+    for name in [
+        "btf",
+        "wbtf",
+        "pbtf",
+        "ip-pbtf",
+        "ip-pbtf-explicit",
+        "ip-pbtf-implicit",
+        "exact",
+        "bucketed",
+    ] {
+        let result = splatscene(&[
+            "order",
+            "--dims",
+            "7,5,4",
+            "--spacing",
+            "0.7,0.7,2.5",
+            "--eye",
+            "2.5,-3,1.2",
+            "--ordering",
+            name,
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        assert!(
+            result.status.success(),
+            "{name}: {}",
+            String::from_utf8_lossy(&result.stderr)
+        );
+        let stderr = String::from_utf8_lossy(&result.stderr);
+        assert!(stderr.contains("view case: face-on"), "{stderr}");
+        assert!(stderr.contains("140 voxels in"), "{stderr}");
+        let bytes = std::fs::read(&out).unwrap();
+        let ids: Vec<u32> = bytes
+            .chunks_exact(4)
+            .map(|c| u32::from_le_bytes(c.try_into().unwrap()))
+            .collect();
+
+        let geometry = VolumeGeometry::axis_aligned([7, 5, 4], [0.7, 0.7, 2.5], [0.0; 3]).unwrap();
+        let eye = geometry.index_to_world_point(DVec3::new(2.5, -3.0, 1.2));
+        let view = ViewCase::new(&geometry, eye, geometry.centre_world()).unwrap();
+        let grid = SparseGrid::dense([7, 5, 4]).unwrap();
+        let ordering: Ordering = name.parse().unwrap();
+        assert_eq!(
+            ids,
+            order(&grid, &view, ordering, &OrderOptions::default()).unwrap(),
+            "{name}"
+        );
+    }
+    std::fs::remove_file(&out).ok();
+}
+
+#[test]
+fn order_writes_to_stdout_without_out() {
+    let result = splatscene(&[
+        "order",
+        "--dims",
+        "3,2,2",
+        "--eye",
+        "1,1,-4",
+        "--ordering",
+        "exact",
+    ]);
+    assert!(result.status.success());
+    assert_eq!(result.stdout.len(), 12 * 4);
+}
+
+#[test]
+fn bad_arguments_fail_with_a_message() {
+    let nan = splatscene(&[
+        "order",
+        "--dims",
+        "4,4,4",
+        "--eye",
+        "nan,0,0",
+        "--ordering",
+        "btf",
+    ]);
+    assert!(!nan.status.success());
+    assert!(String::from_utf8_lossy(&nan.stderr).contains("not finite"));
+    let unknown = splatscene(&[
+        "order",
+        "--dims",
+        "4,4,4",
+        "--eye",
+        "1,1,9",
+        "--ordering",
+        "zigzag",
+    ]);
+    assert!(!unknown.status.success());
+    assert!(String::from_utf8_lossy(&unknown.stderr).contains("unknown ordering"));
+    let huge = splatscene(&[
+        "order",
+        "--dims",
+        "65536,65536,2",
+        "--eye",
+        "1,1,9",
+        "--ordering",
+        "btf",
+    ]);
+    assert!(!huge.status.success());
+    assert!(String::from_utf8_lossy(&huge.stderr).contains("u32 voxel ids"));
+    let same = splatscene(&[
+        "order",
+        "--dims",
+        "4,4,4",
+        "--eye",
+        "1.5,1.5,1.5",
+        "--ordering",
+        "btf",
+    ]);
+    assert!(!same.status.success(), "eye at the default target");
+}
