@@ -25,6 +25,7 @@ pub mod camera;
 pub mod classify;
 pub mod composite;
 pub mod grid;
+pub mod mesh;
 pub mod order;
 pub mod report;
 pub mod volume;
