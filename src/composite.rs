@@ -242,13 +242,12 @@ fn project(
     let m = rows * linear;
     let eye_index = volume.geometry.world_to_index(camera.eye);
     let cov = m * m.transpose() * (style.sigma * style.sigma);
-    let near = 0.1
-        * volume
-            .geometry
-            .spacing()
-            .iter()
-            .copied()
-            .fold(f64::INFINITY, f64::min);
+    let min_spacing = volume
+        .geometry
+        .spacing()
+        .into_iter()
+        .fold(f64::INFINITY, f64::min);
+    let near = camera.near.max(0.1 * min_spacing);
     let radius = style.cutoff / style.sigma;
     let (cx, cy, f) = (
         0.5 * f64::from(camera.width),

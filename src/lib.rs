@@ -27,5 +27,7 @@ pub mod composite;
 pub mod grid;
 pub mod mesh;
 pub mod order;
+pub mod render;
 pub mod report;
+pub mod scene;
 pub mod volume;

@@ -4,7 +4,24 @@
 //! coordinates with the transform that places it in the file's frame (a glTF node hierarchy is
 //! flattened into these transforms) and a material.
 
+mod error;
+mod gltf;
+mod obj;
+mod stl;
+
+pub mod prosthesis;
+pub mod write;
+
+use std::io::Read;
+use std::path::Path;
+
 use glam::DMat4;
+
+pub use error::MeshError;
+use error::Origin;
+
+/// The largest mesh file (or referenced buffer or material file) the loaders read: 2 GiB.
+pub const MAX_FILE_BYTES: u64 = 2 << 30;
 
 /// An indexed triangle mesh in single precision (model coordinates, millimetres by convention).
 #[derive(Debug, Clone, PartialEq, Default)]
@@ -54,7 +71,9 @@ impl CpuMesh {
         self.normals = sums
             .into_iter()
             .map(|s| {
-                let n = glam::DVec3::from(s).try_normalize().unwrap_or(glam::DVec3::Z);
+                let n = glam::DVec3::from(s)
+                    .try_normalize()
+                    .unwrap_or(glam::DVec3::Z);
                 [n.x as f32, n.y as f32, n.z as f32]
             })
             .collect();
@@ -102,4 +121,157 @@ pub struct Model {
     pub parts: Vec<MeshPart>,
     /// Things the loader worked around (a missing MTL file, say), for the user to see.
     pub warnings: Vec<String>,
+}
+
+/// A mesh file format, decided from the first bytes and then the extension.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Format {
+    Glb,
+    GltfJson,
+    StlBinary,
+    StlAscii,
+    Obj,
+}
+
+/// Loads a mesh file: glTF 2.0 (`.gltf` with external or data-URI buffers, or `.glb`), OBJ with
+/// its MTL material libraries, or binary or ASCII STL.
+///
+/// The format is sniffed from the first bytes (`glTF` magic, a JSON object, the binary STL length
+/// rule, `solid`) and then taken from the extension. Files over [`MAX_FILE_BYTES`] are refused
+/// before they are read. Problems the loader worked around are listed in [`Model::warnings`].
+///
+/// # Errors
+///
+/// A [`MeshError`] naming the file for anything that cannot be read or is malformed.
+pub fn load_mesh(path: &Path) -> Result<Model, MeshError> {
+    let origin = Origin::file(path);
+    let bytes = read_file(path)?;
+    load_with_origin(&bytes, path, &origin)
+}
+
+/// Loads a mesh held in memory. `name` gives the extension hint (`"prosthesis.glb"`) and names
+/// the input in errors as `<embedded NAME>`. A `.gltf` held in memory may only use data URIs for
+/// its buffers, and an OBJ's material libraries cannot be found (a warning, default materials).
+///
+/// # Errors
+///
+/// As [`load_mesh`].
+pub fn load_mesh_bytes(bytes: &[u8], name: &str) -> Result<Model, MeshError> {
+    let origin = Origin::embedded(name);
+    check_size(bytes.len() as u64, &origin)?;
+    load_with_origin(bytes, Path::new(name), &origin)
+}
+
+/// Reads accessor `index` of a glTF file (`.gltf` or `.glb`) as `f32` components, element after
+/// element (normalized integers mapped to 0..1 or -1..1, sparse substitution applied). For
+/// inspecting data that does not end up in a [`Model`], such as animation samplers.
+///
+/// # Errors
+///
+/// As [`load_mesh`], and [`MeshError::IndexOutOfRange`] when there is no such accessor.
+pub fn read_gltf_accessor(path: &Path, index: usize) -> Result<Vec<f32>, MeshError> {
+    let origin = Origin::file(path);
+    let bytes = read_file(path)?;
+    gltf::read_accessor(&bytes, &origin, index)
+}
+
+fn load_with_origin(bytes: &[u8], name: &Path, origin: &Origin) -> Result<Model, MeshError> {
+    match sniff(bytes, name) {
+        Some(Format::Glb) => gltf::load(bytes, origin, true),
+        Some(Format::GltfJson) => gltf::load(bytes, origin, false),
+        Some(Format::StlBinary | Format::StlAscii) => stl::load(bytes, origin),
+        Some(Format::Obj) => obj::load(bytes, origin),
+        None => Err(MeshError::UnknownFormat {
+            file: origin.label.clone(),
+            detail: format!(
+                "{} bytes, no glTF, JSON or STL signature, and no .gltf/.glb/.obj/.stl extension",
+                bytes.len()
+            ),
+        }),
+    }
+}
+
+/// Decides the format from the first bytes, then from the extension of `name`.
+fn sniff(bytes: &[u8], name: &Path) -> Option<Format> {
+    if bytes.starts_with(b"glTF") {
+        return Some(Format::Glb);
+    }
+    let text = bytes.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(bytes);
+    if text.trim_ascii_start().starts_with(b"{") {
+        return Some(Format::GltfJson);
+    }
+    if stl::is_binary(bytes) {
+        return Some(Format::StlBinary);
+    }
+    if bytes.starts_with(b"solid") {
+        return Some(Format::StlAscii);
+    }
+    let extension = name.extension()?.to_str()?.to_ascii_lowercase();
+    match extension.as_str() {
+        "glb" => Some(Format::Glb),
+        "gltf" => Some(Format::GltfJson),
+        "obj" => Some(Format::Obj),
+        "stl" => Some(Format::StlBinary),
+        _ => None,
+    }
+}
+
+fn check_size(len: u64, origin: &Origin) -> Result<(), MeshError> {
+    if len > MAX_FILE_BYTES {
+        return Err(origin.too_large("the file", len, MAX_FILE_BYTES));
+    }
+    Ok(())
+}
+
+/// Reads a whole file, refusing one over [`MAX_FILE_BYTES`] before reading it; errors name `path`.
+fn read_file(path: &Path) -> Result<Vec<u8>, MeshError> {
+    let io = |source| MeshError::Io {
+        file: path.to_path_buf(),
+        source,
+    };
+    let file = std::fs::File::open(path).map_err(io)?;
+    let len = file.metadata().map_err(io)?.len();
+    let origin = Origin::file(path);
+    check_size(len, &origin)?;
+    // `len` is at most MAX_FILE_BYTES, which fits in usize on the 64-bit targets this runs on;
+    // the `take` stops a file that grows meanwhile one byte past the limit.
+    let mut bytes = Vec::with_capacity(usize::try_from(len).unwrap_or(0));
+    file.take(MAX_FILE_BYTES + 1)
+        .read_to_end(&mut bytes)
+        .map_err(io)?;
+    check_size(bytes.len() as u64, &origin)?;
+    Ok(bytes)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sniffs_by_content_then_extension() {
+        let p = Path::new;
+        assert_eq!(sniff(b"glTF\x02\0\0\0", p("x.bin")), Some(Format::Glb));
+        assert_eq!(sniff(b"  {\"asset\":{}}", p("x")), Some(Format::GltfJson));
+        assert_eq!(sniff(b"solid cube\n", p("x")), Some(Format::StlAscii));
+        assert_eq!(sniff(b"v 0 0 0\n", p("a.OBJ")), Some(Format::Obj));
+        assert_eq!(sniff(b"", p("a.glb")), Some(Format::Glb));
+        assert_eq!(sniff(b"hello", p("a.txt")), None);
+        let mut stl = vec![0u8; 84 + 50];
+        stl[..5].copy_from_slice(b"solid");
+        stl[80] = 1;
+        assert_eq!(sniff(&stl, p("x")), Some(Format::StlBinary));
+    }
+
+    #[test]
+    fn unknown_format_names_the_input() {
+        let err = load_mesh_bytes(b"hello", "notes.txt").unwrap_err();
+        assert!(matches!(err, MeshError::UnknownFormat { .. }), "{err}");
+        assert_eq!(err.file(), Path::new("<embedded notes.txt>"));
+    }
+
+    #[test]
+    fn missing_file_is_an_io_error() {
+        let err = load_mesh(Path::new("/nonexistent/dir/x.stl")).unwrap_err();
+        assert!(matches!(err, MeshError::Io { .. }), "{err}");
+    }
 }

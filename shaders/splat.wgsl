@@ -1,0 +1,103 @@
+// One splat per significant voxel: an ellipsoidal Gaussian projected in perspective with the
+// local affine approximation (EWA), premultiplied "over" in instance order, depth-tested
+// against the meshes without writing depth. The math follows the CPU reference compositor in
+// src/composite.rs, so GPU frames can be checked against it.
+// Keep in sync with SplatUniforms in src/render/splat_pass.rs.
+
+struct Splat {
+    // Rows of the index-offset -> camera matrix (x right, y up, z forward), world units.
+    m0: vec4<f32>,
+    m1: vec4<f32>,
+    m2: vec4<f32>,
+    // xyz: the eye in voxel index coordinates; w: splats nearer than this are left out.
+    eye: vec4<f32>,
+    // Rows of the camera-space covariance of a splat (sigma^2 M M^T).
+    cov0: vec4<f32>,
+    cov1: vec4<f32>,
+    cov2: vec4<f32>,
+    // x, y: image centre in pixels; z: focal length in pixels (perspective) or pixels per
+    // world unit (orthographic); w: screen-space variance added to every footprint.
+    screen: vec4<f32>,
+    // x, y: image size; z: cut-off of the Gaussian's exponent (radius^2 / sigma^2);
+    // w: 1 for orthographic.
+    size: vec4<f32>,
+    // x: perspective depth scale (near plane); orthographic: y near, z far.
+    depth: vec4<f32>,
+    // Grid size, w unused.
+    dims: vec4<u32>,
+}
+
+@group(0) @binding(0) var<uniform> u: Splat;
+// Straight (not premultiplied) RGBA per voxel; only significant voxels are ever read.
+@group(0) @binding(1) var colors: texture_3d<f32>;
+
+struct VsOut {
+    @builtin(position) clip: vec4<f32>,
+    // Pixel offset from the footprint centre.
+    @location(0) offset: vec2<f32>,
+    @location(1) @interpolate(flat) conic: vec3<f32>,
+    @location(2) @interpolate(flat) color: vec4<f32>,
+}
+
+fn discarded() -> VsOut {
+    var out: VsOut;
+    out.clip = vec4<f32>(2.0, 2.0, 2.0, 1.0);
+    out.offset = vec2<f32>(0.0);
+    out.conic = vec3<f32>(0.0);
+    out.color = vec4<f32>(0.0);
+    return out;
+}
+
+@vertex
+fn vs_main(@builtin(vertex_index) corner: u32, @location(0) id: u32) -> VsOut {
+    let n = u.dims.xyz;
+    let k = vec3<u32>(id % n.x, (id / n.x) % n.y, id / (n.x * n.y));
+    let straight = textureLoad(colors, k, 0);
+    let d = vec3<f32>(k) - u.eye.xyz;
+    let p = vec3<f32>(dot(u.m0.xyz, d), dot(u.m1.xyz, d), dot(u.m2.xyz, d));
+    let ortho = u.size.w > 0.5;
+    if straight.a <= 0.0 || (!ortho && p.z <= u.eye.w) || (ortho && p.z <= u.depth.y) {
+        return discarded();
+    }
+    let f = u.screen.z;
+    var j0 = vec3<f32>(f, 0.0, 0.0);
+    var j1 = vec3<f32>(0.0, -f, 0.0);
+    var centre = vec2<f32>(u.screen.x + f * p.x, u.screen.y - f * p.y);
+    var z = clamp((u.depth.z - p.z) / (u.depth.z - u.depth.y), 0.0, 1.0);
+    if !ortho {
+        let iz = 1.0 / p.z;
+        j0 = vec3<f32>(f * iz, 0.0, -f * p.x * iz * iz);
+        j1 = vec3<f32>(0.0, -f * iz, f * p.y * iz * iz);
+        centre = vec2<f32>(u.screen.x + f * p.x * iz, u.screen.y - f * p.y * iz);
+        z = u.depth.x * iz;
+    }
+    let cov = mat3x3<f32>(u.cov0.xyz, u.cov1.xyz, u.cov2.xyz);
+    let a = dot(j0, cov * j0) + u.screen.w;
+    let b = dot(j0, cov * j1);
+    let c = dot(j1, cov * j1) + u.screen.w;
+    let det = a * c - b * b;
+    if !(det > 0.0) {
+        return discarded();
+    }
+    // The ellipse q = cut-off spans exactly +-radius*sqrt(a) by +-radius*sqrt(c) pixels.
+    let radius = sqrt(u.size.z);
+    let corner_sign = vec2<f32>(f32(corner & 1u) * 2.0 - 1.0, f32((corner >> 1u) & 1u) * 2.0 - 1.0);
+    let offset = corner_sign * (radius * sqrt(vec2<f32>(a, c)) + 0.5);
+    let pixel = centre + offset;
+    var out: VsOut;
+    out.clip = vec4<f32>(pixel.x / u.size.x * 2.0 - 1.0, 1.0 - pixel.y / u.size.y * 2.0, z, 1.0);
+    out.offset = offset;
+    out.conic = vec3<f32>(c / det, -b / det, a / det);
+    out.color = vec4<f32>(straight.rgb * straight.a, straight.a);
+    return out;
+}
+
+@fragment
+fn fs_main(in: VsOut) -> @location(0) vec4<f32> {
+    let d = in.offset;
+    let q = in.conic.x * d.x * d.x + 2.0 * in.conic.y * d.x * d.y + in.conic.z * d.y * d.y;
+    if q > u.size.z {
+        discard;
+    }
+    return in.color * exp(-0.5 * q);
+}

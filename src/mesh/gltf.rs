@@ -1,0 +1,1604 @@
+//! glTF 2.0: `.gltf` JSON (buffers in data URIs or in files next to it) and `.glb`.
+//!
+//! The gltf crate parses and checks the JSON; everything that touches bytes is done here, so that
+//! no declared offset, length or count is trusted before it is checked against the bytes that
+//! hold it:
+//! - the GLB container is split here (magic, version, total length, chunk lengths);
+//! - buffers are resolved here (the GLB BIN chunk, base64 data URIs, relative files), lazily, only
+//!   those that a mesh of the scene reads, each checked against its declared `byteLength`;
+//! - accessors are decoded here rather than with the gltf crate's `Reader`, which can panic or
+//!   misread on malformed input (it reads any component type as `f32` for positions, unwraps
+//!   sparse values, and underflows on a zero count): every element range is checked against its
+//!   buffer view and every view against its buffer before anything is allocated or read.
+//!
+//! All component types are read (so KHR_mesh_quantization files load), normalized integers are
+//! mapped to 0..1 or -1..1, and sparse substitution is applied. Only triangle primitives become
+//! parts (strips and fans are converted to lists); points and lines are skipped with a warning.
+
+use std::borrow::Cow;
+use std::collections::{HashMap, HashSet};
+
+use ::gltf::accessor::{DataType, Dimensions};
+use ::gltf::buffer::{Source, View};
+use ::gltf::json;
+use ::gltf::mesh::{Mode, Semantic};
+use ::gltf::scene::Transform;
+use ::gltf::{Accessor, Document, Node, Primitive};
+use base64::Engine as _;
+use base64::engine::{DecodePaddingMode, GeneralPurpose, GeneralPurposeConfig};
+use glam::{DMat4, DQuat, DVec3};
+
+use super::{CpuMesh, MAX_FILE_BYTES, Material, MeshError, MeshPart, Model, Origin};
+
+/// Deepest node nesting walked; a deeper hierarchy is an error.
+const MAX_DEPTH: usize = 64;
+/// Most elements of an accessor with no buffer view (all zeros but for sparse values): nothing in
+/// the file backs its count, so it is bounded here.
+const MAX_UNBACKED_ELEMENTS: usize = 1 << 20;
+/// Most bytes of mesh data in one model; nodes may instance a mesh many times over.
+const MAX_OUTPUT_BYTES: u64 = MAX_FILE_BYTES;
+/// GLB chunk types.
+const CHUNK_JSON: u32 = u32::from_le_bytes(*b"JSON");
+const CHUNK_BIN: u32 = u32::from_le_bytes(*b"BIN\0");
+/// Required extensions that change only appearance, besides every `KHR_materials_*`; the
+/// geometry loads without them (with a warning). `KHR_mesh_quantization` is fully supported.
+const APPEARANCE_EXTENSIONS: &[&str] = &[
+    "KHR_texture_transform",
+    "KHR_texture_basisu",
+    "EXT_texture_webp",
+    "EXT_texture_avif",
+    "MSFT_texture_dds",
+    "KHR_lights_punctual",
+    "KHR_node_visibility",
+    "KHR_animation_pointer",
+];
+/// Top-level glTF properties that the loader never reads, so their validation errors are moot.
+const UNREAD_PROPERTIES: &[&str] = &[
+    "animations",
+    "asset",
+    "cameras",
+    "extensions",
+    "extensionsUsed",
+    "extras",
+    "images",
+    "materials",
+    "samplers",
+    "skins",
+    "textures",
+];
+/// Base64 as written by glTF exporters, with or without padding.
+const BASE64: GeneralPurpose = GeneralPurpose::new(
+    &base64::alphabet::STANDARD,
+    GeneralPurposeConfig::new()
+        .with_decode_padding_mode(DecodePaddingMode::Indifferent)
+        .with_decode_allow_trailing_bits(true),
+);
+
+/// Loads a glTF file held in `bytes`: a GLB container if `binary`, else JSON.
+pub(super) fn load(bytes: &[u8], origin: &Origin, binary: bool) -> Result<Model, MeshError> {
+    let mut warnings = Vec::new();
+    let (json, bin) = split(bytes, origin, binary, &mut warnings)?;
+    let parsed = parse_document(json, origin, &mut warnings)?;
+    let mut loader = Loader::new(&parsed, origin, bin, binary, warnings);
+    let instances = loader.instances()?;
+    let parts = loader.parts(&instances)?;
+    Ok(Model {
+        parts,
+        warnings: loader.warnings,
+    })
+}
+
+/// Reads accessor `index` of the glTF held in `bytes` as `f32` components.
+pub(super) fn read_accessor(
+    bytes: &[u8],
+    origin: &Origin,
+    index: usize,
+) -> Result<Vec<f32>, MeshError> {
+    let mut warnings = Vec::new();
+    let binary = bytes.starts_with(b"glTF");
+    let (json, bin) = split(bytes, origin, binary, &mut warnings)?;
+    let parsed = parse_document(json, origin, &mut warnings)?;
+    let mut loader = Loader::new(&parsed, origin, bin, binary, warnings);
+    let count = parsed.doc.accessors().len();
+    let accessor = parsed.doc.accessors().nth(index);
+    let accessor =
+        accessor.ok_or_else(|| origin.out_of_range("accessors", index as u64, count as u64))?;
+    loader.read_accessor(&accessor, true, |v| v as f32)
+}
+
+/// The JSON text and the BIN chunk, if any, of a GLB (`binary`) or a JSON glTF file.
+fn split<'a>(
+    bytes: &'a [u8],
+    origin: &Origin,
+    binary: bool,
+    warnings: &mut Vec<String>,
+) -> Result<(&'a [u8], Option<&'a [u8]>), MeshError> {
+    if binary {
+        split_glb(bytes, origin, warnings)
+    } else {
+        Ok((bytes, None))
+    }
+}
+
+fn u32_at(bytes: &[u8], at: usize) -> Option<u32> {
+    let word = bytes.get(at..at.checked_add(4)?)?;
+    Some(u32::from_le_bytes(word.try_into().ok()?))
+}
+
+/// Splits a GLB container into its JSON chunk and its BIN chunk, checking the header and every
+/// chunk length against the bytes there are. Unknown chunks are skipped; bytes after the
+/// declared total length are ignored with a warning.
+fn split_glb<'a>(
+    bytes: &'a [u8],
+    origin: &Origin,
+    warnings: &mut Vec<String>,
+) -> Result<(&'a [u8], Option<&'a [u8]>), MeshError> {
+    let bad = |detail: String| origin.malformed("GLB", detail);
+    let (Some(magic), Some(version), Some(length)) =
+        (u32_at(bytes, 0), u32_at(bytes, 4), u32_at(bytes, 8))
+    else {
+        return Err(bad(format!(
+            "{} bytes, shorter than the 12-byte header",
+            bytes.len()
+        )));
+    };
+    if magic != u32::from_le_bytes(*b"glTF") {
+        return Err(bad(format!("bad magic {:02x?}", &bytes[..4])));
+    }
+    if version != 2 {
+        return Err(origin.unsupported(format!("GLB container version {version}")));
+    }
+    let body = bytes
+        .get(..length as usize)
+        .filter(|b| b.len() >= 12)
+        .ok_or_else(|| {
+            bad(format!(
+                "header declares {length} bytes, the file has {}",
+                bytes.len()
+            ))
+        })?;
+    if body.len() < bytes.len() {
+        let extra = bytes.len() - body.len();
+        warnings.push(format!(
+            "{extra} bytes after the end of the GLB were ignored"
+        ));
+    }
+    let (mut json, mut bin) = (None, None);
+    let mut pos = 12;
+    while pos < body.len() {
+        let (kind, data, next) = chunk_at(body, pos).ok_or_else(|| {
+            bad(format!(
+                "chunk at byte {pos}: truncated header, or length past the end"
+            ))
+        })?;
+        match (kind, json.is_some()) {
+            (CHUNK_JSON, false) => json = Some(data),
+            (_, false) => return Err(bad("the first chunk is not JSON".to_owned())),
+            (CHUNK_JSON, true) => return Err(bad(format!("a second JSON chunk at byte {pos}"))),
+            (CHUNK_BIN, true) if bin.is_none() => bin = Some(data),
+            (CHUNK_BIN, true) => return Err(bad(format!("a second BIN chunk at byte {pos}"))),
+            _ => warnings.push(format!("unknown GLB chunk type {kind:#010x} skipped")),
+        }
+        pos = next;
+    }
+    let json = json.ok_or_else(|| bad("no JSON chunk".to_owned()))?;
+    Ok((json, bin))
+}
+
+/// The type, data and end of the GLB chunk starting at `pos`, if it fits in `body`.
+fn chunk_at(body: &[u8], pos: usize) -> Option<(u32, &[u8], usize)> {
+    let len = u32_at(body, pos)? as usize;
+    let kind = u32_at(body, pos + 4)?;
+    let start = pos + 8;
+    let end = start.checked_add(len)?;
+    Some((kind, body.get(start..end)?, end))
+}
+
+/// A glTF document checked as far as the loader needs.
+struct Parsed {
+    doc: Document,
+    /// Accessors that failed validation: reading one is an error (nothing else uses them).
+    bad_accessors: HashSet<usize>,
+}
+
+/// Parses and validates the JSON of a glTF asset.
+fn parse_document(
+    json_text: &[u8],
+    origin: &Origin,
+    warnings: &mut Vec<String>,
+) -> Result<Parsed, MeshError> {
+    let mut root =
+        deserialize_root(json_text).map_err(|e| origin.malformed("glTF JSON", e.to_string()))?;
+    accept_required_extensions(&mut root, origin, warnings)?;
+    check_position_references(&root, origin)?;
+    let bad_accessors = validate(&root, origin)?;
+    Ok(Parsed {
+        doc: Document::from_json_without_validation(root),
+        bad_accessors,
+    })
+}
+
+/// Deserializes the root object. gltf-json refuses some JSON that the glTF specification (and
+/// its validator) allows; when the strict parse fails, the text is read again as plain JSON,
+/// relaxed (see [`relax`]) and deserialized from that.
+fn deserialize_root(text: &[u8]) -> Result<json::Root, json::Error> {
+    let first = match json::deserialize::from_slice::<json::Root>(text) {
+        Ok(root) => return Ok(root),
+        Err(e) => e,
+    };
+    let Ok(mut value) = json::deserialize::from_slice::<json::Value>(text) else {
+        return Err(first);
+    };
+    if !relax(&mut value) {
+        return Err(first);
+    }
+    json::deserialize::from_value(value).map_err(|_| first)
+}
+
+/// Rewrites what the specification allows but gltf-json's deserializer refuses, in ways that
+/// change nothing the loader reads: integral floats where integers are expected (`1.0`, `1e0`)
+/// become integers, `extras` that are not objects are dropped, scenes without `nodes` get an
+/// empty list, and animations are dropped (never read here; gltf-json requires a channel
+/// target's `node`, which `KHR_animation_pointer` leaves out). Whether anything changed.
+fn relax(root: &mut json::Value) -> bool {
+    let mut changed = relax_values(root);
+    if let json::Value::Object(top) = root {
+        changed |= top.remove("animations").is_some();
+        if let Some(json::Value::Array(scenes)) = top.get_mut("scenes") {
+            for scene in scenes.iter_mut() {
+                if let json::Value::Object(scene) = scene
+                    && !scene.contains_key("nodes")
+                {
+                    scene.insert("nodes".to_owned(), json::Value::Array(Vec::new()));
+                    changed = true;
+                }
+            }
+        }
+    }
+    changed
+}
+
+/// Integral floats to integers and non-object `extras` out, recursively. (The recursion is
+/// bounded by serde_json's nesting limit of 128 on the parse before.)
+fn relax_values(value: &mut json::Value) -> bool {
+    match value {
+        json::Value::Number(n) if n.is_f64() => {
+            let f = n.as_f64().unwrap_or(f64::NAN);
+            let integral = f.fract() == 0.0 && f.abs() < 9.0e15;
+            if integral {
+                *value = json::Value::from(f as i64);
+            }
+            integral
+        }
+        json::Value::Array(items) => items.iter_mut().fold(false, |any, v| relax_values(v) | any),
+        json::Value::Object(map) => {
+            let before = map.len();
+            map.retain(|key, v| key != "extras" || v.is_object());
+            let dropped = map.len() != before;
+            map.values_mut()
+                .fold(dropped, |any, v| relax_values(v) | any)
+        }
+        _ => false,
+    }
+}
+
+/// Drops the required extensions the geometry can be loaded without (warning about those that
+/// change appearance), so that validation passes; any other required extension is unsupported.
+fn accept_required_extensions(
+    root: &mut json::Root,
+    origin: &Origin,
+    warnings: &mut Vec<String>,
+) -> Result<(), MeshError> {
+    for ext in std::mem::take(&mut root.extensions_required) {
+        if ext == "KHR_mesh_quantization" {
+            continue;
+        }
+        if ext.starts_with("KHR_materials_") || APPEARANCE_EXTENSIONS.contains(&ext.as_str()) {
+            warnings.push(format!(
+                "required extension {ext} ignored: appearance may differ"
+            ));
+        } else {
+            return Err(origin.unsupported(format!("required extension {ext}")));
+        }
+    }
+    Ok(())
+}
+
+/// The gltf-json validation indexes `accessors` with each primitive's POSITION accessor without
+/// a bounds check (it panics on an out-of-range one), so those indices are checked first.
+fn check_position_references(root: &json::Root, origin: &Origin) -> Result<(), MeshError> {
+    let semantic = json::validation::Checked::Valid(json::mesh::Semantic::Positions);
+    for (m, mesh) in root.meshes.iter().enumerate() {
+        for (p, primitive) in mesh.primitives.iter().enumerate() {
+            if let Some(index) = primitive.attributes.get(&semantic) {
+                let what = format!("mesh {m} primitive {p} POSITION");
+                let (index, len) = (index.value() as u64, root.accessors.len() as u64);
+                if index >= len {
+                    return Err(origin.out_of_range(what, index, len));
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Runs the gltf-json validation, and judges each error with [`judge`]: an invalid accessor is
+/// remembered (an error only if it is read), and any fatal error makes the file malformed.
+fn validate(root: &json::Root, origin: &Origin) -> Result<HashSet<usize>, MeshError> {
+    use json::validation::Validate;
+    let mut fatal = Vec::new();
+    let mut bad_accessors = HashSet::new();
+    let mut report = |path: &dyn Fn() -> json::Path, error: json::validation::Error| {
+        let path = path();
+        match judge(path.as_str(), error) {
+            Verdict::Moot => {}
+            Verdict::BadAccessor(i) => {
+                bad_accessors.insert(i);
+            }
+            Verdict::Fatal => fatal.push(format!("{}: {error}", path.as_str())),
+        }
+    };
+    root.validate(root, json::Path::new, &mut report);
+    match fatal.first() {
+        None => Ok(bad_accessors),
+        Some(first) => {
+            let detail = format!("{first} ({} validation errors)", fatal.len());
+            Err(origin.malformed("glTF", detail))
+        }
+    }
+}
+
+/// What a validation error means to the loader.
+enum Verdict {
+    /// Nothing: it concerns data the loader does not read.
+    Moot,
+    /// The accessor is unusable.
+    BadAccessor(usize),
+    /// The file cannot be loaded.
+    Fatal,
+}
+
+/// Judges the validation error `error` at JSON path `path`. Moot: errors in properties the
+/// loader never reads, missing or ill-formed `min`/`max` bounds (unused here), a missing POSITION
+/// (that primitive is skipped), and an accessor without a buffer view (zeros, as the
+/// specification says). Fatal: anything else outside accessors (a bad index in a node, a mesh or
+/// a buffer view, say), since the gltf crate's accessors would panic on it.
+fn judge(path: &str, error: json::validation::Error) -> Verdict {
+    use json::validation::Error;
+    let bounds = path.ends_with(".min") || path.ends_with(".max");
+    if let Some((i, field)) = path
+        .strip_prefix("accessors[")
+        .and_then(|r| r.split_once(']'))
+    {
+        let zeros = field == ".bufferView" && error == Error::Missing;
+        return if bounds || zeros {
+            Verdict::Moot
+        } else {
+            Verdict::BadAccessor(i.parse().unwrap_or(usize::MAX))
+        };
+    }
+    let top = path.split(['.', '[']).next().unwrap_or(path);
+    let position = path.contains(".attributes[\"POSITION\"]");
+    if UNREAD_PROPERTIES.contains(&top) || (position && (bounds || error == Error::Missing)) {
+        Verdict::Moot
+    } else {
+        Verdict::Fatal
+    }
+}
+
+/// Byte layout of an accessor element.
+#[derive(Debug, Clone, Copy)]
+struct Layout {
+    data_type: DataType,
+    dims: Dimensions,
+    normalized: bool,
+}
+
+impl Layout {
+    /// The layout of `accessor`; `normalized` is honoured only when `honour_normalized`.
+    fn of(accessor: &Accessor<'_>, honour_normalized: bool) -> Self {
+        Self {
+            data_type: accessor.data_type(),
+            dims: accessor.dimensions(),
+            normalized: honour_normalized && accessor.normalized(),
+        }
+    }
+
+    fn components(self) -> usize {
+        self.dims.multiplicity()
+    }
+
+    /// Rows and columns: matrices are stored column by column.
+    fn shape(self) -> (usize, usize) {
+        match self.dims {
+            Dimensions::Mat2 => (2, 2),
+            Dimensions::Mat3 => (3, 3),
+            Dimensions::Mat4 => (4, 4),
+            _ => (self.components(), 1),
+        }
+    }
+
+    /// Bytes from one matrix column to the next: columns of 1- and 2-byte components are
+    /// padded to a multiple of 4 bytes.
+    fn column_stride(self) -> usize {
+        let (rows, cols) = self.shape();
+        let bytes = rows * self.data_type.size();
+        if cols > 1 {
+            bytes.next_multiple_of(4)
+        } else {
+            bytes
+        }
+    }
+
+    fn element_size(self) -> usize {
+        self.shape().1 * self.column_stride()
+    }
+
+    /// Decodes one element into `out` (one slot a component); `None` if `element` is short.
+    fn decode<T>(self, element: &[u8], out: &mut [T], convert: fn(f64) -> T) -> Option<()> {
+        let (rows, _) = self.shape();
+        let size = self.data_type.size();
+        for (k, slot) in out.iter_mut().enumerate() {
+            let at = (k / rows) * self.column_stride() + (k % rows) * size;
+            *slot = convert(component(element, at, self.data_type, self.normalized)?);
+        }
+        Some(())
+    }
+}
+
+/// One little-endian component at byte `at`, normalized to 0..1 or -1..1 if asked.
+fn component(bytes: &[u8], at: usize, data_type: DataType, normalized: bool) -> Option<f64> {
+    fn take<const N: usize>(bytes: &[u8], at: usize) -> Option<[u8; N]> {
+        bytes.get(at..at.checked_add(N)?)?.try_into().ok()
+    }
+    let (raw, scale) = match data_type {
+        DataType::I8 => (f64::from(i8::from_le_bytes(take(bytes, at)?)), 127.0),
+        DataType::U8 => (f64::from(u8::from_le_bytes(take(bytes, at)?)), 255.0),
+        DataType::I16 => (f64::from(i16::from_le_bytes(take(bytes, at)?)), 32767.0),
+        DataType::U16 => (f64::from(u16::from_le_bytes(take(bytes, at)?)), 65535.0),
+        DataType::U32 => (
+            f64::from(u32::from_le_bytes(take(bytes, at)?)),
+            4_294_967_295.0,
+        ),
+        DataType::F32 => (f64::from(f32::from_le_bytes(take(bytes, at)?)), 1.0),
+    };
+    Some(if normalized {
+        (raw / scale).max(-1.0)
+    } else {
+        raw
+    })
+}
+
+/// The end of `count` elements of `elem` bytes, `stride` apart, from `offset`, or `u64::MAX`
+/// if it overflows.
+fn extent(offset: usize, stride: usize, count: usize, elem: usize) -> u64 {
+    let Some(last) = count.checked_sub(1) else {
+        return offset as u64;
+    };
+    last.checked_mul(stride)
+        .and_then(|s| s.checked_add(offset))
+        .and_then(|s| s.checked_add(elem))
+        .map_or(u64::MAX, |end| end as u64)
+}
+
+/// Buffer bytes, resolved on first use.
+struct Buffers<'a> {
+    origin: &'a Origin,
+    /// Whether the file is a GLB (where a buffer without a uri is the BIN chunk).
+    glb: bool,
+    bin: Option<&'a [u8]>,
+    data: Vec<Option<Cow<'a, [u8]>>>,
+}
+
+impl<'a> Buffers<'a> {
+    /// Resolves `buffer` unless it is already.
+    fn load(&mut self, buffer: &::gltf::Buffer<'_>) -> Result<(), MeshError> {
+        let i = buffer.index();
+        if matches!(self.data.get(i), Some(Some(_))) {
+            return Ok(());
+        }
+        let data = self.resolve(buffer)?;
+        if let Some(slot) = self.data.get_mut(i) {
+            *slot = Some(data);
+        }
+        Ok(())
+    }
+
+    /// The bytes of a buffer resolved before.
+    fn get(&self, index: usize) -> Result<&[u8], MeshError> {
+        match self.data.get(index) {
+            Some(Some(data)) => Ok(data),
+            _ => Err(self
+                .origin
+                .malformed("glTF", format!("buffer {index} was not resolved"))),
+        }
+    }
+
+    /// Fetches a buffer's bytes and checks them against its declared `byteLength`; a GLB BIN
+    /// chunk may be padded beyond it, and only the declared bytes are kept.
+    fn resolve(&self, buffer: &::gltf::Buffer<'_>) -> Result<Cow<'a, [u8]>, MeshError> {
+        let i = buffer.index();
+        let what = format!("buffer {i}");
+        let declared = buffer.length();
+        if declared as u64 > MAX_FILE_BYTES {
+            return Err(self.origin.too_large(what, declared as u64, MAX_FILE_BYTES));
+        }
+        let data = match buffer.source() {
+            Source::Bin if i == 0 => Cow::Borrowed(self.bin.ok_or_else(|| {
+                self.origin
+                    .malformed("glTF", "buffer 0 has no uri and there is no BIN chunk")
+            })?),
+            Source::Bin => {
+                let detail = format!("{what} has no uri (only buffer 0 can be the BIN chunk)");
+                return Err(self.origin.malformed("glTF", detail));
+            }
+            Source::Uri(uri) => Cow::Owned(self.fetch(uri, &what)?),
+        };
+        if data.len() < declared {
+            return Err(self
+                .origin
+                .too_short(what, declared as u64, data.len() as u64));
+        }
+        Ok(match data {
+            Cow::Borrowed(b) => Cow::Borrowed(b.get(..declared).unwrap_or(b)),
+            Cow::Owned(mut v) => {
+                v.truncate(declared);
+                Cow::Owned(v)
+            }
+        })
+    }
+
+    /// The bytes a buffer URI refers to: a base64 data URI, or a file relative to the glTF's.
+    fn fetch(&self, uri: &str, what: &str) -> Result<Vec<u8>, MeshError> {
+        if let Some(rest) = uri.strip_prefix("data:") {
+            return decode_data_uri(rest, what, self.origin);
+        }
+        let Some(dir) = &self.origin.dir else {
+            let detail =
+                format!("{what}: URI {uri:?} names a file; in-memory glTF may only use data URIs");
+            return Err(self.origin.unsupported(detail));
+        };
+        let scheme = uri.split_once(':').is_some_and(|(s, _)| !s.contains('/'));
+        if scheme || uri.starts_with(['/', '\\']) {
+            let detail = format!("{what}: URI {uri:?} is neither a data URI nor a relative file");
+            return Err(self.origin.unsupported(detail));
+        }
+        let relative = percent_decode(uri).ok_or_else(|| {
+            self.origin.malformed(
+                "glTF",
+                format!("{what}: bad percent-encoding in URI {uri:?}"),
+            )
+        })?;
+        super::read_file(&dir.join(relative))
+    }
+}
+
+/// Decodes the part of a data URI after `data:`; only base64 is supported.
+fn decode_data_uri(rest: &str, what: &str, origin: &Origin) -> Result<Vec<u8>, MeshError> {
+    let Some((header, payload)) = rest.split_once(',') else {
+        return Err(origin.malformed("glTF", format!("{what}: data URI without a comma")));
+    };
+    if !header.ends_with(";base64") {
+        return Err(origin.unsupported(format!("{what}: data URI that is not base64")));
+    }
+    BASE64
+        .decode(payload.trim())
+        .map_err(|e| origin.malformed("glTF", format!("{what}: data URI: {e}")))
+}
+
+/// Decodes `%XX` escapes; `None` for a bad escape or a result that is not UTF-8.
+fn percent_decode(uri: &str) -> Option<String> {
+    let bytes = uri.as_bytes();
+    let mut out = Vec::with_capacity(bytes.len());
+    let mut i = 0;
+    while let Some(&b) = bytes.get(i) {
+        if b == b'%' {
+            let hex = bytes
+                .get(i + 1..i + 3)
+                .filter(|h| h.iter().all(u8::is_ascii_hexdigit))?;
+            out.push(u8::from_str_radix(std::str::from_utf8(hex).ok()?, 16).ok()?);
+            i += 3;
+        } else {
+            out.push(b);
+            i += 1;
+        }
+    }
+    String::from_utf8(out).ok()
+}
+
+/// A mesh placed by a node.
+struct Instance<'a> {
+    node: Node<'a>,
+    mesh: ::gltf::Mesh<'a>,
+    /// Node to file coordinates.
+    transform: DMat4,
+}
+
+/// The decoded triangles and material of one primitive, or `None` if it has no triangles.
+type Built = Option<(CpuMesh, Material)>;
+
+/// Turns a parsed document into parts.
+struct Loader<'a> {
+    doc: &'a Document,
+    origin: &'a Origin,
+    bad_accessors: &'a HashSet<usize>,
+    buffers: Buffers<'a>,
+    warnings: Vec<String>,
+}
+
+impl<'a> Loader<'a> {
+    fn new(
+        parsed: &'a Parsed,
+        origin: &'a Origin,
+        bin: Option<&'a [u8]>,
+        glb: bool,
+        warnings: Vec<String>,
+    ) -> Self {
+        let buffers = Buffers {
+            origin,
+            glb,
+            bin,
+            data: vec![None; parsed.doc.buffers().len()],
+        };
+        Self {
+            doc: &parsed.doc,
+            origin,
+            bad_accessors: &parsed.bad_accessors,
+            buffers,
+            warnings,
+        }
+    }
+
+    /// Every mesh the scene places, with its node-to-file transform. The scene is the default
+    /// one, else the first; with no scene at all, every root node (a node nobody's child) is
+    /// walked, and a node left unreached then lies on a cycle.
+    fn instances(&self) -> Result<Vec<Instance<'a>>, MeshError> {
+        let node_count = self.doc.nodes().len();
+        let mut visited = vec![false; node_count];
+        let mut out = Vec::new();
+        if let Some(scene) = self
+            .doc
+            .default_scene()
+            .or_else(|| self.doc.scenes().next())
+        {
+            for node in scene.nodes() {
+                self.walk(node, DMat4::IDENTITY, 1, &mut visited, &mut out)?;
+            }
+            return Ok(out);
+        }
+        let mut has_parent = vec![false; node_count];
+        for child in self.doc.nodes().flat_map(|n| n.children()) {
+            if let Some(flag) = has_parent.get_mut(child.index()) {
+                *flag = true;
+            }
+        }
+        let roots = self
+            .doc
+            .nodes()
+            .filter(|n| has_parent.get(n.index()) == Some(&false));
+        for node in roots {
+            self.walk(node, DMat4::IDENTITY, 1, &mut visited, &mut out)?;
+        }
+        match visited.iter().position(|seen| !seen) {
+            Some(node) => Err(MeshError::NodeCycle {
+                file: self.origin.label.clone(),
+                node,
+            }),
+            None => Ok(out),
+        }
+    }
+
+    /// Walks the subtree of `node` at `depth` (1 for a root) under the `parent` transform.
+    fn walk(
+        &self,
+        node: Node<'a>,
+        parent: DMat4,
+        depth: usize,
+        visited: &mut [bool],
+        out: &mut Vec<Instance<'a>>,
+    ) -> Result<(), MeshError> {
+        let index = node.index();
+        let file = || self.origin.label.clone();
+        if depth > MAX_DEPTH {
+            let limit = MAX_DEPTH;
+            return Err(MeshError::NodeTooDeep {
+                file: file(),
+                node: index,
+                limit,
+            });
+        }
+        match visited.get_mut(index) {
+            Some(seen) if !*seen => *seen = true,
+            _ => {
+                return Err(MeshError::NodeCycle {
+                    file: file(),
+                    node: index,
+                });
+            }
+        }
+        let transform = parent * local_transform(&node);
+        if !transform.is_finite() {
+            return Err(self
+                .origin
+                .non_finite(format!("the transform of node {index}")));
+        }
+        if let Some(mesh) = node.mesh() {
+            out.push(Instance {
+                node: node.clone(),
+                mesh,
+                transform,
+            });
+        }
+        for child in node.children() {
+            self.walk(child, transform, depth + 1, visited, out)?;
+        }
+        Ok(())
+    }
+
+    /// One part per triangle primitive per instance. A primitive is decoded once however many
+    /// nodes place it, and the total output is bounded.
+    fn parts(&mut self, instances: &[Instance<'a>]) -> Result<Vec<MeshPart>, MeshError> {
+        let mut built: HashMap<(usize, usize), Built> = HashMap::new();
+        let mut parts = Vec::new();
+        let mut total_bytes = 0u64;
+        for instance in instances {
+            self.warn_about_deformation(instance);
+            let primitive_count = instance.mesh.primitives().len();
+            for primitive in instance.mesh.primitives() {
+                let key = (instance.mesh.index(), primitive.index());
+                if !built.contains_key(&key) {
+                    let decoded = self.primitive(&primitive, key)?;
+                    built.insert(key, decoded);
+                }
+                let Some(Some((mesh, material))) = built.get(&key) else {
+                    continue;
+                };
+                total_bytes += (mesh.positions.len() * 24 + mesh.indices.len() * 4) as u64;
+                if total_bytes > MAX_OUTPUT_BYTES {
+                    let what = "the meshes placed by all nodes together";
+                    return Err(self.origin.too_large(what, total_bytes, MAX_OUTPUT_BYTES));
+                }
+                parts.push(MeshPart {
+                    name: part_name(instance, &primitive, primitive_count),
+                    transform: instance.transform,
+                    mesh: mesh.clone(),
+                    material: *material,
+                });
+            }
+        }
+        Ok(parts)
+    }
+
+    /// Skins and morph targets are not applied: say so when they would change the shape.
+    fn warn_about_deformation(&mut self, instance: &Instance<'a>) {
+        let index = instance.node.index();
+        let weights = instance.node.weights().or_else(|| instance.mesh.weights());
+        if weights.is_some_and(|w| w.iter().any(|&x| x != 0.0)) {
+            self.warnings
+                .push(format!("node {index}: morph target weights not applied"));
+        }
+        let json = self.doc.as_json().nodes.get(index);
+        if json.is_some_and(|n| n.skin.is_some()) {
+            self.warnings
+                .push(format!("node {index}: skin not applied (drawn unskinned)"));
+        }
+    }
+
+    /// Decodes one primitive: positions, triangle indices, normals and material.
+    fn primitive(
+        &mut self,
+        primitive: &Primitive<'a>,
+        key: (usize, usize),
+    ) -> Result<Built, MeshError> {
+        let label = format!("mesh {} primitive {}", key.0, key.1);
+        let mode = primitive.mode();
+        if !matches!(
+            mode,
+            Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan
+        ) {
+            self.warnings.push(format!(
+                "{label}: {mode:?} skipped (only triangles are loaded)"
+            ));
+            return Ok(None);
+        }
+        let Some(position) = primitive.get(&Semantic::Positions) else {
+            self.warnings
+                .push(format!("{label}: no POSITION attribute, skipped"));
+            return Ok(None);
+        };
+        if let Some(buffer) = self.unsupplied_buffer(primitive) {
+            self.warnings.push(format!(
+                "{label}: skipped, its data lies in buffer {buffer}, which has no uri \
+                 (only a GLB can supply such a buffer)"
+            ));
+            return Ok(None);
+        }
+        let positions = self.read_vec3(&position, &format!("{label} POSITION"))?;
+        if positions.iter().flatten().any(|c| !c.is_finite()) {
+            return Err(self.origin.non_finite(format!("{label} POSITION")));
+        }
+        let vertex_indices = match primitive.indices() {
+            Some(accessor) => self.read_indices(&accessor, positions.len(), &label)?,
+            None => {
+                let n = u32::try_from(positions.len()).unwrap_or(u32::MAX);
+                (0..n).collect()
+            }
+        };
+        let (indices, leftover) = triangle_list(mode, vertex_indices);
+        if leftover {
+            self.warnings.push(format!(
+                "{label}: trailing indices that make no triangle dropped"
+            ));
+        }
+        if indices.is_empty() {
+            self.warnings
+                .push(format!("{label}: no triangles, skipped"));
+            return Ok(None);
+        }
+        let mut mesh = CpuMesh {
+            positions,
+            normals: Vec::new(),
+            indices,
+        };
+        self.attach_normals(primitive, &mut mesh, &label)?;
+        Ok(Some((mesh, material_of(primitive))))
+    }
+
+    /// A buffer that the primitive reads and that a `.gltf` (not GLB) file declares without a
+    /// `uri`. The specification reserves a missing uri for the GLB BIN chunk, so in a `.gltf`
+    /// the buffer's bytes are not part of the file (the glTF validator accepts such files): the
+    /// primitive is skipped with a warning rather than failing the whole file.
+    fn unsupplied_buffer(&self, primitive: &Primitive<'a>) -> Option<usize> {
+        if self.buffers.glb {
+            return None;
+        }
+        let attributes = [Semantic::Positions, Semantic::Normals].map(|s| primitive.get(&s));
+        let accessors = attributes
+            .into_iter()
+            .chain([primitive.indices()])
+            .flatten();
+        let usable = accessors.filter(|a| !self.bad_accessors.contains(&a.index()));
+        let views = usable.flat_map(|a| {
+            let sparse = a.sparse().into_iter();
+            let sparse_views = sparse.flat_map(|s| [s.indices().view(), s.values().view()]);
+            a.view().into_iter().chain(sparse_views)
+        });
+        let mut buffers = views.map(|v| v.buffer());
+        buffers
+            .find(|b| matches!(b.source(), Source::Bin))
+            .map(|b| b.index())
+    }
+
+    /// Uses the primitive's normals when it has usable ones, else computes them.
+    fn attach_normals(
+        &mut self,
+        primitive: &Primitive<'a>,
+        mesh: &mut CpuMesh,
+        label: &str,
+    ) -> Result<(), MeshError> {
+        let Some(accessor) = primitive.get(&Semantic::Normals) else {
+            mesh.compute_normals();
+            return Ok(());
+        };
+        let normals = self.read_vec3(&accessor, &format!("{label} NORMAL"))?;
+        let finite = normals.iter().flatten().all(|c| c.is_finite());
+        if normals.len() != mesh.positions.len() || !finite {
+            let problem = if finite {
+                "count differs from POSITION"
+            } else {
+                "non-finite values"
+            };
+            self.warnings.push(format!(
+                "{label}: NORMAL unusable ({problem}), computed instead"
+            ));
+            mesh.compute_normals();
+            return Ok(());
+        }
+        mesh.normals = normals.into_iter().map(unit_vector).collect();
+        Ok(())
+    }
+
+    /// Fails for an accessor that did not pass validation (its wrapper methods would panic).
+    fn check_valid(&self, accessor: &Accessor<'_>, what: &str) -> Result<(), MeshError> {
+        if self.bad_accessors.contains(&accessor.index()) {
+            let detail = format!("{what}: accessor {} is invalid", accessor.index());
+            return Err(self.origin.malformed("glTF", detail));
+        }
+        Ok(())
+    }
+
+    fn read_vec3(
+        &mut self,
+        accessor: &Accessor<'a>,
+        what: &str,
+    ) -> Result<Vec<[f32; 3]>, MeshError> {
+        self.check_valid(accessor, what)?;
+        if accessor.dimensions() != Dimensions::Vec3 {
+            let detail = format!("{what}: accessor {} is not VEC3", accessor.index());
+            return Err(self.origin.malformed("glTF", detail));
+        }
+        let flat = self.read_accessor(accessor, true, |v| v as f32)?;
+        Ok(flat.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect())
+    }
+
+    /// Reads vertex indices and checks each against the vertex count.
+    fn read_indices(
+        &mut self,
+        accessor: &Accessor<'a>,
+        vertex_count: usize,
+        label: &str,
+    ) -> Result<Vec<u32>, MeshError> {
+        let what = format!("{label} indices");
+        self.check_valid(accessor, &what)?;
+        let unsigned = matches!(
+            accessor.data_type(),
+            DataType::U8 | DataType::U16 | DataType::U32
+        );
+        if accessor.dimensions() != Dimensions::Scalar || !unsigned {
+            let detail = format!(
+                "{what}: accessor {} is not unsigned scalars",
+                accessor.index()
+            );
+            return Err(self.origin.malformed("glTF", detail));
+        }
+        let indices = self.read_accessor(accessor, false, |v| v as u32)?;
+        if let Some(&bad) = indices.iter().find(|&&i| i as usize >= vertex_count) {
+            return Err(self
+                .origin
+                .out_of_range(what, u64::from(bad), vertex_count as u64));
+        }
+        Ok(indices)
+    }
+
+    /// Reads an accessor, element after element, one `T` a component (`convert` maps the
+    /// component value, normalized if the accessor says so and `honour_normalized`), with
+    /// sparse substitution applied. Every range is checked before anything is allocated.
+    fn read_accessor<T: Copy>(
+        &mut self,
+        accessor: &Accessor<'a>,
+        honour_normalized: bool,
+        convert: fn(f64) -> T,
+    ) -> Result<Vec<T>, MeshError> {
+        let what = format!("accessor {}", accessor.index());
+        self.check_valid(accessor, &what)?;
+        let sparse = accessor.sparse();
+        let views = accessor.view().into_iter().chain(
+            sparse
+                .iter()
+                .flat_map(|s| [s.indices().view(), s.values().view()]),
+        );
+        for view in views {
+            self.buffers.load(&view.buffer())?;
+        }
+        let layout = Layout::of(accessor, honour_normalized);
+        let count = accessor.count();
+        let mut out = match accessor.view() {
+            Some(view) => {
+                self.read_dense(&view, accessor.offset(), count, layout, &what, convert)?
+            }
+            None if count <= MAX_UNBACKED_ELEMENTS => {
+                vec![convert(0.0); count * layout.components()]
+            }
+            None => {
+                let bytes = count as u64 * layout.element_size() as u64;
+                let limit = (MAX_UNBACKED_ELEMENTS * layout.element_size()) as u64;
+                return Err(self.origin.too_large(
+                    format!("{what} without a buffer view"),
+                    bytes,
+                    limit,
+                ));
+            }
+        };
+        if let Some(sparse) = sparse {
+            self.apply_sparse(&sparse, count, layout, &what, &mut out, convert)?;
+        }
+        Ok(out)
+    }
+
+    /// The bytes of a buffer view, checked to lie within its (resolved) buffer.
+    fn view_bytes(&self, view: &View<'_>, what: &str) -> Result<&[u8], MeshError> {
+        let data = self.buffers.get(view.buffer().index())?;
+        let range = view.offset()..view.offset().saturating_add(view.length());
+        data.get(range.clone()).ok_or_else(|| {
+            let what = format!("{what}: buffer view {}", view.index());
+            self.origin
+                .too_short(what, range.end as u64, data.len() as u64)
+        })
+    }
+
+    /// Checks that `count` elements of `elem` bytes, `stride` apart from `offset`, fit in `len`.
+    fn check_extent(
+        &self,
+        what: &str,
+        (offset, stride): (usize, usize),
+        count: usize,
+        elem: usize,
+        len: usize,
+    ) -> Result<(), MeshError> {
+        let end = extent(offset, stride, count, elem);
+        if end > len as u64 {
+            return Err(self.origin.too_short(what, end, len as u64));
+        }
+        Ok(())
+    }
+
+    fn read_dense<T: Copy>(
+        &self,
+        view: &View<'_>,
+        offset: usize,
+        count: usize,
+        layout: Layout,
+        what: &str,
+        convert: fn(f64) -> T,
+    ) -> Result<Vec<T>, MeshError> {
+        let bytes = self.view_bytes(view, what)?;
+        let elem = layout.element_size();
+        let stride = view.stride().unwrap_or(elem);
+        if stride < elem {
+            let detail =
+                format!("{what}: byte stride {stride} is less than the {elem}-byte element");
+            return Err(self.origin.malformed("glTF", detail));
+        }
+        self.check_extent(what, (offset, stride), count, elem, bytes.len())?;
+        let n = layout.components();
+        let mut out = vec![convert(0.0); count * n];
+        for (i, slot) in out.chunks_exact_mut(n).enumerate() {
+            let start = offset + i * stride;
+            bytes
+                .get(start..start + elem)
+                .and_then(|element| layout.decode(element, slot, convert))
+                .ok_or_else(|| {
+                    self.origin
+                        .too_short(what, (start + elem) as u64, bytes.len() as u64)
+                })?;
+        }
+        Ok(out)
+    }
+
+    /// Substitutes the sparse values into `out` (`count` elements of `layout`).
+    fn apply_sparse<T: Copy>(
+        &self,
+        sparse: &::gltf::accessor::sparse::Sparse<'_>,
+        count: usize,
+        layout: Layout,
+        what: &str,
+        out: &mut [T],
+        convert: fn(f64) -> T,
+    ) -> Result<(), MeshError> {
+        let n = sparse.count();
+        if n > count {
+            let detail = format!("{what}: {n} sparse values for {count} elements");
+            return Err(self.origin.malformed("glTF", detail));
+        }
+        let (indices, values) = (sparse.indices(), sparse.values());
+        let index_type = match indices.index_type() {
+            ::gltf::accessor::sparse::IndexType::U8 => DataType::U8,
+            ::gltf::accessor::sparse::IndexType::U16 => DataType::U16,
+            ::gltf::accessor::sparse::IndexType::U32 => DataType::U32,
+        };
+        let index_size = index_type.size();
+        let index_bytes = self.view_bytes(&indices.view(), what)?;
+        let index_what = format!("{what} sparse indices");
+        self.check_extent(
+            &index_what,
+            (indices.offset(), index_size),
+            n,
+            index_size,
+            index_bytes.len(),
+        )?;
+        let elem = layout.element_size();
+        let value_bytes = self.view_bytes(&values.view(), what)?;
+        let value_what = format!("{what} sparse values");
+        self.check_extent(
+            &value_what,
+            (values.offset(), elem),
+            n,
+            elem,
+            value_bytes.len(),
+        )?;
+        let comps = layout.components();
+        for s in 0..n {
+            let short = || {
+                self.origin
+                    .too_short(what, (n * elem) as u64, value_bytes.len() as u64)
+            };
+            let at = indices.offset() + s * index_size;
+            let target = component(index_bytes, at, index_type, false).ok_or_else(short)? as usize;
+            let slot = target
+                .checked_mul(comps)
+                .and_then(|a| out.get_mut(a..a + comps));
+            let slot = slot.ok_or_else(|| {
+                self.origin
+                    .out_of_range(&index_what, target as u64, count as u64)
+            })?;
+            let start = values.offset() + s * elem;
+            let element = value_bytes.get(start..start + elem);
+            element
+                .and_then(|e| layout.decode(e, slot, convert))
+                .ok_or_else(short)?;
+        }
+        Ok(())
+    }
+}
+
+/// A node's local transform in double precision; a rotation is normalized first.
+fn local_transform(node: &Node<'_>) -> DMat4 {
+    match node.transform() {
+        Transform::Matrix { matrix } => {
+            DMat4::from_cols_array_2d(&matrix.map(|c| c.map(f64::from)))
+        }
+        Transform::Decomposed {
+            translation,
+            rotation,
+            scale,
+        } => {
+            let q = DQuat::from_array(rotation.map(f64::from));
+            let len = q.length();
+            let q = if len.is_finite() && len > 0.0 {
+                q / len
+            } else {
+                DQuat::IDENTITY
+            };
+            DMat4::from_scale_rotation_translation(
+                DVec3::from_array(scale.map(f64::from)),
+                q,
+                DVec3::from_array(translation.map(f64::from)),
+            )
+        }
+    }
+}
+
+/// Triangle-list indices from a primitive's vertex indices in `mode`, and whether indices were
+/// left over (a list whose length is not a multiple of three).
+fn triangle_list(mode: Mode, mut v: Vec<u32>) -> (Vec<u32>, bool) {
+    match mode {
+        Mode::TriangleStrip => {
+            let triangles = (2..v.len()).flat_map(|i| {
+                // Every other triangle of a strip is flipped back to the strip's winding.
+                if i % 2 == 0 {
+                    [v[i - 2], v[i - 1], v[i]]
+                } else {
+                    [v[i - 2], v[i], v[i - 1]]
+                }
+            });
+            (triangles.collect(), false)
+        }
+        Mode::TriangleFan => {
+            let triangles = (2..v.len()).flat_map(|i| [v[i - 1], v[i], v[0]]);
+            (triangles.collect(), false)
+        }
+        _ => {
+            let whole = v.len() / 3 * 3;
+            let leftover = whole != v.len();
+            v.truncate(whole);
+            (v, leftover)
+        }
+    }
+}
+
+fn unit_vector(n: [f32; 3]) -> [f32; 3] {
+    let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+    if len > 0.0 { n.map(|c| c / len) } else { n }
+}
+
+fn material_of(primitive: &Primitive<'_>) -> Material {
+    let pbr = primitive.material().pbr_metallic_roughness();
+    let unit = |x: f32| {
+        if x.is_finite() {
+            x.clamp(0.0, 1.0)
+        } else {
+            0.0
+        }
+    };
+    Material {
+        base_color: pbr.base_color_factor().map(unit),
+        roughness: unit(pbr.roughness_factor()),
+        metallic: unit(pbr.metallic_factor()),
+    }
+}
+
+/// The node's name, else the mesh's, else `node N`; with the primitive number if there are
+/// several.
+fn part_name(instance: &Instance<'_>, primitive: &Primitive<'_>, primitive_count: usize) -> String {
+    let base = instance
+        .node
+        .name()
+        .or_else(|| instance.mesh.name())
+        .map_or_else(|| format!("node {}", instance.node.index()), str::to_owned);
+    if primitive_count > 1 {
+        format!("{base} #{}", primitive.index())
+    } else {
+        base
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::load_mesh_bytes;
+    use super::*;
+
+    /// A GLB container of `json` and, if not empty, a BIN chunk of `bin` (both padded).
+    fn glb(json: &str, bin: &[u8]) -> Vec<u8> {
+        let mut j = json.as_bytes().to_vec();
+        j.resize(j.len().next_multiple_of(4), b' ');
+        let mut b = bin.to_vec();
+        b.resize(b.len().next_multiple_of(4), 0);
+        let total = 12 + 8 + j.len() + if b.is_empty() { 0 } else { 8 + b.len() };
+        let mut out = b"glTF".to_vec();
+        for word in [2, total as u32, j.len() as u32] {
+            out.extend_from_slice(&word.to_le_bytes());
+        }
+        out.extend_from_slice(b"JSON");
+        out.extend_from_slice(&j);
+        if !b.is_empty() {
+            out.extend_from_slice(&(b.len() as u32).to_le_bytes());
+            out.extend_from_slice(b"BIN\0");
+            out.extend_from_slice(&b);
+        }
+        out
+    }
+
+    /// Three f32 positions of the triangle (0,0,0), (1,0,0), (0,1,0), then u16 indices 0 1 2.
+    fn triangle_bin() -> Vec<u8> {
+        let mut bin = Vec::new();
+        for c in [0f32, 0., 0., 1., 0., 0., 0., 1., 0.] {
+            bin.extend_from_slice(&c.to_le_bytes());
+        }
+        for i in [0u16, 1, 2] {
+            bin.extend_from_slice(&i.to_le_bytes());
+        }
+        bin
+    }
+
+    const TRIANGLE: &str = r#"{
+        "asset": {"version": "2.0"}, "scene": 0, "scenes": [{"nodes": [0]}],
+        "nodes": [{"name": "tri", "translation": [1, 2, 3], "children": [1]},
+                  {"mesh": 0, "scale": [2, 2, 2]}],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1, "material": 0}]}],
+        "materials": [{"pbrMetallicRoughness": {"baseColorFactor": [1, 0, 0, 1],
+                       "roughnessFactor": 0.25, "metallicFactor": 0.5}}],
+        "buffers": [{"byteLength": 42}],
+        "bufferViews": [{"buffer": 0, "byteLength": 36}, {"buffer": 0, "byteOffset": 36, "byteLength": 6}],
+        "accessors": [
+            {"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3",
+             "min": [0, 0, 0], "max": [1, 1, 0]},
+            {"bufferView": 1, "componentType": 5123, "count": 3, "type": "SCALAR"}]
+    }"#;
+
+    fn load_glb(json: &str, bin: &[u8]) -> Result<Model, MeshError> {
+        load_mesh_bytes(&glb(json, bin), "test.glb")
+    }
+
+    /// `json` with its one buffer given as a data URI of `bin`.
+    fn with_data_uri(json: &str, bin: &[u8]) -> String {
+        let uri = format!(
+            r#""uri": "data:application/octet-stream;base64,{}", "byteLength""#,
+            BASE64.encode(bin)
+        );
+        json.replacen(r#""byteLength""#, &uri, 1)
+    }
+
+    #[test]
+    fn triangle_glb_loads_with_transform_and_material() {
+        let model = load_glb(TRIANGLE, &triangle_bin()).unwrap();
+        assert_eq!(model.parts.len(), 1, "{:?}", model.warnings);
+        let part = &model.parts[0];
+        assert_eq!(part.name, "node 1");
+        assert_eq!(part.mesh.triangle_count(), 1);
+        assert_eq!(part.mesh.indices, [0, 1, 2]);
+        assert_eq!(part.mesh.bounds(), Some(([0.0; 3], [1.0, 1.0, 0.0])));
+        assert_eq!(part.mesh.normals, vec![[0.0, 0.0, 1.0]; 3]);
+        let corner = part.transform.transform_point3(DVec3::new(1.0, 0.0, 0.0));
+        assert_eq!(corner, DVec3::new(3.0, 2.0, 3.0));
+        let m = part.material;
+        assert_eq!(
+            (m.base_color, m.roughness, m.metallic),
+            ([1.0, 0.0, 0.0, 1.0], 0.25, 0.5)
+        );
+        assert!(model.warnings.is_empty(), "{:?}", model.warnings);
+    }
+
+    #[test]
+    fn same_triangle_as_gltf_with_a_data_uri() {
+        let json = with_data_uri(TRIANGLE, &triangle_bin());
+        let model = load_mesh_bytes(json.as_bytes(), "tri.gltf").unwrap();
+        assert_eq!(model.parts[0].mesh.triangle_count(), 1);
+    }
+
+    #[test]
+    fn gltf_buffer_without_uri_skips_its_primitives() {
+        let model = load_mesh(TRIANGLE, "tri.gltf").unwrap();
+        assert!(model.parts.is_empty());
+        assert!(
+            model.warnings[0].contains("buffer 0"),
+            "{:?}",
+            model.warnings
+        );
+        let err = load_glb(TRIANGLE, &[]).unwrap_err();
+        assert!(matches!(err, MeshError::Malformed { .. }), "{err}");
+    }
+
+    #[test]
+    fn in_memory_gltf_cannot_name_files() {
+        let json = TRIANGLE.replacen(
+            r#""byteLength": 42"#,
+            r#""uri": "tri.bin", "byteLength": 42"#,
+            1,
+        );
+        let err = load_mesh_bytes(json.as_bytes(), "tri.gltf").unwrap_err();
+        assert!(matches!(err, MeshError::Unsupported { .. }), "{err}");
+        let json = json.replace("tri.bin", "https://example.com/tri.bin");
+        let err = load_mesh(&json, "x.gltf");
+        assert!(matches!(err, Err(MeshError::Unsupported { .. })));
+    }
+
+    fn load_mesh(json: &str, name: &str) -> Result<Model, MeshError> {
+        load_mesh_bytes(json.as_bytes(), name)
+    }
+
+    #[test]
+    fn broken_containers_are_typed_errors() {
+        let good = glb(TRIANGLE, &triangle_bin());
+        let mut bad_magic = good.clone();
+        bad_magic[0] = b'g' ^ 0x20;
+        let truncated = &good[..good.len() - 10];
+        let mut long_chunk = good.clone();
+        long_chunk[12..16].copy_from_slice(&10_000u32.to_le_bytes());
+        for (bytes, what) in [
+            (&bad_magic[..], "magic"),
+            (truncated, "truncated"),
+            (&long_chunk, "chunk"),
+            (&good[..5], "header"),
+        ] {
+            let err = load_mesh_bytes(bytes, "broken.glb").unwrap_err();
+            assert!(
+                matches!(err, MeshError::Malformed { format: "GLB", .. }),
+                "{what}: {err}"
+            );
+        }
+        let mut extra = good;
+        extra.extend_from_slice(b"junk");
+        let model = load_mesh_bytes(&extra, "extra.glb").unwrap();
+        assert_eq!(model.warnings.len(), 1);
+    }
+
+    #[test]
+    fn accessor_past_its_view_and_short_buffer_are_refused() {
+        let json = TRIANGLE.replace(
+            r#""count": 3, "type": "VEC3""#,
+            r#""count": 300000000, "type": "VEC3""#,
+        );
+        let err = load_glb(&json, &triangle_bin()).unwrap_err();
+        assert!(
+            matches!(
+                err,
+                MeshError::BufferTooShort {
+                    needed: 3_600_000_000,
+                    ..
+                }
+            ),
+            "{err}"
+        );
+        let err = load_glb(TRIANGLE, &triangle_bin()[..20]).unwrap_err();
+        assert!(
+            matches!(
+                err,
+                MeshError::BufferTooShort {
+                    needed: 42,
+                    available: 20,
+                    ..
+                }
+            ),
+            "{err}"
+        );
+    }
+
+    #[test]
+    fn index_out_of_range_is_an_error() {
+        let mut bin = triangle_bin();
+        bin[40] = 9;
+        let err = load_glb(TRIANGLE, &bin).unwrap_err();
+        assert!(
+            matches!(
+                err,
+                MeshError::IndexOutOfRange {
+                    index: 9,
+                    len: 3,
+                    ..
+                }
+            ),
+            "{err}"
+        );
+        let json = TRIANGLE.replace(r#""POSITION": 0"#, r#""POSITION": 7"#);
+        let err = load_glb(&json, &triangle_bin()).unwrap_err();
+        assert!(
+            matches!(err, MeshError::IndexOutOfRange { index: 7, .. }),
+            "{err}"
+        );
+    }
+
+    #[test]
+    fn nan_position_is_an_error() {
+        let mut bin = triangle_bin();
+        bin[12..16].copy_from_slice(&f32::NAN.to_le_bytes());
+        let err = load_glb(TRIANGLE, &bin).unwrap_err();
+        assert!(matches!(err, MeshError::NonFinite { .. }), "{err}");
+    }
+
+    #[test]
+    fn cyclic_and_deep_node_graphs_are_errors() {
+        let cycle = r#"{"asset": {"version": "2.0"}, "scenes": [{"nodes": [0]}],
+            "nodes": [{"children": [1]}, {"children": [0]}]}"#;
+        let err = load_mesh(cycle, "cycle.gltf").unwrap_err();
+        assert!(matches!(err, MeshError::NodeCycle { .. }), "{err}");
+        let sceneless =
+            r#"{"asset": {"version": "2.0"}, "nodes": [{}, {"children": [2]}, {"children": [1]}]}"#;
+        let err = load_mesh(sceneless, "cycle.gltf").unwrap_err();
+        assert!(matches!(err, MeshError::NodeCycle { node: 1, .. }), "{err}");
+        let chain: Vec<String> = (1..=70)
+            .map(|i| format!(r#"{{"children": [{i}]}}"#))
+            .collect();
+        let deep = format!(
+            r#"{{"asset": {{"version": "2.0"}}, "scenes": [{{"nodes": [0]}}], "nodes": [{}, {{}}]}}"#,
+            chain.join(",")
+        );
+        let err = load_mesh(&deep, "deep.gltf").unwrap_err();
+        assert!(
+            matches!(err, MeshError::NodeTooDeep { node: 64, .. }),
+            "{err}"
+        );
+    }
+
+    #[test]
+    fn no_meshes_is_an_empty_model() {
+        let model = load_mesh(
+            r#"{"asset": {"version": "2.0"}, "nodes": [{}]}"#,
+            "empty.gltf",
+        )
+        .unwrap();
+        assert!(model.parts.is_empty() && model.warnings.is_empty());
+    }
+
+    #[test]
+    fn sparse_positions_are_substituted() {
+        // The triangle's positions, with vertex 2 replaced by (5, 6, 7) through a sparse block
+        // appended to the buffer: index u8 2 (padded to 4 bytes), then the value.
+        let mut bin = triangle_bin();
+        bin.extend_from_slice(&[0, 0, 2, 0, 0, 0]);
+        for c in [5f32, 6., 7.] {
+            bin.extend_from_slice(&c.to_le_bytes());
+        }
+        let json = TRIANGLE
+            .replace(r#""byteLength": 42}"#, r#""byteLength": 60}"#)
+            .replace(
+                r#"{"buffer": 0, "byteOffset": 36, "byteLength": 6}"#,
+                r#"{"buffer": 0, "byteOffset": 36, "byteLength": 6},
+                   {"buffer": 0, "byteOffset": 44, "byteLength": 1},
+                   {"buffer": 0, "byteOffset": 48, "byteLength": 12}"#,
+            )
+            .replace(
+                r#""max": [1, 1, 0]}"#,
+                r#""max": [5, 6, 7], "sparse": {"count": 1,
+                   "indices": {"bufferView": 2, "componentType": 5121},
+                   "values": {"bufferView": 3}}}"#,
+            );
+        let model = load_glb(&json, &bin).unwrap();
+        let positions = &model.parts[0].mesh.positions;
+        assert_eq!(
+            positions,
+            &[[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [5.0, 6.0, 7.0]]
+        );
+        let out_of_range = json.replace(r#""count": 1,"#, r#""count": 1, "x": 0,"#);
+        let mut bad = bin.clone();
+        bad[44] = 3;
+        let err = load_glb(&out_of_range, &bad).unwrap_err();
+        assert!(
+            matches!(
+                err,
+                MeshError::IndexOutOfRange {
+                    index: 3,
+                    len: 3,
+                    ..
+                }
+            ),
+            "{err}"
+        );
+    }
+
+    #[test]
+    fn quantized_strip_without_indices() {
+        // Four normalized i16 vertices of a unit square (8 bytes a vertex with padding), as a
+        // triangle strip: two triangles, both facing +z.
+        let mut bin = Vec::new();
+        for [x, y] in [[0i16, 0], [32767, 0], [0, 32767], [32767, 32767]] {
+            for c in [x, y, 0, 0] {
+                bin.extend_from_slice(&c.to_le_bytes());
+            }
+        }
+        let json = r#"{"asset": {"version": "2.0"}, "extensionsRequired": ["KHR_mesh_quantization"],
+            "extensionsUsed": ["KHR_mesh_quantization"], "nodes": [{"mesh": 0}],
+            "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "mode": 5}]}],
+            "buffers": [{"byteLength": 32}],
+            "bufferViews": [{"buffer": 0, "byteLength": 32, "byteStride": 8}],
+            "accessors": [{"bufferView": 0, "componentType": 5122, "normalized": true,
+                "count": 4, "type": "VEC3", "min": [0, 0, 0], "max": [32767, 32767, 0]}]}"#;
+        let model = load_glb(json, &bin).unwrap();
+        let mesh = &model.parts[0].mesh;
+        assert_eq!(mesh.indices, [0, 1, 2, 1, 3, 2]);
+        assert_eq!(mesh.bounds(), Some(([0.0; 3], [1.0, 1.0, 0.0])));
+        assert!(mesh.normals.iter().all(|n| *n == [0.0, 0.0, 1.0]));
+        assert_eq!(
+            triangle_list(Mode::TriangleFan, vec![0, 1, 2, 3]).0,
+            [1, 2, 0, 2, 3, 0]
+        );
+    }
+
+    #[test]
+    fn lines_are_skipped_with_a_warning_and_unknown_required_extensions_refused() {
+        let lines = TRIANGLE.replace(r#""indices": 1,"#, r#""indices": 1, "mode": 1,"#);
+        let model = load_glb(&lines, &triangle_bin()).unwrap();
+        assert!(model.parts.is_empty());
+        assert_eq!(model.warnings.len(), 1, "{:?}", model.warnings);
+        let draco = TRIANGLE.replacen(
+            "{",
+            r#"{"extensionsRequired": ["KHR_draco_mesh_compression"],"#,
+            1,
+        );
+        let err = load_glb(&draco, &triangle_bin()).unwrap_err();
+        assert!(matches!(err, MeshError::Unsupported { .. }), "{err}");
+    }
+
+    #[test]
+    fn integers_written_as_floats_are_accepted() {
+        let json = TRIANGLE.replace(r#""bufferView": 1,"#, r#""bufferView": 1.0e0,"#);
+        assert!(load_glb(&json, &triangle_bin()).is_ok());
+        let bad = TRIANGLE.replace(r#""bufferView": 1,"#, r#""bufferView": 1.5,"#);
+        assert!(matches!(
+            load_glb(&bad, &triangle_bin()),
+            Err(MeshError::Malformed { .. })
+        ));
+    }
+
+    #[test]
+    fn uri_helpers() {
+        assert_eq!(
+            percent_decode("a%20b%2Fc.bin").as_deref(),
+            Some("a b/c.bin")
+        );
+        assert_eq!(percent_decode("bad%2"), None);
+        assert_eq!(percent_decode("bad%+1x"), None);
+        let origin = Origin::embedded("x.gltf");
+        assert_eq!(
+            decode_data_uri("application/gltf-buffer;base64,AAEC", "b", &origin).unwrap(),
+            [0, 1, 2]
+        );
+        assert_eq!(
+            decode_data_uri(";base64,AAE", "b", &origin).unwrap(),
+            [0, 1]
+        );
+        assert!(matches!(
+            decode_data_uri("text/plain,hello", "b", &origin),
+            Err(MeshError::Unsupported { .. })
+        ));
+        assert!(matches!(
+            decode_data_uri(";base64,!!", "b", &origin),
+            Err(MeshError::Malformed { .. })
+        ));
+    }
+
+    #[test]
+    fn matrix_layout_pads_columns() {
+        let layout = Layout {
+            data_type: DataType::U8,
+            dims: Dimensions::Mat3,
+            normalized: false,
+        };
+        assert_eq!(layout.element_size(), 12);
+        let bytes = [1u8, 2, 3, 0, 4, 5, 6, 0, 7, 8, 9, 0];
+        let mut out = [0f32; 9];
+        layout.decode(&bytes, &mut out, |v| v as f32).unwrap();
+        assert_eq!(out, [1., 2., 3., 4., 5., 6., 7., 8., 9.]);
+        assert_eq!(extent(4, 12, 0, 12), 4);
+        assert_eq!(extent(0, usize::MAX, 3, 12), u64::MAX);
+    }
+}

@@ -1,0 +1,263 @@
+//! The mesh pass: opaque meshes lit with their normals, writing depth.
+
+use std::sync::Arc;
+
+use bytemuck::{Pod, Zeroable};
+use glam::{DMat3, Mat4};
+use wgpu::util::DeviceExt;
+
+use super::GpuContext;
+use super::target::{COLOR_FORMAT, DEPTH_FORMAT};
+use super::view::ViewSetup;
+use crate::mesh::{CpuMesh, Material};
+use crate::scene::Lights;
+
+/// Keep in sync with `Frame` in shaders/mesh.wgsl.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Pod, Zeroable)]
+struct FrameUniforms {
+    view_proj: [[f32; 4]; 4],
+    forward: [f32; 4],
+    params: [f32; 4],
+    light_dir: [[f32; 4]; 4],
+    light_color: [[f32; 4]; 4],
+}
+const _: () = assert!(size_of::<FrameUniforms>() == 224);
+
+/// Keep in sync with `Object` in shaders/mesh.wgsl.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Pod, Zeroable)]
+struct ObjectUniforms {
+    model: [[f32; 4]; 4],
+    normal: [[f32; 4]; 4],
+    base_color: [f32; 4],
+    material: [f32; 4],
+}
+const _: () = assert!(size_of::<ObjectUniforms>() == 160);
+
+/// Keep in sync with the vertex inputs of shaders/mesh.wgsl.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Pod, Zeroable)]
+struct Vertex {
+    position: [f32; 3],
+    normal: [f32; 3],
+}
+
+/// The mesh pipeline and its per-frame uniforms.
+#[derive(Debug)]
+pub(crate) struct MeshPass {
+    pipeline: wgpu::RenderPipeline,
+    object_layout: wgpu::BindGroupLayout,
+    frame_buffer: wgpu::Buffer,
+    frame_group: wgpu::BindGroup,
+}
+
+/// A mesh on the GPU with its own uniforms.
+#[derive(Debug)]
+pub(crate) struct GpuMesh {
+    /// The CPU mesh it was made from (compared by pointer to know when to upload again).
+    pub(crate) source: Arc<CpuMesh>,
+    vertices: wgpu::Buffer,
+    indices: wgpu::Buffer,
+    index_count: u32,
+    uniforms: wgpu::Buffer,
+    group: wgpu::BindGroup,
+}
+
+fn uniform_layout(
+    device: &wgpu::Device,
+    label: &str,
+    visibility: wgpu::ShaderStages,
+) -> wgpu::BindGroupLayout {
+    device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+        label: Some(label),
+        entries: &[wgpu::BindGroupLayoutEntry {
+            binding: 0,
+            visibility,
+            ty: wgpu::BindingType::Buffer {
+                ty: wgpu::BufferBindingType::Uniform,
+                has_dynamic_offset: false,
+                min_binding_size: None,
+            },
+            count: None,
+        }],
+    })
+}
+
+impl MeshPass {
+    pub(crate) fn new(ctx: &GpuContext) -> Self {
+        let device = &ctx.device;
+        let module = device.create_shader_module(wgpu::include_wgsl!("../../shaders/mesh.wgsl"));
+        let both = wgpu::ShaderStages::VERTEX_FRAGMENT;
+        let frame_layout = uniform_layout(device, "mesh frame", both);
+        let object_layout = uniform_layout(device, "mesh object", both);
+        let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("mesh"),
+            bind_group_layouts: &[Some(&frame_layout), Some(&object_layout)],
+            immediate_size: 0,
+        });
+        let attributes = wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x3];
+        let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+            label: Some("mesh"),
+            layout: Some(&layout),
+            vertex: wgpu::VertexState {
+                module: &module,
+                entry_point: Some("vs_main"),
+                compilation_options: Default::default(),
+                buffers: &[Some(wgpu::VertexBufferLayout {
+                    array_stride: size_of::<Vertex>() as u64,
+                    step_mode: wgpu::VertexStepMode::Vertex,
+                    attributes: &attributes,
+                })],
+            },
+            // Meshes from the wild are not reliably closed or consistently wound: draw both
+            // faces and flip the normal of back faces in the shader.
+            primitive: wgpu::PrimitiveState::default(),
+            depth_stencil: Some(wgpu::DepthStencilState {
+                format: DEPTH_FORMAT,
+                depth_write_enabled: Some(true),
+                depth_compare: Some(wgpu::CompareFunction::Greater),
+                stencil: Default::default(),
+                bias: Default::default(),
+            }),
+            multisample: Default::default(),
+            fragment: Some(wgpu::FragmentState {
+                module: &module,
+                entry_point: Some("fs_main"),
+                compilation_options: Default::default(),
+                targets: &[Some(COLOR_FORMAT.into())],
+            }),
+            multiview_mask: None,
+            cache: None,
+        });
+        let frame_buffer = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("mesh frame"),
+            size: size_of::<FrameUniforms>() as u64,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let frame_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("mesh frame"),
+            layout: &frame_layout,
+            entries: &[wgpu::BindGroupEntry {
+                binding: 0,
+                resource: frame_buffer.as_entire_binding(),
+            }],
+        });
+        Self {
+            pipeline,
+            object_layout,
+            frame_buffer,
+            frame_group,
+        }
+    }
+
+    /// Uploads a mesh once.
+    pub(crate) fn upload(&self, ctx: &GpuContext, mesh: &Arc<CpuMesh>) -> GpuMesh {
+        let device = &ctx.device;
+        let vertices: Vec<Vertex> = mesh
+            .positions
+            .iter()
+            .zip(
+                mesh.normals
+                    .iter()
+                    .chain(std::iter::repeat(&[0.0, 0.0, 1.0])),
+            )
+            .map(|(p, n)| Vertex {
+                position: *p,
+                normal: *n,
+            })
+            .collect();
+        let vertices = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("mesh vertices"),
+            contents: bytemuck::cast_slice(&vertices),
+            usage: wgpu::BufferUsages::VERTEX,
+        });
+        let indices = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("mesh indices"),
+            contents: bytemuck::cast_slice(&mesh.indices),
+            usage: wgpu::BufferUsages::INDEX,
+        });
+        let uniforms = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("mesh object"),
+            size: size_of::<ObjectUniforms>() as u64,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("mesh object"),
+            layout: &self.object_layout,
+            entries: &[wgpu::BindGroupEntry {
+                binding: 0,
+                resource: uniforms.as_entire_binding(),
+            }],
+        });
+        GpuMesh {
+            source: Arc::clone(mesh),
+            vertices,
+            indices,
+            index_count: (mesh.indices.len() / 3 * 3) as u32,
+            uniforms,
+            group,
+        }
+    }
+
+    /// Writes the camera and lights of this frame.
+    pub(crate) fn write_frame(&self, ctx: &GpuContext, view: &ViewSetup, lights: &Lights) {
+        let forward = view.axes.z_axis.as_vec3();
+        let mut u = FrameUniforms {
+            view_proj: view.view_proj().to_cols_array_2d(),
+            forward: forward.extend(lights.headlight).to_array(),
+            params: [
+                lights.ambient,
+                lights.directional.len().min(4) as f32,
+                if view.is_orthographic() { 1.0 } else { 0.0 },
+                0.0,
+            ],
+            light_dir: [[0.0; 4]; 4],
+            light_color: [[0.0; 4]; 4],
+        };
+        for (i, light) in lights.directional.iter().take(4).enumerate() {
+            let d = light.direction.normalize_or(glam::DVec3::NEG_Z).as_vec3();
+            u.light_dir[i] = d.extend(0.0).to_array();
+            u.light_color[i] = [light.color[0], light.color[1], light.color[2], 0.0];
+        }
+        ctx.queue
+            .write_buffer(&self.frame_buffer, 0, bytemuck::bytes_of(&u));
+    }
+
+    /// Writes a mesh's placement (relative to the eye) and material for this frame.
+    pub(crate) fn write_object(
+        ctx: &GpuContext,
+        mesh: &GpuMesh,
+        model: Mat4,
+        world_linear: DMat3,
+        material: &Material,
+    ) {
+        let normal = world_linear.inverse().transpose().as_mat3();
+        let u = ObjectUniforms {
+            model: model.to_cols_array_2d(),
+            normal: Mat4::from_mat3(normal).to_cols_array_2d(),
+            base_color: material.base_color,
+            material: [material.roughness, material.metallic, 0.0, 0.0],
+        };
+        ctx.queue
+            .write_buffer(&mesh.uniforms, 0, bytemuck::bytes_of(&u));
+    }
+
+    /// Records the draws of `meshes` into a pass that clears or keeps the targets.
+    pub(crate) fn draw<'a>(
+        &self,
+        pass: &mut wgpu::RenderPass<'_>,
+        meshes: impl Iterator<Item = &'a GpuMesh>,
+    ) {
+        pass.set_pipeline(&self.pipeline);
+        pass.set_bind_group(0, &self.frame_group, &[]);
+        for mesh in meshes {
+            pass.set_bind_group(1, &mesh.group, &[]);
+            pass.set_vertex_buffer(0, mesh.vertices.slice(..));
+            pass.set_index_buffer(mesh.indices.slice(..), wgpu::IndexFormat::Uint32);
+            pass.draw_indexed(0..mesh.index_count, 0, 0..1);
+        }
+    }
+}

@@ -1,0 +1,78 @@
+//! The GPU layer: a wgpu context, offscreen targets with one readback helper, and the renderer
+//! with its two passes (opaque meshes with depth write, then splats in visibility order,
+//! depth-tested against the meshes). Everything below `render` draws into caller-given texture
+//! views, so windows, screenshots and tests share one code path.
+
+use thiserror::Error;
+
+mod context;
+mod mesh_pass;
+mod renderer;
+mod splat_pass;
+mod target;
+mod view;
+
+pub use context::GpuContext;
+pub use renderer::{FrameOptions, FrameReport, FrameTimings, Renderer, Screenshot};
+pub use splat_pass::gpu_colors;
+pub use target::{COLOR_FORMAT, DEPTH_FORMAT, RenderTarget, read_texture};
+pub use view::ViewSetup;
+
+/// Why a frame could not be rendered.
+#[derive(Debug, Error)]
+pub enum RenderError {
+    /// wgpu found no adapter at all.
+    #[error(
+        "no GPU adapter found ({0}); on Debian or Ubuntu without a GPU install Mesa's software Vulkan driver: apt-get install mesa-vulkan-drivers"
+    )]
+    NoAdapter(String),
+    /// The adapter refused to make a device, or the device failed.
+    #[error("GPU device error: {0}")]
+    Device(String),
+    /// The image size is zero or beyond the adapter's limit.
+    #[error("image size {width}x{height} is not between 1x1 and {max}x{max}")]
+    BadSize {
+        /// Requested width.
+        width: u32,
+        /// Requested height.
+        height: u32,
+        /// The adapter's largest 2D texture side.
+        max: u32,
+    },
+    /// The camera is unusable.
+    #[error("camera: {0}")]
+    BadCamera(String),
+    /// A volume is larger than the adapter's 3D textures.
+    #[error("volume of {dims:?} voxels exceeds the adapter's 3D texture side of {max}")]
+    VolumeTooLarge {
+        /// Grid size.
+        dims: [u32; 3],
+        /// Largest side.
+        max: u32,
+    },
+    /// The draw order does not fit in one GPU buffer.
+    #[error("{splats} splats exceed the adapter's largest buffer of {max_bytes} bytes")]
+    TooManySplats {
+        /// Splats in the draw order.
+        splats: usize,
+        /// The adapter's largest buffer.
+        max_bytes: u64,
+    },
+    /// Reading the image back failed.
+    #[error("reading the frame back failed: {0}")]
+    Readback(String),
+    /// A volume node could not be classified or ordered.
+    #[error("volume node {node:?}: {message}")]
+    Volume {
+        /// The node's name.
+        node: String,
+        /// What went wrong.
+        message: String,
+    },
+}
+
+impl From<crate::camera::CameraError> for RenderError {
+    fn from(e: crate::camera::CameraError) -> Self {
+        Self::BadCamera(e.to_string())
+    }
+}

@@ -1,0 +1,470 @@
+//! The renderer: keeps GPU copies of what the scene holds, builds each pipeline only when the
+//! scene has content for it, and records a frame as a mesh pass then a splat pass.
+
+use std::collections::HashMap;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use glam::{DAffine3, DMat3, DMat4};
+
+use super::mesh_pass::{GpuMesh, MeshPass};
+use super::splat_pass::{GpuVolume, SplatPass};
+use super::target::RenderTarget;
+use super::view::ViewSetup;
+use super::{GpuContext, RenderError};
+use crate::classify::{Classified, TransferFunction, classify};
+use crate::composite::Frame;
+use crate::order::{OrderOptions, Orderer, Ordering, ViewCase, VolumeGeometry};
+use crate::scene::{NodeId, Scene, SceneCamera, volume_placement};
+use crate::volume::CpuVolume;
+
+/// Per-frame choices that are not part of the scene.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FrameOptions {
+    /// Draw every volume in this order instead of its node's own.
+    pub ordering: Option<Ordering>,
+    /// Opaque background colour (linear RGB); `None` for a transparent background.
+    pub background: Option<[f32; 3]>,
+    /// Wait for the GPU after each stage so that [`FrameTimings`] splits the frame (costs a
+    /// little throughput; screenshots and benchmarks want it, a window does not).
+    pub measure: bool,
+}
+
+impl Default for FrameOptions {
+    fn default() -> Self {
+        Self {
+            ordering: None,
+            background: Some([0.06, 0.07, 0.09]),
+            measure: true,
+        }
+    }
+}
+
+/// Wall-clock time of each stage of a frame (stages overlap unless measured).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct FrameTimings {
+    /// Classification (only on frames where a volume or transfer function changed).
+    pub classify: Duration,
+    /// Computing the draw orders on the CPU.
+    pub order: Duration,
+    /// Writing the draw orders and uniforms to the GPU.
+    pub upload: Duration,
+    /// The mesh pass (or the clear, without meshes).
+    pub mesh_pass: Duration,
+    /// The splat pass.
+    pub splat_pass: Duration,
+    /// Copying the image back (screenshots only).
+    pub readback: Duration,
+}
+
+/// What the renderer built and drew; the way to check that a scene without meshes builds no
+/// mesh pipeline, and one without a volume no splat pipeline.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct FrameReport {
+    /// Whether the mesh pipeline exists.
+    pub mesh_pipeline: bool,
+    /// Whether the splat pipeline exists.
+    pub splat_pipeline: bool,
+    /// Meshes drawn.
+    pub meshes: usize,
+    /// Triangles drawn.
+    pub triangles: usize,
+    /// Splats drawn (significant voxels in front of the eye).
+    pub splats: usize,
+    /// Volumes classified this frame (0 when nothing changed).
+    pub classified: usize,
+    /// Where the time went.
+    pub timings: FrameTimings,
+}
+
+/// A rendered frame read back to the CPU.
+#[derive(Debug, Clone)]
+pub struct Screenshot {
+    /// Premultiplied linear RGBA.
+    pub frame: Frame,
+    /// Reversed depth per pixel (0 where no mesh was drawn; splats write no depth).
+    pub depth: Vec<f32>,
+    /// The resolved camera.
+    pub view: ViewSetup,
+    /// What was drawn and how long it took.
+    pub report: FrameReport,
+}
+
+/// Identity of a classification: the volume, the transfer function and the threshold.
+type ClassKey = (usize, usize, u32);
+
+struct VolumeState {
+    key: ClassKey,
+    classified: Classified,
+    gpu: GpuVolume,
+    orderer: Orderer,
+    ids: Vec<u32>,
+}
+
+/// Draws scenes; keeps GPU resources between frames so that a camera move uploads only the
+/// draw orders and a few uniforms.
+#[derive(Default)]
+pub struct Renderer {
+    mesh_pass: Option<MeshPass>,
+    splat_pass: Option<SplatPass>,
+    meshes: HashMap<NodeId, GpuMesh>,
+    volumes: HashMap<NodeId, VolumeState>,
+}
+
+impl std::fmt::Debug for Renderer {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Renderer")
+            .field("mesh_pipeline", &self.mesh_pass.is_some())
+            .field("splat_pipeline", &self.splat_pass.is_some())
+            .field("meshes", &self.meshes.len())
+            .field("volumes", &self.volumes.len())
+            .finish()
+    }
+}
+
+impl Renderer {
+    /// A renderer with nothing built yet.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Renders `scene` seen through `view` into the given colour and depth views (formats
+    /// [`super::COLOR_FORMAT`] and [`super::DEPTH_FORMAT`], of `view.size`).
+    pub fn render(
+        &mut self,
+        ctx: &GpuContext,
+        scene: &Scene,
+        view: &ViewSetup,
+        color: &wgpu::TextureView,
+        depth: &wgpu::TextureView,
+        options: &FrameOptions,
+    ) -> Result<FrameReport, RenderError> {
+        let mut report = FrameReport::default();
+        self.sync_meshes(ctx, scene);
+        let started = Instant::now();
+        report.classified = self.sync_volumes(ctx, scene)?;
+        report.timings.classify = started.elapsed();
+        let ordered = self.order_volumes(scene, view, options, &mut report)?;
+        let started = Instant::now();
+        self.upload(ctx, scene, view, &ordered, &mut report)?;
+        if options.measure {
+            ctx.wait()?;
+        }
+        report.timings.upload = started.elapsed();
+        let started = Instant::now();
+        self.mesh_stage(ctx, scene, color, depth, options);
+        if options.measure {
+            ctx.wait()?;
+        }
+        report.timings.mesh_pass = started.elapsed();
+        let started = Instant::now();
+        self.splat_stage(ctx, &ordered, color, depth);
+        if options.measure {
+            ctx.wait()?;
+        }
+        report.timings.splat_pass = started.elapsed();
+        report.mesh_pipeline = self.mesh_pass.is_some();
+        report.splat_pipeline = self.splat_pass.is_some();
+        Ok(report)
+    }
+
+    /// Renders into a new offscreen target of `size` and reads colour and depth back.
+    pub fn screenshot(
+        &mut self,
+        ctx: &GpuContext,
+        scene: &Scene,
+        camera: &SceneCamera,
+        size: (u32, u32),
+        options: &FrameOptions,
+    ) -> Result<Screenshot, RenderError> {
+        let target = RenderTarget::new(ctx, size.0, size.1)?;
+        let view = ViewSetup::new(camera, size, scene.bounds())?;
+        let mut report = self.render(
+            ctx,
+            scene,
+            &view,
+            &target.color_view,
+            &target.depth_view,
+            options,
+        )?;
+        let started = Instant::now();
+        let frame = target.read_color(ctx)?;
+        let depth = target.read_depth(ctx)?;
+        report.timings.readback = started.elapsed();
+        Ok(Screenshot {
+            frame,
+            depth,
+            view,
+            report,
+        })
+    }
+
+    fn sync_meshes(&mut self, ctx: &GpuContext, scene: &Scene) {
+        let mut live = Vec::new();
+        for (id, node, _) in scene.meshes() {
+            if node.mesh.indices.len() < 3 {
+                continue;
+            }
+            live.push(id);
+            let fresh = self
+                .meshes
+                .get(&id)
+                .is_some_and(|m| Arc::ptr_eq(&m.source, &node.mesh));
+            if !fresh {
+                let pass = self.mesh_pass.get_or_insert_with(|| MeshPass::new(ctx));
+                let gpu = pass.upload(ctx, &node.mesh);
+                self.meshes.insert(id, gpu);
+            }
+        }
+        self.meshes.retain(|id, _| live.contains(id));
+    }
+
+    /// Classifies volumes whose data, transfer function or threshold changed; returns how many.
+    fn sync_volumes(&mut self, ctx: &GpuContext, scene: &Scene) -> Result<usize, RenderError> {
+        let mut live = Vec::new();
+        let mut classified = 0;
+        for (id, node, _) in scene.volumes() {
+            live.push(id);
+            let key = class_key(&node.volume, &node.transfer, node.splats.min_opacity);
+            if self.volumes.get(&id).is_some_and(|v| v.key == key) {
+                continue;
+            }
+            let name = &scene.nodes()[id.0].name;
+            let result =
+                classify(&node.volume, &node.transfer, node.splats.min_opacity).map_err(|e| {
+                    RenderError::Volume {
+                        node: name.clone(),
+                        message: e.to_string(),
+                    }
+                })?;
+            classified += 1;
+            if result.grid.is_empty() {
+                self.volumes.remove(&id);
+                continue;
+            }
+            let pass = self.splat_pass.get_or_insert_with(|| SplatPass::new(ctx));
+            let gpu = pass.upload(ctx, &result)?;
+            let old = self.volumes.remove(&id);
+            let (orderer, ids) = old.map(|o| (o.orderer, o.ids)).unwrap_or_default();
+            self.volumes.insert(
+                id,
+                VolumeState {
+                    key,
+                    classified: result,
+                    gpu,
+                    orderer,
+                    ids,
+                },
+            );
+        }
+        self.volumes.retain(|id, _| live.contains(id));
+        Ok(classified)
+    }
+
+    /// Orders every volume's splats for this view; returns the volumes far to near.
+    fn order_volumes(
+        &mut self,
+        scene: &Scene,
+        view: &ViewSetup,
+        options: &FrameOptions,
+        report: &mut FrameReport,
+    ) -> Result<Vec<(NodeId, VolumeGeometry)>, RenderError> {
+        let started = Instant::now();
+        let pinhole = view.pinhole()?;
+        let mut ordered = Vec::new();
+        for (id, node, world) in scene.volumes() {
+            let Some(state) = self.volumes.get_mut(&id) else {
+                continue;
+            };
+            let name = &scene.nodes()[id.0].name;
+            let fail = |message: String| RenderError::Volume {
+                node: name.clone(),
+                message,
+            };
+            let geometry = node_geometry(&node.volume, world).map_err(fail)?;
+            let case = ViewCase::new(&geometry, pinhole.eye, pinhole.target)
+                .map_err(|e| fail(e.to_string()))?;
+            let ordering = options.ordering.unwrap_or(node.splats.ordering);
+            let order_options = OrderOptions {
+                cull_behind_eye: true,
+                ..Default::default()
+            };
+            state
+                .orderer
+                .order(
+                    &state.classified.grid,
+                    &case,
+                    ordering,
+                    &order_options,
+                    &mut state.ids,
+                )
+                .map_err(|e| fail(e.to_string()))?;
+            report.splats += state.ids.len();
+            ordered.push((id, geometry));
+        }
+        // Between volumes: farthest centre first (volumes that interpenetrate are not sorted
+        // splat by splat against each other).
+        let eye = view.camera.eye;
+        let distance = |g: &VolumeGeometry| (g.centre_world() - eye).length();
+        ordered.sort_by(|a, b| distance(&b.1).total_cmp(&distance(&a.1)));
+        report.timings.order = started.elapsed();
+        Ok(ordered)
+    }
+
+    fn upload(
+        &mut self,
+        ctx: &GpuContext,
+        scene: &Scene,
+        view: &ViewSetup,
+        ordered: &[(NodeId, VolumeGeometry)],
+        report: &mut FrameReport,
+    ) -> Result<(), RenderError> {
+        for (id, geometry) in ordered {
+            let Some(state) = self.volumes.get_mut(id) else {
+                continue;
+            };
+            let style = scene
+                .volumes()
+                .find(|(v, _, _)| v == id)
+                .map(|(_, node, _)| node.splats.style)
+                .unwrap_or_default();
+            SplatPass::upload_order(ctx, &mut state.gpu, &state.ids)?;
+            SplatPass::write_uniforms(ctx, &state.gpu, geometry, view, &style);
+        }
+        if let Some(pass) = &self.mesh_pass {
+            pass.write_frame(ctx, view, &scene.lights);
+        }
+        for (id, node, world) in scene.meshes() {
+            if let Some(gpu) = self.meshes.get(&id) {
+                MeshPass::write_object(
+                    ctx,
+                    gpu,
+                    view.relative(world),
+                    linear_part(world),
+                    &node.material,
+                );
+                report.meshes += 1;
+                report.triangles += node.mesh.triangle_count();
+            }
+        }
+        Ok(())
+    }
+
+    fn mesh_stage(
+        &self,
+        ctx: &GpuContext,
+        scene: &Scene,
+        color: &wgpu::TextureView,
+        depth: &wgpu::TextureView,
+        options: &FrameOptions,
+    ) {
+        let clear = options
+            .background
+            .map_or(wgpu::Color::TRANSPARENT, |[r, g, b]| wgpu::Color {
+                r: f64::from(r),
+                g: f64::from(g),
+                b: f64::from(b),
+                a: 1.0,
+            });
+        let mut encoder = ctx.device.create_command_encoder(&Default::default());
+        {
+            let mut pass = begin(&mut encoder, color, depth, Some(clear), "mesh pass");
+            if let Some(mesh_pass) = &self.mesh_pass {
+                let meshes = scene.meshes().filter_map(|(id, _, _)| self.meshes.get(&id));
+                mesh_pass.draw(&mut pass, meshes);
+            }
+        }
+        ctx.queue.submit([encoder.finish()]);
+    }
+
+    fn splat_stage(
+        &self,
+        ctx: &GpuContext,
+        ordered: &[(NodeId, VolumeGeometry)],
+        color: &wgpu::TextureView,
+        depth: &wgpu::TextureView,
+    ) {
+        let Some(splat_pass) = &self.splat_pass else {
+            return;
+        };
+        let mut encoder = ctx.device.create_command_encoder(&Default::default());
+        {
+            let mut pass = begin(&mut encoder, color, depth, None, "splat pass");
+            for (id, _) in ordered {
+                if let Some(state) = self.volumes.get(id) {
+                    splat_pass.draw(&mut pass, &state.gpu);
+                }
+            }
+        }
+        ctx.queue.submit([encoder.finish()]);
+    }
+}
+
+/// A render pass on the targets; `clear` clears colour (and depth to 0, reversed far),
+/// `None` keeps what is there.
+fn begin<'e>(
+    encoder: &'e mut wgpu::CommandEncoder,
+    color: &wgpu::TextureView,
+    depth: &wgpu::TextureView,
+    clear: Option<wgpu::Color>,
+    label: &str,
+) -> wgpu::RenderPass<'e> {
+    let load = clear.map_or(wgpu::LoadOp::Load, wgpu::LoadOp::Clear);
+    let depth_load = if clear.is_some() {
+        wgpu::LoadOp::Clear(0.0)
+    } else {
+        wgpu::LoadOp::Load
+    };
+    encoder
+        .begin_render_pass(&wgpu::RenderPassDescriptor {
+            label: Some(label),
+            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                view: color,
+                depth_slice: None,
+                resolve_target: None,
+                ops: wgpu::Operations {
+                    load,
+                    store: wgpu::StoreOp::Store,
+                },
+            })],
+            depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                view: depth,
+                depth_ops: Some(wgpu::Operations {
+                    load: depth_load,
+                    store: wgpu::StoreOp::Store,
+                }),
+                stencil_ops: None,
+            }),
+            timestamp_writes: None,
+            occlusion_query_set: None,
+            multiview_mask: None,
+        })
+        .forget_lifetime()
+}
+
+fn class_key(
+    volume: &Arc<CpuVolume>,
+    transfer: &Arc<TransferFunction>,
+    min_opacity: f32,
+) -> ClassKey {
+    (
+        Arc::as_ptr(volume) as usize,
+        Arc::as_ptr(transfer) as usize,
+        min_opacity.to_bits(),
+    )
+}
+
+fn linear_part(m: DMat4) -> DMat3 {
+    DMat3::from_mat4(m)
+}
+
+/// The index-to-world placement of a volume under its node transform.
+pub(crate) fn node_geometry(volume: &CpuVolume, world: DMat4) -> Result<VolumeGeometry, String> {
+    let m = world * volume_placement(volume);
+    let affine = m.row(3).abs_diff_eq(glam::DVec4::W, 1e-12);
+    if !affine {
+        return Err("node transform is not affine".into());
+    }
+    let placement = DAffine3::from_mat3_translation(DMat3::from_mat4(m), m.w_axis.truncate());
+    VolumeGeometry::new(volume.dims, placement).map_err(|e| e.to_string())
+}

@@ -1,0 +1,327 @@
+//! The splat pass: one instanced quad per significant voxel, drawn in the order the `order`
+//! module gives, premultiplied "over", depth-tested against the meshes without writing depth.
+//!
+//! Per volume the GPU holds a 3D texture of straight RGBA8 colour (uploaded when the volume or
+//! its transfer function changes) and the draw order as an instance vertex buffer of u32 voxel
+//! ids, the one thing uploaded per frame. Vertex buffers are not bound by the 128 MiB storage
+//! binding ceiling: their size is limited only by the adapter's `max_buffer_size`.
+
+use bytemuck::{Pod, Zeroable};
+use glam::DVec3;
+
+use super::target::{COLOR_FORMAT, DEPTH_FORMAT};
+use super::view::ViewSetup;
+use super::{GpuContext, RenderError};
+use crate::classify::Classified;
+use crate::composite::SplatStyle;
+use crate::order::VolumeGeometry;
+
+/// Keep in sync with `Splat` in shaders/splat.wgsl.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Pod, Zeroable)]
+struct SplatUniforms {
+    m: [[f32; 4]; 3],
+    eye: [f32; 4],
+    cov: [[f32; 4]; 3],
+    screen: [f32; 4],
+    size: [f32; 4],
+    depth: [f32; 4],
+    dims: [u32; 4],
+}
+const _: () = assert!(size_of::<SplatUniforms>() == 176);
+
+/// The splat pipeline.
+#[derive(Debug)]
+pub(crate) struct SplatPass {
+    pipeline: wgpu::RenderPipeline,
+    layout: wgpu::BindGroupLayout,
+}
+
+/// One classified volume on the GPU.
+#[derive(Debug)]
+pub(crate) struct GpuVolume {
+    uniforms: wgpu::Buffer,
+    group: wgpu::BindGroup,
+    order: Option<wgpu::Buffer>,
+    count: u32,
+}
+
+/// The colour a splat gets on the GPU, as premultiplied RGBA: colours are stored straight in
+/// 8 bits per channel and premultiplied in the shader. A CPU reference meant to match a GPU
+/// frame composites these.
+pub fn gpu_colors(colors: &[[f32; 4]]) -> Vec<[f32; 4]> {
+    colors
+        .iter()
+        .map(|c| {
+            let s = straight_rgba8(*c).map(|v| f32::from(v) / 255.0);
+            [s[0] * s[3], s[1] * s[3], s[2] * s[3], s[3]]
+        })
+        .collect()
+}
+
+fn straight_rgba8(premultiplied: [f32; 4]) -> [u8; 4] {
+    let a = premultiplied[3].clamp(0.0, 1.0);
+    let q = |v: f32| (v.clamp(0.0, 1.0) * 255.0).round() as u8;
+    if a <= 0.0 {
+        return [0; 4];
+    }
+    [
+        q(premultiplied[0] / a),
+        q(premultiplied[1] / a),
+        q(premultiplied[2] / a),
+        q(a),
+    ]
+}
+
+impl SplatPass {
+    pub(crate) fn new(ctx: &GpuContext) -> Self {
+        let device = &ctx.device;
+        let module = device.create_shader_module(wgpu::include_wgsl!("../../shaders/splat.wgsl"));
+        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("splat"),
+            entries: &[
+                wgpu::BindGroupLayoutEntry {
+                    binding: 0,
+                    visibility: wgpu::ShaderStages::VERTEX_FRAGMENT,
+                    ty: wgpu::BindingType::Buffer {
+                        ty: wgpu::BufferBindingType::Uniform,
+                        has_dynamic_offset: false,
+                        min_binding_size: None,
+                    },
+                    count: None,
+                },
+                wgpu::BindGroupLayoutEntry {
+                    binding: 1,
+                    visibility: wgpu::ShaderStages::VERTEX,
+                    ty: wgpu::BindingType::Texture {
+                        sample_type: wgpu::TextureSampleType::Float { filterable: false },
+                        view_dimension: wgpu::TextureViewDimension::D3,
+                        multisampled: false,
+                    },
+                    count: None,
+                },
+            ],
+        });
+        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("splat"),
+            bind_group_layouts: &[Some(&layout)],
+            immediate_size: 0,
+        });
+        let attributes = wgpu::vertex_attr_array![0 => Uint32];
+        let over = wgpu::BlendComponent {
+            src_factor: wgpu::BlendFactor::One,
+            dst_factor: wgpu::BlendFactor::OneMinusSrcAlpha,
+            operation: wgpu::BlendOperation::Add,
+        };
+        let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+            label: Some("splat"),
+            layout: Some(&pipeline_layout),
+            vertex: wgpu::VertexState {
+                module: &module,
+                entry_point: Some("vs_main"),
+                compilation_options: Default::default(),
+                buffers: &[Some(wgpu::VertexBufferLayout {
+                    array_stride: 4,
+                    step_mode: wgpu::VertexStepMode::Instance,
+                    attributes: &attributes,
+                })],
+            },
+            primitive: wgpu::PrimitiveState {
+                topology: wgpu::PrimitiveTopology::TriangleStrip,
+                ..Default::default()
+            },
+            depth_stencil: Some(wgpu::DepthStencilState {
+                format: DEPTH_FORMAT,
+                depth_write_enabled: Some(false),
+                depth_compare: Some(wgpu::CompareFunction::GreaterEqual),
+                stencil: Default::default(),
+                bias: Default::default(),
+            }),
+            multisample: Default::default(),
+            fragment: Some(wgpu::FragmentState {
+                module: &module,
+                entry_point: Some("fs_main"),
+                compilation_options: Default::default(),
+                targets: &[Some(wgpu::ColorTargetState {
+                    format: COLOR_FORMAT,
+                    blend: Some(wgpu::BlendState {
+                        color: over,
+                        alpha: over,
+                    }),
+                    write_mask: wgpu::ColorWrites::ALL,
+                })],
+            }),
+            multiview_mask: None,
+            cache: None,
+        });
+        Self { pipeline, layout }
+    }
+
+    /// Uploads a classified volume's colours as a dense 3D texture.
+    pub(crate) fn upload(
+        &self,
+        ctx: &GpuContext,
+        classified: &Classified,
+    ) -> Result<GpuVolume, RenderError> {
+        let dims = classified.grid.dims();
+        let max = ctx.device.limits().max_texture_dimension_3d;
+        if dims.iter().any(|&n| n > max) {
+            return Err(RenderError::VolumeTooLarge { dims, max });
+        }
+        let voxels = dims.iter().map(|&n| n as usize).product::<usize>();
+        let mut texels = vec![0u8; voxels * 4];
+        for (id, color) in classified.grid.ids().zip(&classified.colors) {
+            let i = id as usize * 4;
+            texels[i..i + 4].copy_from_slice(&straight_rgba8(*color));
+        }
+        let size = wgpu::Extent3d {
+            width: dims[0],
+            height: dims[1],
+            depth_or_array_layers: dims[2],
+        };
+        let texture = ctx.device.create_texture(&wgpu::TextureDescriptor {
+            label: Some("splat colours"),
+            size,
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D3,
+            format: wgpu::TextureFormat::Rgba8Unorm,
+            usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+            view_formats: &[],
+        });
+        ctx.queue.write_texture(
+            texture.as_image_copy(),
+            &texels,
+            wgpu::TexelCopyBufferLayout {
+                offset: 0,
+                bytes_per_row: Some(4 * dims[0]),
+                rows_per_image: Some(dims[1]),
+            },
+            size,
+        );
+        let uniforms = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("splat uniforms"),
+            size: size_of::<SplatUniforms>() as u64,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let view = texture.create_view(&Default::default());
+        let group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("splat"),
+            layout: &self.layout,
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: uniforms.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: wgpu::BindingResource::TextureView(&view),
+                },
+            ],
+        });
+        Ok(GpuVolume {
+            uniforms,
+            group,
+            order: None,
+            count: 0,
+        })
+    }
+
+    /// Uploads this frame's draw order (voxel ids, first drawn first), growing the buffer only
+    /// when the list outgrows it.
+    pub(crate) fn upload_order(
+        ctx: &GpuContext,
+        volume: &mut GpuVolume,
+        ids: &[u32],
+    ) -> Result<(), RenderError> {
+        let bytes = (ids.len() * 4) as u64;
+        if bytes > ctx.device.limits().max_buffer_size {
+            return Err(RenderError::TooManySplats {
+                splats: ids.len(),
+                max_bytes: ctx.device.limits().max_buffer_size,
+            });
+        }
+        let fits = volume.order.as_ref().is_some_and(|b| b.size() >= bytes);
+        if !fits && bytes > 0 {
+            volume.order = Some(ctx.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("splat order"),
+                size: bytes.next_multiple_of(4096),
+                usage: wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            }));
+        }
+        if let (Some(buffer), false) = (&volume.order, ids.is_empty()) {
+            ctx.queue.write_buffer(buffer, 0, bytemuck::cast_slice(ids));
+        }
+        volume.count = ids.len() as u32;
+        Ok(())
+    }
+
+    /// Writes the projection of this frame for one volume.
+    pub(crate) fn write_uniforms(
+        ctx: &GpuContext,
+        volume: &GpuVolume,
+        geometry: &VolumeGeometry,
+        view: &ViewSetup,
+        style: &SplatStyle,
+    ) {
+        let linear = geometry.index_to_world().matrix3;
+        let m = view.axes.transpose() * linear;
+        let cov = m * m.transpose() * (style.sigma * style.sigma);
+        let eye_index = geometry.world_to_index(view.camera.eye);
+        let min_spacing = geometry.spacing().into_iter().fold(f64::INFINITY, f64::min);
+        let row = |v: DVec3| [v.x as f32, v.y as f32, v.z as f32, 0.0];
+        let (w, h) = (f64::from(view.size.0), f64::from(view.size.1));
+        let cutoff = (style.cutoff / style.sigma).powi(2);
+        let ortho = view.is_orthographic();
+        let u = SplatUniforms {
+            m: [row(m.row(0)), row(m.row(1)), row(m.row(2))],
+            eye: [
+                eye_index.x as f32,
+                eye_index.y as f32,
+                eye_index.z as f32,
+                view.near.max(0.1 * min_spacing) as f32,
+            ],
+            cov: [row(cov.row(0)), row(cov.row(1)), row(cov.row(2))],
+            screen: [
+                (0.5 * w) as f32,
+                (0.5 * h) as f32,
+                view.focal as f32,
+                style.pixel_variance as f32,
+            ],
+            size: [
+                w as f32,
+                h as f32,
+                cutoff as f32,
+                if ortho { 1.0 } else { 0.0 },
+            ],
+            depth: [
+                view.near as f32,
+                view.near as f32,
+                view.far.min(f64::MAX) as f32,
+                0.0,
+            ],
+            dims: {
+                let d = geometry.dims();
+                [d[0], d[1], d[2], 0]
+            },
+        };
+        ctx.queue
+            .write_buffer(&volume.uniforms, 0, bytemuck::bytes_of(&u));
+    }
+
+    /// Records the draw of one volume's splats.
+    pub(crate) fn draw(&self, pass: &mut wgpu::RenderPass<'_>, volume: &GpuVolume) {
+        let Some(order) = &volume.order else {
+            return;
+        };
+        if volume.count == 0 {
+            return;
+        }
+        pass.set_pipeline(&self.pipeline);
+        pass.set_bind_group(0, &volume.group, &[]);
+        pass.set_vertex_buffer(0, order.slice(..u64::from(volume.count) * 4));
+        pass.draw(0..4, 0..volume.count);
+    }
+}

@@ -1,0 +1,145 @@
+//! Offscreen render targets and the one readback helper (rows padded to 256 bytes on the GPU,
+//! packed tightly on the CPU).
+
+use super::{GpuContext, RenderError};
+use crate::composite::Frame;
+
+/// Colour format of offscreen targets: 16-bit float, so that thousands of faint splats blend
+/// without 8-bit rounding at every layer.
+pub const COLOR_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Float;
+/// Depth format: 32-bit float with reversed depth (1 at the near plane, 0 at infinity).
+pub const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
+
+/// A colour and a depth texture of one size, to render into and read back.
+#[derive(Debug)]
+pub struct RenderTarget {
+    /// Width and height in pixels.
+    pub size: (u32, u32),
+    /// Premultiplied linear RGBA.
+    pub color: wgpu::Texture,
+    /// View of `color`.
+    pub color_view: wgpu::TextureView,
+    /// Reversed depth.
+    pub depth: wgpu::Texture,
+    /// View of `depth`.
+    pub depth_view: wgpu::TextureView,
+}
+
+impl RenderTarget {
+    /// Targets of `width` x `height` pixels (any size the adapter allows, odd ones too).
+    pub fn new(ctx: &GpuContext, width: u32, height: u32) -> Result<Self, RenderError> {
+        let max = ctx.device.limits().max_texture_dimension_2d;
+        if width == 0 || height == 0 || width > max || height > max {
+            return Err(RenderError::BadSize { width, height, max });
+        }
+        let make = |format, label| {
+            ctx.device.create_texture(&wgpu::TextureDescriptor {
+                label: Some(label),
+                size: wgpu::Extent3d {
+                    width,
+                    height,
+                    depth_or_array_layers: 1,
+                },
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format,
+                usage: wgpu::TextureUsages::RENDER_ATTACHMENT
+                    | wgpu::TextureUsages::COPY_SRC
+                    | wgpu::TextureUsages::TEXTURE_BINDING,
+                view_formats: &[],
+            })
+        };
+        let color = make(COLOR_FORMAT, "colour target");
+        let depth = make(DEPTH_FORMAT, "depth target");
+        Ok(Self {
+            size: (width, height),
+            color_view: color.create_view(&Default::default()),
+            depth_view: depth.create_view(&Default::default()),
+            color,
+            depth,
+        })
+    }
+
+    /// Reads the colour target back as a premultiplied RGBA frame.
+    pub fn read_color(&self, ctx: &GpuContext) -> Result<Frame, RenderError> {
+        let bytes = read_texture(ctx, &self.color, wgpu::TextureAspect::All, 8)?;
+        let pixels = bytes
+            .chunks_exact(8)
+            .map(|p| {
+                std::array::from_fn(|c| half::f16::from_le_bytes([p[2 * c], p[2 * c + 1]]).to_f32())
+            })
+            .collect();
+        Ok(Frame {
+            width: self.size.0,
+            height: self.size.1,
+            pixels,
+        })
+    }
+
+    /// Reads the depth target back: reversed depth per pixel, 0 where nothing was drawn.
+    pub fn read_depth(&self, ctx: &GpuContext) -> Result<Vec<f32>, RenderError> {
+        let bytes = read_texture(ctx, &self.depth, wgpu::TextureAspect::DepthOnly, 4)?;
+        Ok(bytes
+            .chunks_exact(4)
+            .map(|p| f32::from_le_bytes([p[0], p[1], p[2], p[3]]))
+            .collect())
+    }
+}
+
+/// Copies a 2D texture to the CPU with rows packed tightly (`bytes_per_texel` each).
+pub fn read_texture(
+    ctx: &GpuContext,
+    texture: &wgpu::Texture,
+    aspect: wgpu::TextureAspect,
+    bytes_per_texel: u32,
+) -> Result<Vec<u8>, RenderError> {
+    let (width, height) = (texture.width(), texture.height());
+    let row = width * bytes_per_texel;
+    let padded =
+        row.div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT) * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT;
+    let buffer = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("readback"),
+        size: u64::from(padded) * u64::from(height),
+        usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
+        mapped_at_creation: false,
+    });
+    let mut encoder = ctx.device.create_command_encoder(&Default::default());
+    encoder.copy_texture_to_buffer(
+        wgpu::TexelCopyTextureInfo {
+            texture,
+            mip_level: 0,
+            origin: wgpu::Origin3d::ZERO,
+            aspect,
+        },
+        wgpu::TexelCopyBufferInfo {
+            buffer: &buffer,
+            layout: wgpu::TexelCopyBufferLayout {
+                offset: 0,
+                bytes_per_row: Some(padded),
+                rows_per_image: Some(height),
+            },
+        },
+        texture.size(),
+    );
+    ctx.queue.submit([encoder.finish()]);
+    let (sender, receiver) = std::sync::mpsc::channel();
+    buffer.map_async(wgpu::MapMode::Read, .., move |r| {
+        let _ = sender.send(r);
+    });
+    ctx.wait()?;
+    receiver
+        .recv()
+        .map_err(|e| RenderError::Readback(e.to_string()))?
+        .map_err(|e| RenderError::Readback(e.to_string()))?;
+    let mapped = buffer
+        .get_mapped_range(..)
+        .map_err(|e| RenderError::Readback(e.to_string()))?;
+    let mut out = Vec::with_capacity((row * height) as usize);
+    for r in mapped.chunks_exact(padded as usize) {
+        out.extend_from_slice(&r[..row as usize]);
+    }
+    drop(mapped);
+    buffer.unmap();
+    Ok(out)
+}

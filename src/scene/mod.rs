@@ -1,0 +1,295 @@
+//! The scene graph, with no GPU involved: named nodes with local transforms and children; mesh
+//! nodes, volume nodes, a camera and lights. World transforms and bounds are computed once per
+//! change (a generation counter tells renderers what moved), not per frame.
+
+use std::sync::Arc;
+
+use glam::{DMat4, DVec3};
+use thiserror::Error;
+
+use crate::classify::TransferFunction;
+use crate::composite::SplatStyle;
+use crate::mesh::{CpuMesh, Material};
+use crate::order::Ordering;
+use crate::volume::CpuVolume;
+
+mod view;
+
+pub use view::{Light, Lights, Projection, SceneCamera};
+
+/// Index of a node in its [`Scene`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct NodeId(pub usize);
+
+/// Why a scene edit was refused.
+#[derive(Debug, Error, Clone, PartialEq)]
+pub enum SceneError {
+    /// The node id is not in this scene.
+    #[error("no node {0:?} in the scene")]
+    NoSuchNode(NodeId),
+    /// A transform has NaN or infinite entries, or is singular.
+    #[error("node {name:?}: transform is not finite and invertible")]
+    BadTransform {
+        /// The node's name.
+        name: String,
+    },
+}
+
+/// A mesh drawn opaque with its material.
+#[derive(Debug, Clone)]
+pub struct MeshNode {
+    /// The triangles, shared between nodes that draw the same mesh.
+    pub mesh: Arc<CpuMesh>,
+    /// Colour and shading parameters.
+    pub material: Material,
+}
+
+/// How a volume becomes splats.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SplatSettings {
+    /// Footprint shape.
+    pub style: SplatStyle,
+    /// Voxels with opacity at or below this are left out.
+    pub min_opacity: f32,
+    /// The draw order.
+    pub ordering: Ordering,
+}
+
+impl Default for SplatSettings {
+    fn default() -> Self {
+        Self {
+            style: SplatStyle::default(),
+            min_opacity: 1.0 / 255.0,
+            ordering: Ordering::IpPbtfImplicit,
+        }
+    }
+}
+
+/// A CT volume splatted one splat per significant voxel.
+#[derive(Debug, Clone)]
+pub struct VolumeNode {
+    /// Scalar values and their placement (the node transform goes on top).
+    pub volume: Arc<CpuVolume>,
+    /// Scalar to colour and opacity.
+    pub transfer: Arc<TransferFunction>,
+    /// Splat shape, threshold and ordering.
+    pub splats: SplatSettings,
+}
+
+/// What a node carries besides its transform.
+#[derive(Debug, Clone)]
+pub enum NodeContent {
+    /// A grouping node.
+    Empty,
+    /// An opaque mesh.
+    Mesh(MeshNode),
+    /// A volume.
+    Volume(VolumeNode),
+}
+
+/// A node: a name, a transform relative to its parent, children and content.
+#[derive(Debug, Clone)]
+pub struct Node {
+    /// Name, unique or not.
+    pub name: String,
+    local: DMat4,
+    parent: Option<NodeId>,
+    children: Vec<NodeId>,
+    /// What the node draws.
+    pub content: NodeContent,
+}
+
+impl Node {
+    /// Transform from this node's frame to its parent's.
+    pub fn local(&self) -> DMat4 {
+        self.local
+    }
+
+    /// The parent node, if any.
+    pub fn parent(&self) -> Option<NodeId> {
+        self.parent
+    }
+
+    /// The child nodes.
+    pub fn children(&self) -> &[NodeId] {
+        &self.children
+    }
+}
+
+/// A scene: nodes, a camera and lights.
+#[derive(Debug, Clone, Default)]
+pub struct Scene {
+    nodes: Vec<Node>,
+    world: Vec<DMat4>,
+    generation: u64,
+    /// The camera; [`SceneCamera::fit`] frames the scene when none was set.
+    pub camera: Option<SceneCamera>,
+    /// The lights.
+    pub lights: Lights,
+}
+
+impl Scene {
+    /// An empty scene with the default lights (a headlight).
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Adds a node under `parent` (a root when `None`) and returns its id.
+    pub fn add(
+        &mut self,
+        name: impl Into<String>,
+        local: DMat4,
+        parent: Option<NodeId>,
+        content: NodeContent,
+    ) -> Result<NodeId, SceneError> {
+        let name = name.into();
+        check_transform(&name, &local)?;
+        if let Some(p) = parent {
+            self.node(p)?;
+        }
+        let id = NodeId(self.nodes.len());
+        let world = parent.map_or(DMat4::IDENTITY, |p| self.world[p.0]) * local;
+        self.nodes.push(Node {
+            name,
+            local,
+            parent,
+            children: Vec::new(),
+            content,
+        });
+        self.world.push(world);
+        if let Some(p) = parent {
+            self.nodes[p.0].children.push(id);
+        }
+        self.generation += 1;
+        Ok(id)
+    }
+
+    /// Sets a node's local transform and updates the world transforms below it.
+    pub fn set_local(&mut self, id: NodeId, local: DMat4) -> Result<(), SceneError> {
+        let node = self.node(id)?;
+        check_transform(&node.name, &local)?;
+        self.nodes[id.0].local = local;
+        let mut stack = vec![id];
+        while let Some(n) = stack.pop() {
+            let parent = self.nodes[n.0].parent;
+            self.world[n.0] =
+                parent.map_or(DMat4::IDENTITY, |p| self.world[p.0]) * self.nodes[n.0].local;
+            stack.extend_from_slice(&self.nodes[n.0].children);
+        }
+        self.generation += 1;
+        Ok(())
+    }
+
+    /// Replaces a node's content (a new transfer function, say).
+    pub fn set_content(&mut self, id: NodeId, content: NodeContent) -> Result<(), SceneError> {
+        self.node(id)?;
+        self.nodes[id.0].content = content;
+        self.generation += 1;
+        Ok(())
+    }
+
+    /// A node by id.
+    pub fn node(&self, id: NodeId) -> Result<&Node, SceneError> {
+        self.nodes.get(id.0).ok_or(SceneError::NoSuchNode(id))
+    }
+
+    /// Every node, indexed by [`NodeId`].
+    pub fn nodes(&self) -> &[Node] {
+        &self.nodes
+    }
+
+    /// A node's transform to world space (kept up to date on every edit).
+    pub fn world(&self, id: NodeId) -> DMat4 {
+        self.world.get(id.0).copied().unwrap_or(DMat4::IDENTITY)
+    }
+
+    /// Counts edits; a renderer compares it with the value it last saw to know what to redo.
+    pub fn generation(&self) -> u64 {
+        self.generation
+    }
+
+    /// The first node with this name.
+    pub fn find(&self, name: &str) -> Option<NodeId> {
+        self.nodes.iter().position(|n| n.name == name).map(NodeId)
+    }
+
+    /// Mesh nodes with their world transforms.
+    pub fn meshes(&self) -> impl Iterator<Item = (NodeId, &MeshNode, DMat4)> + '_ {
+        self.nodes
+            .iter()
+            .enumerate()
+            .filter_map(|(i, n)| match &n.content {
+                NodeContent::Mesh(m) => Some((NodeId(i), m, self.world[i])),
+                _ => None,
+            })
+    }
+
+    /// Volume nodes with their world transforms.
+    pub fn volumes(&self) -> impl Iterator<Item = (NodeId, &VolumeNode, DMat4)> + '_ {
+        self.nodes
+            .iter()
+            .enumerate()
+            .filter_map(|(i, n)| match &n.content {
+                NodeContent::Volume(v) => Some((NodeId(i), v, self.world[i])),
+                _ => None,
+            })
+    }
+
+    /// World-space bounds `(min, max)` of every mesh and volume, or `None` for a scene with
+    /// nothing to draw.
+    pub fn bounds(&self) -> Option<(DVec3, DVec3)> {
+        let mut points = Vec::new();
+        for (_, m, world) in self.meshes() {
+            if let Some((lo, hi)) = m.mesh.bounds() {
+                let (lo, hi) = (
+                    DVec3::from(lo.map(f64::from)),
+                    DVec3::from(hi.map(f64::from)),
+                );
+                points.extend(box_corners(lo, hi).map(|c| world.transform_point3(c)));
+            }
+        }
+        for (_, v, world) in self.volumes() {
+            let vol = &v.volume;
+            let to_world = world * volume_placement(vol);
+            let hi = DVec3::from(vol.dims.map(|n| f64::from(n.max(1)) - 1.0));
+            points.extend(box_corners(DVec3::ZERO, hi).map(|c| to_world.transform_point3(c)));
+        }
+        let first = *points.first()?;
+        Some(
+            points
+                .iter()
+                .fold((first, first), |(lo, hi), p| (lo.min(*p), hi.max(*p))),
+        )
+    }
+}
+
+/// Voxel index coordinates to the volume node's frame: direction x spacing, then the origin.
+pub fn volume_placement(volume: &CpuVolume) -> DMat4 {
+    let linear = volume.direction * glam::DMat3::from_diagonal(volume.spacing.into());
+    DMat4::from_cols(
+        linear.x_axis.extend(0.0),
+        linear.y_axis.extend(0.0),
+        linear.z_axis.extend(0.0),
+        DVec3::from(volume.origin).extend(1.0),
+    )
+}
+
+fn box_corners(lo: DVec3, hi: DVec3) -> [DVec3; 8] {
+    std::array::from_fn(|i| {
+        DVec3::new(
+            if i & 1 == 0 { lo.x } else { hi.x },
+            if i & 2 == 0 { lo.y } else { hi.y },
+            if i & 4 == 0 { lo.z } else { hi.z },
+        )
+    })
+}
+
+fn check_transform(name: &str, m: &DMat4) -> Result<(), SceneError> {
+    let det = m.determinant();
+    if !m.is_finite() || !det.is_normal() {
+        return Err(SceneError::BadTransform {
+            name: name.to_owned(),
+        });
+    }
+    Ok(())
+}

@@ -1,0 +1,176 @@
+//! The scene camera (perspective or orthographic, look-at, fit to the scene) and the lights.
+
+use glam::DVec3;
+
+use crate::camera::{Camera, CameraError};
+
+/// How the camera projects.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Projection {
+    /// A pinhole camera with this vertical field of view in degrees.
+    Perspective {
+        /// Vertical field of view in degrees.
+        fov_y_degrees: f64,
+    },
+    /// Parallel rays; the image spans this height in world units.
+    Orthographic {
+        /// Visible height in world units.
+        height: f64,
+    },
+}
+
+impl Default for Projection {
+    fn default() -> Self {
+        Self::Perspective {
+            fov_y_degrees: 35.0,
+        }
+    }
+}
+
+/// A look-at camera in f64 world coordinates.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SceneCamera {
+    /// Eye position (for an orthographic camera, the plane the rays start from).
+    pub eye: DVec3,
+    /// A point on the view axis.
+    pub target: DVec3,
+    /// Roughly up on screen.
+    pub up: DVec3,
+    /// Perspective or orthographic.
+    pub projection: Projection,
+    /// Near plane in world units; `None` picks a small fraction of the scene size.
+    pub near: Option<f64>,
+}
+
+impl SceneCamera {
+    /// A perspective camera (35 degree field of view) at `eye` looking at `target`, with an up
+    /// vector that is never parallel to the view direction.
+    pub fn look_at(eye: DVec3, target: DVec3) -> Self {
+        Self {
+            eye,
+            target,
+            up: Camera::safe_up(eye, target),
+            projection: Projection::default(),
+            near: None,
+        }
+    }
+
+    /// A camera looking along `direction` at the centre of `bounds`, far enough back that the
+    /// bounding sphere fills the view at the given aspect ratio (width / height).
+    pub fn fit(
+        bounds: (DVec3, DVec3),
+        direction: DVec3,
+        projection: Projection,
+        aspect: f64,
+    ) -> Self {
+        let centre = 0.5 * (bounds.0 + bounds.1);
+        let radius = (0.5 * (bounds.1 - bounds.0).length()).max(1e-6);
+        let forward = direction.try_normalize().unwrap_or(DVec3::NEG_Y);
+        let aspect = if aspect.is_finite() && aspect > 0.0 {
+            aspect
+        } else {
+            1.0
+        };
+        let (distance, projection) = match projection {
+            Projection::Perspective { fov_y_degrees } => {
+                let half_y = (0.5 * fov_y_degrees.to_radians()).tan();
+                let half = half_y.min(half_y * aspect).atan();
+                (radius / half.sin() * 1.02, projection)
+            }
+            Projection::Orthographic { .. } => (
+                3.0 * radius,
+                Projection::Orthographic {
+                    height: 2.04 * radius / aspect.min(1.0),
+                },
+            ),
+        };
+        let eye = centre - forward * distance;
+        Self {
+            projection,
+            ..Self::look_at(eye, centre)
+        }
+    }
+
+    /// The same camera orbited about its target: `yaw` about world +z, then `pitch` up, both in
+    /// degrees; the distance stays the same.
+    pub fn orbit(&self, yaw_degrees: f64, pitch_degrees: f64) -> Self {
+        let offset = self.eye - self.target;
+        let r = offset.length();
+        let yaw = offset.y.atan2(offset.x) + yaw_degrees.to_radians();
+        let flat = (offset.x * offset.x + offset.y * offset.y).sqrt();
+        let pitch = (offset.z.atan2(flat) + pitch_degrees.to_radians()).clamp(-1.55, 1.55);
+        let eye = self.target
+            + r * DVec3::new(
+                pitch.cos() * yaw.cos(),
+                pitch.cos() * yaw.sin(),
+                pitch.sin(),
+            );
+        Self {
+            eye,
+            up: Camera::safe_up(eye, self.target),
+            ..*self
+        }
+    }
+
+    /// The pinhole camera the CPU compositor and the orderings use, for an image of this size.
+    /// An orthographic camera becomes a very distant pinhole with the same view, so that
+    /// orderings see the parallel case.
+    pub fn pinhole(&self, width: u32, height: u32, near: f64) -> Result<Camera, CameraError> {
+        let mut camera = Camera {
+            eye: self.eye,
+            target: self.target,
+            up: self.up,
+            fov_y_degrees: 35.0,
+            width,
+            height,
+            near,
+        };
+        match self.projection {
+            Projection::Perspective { fov_y_degrees } => camera.fov_y_degrees = fov_y_degrees,
+            Projection::Orthographic { height: h } => {
+                let forward = (self.target - self.eye)
+                    .try_normalize()
+                    .ok_or(CameraError::NoViewDirection)?;
+                let distance = 1e6 * h.abs().max(1e-6);
+                camera.eye = self.target - forward * distance;
+                camera.fov_y_degrees = 2.0 * (0.5 * h / distance).atan().to_degrees();
+            }
+        }
+        camera.frame()?;
+        Ok(camera)
+    }
+}
+
+/// A directional light.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Light {
+    /// Direction the light travels (from the light into the scene), world space.
+    pub direction: DVec3,
+    /// Linear RGB colour times intensity.
+    pub color: [f32; 3],
+}
+
+/// The lights of a scene: a headlight along the view direction, an ambient term and up to
+/// four directional lights.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Lights {
+    /// Headlight intensity (0 turns it off).
+    pub headlight: f32,
+    /// Ambient intensity.
+    pub ambient: f32,
+    /// Directional lights; the renderer uses the first four.
+    pub directional: Vec<Light>,
+}
+
+impl Default for Lights {
+    fn default() -> Self {
+        Self {
+            headlight: 0.75,
+            ambient: 0.18,
+            directional: vec![Light {
+                direction: DVec3::new(-0.3, 0.5, -1.0),
+                color: [0.35, 0.35, 0.33],
+            }],
+        }
+    }
+}

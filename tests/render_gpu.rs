@@ -1,0 +1,313 @@
+//! The renderer on whatever adapter wgpu finds (lavapipe in CI): GPU frames against the CPU
+//! reference compositor, depth compositing against meshes, the ordering on screen, and what the
+//! renderer leaves out.
+
+use std::sync::Arc;
+
+use glam::{DMat4, DVec3};
+use splatscene::classify::{TransferFunction, classify};
+use splatscene::composite::{SplatStyle, SplatVolume, compare, composite};
+use splatscene::mesh::{CpuMesh, Material};
+use splatscene::order::{OrderOptions, Orderer, Ordering, ViewCase};
+use splatscene::render::{FrameOptions, GpuContext, Renderer, gpu_colors};
+use splatscene::scene::{MeshNode, NodeContent, Scene, SceneCamera, SplatSettings, VolumeNode};
+use splatscene::volume::CpuVolume;
+
+fn context() -> GpuContext {
+    GpuContext::headless().expect("a GPU adapter (install mesa-vulkan-drivers)")
+}
+
+/// Nested shells of "bone" in an n^3 grid (denser outside).
+fn shells(n: u32, spacing: [f64; 3]) -> CpuVolume {
+    let c = (f64::from(n) - 1.0) / 2.0;
+    let r_out = c;
+    let values = (0..n * n * n)
+        .map(|id| {
+            let (x, y, z) = (id % n, id / n % n, id / n / n);
+            let r = DVec3::new(f64::from(x) - c, f64::from(y) - c, f64::from(z) - c).length();
+            match r / r_out {
+                r if r > 0.98 => -1000.0,
+                r if r > 0.82 => 1300.0,
+                r if r > 0.45 => 400.0 + 40.0 * (id % 7) as f32,
+                _ => 40.0,
+            }
+        })
+        .collect();
+    CpuVolume {
+        dims: [n; 3],
+        spacing,
+        origin: [0.0; 3],
+        direction: glam::DMat3::IDENTITY,
+        values,
+    }
+}
+
+fn volume_scene(volume: CpuVolume, ordering: Ordering) -> Scene {
+    let mut scene = Scene::new();
+    let node = VolumeNode {
+        volume: Arc::new(volume),
+        transfer: Arc::new(TransferFunction::ct_bone()),
+        splats: SplatSettings {
+            ordering,
+            ..Default::default()
+        },
+    };
+    scene
+        .add("volume", DMat4::IDENTITY, None, NodeContent::Volume(node))
+        .unwrap();
+    scene
+}
+
+const TRANSPARENT: FrameOptions = FrameOptions {
+    ordering: None,
+    background: None,
+    measure: false,
+};
+
+#[test]
+fn gpu_frame_matches_the_cpu_reference_compositor() {
+    let ctx = context();
+    let volume = shells(20, [1.0, 1.0, 1.5]);
+    let geometry = volume.geometry().unwrap();
+    let centre = geometry.centre_world();
+    let camera = SceneCamera::look_at(centre + DVec3::new(9.0, -38.0, 14.0), centre);
+    let scene = volume_scene(volume.clone(), Ordering::IpPbtfImplicit);
+    let mut renderer = Renderer::new();
+    let shot = renderer
+        .screenshot(&ctx, &scene, &camera, (97, 81), &TRANSPARENT)
+        .unwrap();
+
+    let classified = classify(&volume, &TransferFunction::ct_bone(), 1.0 / 255.0).unwrap();
+    let colors = gpu_colors(&classified.colors);
+    let pinhole = shot.view.pinhole().unwrap();
+    let view = ViewCase::new(&geometry, pinhole.eye, pinhole.target).unwrap();
+    let mut ids = Vec::new();
+    let options = OrderOptions {
+        cull_behind_eye: true,
+        ..Default::default()
+    };
+    Orderer::new()
+        .order(
+            &classified.grid,
+            &view,
+            Ordering::IpPbtfImplicit,
+            &options,
+            &mut ids,
+        )
+        .unwrap();
+    let splats = SplatVolume {
+        geometry: &geometry,
+        grid: &classified.grid,
+        colors: &colors,
+    };
+    let (reference, _) = composite(&pinhole, &splats, &ids, &SplatStyle::default()).unwrap();
+    let d = compare(&shot.frame, &reference).unwrap();
+    let covered = reference.pixels.iter().filter(|p| p[3] > 0.05).count();
+    eprintln!(
+        "GPU vs CPU: {d:?}, {covered} covered pixels, {} splats",
+        shot.report.splats
+    );
+    assert!(covered > 2000, "the volume fills much of the image");
+    assert_eq!(shot.report.splats, ids.len());
+    // Measured on lavapipe (llvmpipe, LLVM 15): max 0.0038, no pixel off by more than 4/255.
+    // The GPU blends in 16-bit float and evaluates the footprints in f32.
+    assert!(d.max_abs < 3.0 / 255.0, "{d:?}");
+    assert!(d.bad_pixel_share <= 0.002, "{d:?}");
+}
+
+/// A square in the plane y = `y`, spanning `lo..hi` in x and z, facing -y.
+fn wall(y: f32, lo: f32, hi: f32) -> CpuMesh {
+    let mut mesh = CpuMesh {
+        positions: vec![[lo, y, lo], [hi, y, lo], [hi, y, hi], [lo, y, hi]],
+        normals: Vec::new(),
+        indices: vec![0, 1, 2, 0, 2, 3],
+    };
+    mesh.compute_normals();
+    mesh
+}
+
+fn add_wall(scene: &mut Scene) {
+    let node = MeshNode {
+        mesh: Arc::new(wall(9.5, 4.0, 15.0)),
+        material: Material {
+            base_color: [0.2, 0.5, 0.9, 1.0],
+            ..Default::default()
+        },
+    };
+    scene
+        .add("wall", DMat4::IDENTITY, None, NodeContent::Mesh(node))
+        .unwrap();
+}
+
+#[test]
+fn splats_behind_a_mesh_are_hidden_and_write_no_depth() {
+    let ctx = context();
+    let volume = shells(20, [1.0; 3]);
+    let centre = volume.geometry().unwrap().centre_world();
+    let camera = SceneCamera::look_at(centre + DVec3::new(3.0, -45.0, 5.0), centre);
+    let size = (64, 64);
+    let options = FrameOptions {
+        background: Some([0.0, 0.0, 0.0]),
+        ..TRANSPARENT
+    };
+    // The same voxels with everything behind the wall (y > 9.5) made air.
+    let mut front = volume.clone();
+    for (id, v) in front.values.iter_mut().enumerate() {
+        if id / 20 % 20 > 9 {
+            *v = -1000.0;
+        }
+    }
+    let mut shoot = |volume: Option<&CpuVolume>, with_wall: bool| {
+        let mut scene = volume.map_or_else(Scene::new, |v| {
+            volume_scene(v.clone(), Ordering::IpPbtfImplicit)
+        });
+        if with_wall {
+            add_wall(&mut scene);
+        }
+        // Every scene shares one view: the bounds of the full volume.
+        let mut renderer = Renderer::new();
+        let view_scene = volume_scene(shells(20, [1.0; 3]), Ordering::Exact);
+        let view = splatscene::render::ViewSetup::new(&camera, size, view_scene.bounds()).unwrap();
+        let target = splatscene::render::RenderTarget::new(&ctx, size.0, size.1).unwrap();
+        renderer
+            .render(
+                &ctx,
+                &scene,
+                &view,
+                &target.color_view,
+                &target.depth_view,
+                &options,
+            )
+            .unwrap();
+        (
+            target.read_color(&ctx).unwrap(),
+            target.read_depth(&ctx).unwrap(),
+        )
+    };
+    let (all, all_depth) = shoot(Some(&volume), true);
+    let (wall_only, wall_depth) = shoot(None, true);
+    let (front_only, _) = shoot(Some(&front), true);
+    let (no_wall, _) = shoot(Some(&volume), false);
+    assert_eq!(all_depth, wall_depth, "splats write no depth");
+    let mut on_wall = 0;
+    let mut splat_shows = 0;
+    for i in 0..all.pixels.len() {
+        if wall_depth[i] > 0.0 {
+            on_wall += 1;
+            assert_eq!(
+                all.pixels[i], front_only.pixels[i],
+                "pixel {i}: only splats in front of the wall count"
+            );
+            splat_shows += usize::from(all.pixels[i] != wall_only.pixels[i]);
+        } else {
+            assert_eq!(
+                all.pixels[i], no_wall.pixels[i],
+                "pixel {i}: off the wall every splat counts"
+            );
+        }
+    }
+    assert!(
+        on_wall > 500,
+        "the wall covers part of the image ({on_wall} pixels)"
+    );
+    assert!(
+        splat_shows * 2 > on_wall,
+        "splats in front of the wall show ({splat_shows} of {on_wall})"
+    );
+}
+
+#[test]
+fn pbtf_differs_from_the_exact_order_more_than_ip_pbtf_on_screen() {
+    let ctx = context();
+    let volume = shells(24, [1.0; 3]);
+    let geometry = volume.geometry().unwrap();
+    let centre = geometry.centre_world();
+    // Face-on and close: the eye sits over the volume's top face, inside its x and y extent.
+    let camera = SceneCamera::look_at(centre + DVec3::new(2.3, 3.1, 21.0), centre);
+    let scene = volume_scene(volume, Ordering::Exact);
+    let mut renderer = Renderer::new();
+    let mut shoot = |ordering| {
+        let options = FrameOptions {
+            ordering: Some(ordering),
+            ..TRANSPARENT
+        };
+        renderer
+            .screenshot(&ctx, &scene, &camera, (96, 96), &options)
+            .unwrap()
+            .frame
+    };
+    let exact = shoot(Ordering::Exact);
+    let pbtf = compare(&shoot(Ordering::Pbtf), &exact).unwrap();
+    let ip = compare(&shoot(Ordering::IpPbtfImplicit), &exact).unwrap();
+    let bucketed = compare(&shoot(Ordering::Bucketed), &exact).unwrap();
+    eprintln!(
+        "on screen, RMSE against exact: PBTF {pbtf:?}, IP-PBTF {ip:?}, bucketed {bucketed:?}"
+    );
+    assert!(
+        ip.rmse * 2.0 < pbtf.rmse,
+        "IP-PBTF {ip:?} against PBTF {pbtf:?}"
+    );
+    assert!(pbtf.bad_pixel_share > ip.bad_pixel_share);
+}
+
+#[test]
+fn pipelines_are_built_only_for_content() {
+    let ctx = context();
+    let camera = SceneCamera::look_at(DVec3::new(5.0, -40.0, 5.0), DVec3::splat(5.0));
+    let mut volume_only = volume_scene(shells(12, [1.0; 3]), Ordering::IpPbtfImplicit);
+    let report = Renderer::new()
+        .screenshot(&ctx, &volume_only, &camera, (32, 32), &TRANSPARENT)
+        .unwrap()
+        .report;
+    assert!(!report.mesh_pipeline && report.splat_pipeline, "{report:?}");
+    assert!(report.splats > 0);
+
+    let mut mesh_only = Scene::new();
+    add_wall(&mut mesh_only);
+    let report = Renderer::new()
+        .screenshot(&ctx, &mesh_only, &camera, (32, 32), &TRANSPARENT)
+        .unwrap()
+        .report;
+    assert!(report.mesh_pipeline && !report.splat_pipeline, "{report:?}");
+    assert_eq!((report.meshes, report.triangles, report.splats), (1, 2, 0));
+
+    // A volume whose every voxel is transparent gives no splats and no splat pipeline.
+    let mut air = shells(12, [1.0; 3]);
+    air.values.iter_mut().for_each(|v| *v = -1000.0);
+    let empty = volume_scene(air, Ordering::IpPbtfImplicit);
+    let report = Renderer::new()
+        .screenshot(&ctx, &empty, &camera, (32, 32), &TRANSPARENT)
+        .unwrap()
+        .report;
+    assert!(
+        !report.mesh_pipeline && !report.splat_pipeline,
+        "{report:?}"
+    );
+
+    // Camera moves do not classify again; nothing is re-uploaded but the order.
+    let mut renderer = Renderer::new();
+    let first = renderer
+        .screenshot(&ctx, &volume_only, &camera, (32, 32), &TRANSPARENT)
+        .unwrap()
+        .report;
+    let moved = renderer
+        .screenshot(
+            &ctx,
+            &volume_only,
+            &camera.orbit(30.0, 10.0),
+            (32, 32),
+            &TRANSPARENT,
+        )
+        .unwrap()
+        .report;
+    assert_eq!((first.classified, moved.classified), (1, 0));
+    add_wall(&mut volume_only);
+    let both = renderer
+        .screenshot(&ctx, &volume_only, &camera, (32, 32), &TRANSPARENT)
+        .unwrap()
+        .report;
+    assert!(
+        both.mesh_pipeline && both.splat_pipeline && both.classified == 0,
+        "{both:?}"
+    );
+}
