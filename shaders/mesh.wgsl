@@ -47,7 +47,7 @@ fn vs_main(@location(0) position: vec3<f32>, @location(1) normal: vec3<f32>) -> 
 fn shade(n: vec3<f32>, l: vec3<f32>, v: vec3<f32>, color: vec3<f32>) -> vec3<f32> {
     let roughness = clamp(object.material.x, 0.04, 1.0);
     let metallic = clamp(object.material.y, 0.0, 1.0);
-    let diffuse = max(dot(n, l), 0.0) * (1.0 - 0.7 * metallic);
+    let diffuse = max(dot(n, l), 0.0) * (1.0 - 0.5 * metallic);
     let h = normalize(l + v);
     let shininess = 2.0 / (roughness * roughness * roughness * roughness) - 2.0;
     let spec_color = mix(vec3<f32>(0.04), object.base_color.rgb, metallic);
@@ -66,7 +66,11 @@ fn fs_main(in: VsOut, @builtin(front_facing) front: bool) -> @location(0) vec4<f
         v = -frame.forward.xyz;
     }
     let base = object.base_color.rgb;
-    var c = frame.params.x * base;
+    // Metals have little diffuse light; a view-dependent sheen stands in for the reflected
+    // surroundings so that they do not go dark.
+    let metallic = clamp(object.material.y, 0.0, 1.0);
+    let sheen = metallic * (0.35 + 0.45 * pow(1.0 - max(dot(n, v), 0.0), 2.0));
+    var c = frame.params.x * base + sheen * base;
     c += frame.forward.w * shade(n, -frame.forward.xyz, v, base);
     let count = u32(frame.params.y);
     for (var i = 0u; i < count; i++) {

@@ -25,11 +25,18 @@ struct Splat {
     depth: vec4<f32>,
     // Grid size, w unused.
     dims: vec4<u32>,
+    // Rows of the index-space gradient -> camera-space normal matrix (R L^-T); n0.w is the
+    // shading strength (0: flat colour, 1: fully headlight-shaded).
+    n0: vec4<f32>,
+    n1: vec4<f32>,
+    n2: vec4<f32>,
 }
 
 @group(0) @binding(0) var<uniform> u: Splat;
 // Straight (not premultiplied) RGBA per voxel; only significant voxels are ever read.
 @group(0) @binding(1) var colors: texture_3d<f32>;
+// Unit index-space gradient per voxel in xyz (w = 1 where the gradient is defined).
+@group(0) @binding(2) var normals: texture_3d<f32>;
 
 struct VsOut {
     @builtin(position) clip: vec4<f32>,
@@ -88,7 +95,18 @@ fn vs_main(@builtin(vertex_index) corner: u32, @location(0) id: u32) -> VsOut {
     out.clip = vec4<f32>(pixel.x / u.size.x * 2.0 - 1.0, 1.0 - pixel.y / u.size.y * 2.0, z, 1.0);
     out.offset = offset;
     out.conic = vec3<f32>(c / det, -b / det, a / det);
-    out.color = vec4<f32>(straight.rgb * straight.a, straight.a);
+    var rgb = straight.rgb;
+    let strength = u.n0.w;
+    if strength > 0.0 {
+        let g = textureLoad(normals, k, 0);
+        if g.w > 0.5 {
+            let n = vec3<f32>(dot(u.n0.xyz, g.xyz), dot(u.n1.xyz, g.xyz), dot(u.n2.xyz, g.xyz));
+            // Headlight, two-sided: a surface facing the eye either way is lit.
+            let lambert = abs(normalize(n).z);
+            rgb *= 1.0 - strength + strength * lambert;
+        }
+    }
+    out.color = vec4<f32>(rgb * straight.a, straight.a);
     return out;
 }
 

@@ -47,8 +47,10 @@ fn volume_scene(volume: CpuVolume, ordering: Ordering) -> Scene {
     let node = VolumeNode {
         volume: Arc::new(volume),
         transfer: Arc::new(TransferFunction::ct_bone()),
+        // Flat colours: the CPU reference compositor does not shade.
         splats: SplatSettings {
             ordering,
+            shading: 0.0,
             ..Default::default()
         },
     };

@@ -16,8 +16,10 @@
 //! parts (strips and fans are converted to lists); points and lines are skipped with a warning.
 
 use std::borrow::Cow;
+use std::collections::hash_map::Entry;
 use std::collections::{HashMap, HashSet};
 
+use ::gltf::accessor::sparse::{IndexType, Sparse};
 use ::gltf::accessor::{DataType, Dimensions};
 use ::gltf::buffer::{Source, View};
 use ::gltf::json;
@@ -125,44 +127,15 @@ fn u32_at(bytes: &[u8], at: usize) -> Option<u32> {
     Some(u32::from_le_bytes(word.try_into().ok()?))
 }
 
-/// Splits a GLB container into its JSON chunk and its BIN chunk, checking the header and every
-/// chunk length against the bytes there are. Unknown chunks are skipped; bytes after the
-/// declared total length are ignored with a warning.
+/// Splits a GLB container into its JSON chunk and its BIN chunk, checking every chunk length
+/// against the bytes there are. Unknown chunks are skipped with a warning.
 fn split_glb<'a>(
     bytes: &'a [u8],
     origin: &Origin,
     warnings: &mut Vec<String>,
 ) -> Result<(&'a [u8], Option<&'a [u8]>), MeshError> {
+    let body = glb_body(bytes, origin, warnings)?;
     let bad = |detail: String| origin.malformed("GLB", detail);
-    let (Some(magic), Some(version), Some(length)) =
-        (u32_at(bytes, 0), u32_at(bytes, 4), u32_at(bytes, 8))
-    else {
-        return Err(bad(format!(
-            "{} bytes, shorter than the 12-byte header",
-            bytes.len()
-        )));
-    };
-    if magic != u32::from_le_bytes(*b"glTF") {
-        return Err(bad(format!("bad magic {:02x?}", &bytes[..4])));
-    }
-    if version != 2 {
-        return Err(origin.unsupported(format!("GLB container version {version}")));
-    }
-    let body = bytes
-        .get(..length as usize)
-        .filter(|b| b.len() >= 12)
-        .ok_or_else(|| {
-            bad(format!(
-                "header declares {length} bytes, the file has {}",
-                bytes.len()
-            ))
-        })?;
-    if body.len() < bytes.len() {
-        let extra = bytes.len() - body.len();
-        warnings.push(format!(
-            "{extra} bytes after the end of the GLB were ignored"
-        ));
-    }
     let (mut json, mut bin) = (None, None);
     let mut pos = 12;
     while pos < body.len() {
@@ -171,18 +144,60 @@ fn split_glb<'a>(
                 "chunk at byte {pos}: truncated header, or length past the end"
             ))
         })?;
-        match (kind, json.is_some()) {
-            (CHUNK_JSON, false) => json = Some(data),
-            (_, false) => return Err(bad("the first chunk is not JSON".to_owned())),
-            (CHUNK_JSON, true) => return Err(bad(format!("a second JSON chunk at byte {pos}"))),
-            (CHUNK_BIN, true) if bin.is_none() => bin = Some(data),
-            (CHUNK_BIN, true) => return Err(bad(format!("a second BIN chunk at byte {pos}"))),
-            _ => warnings.push(format!("unknown GLB chunk type {kind:#010x} skipped")),
+        let problem = match (kind, json.is_some()) {
+            (CHUNK_JSON, false) => json.replace(data).map(|_| ""),
+            (_, false) => Some("the first chunk is not JSON"),
+            (CHUNK_JSON, true) => Some("a second JSON chunk"),
+            (CHUNK_BIN, true) if bin.is_none() => bin.replace(data).map(|_| ""),
+            (CHUNK_BIN, true) => Some("a second BIN chunk"),
+            _ => {
+                warnings.push(format!("unknown GLB chunk type {kind:#010x} skipped"));
+                None
+            }
+        };
+        if let Some(problem) = problem {
+            return Err(bad(format!("{problem} at byte {pos}")));
         }
         pos = next;
     }
     let json = json.ok_or_else(|| bad("no JSON chunk".to_owned()))?;
     Ok((json, bin))
+}
+
+/// Checks the 12-byte GLB header (magic, version 2, total length) and returns the bytes it
+/// declares; bytes after them are ignored with a warning.
+fn glb_body<'a>(
+    bytes: &'a [u8],
+    origin: &Origin,
+    warnings: &mut Vec<String>,
+) -> Result<&'a [u8], MeshError> {
+    let bad = |detail: String| origin.malformed("GLB", detail);
+    let (Some(magic), Some(version), Some(length)) =
+        (u32_at(bytes, 0), u32_at(bytes, 4), u32_at(bytes, 8))
+    else {
+        let len = bytes.len();
+        return Err(bad(format!("{len} bytes, shorter than the 12-byte header")));
+    };
+    if magic != u32::from_le_bytes(*b"glTF") {
+        return Err(bad(format!("bad magic {:02x?}", magic.to_le_bytes())));
+    }
+    if version != 2 {
+        return Err(origin.unsupported(format!("GLB container version {version}")));
+    }
+    let body = bytes.get(..length as usize).filter(|b| b.len() >= 12);
+    let body = body.ok_or_else(|| {
+        bad(format!(
+            "header declares {length} bytes, the file has {}",
+            bytes.len()
+        ))
+    })?;
+    if body.len() < bytes.len() {
+        let extra = bytes.len() - body.len();
+        warnings.push(format!(
+            "{extra} bytes after the end of the GLB were ignored"
+        ));
+    }
+    Ok(body)
 }
 
 /// The type, data and end of the GLB chunk starting at `pos`, if it fits in `body`.
@@ -289,7 +304,10 @@ fn accept_required_extensions(
     origin: &Origin,
     warnings: &mut Vec<String>,
 ) -> Result<(), MeshError> {
-    for ext in std::mem::take(&mut root.extensions_required) {
+    let mut required = std::mem::take(&mut root.extensions_required);
+    required.sort_unstable();
+    required.dedup();
+    for ext in required {
         if ext == "KHR_mesh_quantization" {
             continue;
         }
@@ -698,33 +716,16 @@ impl<'a> Loader<'a> {
         out: &mut Vec<Instance<'a>>,
     ) -> Result<(), MeshError> {
         let index = node.index();
-        let file = || self.origin.label.clone();
-        if depth > MAX_DEPTH {
-            let limit = MAX_DEPTH;
-            return Err(MeshError::NodeTooDeep {
-                file: file(),
-                node: index,
-                limit,
-            });
-        }
-        match visited.get_mut(index) {
-            Some(seen) if !*seen => *seen = true,
-            _ => {
-                return Err(MeshError::NodeCycle {
-                    file: file(),
-                    node: index,
-                });
-            }
-        }
+        self.enter(index, depth, visited)?;
         let transform = parent * local_transform(&node);
         if !transform.is_finite() {
-            return Err(self
-                .origin
-                .non_finite(format!("the transform of node {index}")));
+            let what = format!("the transform of node {index}");
+            return Err(self.origin.non_finite(what));
         }
         if let Some(mesh) = node.mesh() {
+            let node = node.clone();
             out.push(Instance {
-                node: node.clone(),
+                node,
                 mesh,
                 transform,
             });
@@ -733,6 +734,27 @@ impl<'a> Loader<'a> {
             self.walk(child, transform, depth + 1, visited, out)?;
         }
         Ok(())
+    }
+
+    /// Marks node `index` visited at `depth`; an error if it was visited before (a cycle, or a
+    /// node with two parents) or lies too deep.
+    fn enter(&self, index: usize, depth: usize, visited: &mut [bool]) -> Result<(), MeshError> {
+        let file = self.origin.label.clone();
+        if depth > MAX_DEPTH {
+            let limit = MAX_DEPTH;
+            return Err(MeshError::NodeTooDeep {
+                file,
+                node: index,
+                limit,
+            });
+        }
+        match visited.get_mut(index) {
+            Some(seen) if !*seen => {
+                *seen = true;
+                Ok(())
+            }
+            _ => Err(MeshError::NodeCycle { file, node: index }),
+        }
     }
 
     /// One part per triangle primitive per instance. A primitive is decoded once however many
@@ -746,11 +768,11 @@ impl<'a> Loader<'a> {
             let primitive_count = instance.mesh.primitives().len();
             for primitive in instance.mesh.primitives() {
                 let key = (instance.mesh.index(), primitive.index());
-                if !built.contains_key(&key) {
-                    let decoded = self.primitive(&primitive, key)?;
-                    built.insert(key, decoded);
-                }
-                let Some(Some((mesh, material))) = built.get(&key) else {
+                let decoded = match built.entry(key) {
+                    Entry::Occupied(known) => known.into_mut(),
+                    Entry::Vacant(slot) => slot.insert(self.primitive(&primitive, key)?),
+                };
+                let Some((mesh, material)) = decoded else {
                     continue;
                 };
                 total_bytes += (mesh.positions.len() * 24 + mesh.indices.len() * 4) as u64;
@@ -791,57 +813,58 @@ impl<'a> Loader<'a> {
         key: (usize, usize),
     ) -> Result<Built, MeshError> {
         let label = format!("mesh {} primitive {}", key.0, key.1);
-        let mode = primitive.mode();
-        if !matches!(
-            mode,
-            Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan
-        ) {
-            self.warnings.push(format!(
-                "{label}: {mode:?} skipped (only triangles are loaded)"
-            ));
-            return Ok(None);
-        }
-        let Some(position) = primitive.get(&Semantic::Positions) else {
-            self.warnings
-                .push(format!("{label}: no POSITION attribute, skipped"));
-            return Ok(None);
+        let position = match self.skip_reason(primitive) {
+            Ok(position) => position,
+            Err(reason) => {
+                self.warnings.push(format!("{label}: skipped: {reason}"));
+                return Ok(None);
+            }
         };
-        if let Some(buffer) = self.unsupplied_buffer(primitive) {
-            self.warnings.push(format!(
-                "{label}: skipped, its data lies in buffer {buffer}, which has no uri \
-                 (only a GLB can supply such a buffer)"
-            ));
-            return Ok(None);
-        }
         let positions = self.read_vec3(&position, &format!("{label} POSITION"))?;
         if positions.iter().flatten().any(|c| !c.is_finite()) {
             return Err(self.origin.non_finite(format!("{label} POSITION")));
         }
         let vertex_indices = match primitive.indices() {
             Some(accessor) => self.read_indices(&accessor, positions.len(), &label)?,
-            None => {
-                let n = u32::try_from(positions.len()).unwrap_or(u32::MAX);
-                (0..n).collect()
-            }
+            None => (0..u32::try_from(positions.len()).unwrap_or(u32::MAX)).collect(),
         };
-        let (indices, leftover) = triangle_list(mode, vertex_indices);
+        let (indices, leftover) = triangle_list(primitive.mode(), vertex_indices);
         if leftover {
-            self.warnings.push(format!(
-                "{label}: trailing indices that make no triangle dropped"
-            ));
+            let warning = format!("{label}: trailing indices that make no triangle dropped");
+            self.warnings.push(warning);
         }
         if indices.is_empty() {
             self.warnings
-                .push(format!("{label}: no triangles, skipped"));
+                .push(format!("{label}: skipped: no triangles"));
             return Ok(None);
         }
+        let normals = Vec::new();
         let mut mesh = CpuMesh {
             positions,
-            normals: Vec::new(),
+            normals,
             indices,
         };
         self.attach_normals(primitive, &mut mesh, &label)?;
         Ok(Some((mesh, material_of(primitive))))
+    }
+
+    /// The POSITION accessor of a primitive to be loaded, or why the primitive is skipped.
+    fn skip_reason(&self, primitive: &Primitive<'a>) -> Result<Accessor<'a>, String> {
+        let mode = primitive.mode();
+        if !matches!(
+            mode,
+            Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan
+        ) {
+            return Err(format!("{mode:?} (only triangles are loaded)"));
+        }
+        let position = primitive.get(&Semantic::Positions);
+        let position = position.ok_or_else(|| "no POSITION attribute".to_owned())?;
+        if let Some(buffer) = self.unsupplied_buffer(primitive) {
+            return Err(format!(
+                "its data lies in buffer {buffer}, which has no uri (only a GLB can supply one)"
+            ));
+        }
+        Ok(position)
     }
 
     /// A buffer that the primitive reads and that a `.gltf` (not GLB) file declares without a
@@ -1058,66 +1081,69 @@ impl<'a> Loader<'a> {
     /// Substitutes the sparse values into `out` (`count` elements of `layout`).
     fn apply_sparse<T: Copy>(
         &self,
-        sparse: &::gltf::accessor::sparse::Sparse<'_>,
+        sparse: &Sparse<'_>,
         count: usize,
         layout: Layout,
         what: &str,
         out: &mut [T],
         convert: fn(f64) -> T,
     ) -> Result<(), MeshError> {
+        let targets = self.sparse_targets(sparse, count, what)?;
+        let values = sparse.values();
+        let elem = layout.element_size();
+        let bytes = self.view_bytes(&values.view(), what)?;
+        let values_what = format!("{what} sparse values");
+        let n = targets.len();
+        self.check_extent(&values_what, (values.offset(), elem), n, elem, bytes.len())?;
+        let comps = layout.components();
+        for (s, target) in targets.into_iter().enumerate() {
+            let start = values.offset() + s * elem;
+            let slot = out.get_mut(target * comps..(target + 1) * comps);
+            slot.zip(bytes.get(start..start + elem))
+                .and_then(|(slot, element)| layout.decode(element, slot, convert))
+                .ok_or_else(|| {
+                    self.origin
+                        .too_short(&values_what, (start + elem) as u64, bytes.len() as u64)
+                })?;
+        }
+        Ok(())
+    }
+
+    /// The element indices a sparse block substitutes, each checked to be below `count`.
+    fn sparse_targets(
+        &self,
+        sparse: &Sparse<'_>,
+        count: usize,
+        what: &str,
+    ) -> Result<Vec<usize>, MeshError> {
         let n = sparse.count();
         if n > count {
             let detail = format!("{what}: {n} sparse values for {count} elements");
             return Err(self.origin.malformed("glTF", detail));
         }
-        let (indices, values) = (sparse.indices(), sparse.values());
+        let indices = sparse.indices();
         let index_type = match indices.index_type() {
-            ::gltf::accessor::sparse::IndexType::U8 => DataType::U8,
-            ::gltf::accessor::sparse::IndexType::U16 => DataType::U16,
-            ::gltf::accessor::sparse::IndexType::U32 => DataType::U32,
+            IndexType::U8 => DataType::U8,
+            IndexType::U16 => DataType::U16,
+            IndexType::U32 => DataType::U32,
         };
-        let index_size = index_type.size();
-        let index_bytes = self.view_bytes(&indices.view(), what)?;
-        let index_what = format!("{what} sparse indices");
-        self.check_extent(
-            &index_what,
-            (indices.offset(), index_size),
-            n,
-            index_size,
-            index_bytes.len(),
-        )?;
-        let elem = layout.element_size();
-        let value_bytes = self.view_bytes(&values.view(), what)?;
-        let value_what = format!("{what} sparse values");
-        self.check_extent(
-            &value_what,
-            (values.offset(), elem),
-            n,
-            elem,
-            value_bytes.len(),
-        )?;
-        let comps = layout.components();
-        for s in 0..n {
-            let short = || {
-                self.origin
-                    .too_short(what, (n * elem) as u64, value_bytes.len() as u64)
-            };
-            let at = indices.offset() + s * index_size;
-            let target = component(index_bytes, at, index_type, false).ok_or_else(short)? as usize;
-            let slot = target
-                .checked_mul(comps)
-                .and_then(|a| out.get_mut(a..a + comps));
-            let slot = slot.ok_or_else(|| {
-                self.origin
-                    .out_of_range(&index_what, target as u64, count as u64)
-            })?;
-            let start = values.offset() + s * elem;
-            let element = value_bytes.get(start..start + elem);
-            element
-                .and_then(|e| layout.decode(e, slot, convert))
-                .ok_or_else(short)?;
-        }
-        Ok(())
+        let size = index_type.size();
+        let bytes = self.view_bytes(&indices.view(), what)?;
+        let what = format!("{what} sparse indices");
+        self.check_extent(&what, (indices.offset(), size), n, size, bytes.len())?;
+        (0..n)
+            .map(|s| {
+                let at = indices.offset() + s * size;
+                let end = (at + size) as u64;
+                let target = component(bytes, at, index_type, false);
+                let target =
+                    target.ok_or_else(|| self.origin.too_short(&what, end, bytes.len() as u64))?;
+                if target >= count as f64 {
+                    return Err(self.origin.out_of_range(&what, target as u64, count as u64));
+                }
+                Ok(target as usize)
+            })
+            .collect()
     }
 }
 

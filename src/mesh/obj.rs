@@ -87,8 +87,7 @@ fn load_mtl(lib: &Path, origin: &Origin, warnings: &RefCell<Vec<String>>) -> tob
                 all_map.extend(map.into_iter().map(|(k, v)| (k, v + offset)));
             }
             (Err(e), _) => warn(format!(
-                "material library {}: {e}; its materials fall back to the default",
-                path.display()
+                "material library not loaded ({e}); its materials fall back to the default"
             )),
         }
     }
@@ -102,7 +101,7 @@ fn to_cpu_mesh(
     name: &str,
     origin: &Origin,
 ) -> Result<Option<CpuMesh>, MeshError> {
-    if mesh.positions.len() % 3 != 0 || mesh.indices.len() % 3 != 0 {
+    if !mesh.positions.len().is_multiple_of(3) || !mesh.indices.len().is_multiple_of(3) {
         let detail = format!("object {name:?}: positions or indices not in threes");
         return Err(origin.malformed("OBJ", detail));
     }

@@ -7,12 +7,14 @@ use thiserror::Error;
 
 mod context;
 mod mesh_pass;
+mod output;
 mod renderer;
 mod splat_pass;
 mod target;
 mod view;
 
 pub use context::GpuContext;
+pub use output::{depth_range, depth_to_luma16, encode_png, frame_to_rgba8};
 pub use renderer::{FrameOptions, FrameReport, FrameTimings, Renderer, Screenshot};
 pub use splat_pass::gpu_colors;
 pub use target::{COLOR_FORMAT, DEPTH_FORMAT, RenderTarget, read_texture};

@@ -243,7 +243,7 @@ impl Renderer {
                 continue;
             }
             let pass = self.splat_pass.get_or_insert_with(|| SplatPass::new(ctx));
-            let gpu = pass.upload(ctx, &result)?;
+            let gpu = pass.upload(ctx, &node.volume, &result)?;
             let old = self.volumes.remove(&id);
             let (orderer, ids) = old.map(|o| (o.orderer, o.ids)).unwrap_or_default();
             self.volumes.insert(
@@ -323,13 +323,13 @@ impl Renderer {
             let Some(state) = self.volumes.get_mut(id) else {
                 continue;
             };
-            let style = scene
+            let settings = scene
                 .volumes()
                 .find(|(v, _, _)| v == id)
-                .map(|(_, node, _)| node.splats.style)
+                .map(|(_, node, _)| node.splats)
                 .unwrap_or_default();
             SplatPass::upload_order(ctx, &mut state.gpu, &state.ids)?;
-            SplatPass::write_uniforms(ctx, &state.gpu, geometry, view, &style);
+            SplatPass::write_uniforms(ctx, &state.gpu, geometry, view, &settings);
         }
         if let Some(pass) = &self.mesh_pass {
             pass.write_frame(ctx, view, &scene.lights);

@@ -13,8 +13,9 @@ use super::target::{COLOR_FORMAT, DEPTH_FORMAT};
 use super::view::ViewSetup;
 use super::{GpuContext, RenderError};
 use crate::classify::Classified;
-use crate::composite::SplatStyle;
 use crate::order::VolumeGeometry;
+use crate::scene::SplatSettings;
+use crate::volume::CpuVolume;
 
 /// Keep in sync with `Splat` in shaders/splat.wgsl.
 #[repr(C)]
@@ -27,8 +28,9 @@ struct SplatUniforms {
     size: [f32; 4],
     depth: [f32; 4],
     dims: [u32; 4],
+    normal: [[f32; 4]; 3],
 }
-const _: () = assert!(size_of::<SplatUniforms>() == 176);
+const _: () = assert!(size_of::<SplatUniforms>() == 224);
 
 /// The splat pipeline.
 #[derive(Debug)]
@@ -44,6 +46,41 @@ pub(crate) struct GpuVolume {
     group: wgpu::BindGroup,
     order: Option<wgpu::Buffer>,
     count: u32,
+}
+
+fn texture_3d(
+    ctx: &GpuContext,
+    dims: [u32; 3],
+    format: wgpu::TextureFormat,
+    texels: &[u8],
+    label: &str,
+) -> wgpu::Texture {
+    let size = wgpu::Extent3d {
+        width: dims[0],
+        height: dims[1],
+        depth_or_array_layers: dims[2],
+    };
+    let texture = ctx.device.create_texture(&wgpu::TextureDescriptor {
+        label: Some(label),
+        size,
+        mip_level_count: 1,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D3,
+        format,
+        usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+        view_formats: &[],
+    });
+    ctx.queue.write_texture(
+        texture.as_image_copy(),
+        texels,
+        wgpu::TexelCopyBufferLayout {
+            offset: 0,
+            bytes_per_row: Some(4 * dims[0]),
+            rows_per_image: Some(dims[1]),
+        },
+        size,
+    );
+    texture
 }
 
 /// The colour a splat gets on the GPU, as premultiplied RGBA: colours are stored straight in
@@ -73,6 +110,57 @@ fn straight_rgba8(premultiplied: [f32; 4]) -> [u8; 4] {
     ]
 }
 
+fn texture_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::VERTEX,
+        ty: wgpu::BindingType::Texture {
+            sample_type: wgpu::TextureSampleType::Float { filterable: false },
+            view_dimension: wgpu::TextureViewDimension::D3,
+            multisampled: false,
+        },
+        count: None,
+    }
+}
+
+/// Unit index-space gradients of `volume` by central differences (one-sided at the faces),
+/// as snorm8 texels for the significant voxels (w = 127 where the gradient is not zero).
+fn gradient_texels(volume: &CpuVolume, classified: &Classified) -> Vec<u8> {
+    let [nx, ny, nz] = volume.dims.map(|n| n as usize);
+    let value = |x: usize, y: usize, z: usize| {
+        volume
+            .values
+            .get(x + nx * (y + ny * z))
+            .copied()
+            .unwrap_or(0.0)
+    };
+    let diff = |k: usize, n: usize, at: &dyn Fn(usize) -> f32| {
+        let (lo, hi) = (k.saturating_sub(1), (k + 1).min(n - 1));
+        if hi == lo {
+            0.0
+        } else {
+            (at(hi) - at(lo)) / (hi - lo) as f32
+        }
+    };
+    let mut texels = vec![0u8; nx * ny * nz * 4];
+    for id in classified.grid.ids() {
+        let [x, y, z] = classified.grid.coords(id).map(|c| c as usize);
+        let g = glam::Vec3::new(
+            diff(x, nx, &|i| value(i, y, z)),
+            diff(y, ny, &|i| value(x, i, z)),
+            diff(z, nz, &|i| value(x, y, i)),
+        );
+        // Pointing from dense to less dense: outward on bone surfaces.
+        let Some(n) = (-g).try_normalize() else {
+            continue;
+        };
+        let q = |v: f32| (v * 127.0).round() as i8 as u8;
+        let i = id as usize * 4;
+        texels[i..i + 4].copy_from_slice(&[q(n.x), q(n.y), q(n.z), 127]);
+    }
+    texels
+}
+
 impl SplatPass {
     pub(crate) fn new(ctx: &GpuContext) -> Self {
         let device = &ctx.device;
@@ -90,16 +178,8 @@ impl SplatPass {
                     },
                     count: None,
                 },
-                wgpu::BindGroupLayoutEntry {
-                    binding: 1,
-                    visibility: wgpu::ShaderStages::VERTEX,
-                    ty: wgpu::BindingType::Texture {
-                        sample_type: wgpu::TextureSampleType::Float { filterable: false },
-                        view_dimension: wgpu::TextureViewDimension::D3,
-                        multisampled: false,
-                    },
-                    count: None,
-                },
+                texture_entry(1),
+                texture_entry(2),
             ],
         });
         let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
@@ -161,6 +241,7 @@ impl SplatPass {
     pub(crate) fn upload(
         &self,
         ctx: &GpuContext,
+        volume: &CpuVolume,
         classified: &Classified,
     ) -> Result<GpuVolume, RenderError> {
         let dims = classified.grid.dims();
@@ -174,30 +255,19 @@ impl SplatPass {
             let i = id as usize * 4;
             texels[i..i + 4].copy_from_slice(&straight_rgba8(*color));
         }
-        let size = wgpu::Extent3d {
-            width: dims[0],
-            height: dims[1],
-            depth_or_array_layers: dims[2],
-        };
-        let texture = ctx.device.create_texture(&wgpu::TextureDescriptor {
-            label: Some("splat colours"),
-            size,
-            mip_level_count: 1,
-            sample_count: 1,
-            dimension: wgpu::TextureDimension::D3,
-            format: wgpu::TextureFormat::Rgba8Unorm,
-            usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
-            view_formats: &[],
-        });
-        ctx.queue.write_texture(
-            texture.as_image_copy(),
+        let colors = texture_3d(
+            ctx,
+            dims,
+            wgpu::TextureFormat::Rgba8Unorm,
             &texels,
-            wgpu::TexelCopyBufferLayout {
-                offset: 0,
-                bytes_per_row: Some(4 * dims[0]),
-                rows_per_image: Some(dims[1]),
-            },
-            size,
+            "splat colours",
+        );
+        let normals = texture_3d(
+            ctx,
+            dims,
+            wgpu::TextureFormat::Rgba8Snorm,
+            &gradient_texels(volume, classified),
+            "splat normals",
         );
         let uniforms = ctx.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("splat uniforms"),
@@ -205,7 +275,10 @@ impl SplatPass {
             usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
-        let view = texture.create_view(&Default::default());
+        let (colors, normals) = (
+            colors.create_view(&Default::default()),
+            normals.create_view(&Default::default()),
+        );
         let group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("splat"),
             layout: &self.layout,
@@ -216,7 +289,11 @@ impl SplatPass {
                 },
                 wgpu::BindGroupEntry {
                     binding: 1,
-                    resource: wgpu::BindingResource::TextureView(&view),
+                    resource: wgpu::BindingResource::TextureView(&colors),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 2,
+                    resource: wgpu::BindingResource::TextureView(&normals),
                 },
             ],
         });
@@ -264,8 +341,9 @@ impl SplatPass {
         volume: &GpuVolume,
         geometry: &VolumeGeometry,
         view: &ViewSetup,
-        style: &SplatStyle,
+        settings: &SplatSettings,
     ) {
+        let style = &settings.style;
         let linear = geometry.index_to_world().matrix3;
         let m = view.axes.transpose() * linear;
         let cov = m * m.transpose() * (style.sigma * style.sigma);
@@ -305,6 +383,12 @@ impl SplatPass {
             dims: {
                 let d = geometry.dims();
                 [d[0], d[1], d[2], 0]
+            },
+            normal: {
+                let n = view.axes.transpose() * linear.inverse().transpose();
+                let mut rows = [row(n.row(0)), row(n.row(1)), row(n.row(2))];
+                rows[0][3] = settings.shading.clamp(0.0, 1.0);
+                rows
             },
         };
         ctx.queue

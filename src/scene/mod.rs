@@ -13,6 +13,8 @@ use crate::mesh::{CpuMesh, Material};
 use crate::order::Ordering;
 use crate::volume::CpuVolume;
 
+pub mod file;
+pub mod shoulder;
 mod view;
 
 pub use view::{Light, Lights, Projection, SceneCamera};
@@ -53,6 +55,9 @@ pub struct SplatSettings {
     pub min_opacity: f32,
     /// The draw order.
     pub ordering: Ordering,
+    /// Headlight shading from the gradient: 0 keeps the transfer function's flat colour
+    /// (what the CPU reference compositor draws), 1 fully shades.
+    pub shading: f32,
 }
 
 impl Default for SplatSettings {
@@ -61,6 +66,7 @@ impl Default for SplatSettings {
             style: SplatStyle::default(),
             min_opacity: 1.0 / 255.0,
             ordering: Ordering::IpPbtfImplicit,
+            shading: 0.8,
         }
     }
 }

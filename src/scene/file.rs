@@ -1,0 +1,533 @@
+//! Scene files: a TOML description of volumes, meshes, camera, lights and output, read with
+//! serde. Relative paths are taken from the scene file's folder. `builtin:shoulder-phantom`
+//! and `builtin:prosthesis` name the built-in phantom and prosthesis.
+//!
+//! ```toml
+//! [output]
+//! size = [800, 600]
+//! ordering = "ip-pbtf"
+//!
+//! [camera]
+//! view_from = [-0.55, 1.0, -0.35]   # fit the scene, looking along this direction
+//!
+//! [[volume]]
+//! path = "builtin:shoulder-phantom"
+//! transfer = "ct-bone"
+//! resect_humeral_head = true
+//!
+//! [[mesh]]
+//! path = "builtin:prosthesis"
+//! seat = "phantom"
+//! ```
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use glam::{DMat4, DQuat, DVec3, EulerRot};
+use serde::Deserialize;
+use thiserror::Error;
+
+use super::shoulder::{add_model, prosthesis_model, resect_humeral_head};
+use super::{
+    Light, Lights, NodeContent, Projection, Scene, SceneCamera, SplatSettings, VolumeNode,
+};
+use crate::classify::TransferFunction;
+use crate::mesh::prosthesis::seat_in_phantom;
+use crate::mesh::{MeshError, load_mesh};
+use crate::order::Ordering;
+use crate::volume::phantom::{DEFAULT_DIMS, DEFAULT_SPACING};
+use crate::volume::{
+    CpuVolume, RawSpec, ScalarFormat, VolumeError, load_raw, load_raw_slices, shoulder_landmarks,
+    shoulder_phantom_default, slice_stack,
+};
+
+/// Why a scene file could not be used.
+#[derive(Debug, Error)]
+pub enum SceneFileError {
+    /// The file could not be read.
+    #[error("{}: cannot read: {source}", path.display())]
+    Io {
+        /// The scene file.
+        path: PathBuf,
+        /// The cause.
+        source: std::io::Error,
+    },
+    /// The TOML is malformed or has unknown or mistyped fields.
+    #[error("{}: {message}", path.display())]
+    Parse {
+        /// The scene file.
+        path: PathBuf,
+        /// What the parser said, with the line.
+        message: String,
+    },
+    /// A value is out of range or a combination makes no sense.
+    #[error("{}: {message}", path.display())]
+    Invalid {
+        /// The scene file.
+        path: PathBuf,
+        /// What is wrong.
+        message: String,
+    },
+    /// A mesh did not load.
+    #[error(transparent)]
+    Mesh(#[from] MeshError),
+    /// A volume did not load.
+    #[error(transparent)]
+    Volume(#[from] VolumeError),
+}
+
+/// Output settings.
+#[derive(Debug, Clone, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct OutputSpec {
+    /// Image width and height in pixels.
+    pub size: Option<[u32; 2]>,
+    /// Opaque background colour, linear RGB.
+    pub background: Option<[f32; 3]>,
+    /// A transparent background instead.
+    #[serde(default)]
+    pub transparent: bool,
+    /// Ordering for every volume (btf, wbtf, pbtf, ip-pbtf, exact, bucketed...).
+    pub ordering: Option<String>,
+}
+
+/// The camera; without `eye` the scene is fitted, seen along `view_from`.
+#[derive(Debug, Clone, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CameraSpec {
+    /// Eye position (world).
+    pub eye: Option<[f64; 3]>,
+    /// Look-at point; the scene centre by default.
+    pub target: Option<[f64; 3]>,
+    /// Up vector; +z unless the view is vertical.
+    pub up: Option<[f64; 3]>,
+    /// Viewing direction used to fit the scene when no eye is given.
+    pub view_from: Option<[f64; 3]>,
+    /// Vertical field of view in degrees (perspective).
+    pub fov: Option<f64>,
+    /// Visible height in world units: makes the camera orthographic.
+    pub orthographic_height: Option<f64>,
+    /// Near plane distance.
+    pub near: Option<f64>,
+}
+
+/// A directional light.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LightSpec {
+    /// Direction the light travels.
+    pub direction: [f64; 3],
+    /// Linear RGB times intensity.
+    pub color: [f32; 3],
+}
+
+/// Lights; absent fields keep the defaults.
+#[derive(Debug, Clone, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LightsSpec {
+    /// Headlight intensity.
+    pub headlight: Option<f32>,
+    /// Ambient intensity.
+    pub ambient: Option<f32>,
+    /// Directional lights (replace the default one when given).
+    pub directional: Option<Vec<LightSpec>>,
+}
+
+/// A node transform: scale, then rotation (degrees about x, y, z in that order), then
+/// translation; or a full column-major matrix.
+#[derive(Debug, Clone, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TransformSpec {
+    /// Translation.
+    pub translate: Option<[f64; 3]>,
+    /// Rotation in degrees about x, then y, then z.
+    pub rotate_degrees: Option<[f64; 3]>,
+    /// Per-axis scale.
+    pub scale: Option<[f64; 3]>,
+    /// A column-major 4x4 matrix (replaces the other fields).
+    pub matrix: Option<[f64; 16]>,
+}
+
+/// A volume.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct VolumeSpec {
+    /// Node name.
+    pub name: Option<String>,
+    /// A raw file (or the first of a slice stack ending in `.1`), or `builtin:shoulder-phantom`.
+    pub path: String,
+    /// Raw: grid size.
+    pub dims: Option<[u32; 3]>,
+    /// Raw: scalar type and byte order, such as `u8`, `i16le`, `u16be`, `f32`.
+    pub scalar: Option<String>,
+    /// Raw: bytes to skip at the start of each file.
+    pub header_bytes: Option<u64>,
+    /// Raw: voxel spacing in millimetres.
+    pub spacing: Option<[f64; 3]>,
+    /// Raw: world position of the first voxel.
+    pub origin: Option<[f64; 3]>,
+    /// Transfer-function preset: `ct-bone` (default) or `ramp` (with `window` and `color`).
+    pub transfer: Option<String>,
+    /// Ramp: transparent at the first value, `color` at the second.
+    pub window: Option<[f32; 2]>,
+    /// Ramp: straight RGBA at the top of the window.
+    pub color: Option<[f32; 4]>,
+    /// Voxels at or below this opacity are left out.
+    pub min_opacity: Option<f32>,
+    /// The phantom only: remove the humeral head above the resection plane.
+    #[serde(default)]
+    pub resect_humeral_head: bool,
+    /// Node transform.
+    #[serde(default)]
+    pub transform: TransformSpec,
+}
+
+/// A mesh file.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MeshSpec {
+    /// Node name.
+    pub name: Option<String>,
+    /// A glTF, OBJ or STL file, or `builtin:prosthesis`.
+    pub path: String,
+    /// Base colour (RGB or RGBA, linear) replacing the file's.
+    pub color: Option<Vec<f32>>,
+    /// Roughness replacing the file's.
+    pub roughness: Option<f32>,
+    /// Metalness replacing the file's.
+    pub metallic: Option<f32>,
+    /// `phantom`: seat the prosthesis in the built-in phantom's humerus (before `transform`).
+    pub seat: Option<String>,
+    /// Node transform.
+    #[serde(default)]
+    pub transform: TransformSpec,
+}
+
+/// A whole scene file.
+#[derive(Debug, Clone, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SceneFile {
+    /// Output settings.
+    #[serde(default)]
+    pub output: OutputSpec,
+    /// The camera.
+    pub camera: Option<CameraSpec>,
+    /// The lights.
+    #[serde(default)]
+    pub lights: LightsSpec,
+    /// Volumes.
+    #[serde(default, rename = "volume")]
+    pub volumes: Vec<VolumeSpec>,
+    /// Meshes.
+    #[serde(default, rename = "mesh")]
+    pub meshes: Vec<MeshSpec>,
+}
+
+/// A loaded scene with the output settings of its file.
+#[derive(Debug, Clone)]
+pub struct LoadedScene {
+    /// The scene, its camera set.
+    pub scene: Scene,
+    /// Image size.
+    pub size: Option<(u32, u32)>,
+    /// Background; `None` is transparent.
+    pub background: Option<[f32; 3]>,
+    /// Ordering override.
+    pub ordering: Option<Ordering>,
+}
+
+impl SceneFile {
+    /// Reads and parses a scene file (at most 1 MiB).
+    pub fn read(path: &Path) -> Result<Self, SceneFileError> {
+        let io = |source| SceneFileError::Io {
+            path: path.into(),
+            source,
+        };
+        let len = std::fs::metadata(path).map_err(io)?.len();
+        if len > 1 << 20 {
+            return Err(SceneFileError::Invalid {
+                path: path.into(),
+                message: format!("{len} bytes is too large for a scene file (1 MiB at most)"),
+            });
+        }
+        let text = std::fs::read_to_string(path).map_err(io)?;
+        Self::parse(&text, path)
+    }
+
+    /// Parses scene TOML; `path` names it in errors.
+    pub fn parse(text: &str, path: &Path) -> Result<Self, SceneFileError> {
+        toml::from_str(text).map_err(|e| SceneFileError::Parse {
+            path: path.into(),
+            message: e.to_string(),
+        })
+    }
+
+    /// Loads everything the file names; relative paths are taken from `base`.
+    pub fn load(&self, path: &Path, base: &Path) -> Result<LoadedScene, SceneFileError> {
+        let invalid = |message: String| SceneFileError::Invalid {
+            path: path.into(),
+            message,
+        };
+        let mut scene = Scene::new();
+        for (i, spec) in self.volumes.iter().enumerate() {
+            let node = load_volume(spec, base, &invalid)?;
+            let name = spec
+                .name
+                .clone()
+                .unwrap_or_else(|| format!("volume {}", i + 1));
+            let local = transform(&spec.transform).map_err(&invalid)?;
+            scene
+                .add(name, local, None, NodeContent::Volume(node))
+                .map_err(|e| invalid(e.to_string()))?;
+        }
+        for (i, spec) in self.meshes.iter().enumerate() {
+            load_mesh_spec(&mut scene, spec, i, base, &invalid)?;
+        }
+        scene.lights = lights(&self.lights);
+        let size = self.output.size.map(|[w, h]| (w, h));
+        if size.is_some_and(|(w, h)| w == 0 || h == 0 || w > 16384 || h > 16384) {
+            return Err(invalid(format!(
+                "output size {size:?} is not between 1 and 16384"
+            )));
+        }
+        let ordering = match &self.output.ordering {
+            Some(name) => Some(
+                name.parse::<Ordering>()
+                    .map_err(|e| invalid(e.to_string()))?,
+            ),
+            None => None,
+        };
+        let aspect = size.map_or(4.0 / 3.0, |(w, h)| f64::from(w) / f64::from(h));
+        scene.camera = Some(camera(self.camera.as_ref(), &scene, aspect).map_err(&invalid)?);
+        let background = if self.output.transparent {
+            None
+        } else {
+            Some(self.output.background.unwrap_or([0.06, 0.07, 0.09]))
+        };
+        Ok(LoadedScene {
+            scene,
+            size,
+            background,
+            ordering,
+        })
+    }
+}
+
+/// Reads a scene file and loads what it names.
+pub fn load_scene_file(path: &Path) -> Result<LoadedScene, SceneFileError> {
+    let file = SceneFile::read(path)?;
+    let base = path.parent().unwrap_or(Path::new("."));
+    file.load(path, base)
+}
+
+fn resolve(base: &Path, path: &str) -> PathBuf {
+    let p = Path::new(path);
+    if p.is_absolute() {
+        p.into()
+    } else {
+        base.join(p)
+    }
+}
+
+fn load_volume(
+    spec: &VolumeSpec,
+    base: &Path,
+    invalid: &dyn Fn(String) -> SceneFileError,
+) -> Result<VolumeNode, SceneFileError> {
+    let volume = if spec.path == "builtin:shoulder-phantom" {
+        let mut volume = shoulder_phantom_default();
+        if spec.resect_humeral_head {
+            resect_humeral_head(
+                &mut volume,
+                &shoulder_landmarks(DEFAULT_DIMS, DEFAULT_SPACING),
+            );
+        }
+        volume
+    } else {
+        load_raw_volume(spec, &resolve(base, &spec.path), invalid)?
+    };
+    let transfer = match spec.transfer.as_deref().unwrap_or("ct-bone") {
+        "ct-bone" => TransferFunction::ct_bone(),
+        "ramp" => {
+            let [lo, hi] = spec.window.ok_or_else(|| {
+                invalid("the ramp transfer function needs window = [lo, hi]".into())
+            })?;
+            TransferFunction::ramp(lo, hi, spec.color.unwrap_or([1.0, 0.93, 0.85, 0.6]))
+        }
+        other => {
+            return Err(invalid(format!(
+                "unknown transfer function {other:?} (ct-bone or ramp)"
+            )));
+        }
+    };
+    let min_opacity = spec.min_opacity.unwrap_or(1.0 / 255.0);
+    if !(0.0..1.0).contains(&min_opacity) {
+        return Err(invalid(format!(
+            "min_opacity {min_opacity} is not in [0, 1)"
+        )));
+    }
+    Ok(VolumeNode {
+        volume: Arc::new(volume),
+        transfer: Arc::new(transfer),
+        splats: SplatSettings {
+            min_opacity,
+            ..Default::default()
+        },
+    })
+}
+
+fn load_raw_volume(
+    spec: &VolumeSpec,
+    path: &Path,
+    invalid: &dyn Fn(String) -> SceneFileError,
+) -> Result<CpuVolume, SceneFileError> {
+    let (Some(dims), Some(scalar)) = (spec.dims, &spec.scalar) else {
+        return Err(invalid(format!(
+            "volume {}: a raw volume needs dims and scalar",
+            path.display()
+        )));
+    };
+    let format: ScalarFormat = scalar
+        .parse()
+        .map_err(|e| invalid(format!("volume {}: {e}", path.display())))?;
+    let raw = RawSpec {
+        header_bytes: spec.header_bytes.unwrap_or(0),
+        spacing: spec.spacing.unwrap_or([1.0; 3]),
+        origin: spec.origin.unwrap_or([0.0; 3]),
+        ..RawSpec::new(dims, format.scalar, format.order)
+    };
+    let is_stack = path.extension().is_some_and(|e| e == "1");
+    Ok(if is_stack {
+        load_raw_slices(&slice_stack(path)?, &raw)?
+    } else {
+        load_raw(path, &raw)?
+    })
+}
+
+fn load_mesh_spec(
+    scene: &mut Scene,
+    spec: &MeshSpec,
+    index: usize,
+    base: &Path,
+    invalid: &dyn Fn(String) -> SceneFileError,
+) -> Result<(), SceneFileError> {
+    let mut model = if spec.path == "builtin:prosthesis" {
+        prosthesis_model()?
+    } else {
+        load_mesh(&resolve(base, &spec.path))?
+    };
+    for warning in &model.warnings {
+        eprintln!("warning: {warning}");
+    }
+    for part in &mut model.parts {
+        if let Some(c) = &spec.color {
+            match c.as_slice() {
+                [r, g, b] => part.material.base_color = [*r, *g, *b, 1.0],
+                [r, g, b, a] => part.material.base_color = [*r, *g, *b, *a],
+                _ => {
+                    return Err(invalid(format!(
+                        "mesh {}: color needs 3 or 4 numbers",
+                        spec.path
+                    )));
+                }
+            }
+        }
+        if let Some(r) = spec.roughness {
+            part.material.roughness = r.clamp(0.0, 1.0);
+        }
+        if let Some(m) = spec.metallic {
+            part.material.metallic = m.clamp(0.0, 1.0);
+        }
+    }
+    let seat = match spec.seat.as_deref() {
+        None => DMat4::IDENTITY,
+        Some("phantom") => seat_in_phantom(&shoulder_landmarks(DEFAULT_DIMS, DEFAULT_SPACING)),
+        Some(other) => return Err(invalid(format!("unknown seat {other:?} (phantom)"))),
+    };
+    let local = seat * transform(&spec.transform).map_err(invalid)?;
+    let name = spec
+        .name
+        .clone()
+        .unwrap_or_else(|| format!("mesh {}", index + 1));
+    add_model(scene, &name, local, &model)
+        .ok_or_else(|| invalid(format!("mesh {name}: transform is singular")))?;
+    Ok(())
+}
+
+fn transform(spec: &TransformSpec) -> Result<DMat4, String> {
+    let m = match spec.matrix {
+        Some(cols) => DMat4::from_cols_array(&cols),
+        None => {
+            let [rx, ry, rz] = spec.rotate_degrees.unwrap_or([0.0; 3]).map(f64::to_radians);
+            DMat4::from_scale_rotation_translation(
+                DVec3::from(spec.scale.unwrap_or([1.0; 3])),
+                DQuat::from_euler(EulerRot::ZYX, rz, ry, rx),
+                DVec3::from(spec.translate.unwrap_or([0.0; 3])),
+            )
+        }
+    };
+    if !m.is_finite() || !m.determinant().is_normal() {
+        return Err(format!("transform {spec:?} is not finite and invertible"));
+    }
+    Ok(m)
+}
+
+fn lights(spec: &LightsSpec) -> Lights {
+    let mut lights = Lights::default();
+    if let Some(h) = spec.headlight {
+        lights.headlight = h.max(0.0);
+    }
+    if let Some(a) = spec.ambient {
+        lights.ambient = a.max(0.0);
+    }
+    if let Some(list) = &spec.directional {
+        lights.directional = list
+            .iter()
+            .map(|l| Light {
+                direction: DVec3::from(l.direction),
+                color: l.color,
+            })
+            .collect();
+    }
+    lights
+}
+
+fn camera(spec: Option<&CameraSpec>, scene: &Scene, aspect: f64) -> Result<SceneCamera, String> {
+    let default = CameraSpec::default();
+    let spec = spec.unwrap_or(&default);
+    let bounds = scene.bounds().unwrap_or((DVec3::splat(-1.0), DVec3::ONE));
+    let projection = match (spec.orthographic_height, spec.fov) {
+        (Some(height), _) if height.is_finite() && height > 0.0 => {
+            Projection::Orthographic { height }
+        }
+        (Some(height), _) => return Err(format!("orthographic_height {height} must be positive")),
+        (None, Some(fov)) if fov > 0.0 && fov < 180.0 => {
+            Projection::Perspective { fov_y_degrees: fov }
+        }
+        (None, Some(fov)) => return Err(format!("fov {fov} is not between 0 and 180 degrees")),
+        (None, None) => Projection::default(),
+    };
+    let mut camera = match spec.eye {
+        Some(eye) => {
+            let target = spec.target.map_or(0.5 * (bounds.0 + bounds.1), DVec3::from);
+            SceneCamera {
+                projection,
+                ..SceneCamera::look_at(DVec3::from(eye), target)
+            }
+        }
+        None => {
+            let direction = DVec3::from(spec.view_from.unwrap_or([-0.55, 1.0, -0.35]));
+            let mut fitted = SceneCamera::fit(bounds, direction, projection, aspect);
+            if let Some(t) = spec.target {
+                fitted.target = DVec3::from(t);
+            }
+            fitted
+        }
+    };
+    if let Some(up) = spec.up {
+        camera.up = DVec3::from(up);
+    }
+    camera.near = spec.near;
+    camera.pinhole(16, 16, 0.0).map_err(|e| e.to_string())?;
+    Ok(camera)
+}
