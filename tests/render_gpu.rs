@@ -159,7 +159,7 @@ fn splats_behind_a_mesh_are_hidden_and_write_no_depth() {
             *v = -1000.0;
         }
     }
-    let mut shoot = |volume: Option<&CpuVolume>, with_wall: bool| {
+    let shoot = |volume: Option<&CpuVolume>, with_wall: bool| {
         let mut scene = volume.map_or_else(Scene::new, |v| {
             volume_scene(v.clone(), Ordering::IpPbtfImplicit)
         });
@@ -193,6 +193,7 @@ fn splats_behind_a_mesh_are_hidden_and_write_no_depth() {
     assert_eq!(all_depth, wall_depth, "splats write no depth");
     let mut on_wall = 0;
     let mut splat_shows = 0;
+    #[allow(clippy::needless_range_loop)] // four images indexed alike
     for i in 0..all.pixels.len() {
         if wall_depth[i] > 0.0 {
             on_wall += 1;
@@ -312,4 +313,100 @@ fn pipelines_are_built_only_for_content() {
         both.mesh_pipeline && both.splat_pipeline && both.classified == 0,
         "{both:?}"
     );
+}
+
+/// A flat quad over x in [-1000, 0], y in [-1000, 1000] at z = 0, facing +z.
+fn left_half_quad() -> Scene {
+    let mut mesh = CpuMesh {
+        positions: vec![
+            [-1000.0, -1000.0, 0.0],
+            [0.0, -1000.0, 0.0],
+            [0.0, 1000.0, 0.0],
+            [-1000.0, 1000.0, 0.0],
+        ],
+        normals: Vec::new(),
+        indices: vec![0, 1, 2, 0, 2, 3],
+    };
+    mesh.compute_normals();
+    let mut scene = Scene::new();
+    let node = MeshNode {
+        mesh: Arc::new(mesh),
+        material: Material::default(),
+    };
+    scene
+        .add("quad", DMat4::IDENTITY, None, NodeContent::Mesh(node))
+        .unwrap();
+    scene
+}
+
+#[test]
+fn readback_handles_any_size_including_odd_widths() {
+    let ctx = context();
+    let scene = left_half_quad();
+    // Looking down -z with +y up: screen right is +x, so the quad fills the left half.
+    let camera = SceneCamera {
+        up: DVec3::Y,
+        projection: splatscene::scene::Projection::Orthographic { height: 2.0 },
+        ..SceneCamera::look_at(DVec3::new(0.0, 0.0, 5.0), DVec3::ZERO)
+    };
+    let options = FrameOptions {
+        background: Some([0.0, 0.0, 0.0]),
+        ..TRANSPARENT
+    };
+    let mut renderer = Renderer::new();
+    for (w, h) in [(1, 1), (2, 3), (63, 17), (65, 300), (257, 5), (1000, 2)] {
+        let shot = renderer
+            .screenshot(&ctx, &scene, &camera, (w, h), &options)
+            .unwrap();
+        assert_eq!(shot.frame.pixels.len(), (w * h) as usize);
+        assert_eq!(shot.depth.len(), (w * h) as usize);
+        let lit = shot.frame.pixels[0];
+        for y in 0..h {
+            for x in 0..w {
+                let p = shot.frame.pixels[(y * w + x) as usize];
+                let centre = f64::from(x) + 0.5 - f64::from(w) / 2.0;
+                if centre < 0.0 {
+                    assert_eq!(p, lit, "{w}x{h}: pixel ({x}, {y}) is on the quad");
+                    assert!(p[0] > 0.1 && p[3] == 1.0, "{w}x{h}: the quad is lit");
+                } else if centre > 0.0 {
+                    assert_eq!(
+                        p,
+                        [0.0, 0.0, 0.0, 1.0],
+                        "{w}x{h}: pixel ({x}, {y}) is background"
+                    );
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn twenty_million_splats_render() {
+    // 272^3 = 20.1M significant voxels: 80 MB of draw order and 20M splats, past the 128 MiB
+    // storage-binding ceiling that a per-splat storage buffer of 8 bytes or more would hit.
+    let ctx = context();
+    let n = 272u32;
+    let volume = CpuVolume {
+        dims: [n; 3],
+        spacing: [0.5; 3],
+        origin: [0.0; 3],
+        direction: glam::DMat3::IDENTITY,
+        values: vec![1300.0; (n * n * n) as usize],
+    };
+    let scene = volume_scene(volume, Ordering::IpPbtfImplicit);
+    let bounds = scene.bounds().unwrap();
+    let camera = SceneCamera::fit(bounds, DVec3::new(-0.4, 1.0, -0.5), Default::default(), 1.0);
+    let options = FrameOptions {
+        measure: true,
+        ..TRANSPARENT
+    };
+    let shot = Renderer::new()
+        .screenshot(&ctx, &scene, &camera, (48, 48), &options)
+        .unwrap();
+    assert_eq!(shot.report.splats, (n * n * n) as usize);
+    let centre = shot.frame.pixels[24 * 48 + 24];
+    assert!(centre[3] > 0.99, "the cube covers the centre: {centre:?}");
+    let corner = shot.frame.pixels[0];
+    assert_eq!(corner[3], 0.0, "the fitted cube leaves the corner empty");
+    eprintln!("20M splats: {:?}", shot.report.timings);
 }

@@ -148,19 +148,21 @@ impl Renderer {
         let started = Instant::now();
         self.upload(ctx, scene, view, &ordered, &mut report)?;
         if options.measure {
+            // Queue writes are staged until the next submission: submit nothing to flush them.
+            ctx.queue.submit([]);
             ctx.wait()?;
         }
         report.timings.upload = started.elapsed();
         let started = Instant::now();
         self.mesh_stage(ctx, scene, color, depth, options);
         if options.measure {
-            ctx.wait()?;
+            finish_drawing(ctx, color)?;
         }
         report.timings.mesh_pass = started.elapsed();
         let started = Instant::now();
         self.splat_stage(ctx, &ordered, color, depth);
         if options.measure {
-            ctx.wait()?;
+            finish_drawing(ctx, color)?;
         }
         report.timings.splat_pass = started.elapsed();
         report.mesh_pipeline = self.mesh_pass.is_some();
@@ -398,6 +400,36 @@ impl Renderer {
         }
         ctx.queue.submit([encoder.finish()]);
     }
+}
+
+/// Waits until everything drawn into `color` is really there. Software rasterisers such as
+/// llvmpipe bin geometry at submission and rasterise only when the pixels are needed, so a
+/// plain wait would leave the fragment work to whatever reads the target next: reading one
+/// texel back forces it.
+fn finish_drawing(ctx: &GpuContext, color: &wgpu::TextureView) -> Result<(), RenderError> {
+    let texture = color.texture();
+    let buffer = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("finish drawing"),
+        size: 256,
+        usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
+        mapped_at_creation: false,
+    });
+    let mut encoder = ctx.device.create_command_encoder(&Default::default());
+    encoder.copy_texture_to_buffer(
+        texture.as_image_copy(),
+        wgpu::TexelCopyBufferInfo {
+            buffer: &buffer,
+            layout: wgpu::TexelCopyBufferLayout {
+                offset: 0,
+                bytes_per_row: None,
+                rows_per_image: None,
+            },
+        },
+        wgpu::Extent3d::default(),
+    );
+    ctx.queue.submit([encoder.finish()]);
+    buffer.map_async(wgpu::MapMode::Read, .., |_| {});
+    ctx.wait()
 }
 
 /// A render pass on the targets; `clear` clears colour (and depth to 0, reversed far),

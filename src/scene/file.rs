@@ -1,6 +1,17 @@
 //! Scene files: a TOML description of volumes, meshes, camera, lights and output, read with
-//! serde. Relative paths are taken from the scene file's folder. `builtin:shoulder-phantom`
-//! and `builtin:prosthesis` name the built-in phantom and prosthesis.
+//! serde. Every table refuses fields it does not know, so a misspelt key is an error naming the
+//! file and the key rather than a setting silently left at its default.
+//!
+//! Paths of volumes and meshes are read as follows:
+//! - `builtin:shoulder-phantom` (volumes) and `builtin:prosthesis` (meshes) name the built-in
+//!   phantom and prosthesis;
+//! - `data:REST` names `REST` inside the shared test data folder: `$SPLATSCENE_DATA/REST`, or
+//!   `../shared/data/REST` relative to the current directory when `SPLATSCENE_DATA` is unset or
+//!   empty. `REST` must be a relative path that stays inside that folder (no `..`), so that a
+//!   scene file written against the data works on every machine that has the data, wherever it
+//!   lies;
+//! - any other relative path is taken from the scene file's folder; absolute paths are used as
+//!   they are.
 //!
 //! ```toml
 //! [output]
@@ -15,19 +26,31 @@
 //! transfer = "ct-bone"
 //! resect_humeral_head = true
 //!
+//! [[volume]]
+//! path = "data:volumes/engine/engine_256x256x128_uint8.raw"
+//! dims = [256, 256, 128]
+//! scalar = "u8"
+//! transfer = "ramp"
+//! window = [90, 200]
+//!
 //! [[mesh]]
 //! path = "builtin:prosthesis"
 //! seat = "phantom"
 //! ```
+//!
+//! `examples/scenes/` holds complete scene files.
 
-use std::path::{Path, PathBuf};
+use std::ffi::OsStr;
+use std::path::{Component, Path, PathBuf};
 use std::sync::Arc;
 
 use glam::{DMat4, DQuat, DVec3, EulerRot};
 use serde::Deserialize;
 use thiserror::Error;
 
-use super::shoulder::{add_model, prosthesis_model, resect_humeral_head};
+use super::shoulder::{
+    add_model, cut_away_anterior_humerus, prosthesis_model, resect_humeral_head,
+};
 use super::{
     Light, Lights, NodeContent, Projection, Scene, SceneCamera, SplatSettings, VolumeNode,
 };
@@ -74,6 +97,51 @@ pub enum SceneFileError {
     /// A volume did not load.
     #[error(transparent)]
     Volume(#[from] VolumeError),
+    /// A `data:` path names a file that is not in the shared data folder, most likely because
+    /// `SPLATSCENE_DATA` is not set to where the data lie.
+    #[error(
+        "{}: {} not found: `data:` paths are read from ${DATA_ENV} ({}); set {DATA_ENV} to the shared data folder",
+        path.display(),
+        file.display(),
+        describe_data_dir(data_var.as_deref())
+    )]
+    DataNotFound {
+        /// The scene file.
+        path: PathBuf,
+        /// The file the `data:` path resolved to.
+        file: PathBuf,
+        /// The value of `SPLATSCENE_DATA` when the path was resolved (`None` when unset).
+        data_var: Option<std::ffi::OsString>,
+    },
+}
+
+/// The environment variable naming the shared data folder that `data:` paths point into.
+pub const DATA_ENV: &str = "SPLATSCENE_DATA";
+
+/// The shared data folder when [`DATA_ENV`] is unset or empty, relative to the current
+/// directory (where it lies next to a checkout of the repository run from its root).
+pub const DEFAULT_DATA_DIR: &str = "../shared/data";
+
+/// The shared data folder: `$SPLATSCENE_DATA`, or [`DEFAULT_DATA_DIR`] when that is unset or
+/// empty.
+pub fn data_dir() -> PathBuf {
+    data_dir_from(std::env::var_os(DATA_ENV).as_deref())
+}
+
+fn data_dir_from(var: Option<&OsStr>) -> PathBuf {
+    match var {
+        // An empty value is far more likely a blank export than a wish for the current
+        // directory, so it counts as unset.
+        Some(v) if !v.is_empty() => PathBuf::from(v),
+        _ => PathBuf::from(DEFAULT_DATA_DIR),
+    }
+}
+
+fn describe_data_dir(var: Option<&OsStr>) -> String {
+    match var {
+        Some(v) if !v.is_empty() => format!("now {}", Path::new(v).display()),
+        _ => format!("unset, so {DEFAULT_DATA_DIR} relative to the current directory"),
+    }
 }
 
 /// Output settings.
@@ -177,6 +245,9 @@ pub struct VolumeSpec {
     /// The phantom only: remove the humeral head above the resection plane.
     #[serde(default)]
     pub resect_humeral_head: bool,
+    /// The phantom only: cut away the bone in front of the humeral shaft within this many
+    /// millimetres of its axis (the built-in scene uses 30), so that a stem shows in its canal.
+    pub cut_away_anterior_humerus: Option<f64>,
     /// Node transform.
     #[serde(default)]
     pub transform: TransformSpec,
@@ -268,9 +339,24 @@ impl SceneFile {
             path: path.into(),
             message,
         };
+        // The cheap checks come first, so that a typo is reported before volumes are read.
+        let size = self.output.size.map(|[w, h]| (w, h));
+        if size.is_some_and(|(w, h)| w == 0 || h == 0 || w > 16384 || h > 16384) {
+            return Err(invalid(format!(
+                "output size {size:?} is not between 1 and 16384"
+            )));
+        }
+        let ordering = match &self.output.ordering {
+            Some(name) => Some(
+                name.parse::<Ordering>()
+                    .map_err(|e| invalid(format!("output.ordering: {e}")))?,
+            ),
+            None => None,
+        };
+        let data = DataRoot::from_env();
         let mut scene = Scene::new();
         for (i, spec) in self.volumes.iter().enumerate() {
-            let node = load_volume(spec, base, &invalid)?;
+            let node = load_volume(spec, path, base, &data, &invalid)?;
             let name = spec
                 .name
                 .clone()
@@ -281,22 +367,9 @@ impl SceneFile {
                 .map_err(|e| invalid(e.to_string()))?;
         }
         for (i, spec) in self.meshes.iter().enumerate() {
-            load_mesh_spec(&mut scene, spec, i, base, &invalid)?;
+            load_mesh_spec(&mut scene, spec, i, path, base, &data, &invalid)?;
         }
         scene.lights = lights(&self.lights);
-        let size = self.output.size.map(|[w, h]| (w, h));
-        if size.is_some_and(|(w, h)| w == 0 || h == 0 || w > 16384 || h > 16384) {
-            return Err(invalid(format!(
-                "output size {size:?} is not between 1 and 16384"
-            )));
-        }
-        let ordering = match &self.output.ordering {
-            Some(name) => Some(
-                name.parse::<Ordering>()
-                    .map_err(|e| invalid(e.to_string()))?,
-            ),
-            None => None,
-        };
         let aspect = size.map_or(4.0 / 3.0, |(w, h)| f64::from(w) / f64::from(h));
         scene.camera = Some(camera(self.camera.as_ref(), &scene, aspect).map_err(&invalid)?);
         let background = if self.output.transparent {
@@ -320,31 +393,113 @@ pub fn load_scene_file(path: &Path) -> Result<LoadedScene, SceneFileError> {
     file.load(path, base)
 }
 
-fn resolve(base: &Path, path: &str) -> PathBuf {
-    let p = Path::new(path);
-    if p.is_absolute() {
-        p.into()
-    } else {
-        base.join(p)
+/// The data folder as read once per scene load, with the variable's value for error messages.
+struct DataRoot {
+    dir: PathBuf,
+    var: Option<std::ffi::OsString>,
+}
+
+impl DataRoot {
+    fn from_env() -> Self {
+        let var = std::env::var_os(DATA_ENV);
+        Self {
+            dir: data_dir_from(var.as_deref()),
+            var,
+        }
     }
+}
+
+/// Where a volume or mesh `path` of a scene file points (see the module documentation): a
+/// `data:` path inside `data_dir`, a relative path inside `base` (the scene file's folder), an
+/// absolute path as it is. Built-in names are not paths and must be handled before.
+///
+/// # Errors
+///
+/// A message when a `data:` path is empty, absolute, or climbs out of the data folder.
+pub fn resolve_path(path: &str, base: &Path, data_dir: &Path) -> Result<PathBuf, String> {
+    let Some(rest) = path.strip_prefix("data:") else {
+        let p = Path::new(path);
+        return Ok(if p.is_absolute() {
+            p.into()
+        } else {
+            base.join(p)
+        });
+    };
+    let rel = Path::new(rest);
+    let mut names = 0;
+    for component in rel.components() {
+        match component {
+            Component::Normal(_) => names += 1,
+            Component::CurDir => {}
+            // A data: path that leaves the data folder would make scene files depend on what
+            // lies around it, which is what the prefix exists to avoid.
+            Component::ParentDir | Component::RootDir | Component::Prefix(_) => {
+                return Err(format!(
+                    "{path:?}: a data: path must stay inside the data folder (relative, no ..)"
+                ));
+            }
+        }
+    }
+    if names == 0 {
+        return Err(format!(
+            "{path:?}: a data: path needs a file name after data:"
+        ));
+    }
+    Ok(data_dir.join(rel))
+}
+
+/// [`resolve_path`] with the scene's error types, and a missing `data:` file reported as
+/// [`SceneFileError::DataNotFound`] (which says what to set) instead of a bare read error.
+fn resolve_spec_path(
+    path: &str,
+    scene_file: &Path,
+    base: &Path,
+    data: &DataRoot,
+    invalid: &dyn Fn(String) -> SceneFileError,
+) -> Result<PathBuf, SceneFileError> {
+    let resolved = resolve_path(path, base, &data.dir).map_err(invalid)?;
+    if path.starts_with("data:") && !resolved.exists() {
+        return Err(SceneFileError::DataNotFound {
+            path: scene_file.into(),
+            file: resolved,
+            data_var: data.var.clone(),
+        });
+    }
+    Ok(resolved)
 }
 
 fn load_volume(
     spec: &VolumeSpec,
+    scene_file: &Path,
     base: &Path,
+    data: &DataRoot,
     invalid: &dyn Fn(String) -> SceneFileError,
 ) -> Result<VolumeNode, SceneFileError> {
     let volume = if spec.path == "builtin:shoulder-phantom" {
         let mut volume = shoulder_phantom_default();
+        let marks = shoulder_landmarks(DEFAULT_DIMS, DEFAULT_SPACING);
         if spec.resect_humeral_head {
-            resect_humeral_head(
-                &mut volume,
-                &shoulder_landmarks(DEFAULT_DIMS, DEFAULT_SPACING),
-            );
+            resect_humeral_head(&mut volume, &marks);
+        }
+        if let Some(reach) = spec.cut_away_anterior_humerus {
+            if !(reach.is_finite() && reach > 0.0) {
+                return Err(invalid(format!(
+                    "cut_away_anterior_humerus {reach} must be a positive number of millimetres"
+                )));
+            }
+            cut_away_anterior_humerus(&mut volume, &marks, reach);
         }
         volume
     } else {
-        load_raw_volume(spec, &resolve(base, &spec.path), invalid)?
+        if spec.cut_away_anterior_humerus.is_some() {
+            // The cut is placed by the phantom's landmarks, which no other volume has.
+            return Err(invalid(format!(
+                "volume {}: cut_away_anterior_humerus applies to builtin:shoulder-phantom only",
+                spec.path
+            )));
+        }
+        let file = resolve_spec_path(&spec.path, scene_file, base, data, invalid)?;
+        load_raw_volume(spec, &file, invalid)?
     };
     let transfer = match spec.transfer.as_deref().unwrap_or("ct-bone") {
         "ct-bone" => TransferFunction::ct_bone(),
@@ -408,13 +563,17 @@ fn load_mesh_spec(
     scene: &mut Scene,
     spec: &MeshSpec,
     index: usize,
+    scene_file: &Path,
     base: &Path,
+    data: &DataRoot,
     invalid: &dyn Fn(String) -> SceneFileError,
 ) -> Result<(), SceneFileError> {
     let mut model = if spec.path == "builtin:prosthesis" {
         prosthesis_model()?
     } else {
-        load_mesh(&resolve(base, &spec.path))?
+        load_mesh(&resolve_spec_path(
+            &spec.path, scene_file, base, data, invalid,
+        )?)?
     };
     for warning in &model.warnings {
         eprintln!("warning: {warning}");
