@@ -132,3 +132,71 @@ fn bad_arguments_fail_with_a_message() {
     ]);
     assert!(!same.status.success(), "eye at the default target");
 }
+
+#[test]
+fn render_writes_the_built_in_scene_at_any_size_with_depth() {
+    let (out, depth) = (temp_path("shoulder.png"), temp_path("shoulder-depth.png"));
+    let result = splatscene(&[
+        "render",
+        "--out",
+        out.to_str().unwrap(),
+        "--size",
+        "161x97",
+        "--depth",
+        depth.to_str().unwrap(),
+    ]);
+    assert!(
+        result.status.success(),
+        "{}",
+        String::from_utf8_lossy(&result.stderr)
+    );
+    let stderr = String::from_utf8_lossy(&result.stderr);
+    assert!(
+        stderr.contains("3 meshes") && stderr.contains("splats"),
+        "{stderr}"
+    );
+    let color = image::open(&out).unwrap();
+    assert_eq!((color.width(), color.height()), (161, 97));
+    let depth_image = image::open(&depth).unwrap();
+    assert!(
+        matches!(depth_image, image::DynamicImage::ImageLuma16(_)),
+        "16-bit grey depth"
+    );
+    let grey = depth_image.to_luma16();
+    let (near, far) = grey
+        .pixels()
+        .fold((u16::MAX, 0), |(lo, hi), p| (lo.min(p[0]), hi.max(p[0])));
+    assert!(
+        near < far && far == u16::MAX,
+        "the prosthesis has depth, the background is far"
+    );
+    std::fs::remove_file(&out).ok();
+    std::fs::remove_file(&depth).ok();
+}
+
+#[test]
+fn render_without_an_adapter_names_the_package_to_install() {
+    // No adapter of a backend this build lacks: wgpu finds nothing at all.
+    let out = temp_path("none.png");
+    let result = Command::new(env!("CARGO_BIN_EXE_splatscene"))
+        .args(["render", "--out", out.to_str().unwrap(), "--size", "8x8"])
+        .env("WGPU_BACKEND", "metal")
+        .output()
+        .unwrap();
+    assert!(!result.status.success());
+    let stderr = String::from_utf8_lossy(&result.stderr);
+    assert!(stderr.contains("mesa-vulkan-drivers"), "{stderr}");
+    assert!(!out.exists(), "no file on failure");
+}
+
+#[test]
+fn render_names_a_missing_scene_file() {
+    let result = splatscene(&[
+        "render",
+        "/nonexistent/plan.toml",
+        "--out",
+        "/tmp/never.png",
+    ]);
+    assert!(!result.status.success());
+    assert!(String::from_utf8_lossy(&result.stderr).contains("/nonexistent/plan.toml"));
+}
