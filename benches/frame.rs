@@ -1,0 +1,152 @@
+//! Frame time of the renderer: the engine and the CT head (classified with a ramp transfer
+//! function) with the prosthesis seated in them, at 512x512, on whatever adapter wgpu finds
+//! (lavapipe on machines without a GPU). Criterion times whole frames read back to the CPU;
+//! afterwards a few frames with stage timing print the split (order, upload, mesh pass, splat
+//! pass, readback), medians over the frames.
+//!
+//! `cargo bench --bench frame`; the data comes from `SPLATSCENE_DATA` (default
+//! `../shared/data`).
+
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::time::Duration;
+
+use criterion::{Criterion, criterion_group, criterion_main};
+use glam::{DMat4, DVec3};
+use splatscene::classify::TransferFunction;
+use splatscene::render::{FrameOptions, FrameTimings, GpuContext, Renderer};
+use splatscene::scene::shoulder::{add_model, prosthesis_model};
+use splatscene::scene::{NodeContent, Scene, SceneCamera, SplatSettings, VolumeNode};
+use splatscene::volume::CpuVolume;
+use splatscene::volume::raw::{
+    ByteOrder, RawSpec, ScalarType, load_raw, load_raw_slices, slice_stack,
+};
+
+fn data_dir() -> PathBuf {
+    std::env::var_os("SPLATSCENE_DATA")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/data"))
+}
+
+fn scene(volume: CpuVolume, tf: TransferFunction) -> Scene {
+    let mut scene = Scene::new();
+    let node = VolumeNode {
+        volume: Arc::new(volume),
+        transfer: Arc::new(tf),
+        splats: SplatSettings::default(),
+    };
+    scene
+        .add("ct", DMat4::IDENTITY, None, NodeContent::Volume(node))
+        .unwrap();
+    let (lo, hi) = scene.bounds().unwrap();
+    let at = DMat4::from_translation(0.5 * (lo + hi) + DVec3::new(0.0, 0.0, 0.2 * (hi.z - lo.z)));
+    add_model(&mut scene, "prosthesis", at, &prosthesis_model().unwrap());
+    let bounds = scene.bounds().unwrap();
+    scene.camera = Some(SceneCamera::fit(
+        bounds,
+        DVec3::new(-0.4, 1.0, -0.55),
+        Default::default(),
+        1.0,
+    ));
+    scene
+}
+
+fn scenes() -> Vec<(&'static str, Scene)> {
+    let dir = data_dir().join("volumes");
+    let engine = load_raw(
+        &dir.join("engine/engine_256x256x128_uint8.raw"),
+        &RawSpec::new([256, 256, 128], ScalarType::U8, ByteOrder::Little),
+    )
+    .expect("engine volume (set SPLATSCENE_DATA)");
+    let head_spec = RawSpec {
+        spacing: [1.0, 1.0, 2.0],
+        ..RawSpec::new([256, 256, 113], ScalarType::U16, ByteOrder::Big)
+    };
+    let head = load_raw_slices(
+        &slice_stack(&dir.join("stanford_cthead/CThead.1")).expect("CT head"),
+        &head_spec,
+    )
+    .expect("CT head volume");
+    vec![
+        (
+            "engine",
+            scene(
+                engine,
+                TransferFunction::ramp(100.0, 200.0, [0.85, 0.8, 0.75, 0.5]),
+            ),
+        ),
+        (
+            "cthead",
+            scene(
+                head,
+                TransferFunction::ramp(1200.0, 1800.0, [1.0, 0.93, 0.85, 0.6]),
+            ),
+        ),
+    ]
+}
+
+fn median(mut v: Vec<Duration>) -> f64 {
+    v.sort();
+    v[v.len() / 2].as_secs_f64() * 1e3
+}
+
+fn frames(c: &mut Criterion) {
+    let ctx = GpuContext::headless().expect("a GPU adapter (install mesa-vulkan-drivers)");
+    eprintln!("adapter: {}", ctx.describe());
+    let size = (512, 512);
+    let mut group = c.benchmark_group("frame");
+    group
+        .sample_size(10)
+        .warm_up_time(Duration::from_secs(1))
+        .measurement_time(Duration::from_secs(10));
+    for (name, scene) in scenes() {
+        let mut renderer = Renderer::new();
+        let base = scene.camera.unwrap();
+        let options = FrameOptions {
+            measure: false,
+            ..Default::default()
+        };
+        let mut turn = 0.0;
+        group.bench_function(name, |b| {
+            b.iter(|| {
+                turn += 7.0;
+                renderer
+                    .screenshot(&ctx, &scene, &base.orbit(turn, 0.0), size, &options)
+                    .unwrap()
+            })
+        });
+        let measured = FrameOptions {
+            measure: true,
+            ..options
+        };
+        let runs: Vec<FrameTimings> = (0..7)
+            .map(|i| {
+                let camera = base.orbit(f64::from(i) * 11.0, 0.0);
+                renderer
+                    .screenshot(&ctx, &scene, &camera, size, &measured)
+                    .unwrap()
+                    .report
+                    .timings
+            })
+            .collect();
+        let report = renderer
+            .screenshot(&ctx, &scene, &base, size, &measured)
+            .unwrap()
+            .report;
+        let stage = |f: fn(&FrameTimings) -> Duration| median(runs.iter().map(f).collect());
+        eprintln!(
+            "{name}: {} splats, {} triangles; median ms over 7 frames: order {:.1}, upload {:.1}, mesh pass {:.1}, splat pass {:.1}, readback {:.1}",
+            report.splats,
+            report.triangles,
+            stage(|t| t.order),
+            stage(|t| t.upload),
+            stage(|t| t.mesh_pass),
+            stage(|t| t.splat_pass),
+            stage(|t| t.readback),
+        );
+    }
+    group.finish();
+}
+
+criterion_group!(benches, frames);
+criterion_main!(benches);
