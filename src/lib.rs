@@ -5,7 +5,13 @@
 //! - [`grid`]: sparse sets of significant voxels with run-length rows (space skipping);
 //! - [`order`]: the view case and every visibility ordering (BTF, WBTF, PBTF, IP-PBTF explicit
 //!   and implicit, the exact sort, and a bucketed distance order);
-//! - [`composite`]: a CPU reference compositor of Gaussian splats and the error measure.
+//! - [`composite`]: a CPU reference compositor of Gaussian splats and the error measure;
+//! - [`volume`], [`classify`]: CT volumes, loaders, the built-in phantom, transfer functions;
+//! - [`mesh`]: triangle meshes with glTF, OBJ and STL loaders, and the prosthesis generator;
+//! - [`scene`]: the scene graph, camera, lights, scene files and the built-in shoulder scene.
+//!
+//! On top, [`render`]: a wgpu renderer (headless by default) that draws the meshes with a depth
+//! buffer, then the splats in visibility order, depth-tested against them.
 //!
 //! ```
 //! use splatscene::grid::SparseGrid;

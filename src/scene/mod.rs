@@ -127,6 +127,10 @@ impl Node {
 pub struct Scene {
     nodes: Vec<Node>,
     world: Vec<DMat4>,
+    /// Bounds of each node's own content in its frame (meshes and volumes).
+    local_bounds: Vec<Option<(DVec3, DVec3)>>,
+    /// World bounds of everything, redone on every edit.
+    bounds: Option<(DVec3, DVec3)>,
     generation: u64,
     /// The camera; [`SceneCamera::fit`] frames the scene when none was set.
     pub camera: Option<SceneCamera>,
@@ -155,6 +159,7 @@ impl Scene {
         }
         let id = NodeId(self.nodes.len());
         let world = parent.map_or(DMat4::IDENTITY, |p| self.world[p.0]) * local;
+        self.local_bounds.push(content_bounds(&content));
         self.nodes.push(Node {
             name,
             local,
@@ -166,7 +171,7 @@ impl Scene {
         if let Some(p) = parent {
             self.nodes[p.0].children.push(id);
         }
-        self.generation += 1;
+        self.edited();
         Ok(id)
     }
 
@@ -182,15 +187,16 @@ impl Scene {
                 parent.map_or(DMat4::IDENTITY, |p| self.world[p.0]) * self.nodes[n.0].local;
             stack.extend_from_slice(&self.nodes[n.0].children);
         }
-        self.generation += 1;
+        self.edited();
         Ok(())
     }
 
     /// Replaces a node's content (a new transfer function, say).
     pub fn set_content(&mut self, id: NodeId, content: NodeContent) -> Result<(), SceneError> {
         self.node(id)?;
+        self.local_bounds[id.0] = content_bounds(&content);
         self.nodes[id.0].content = content;
-        self.generation += 1;
+        self.edited();
         Ok(())
     }
 
@@ -242,30 +248,46 @@ impl Scene {
     }
 
     /// World-space bounds `(min, max)` of every mesh and volume, or `None` for a scene with
-    /// nothing to draw.
+    /// nothing to draw (kept up to date on every edit).
     pub fn bounds(&self) -> Option<(DVec3, DVec3)> {
-        let mut points = Vec::new();
-        for (_, m, world) in self.meshes() {
-            if let Some((lo, hi)) = m.mesh.bounds() {
-                let (lo, hi) = (
-                    DVec3::from(lo.map(f64::from)),
-                    DVec3::from(hi.map(f64::from)),
-                );
-                points.extend(box_corners(lo, hi).map(|c| world.transform_point3(c)));
-            }
+        self.bounds
+    }
+
+    fn edited(&mut self) {
+        self.generation += 1;
+        let corners = self
+            .local_bounds
+            .iter()
+            .zip(&self.world)
+            .filter_map(|(b, world)| {
+                b.map(|(lo, hi)| box_corners(lo, hi).map(|c| world.transform_point3(c)))
+            })
+            .flatten();
+        self.bounds = corners.fold(None, |acc, p| match acc {
+            None => Some((p, p)),
+            Some((lo, hi)) => Some((lo.min(p), hi.max(p))),
+        });
+    }
+}
+
+/// Bounds of a node's content in its own frame.
+fn content_bounds(content: &NodeContent) -> Option<(DVec3, DVec3)> {
+    match content {
+        NodeContent::Empty => None,
+        NodeContent::Mesh(m) => m.mesh.bounds().map(|(lo, hi)| {
+            (
+                DVec3::from(lo.map(f64::from)),
+                DVec3::from(hi.map(f64::from)),
+            )
+        }),
+        NodeContent::Volume(v) => {
+            let placement = volume_placement(&v.volume);
+            let hi = DVec3::from(v.volume.dims.map(|n| f64::from(n.max(1)) - 1.0));
+            let corners = box_corners(DVec3::ZERO, hi).map(|c| placement.transform_point3(c));
+            let lo = corners.iter().fold(corners[0], |a, c| a.min(*c));
+            let hi = corners.iter().fold(corners[0], |a, c| a.max(*c));
+            Some((lo, hi))
         }
-        for (_, v, world) in self.volumes() {
-            let vol = &v.volume;
-            let to_world = world * volume_placement(vol);
-            let hi = DVec3::from(vol.dims.map(|n| f64::from(n.max(1)) - 1.0));
-            points.extend(box_corners(DVec3::ZERO, hi).map(|c| to_world.transform_point3(c)));
-        }
-        let first = *points.first()?;
-        Some(
-            points
-                .iter()
-                .fold((first, first), |(lo, hi), p| (lo.min(*p), hi.max(*p))),
-        )
     }
 }
 
@@ -298,4 +320,78 @@ fn check_transform(name: &str, m: &DMat4) -> Result<(), SceneError> {
         });
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn cube() -> NodeContent {
+        let mut mesh = CpuMesh {
+            positions: vec![[0.0; 3], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [1.0, 1.0, 1.0]],
+            normals: Vec::new(),
+            indices: vec![0, 1, 2, 1, 3, 2],
+        };
+        mesh.compute_normals();
+        NodeContent::Mesh(MeshNode {
+            mesh: Arc::new(mesh),
+            material: Material::default(),
+        })
+    }
+
+    #[test]
+    fn world_transforms_and_bounds_follow_edits() {
+        let mut scene = Scene::new();
+        assert_eq!(scene.bounds(), None);
+        let group = scene
+            .add(
+                "group",
+                DMat4::from_translation(DVec3::X * 10.0),
+                None,
+                NodeContent::Empty,
+            )
+            .unwrap();
+        let child = scene
+            .add(
+                "cube",
+                DMat4::from_scale(DVec3::splat(2.0)),
+                Some(group),
+                cube(),
+            )
+            .unwrap();
+        assert_eq!(
+            scene.bounds(),
+            Some((DVec3::new(10.0, 0.0, 0.0), DVec3::new(12.0, 2.0, 2.0)))
+        );
+        let before = scene.generation();
+        scene
+            .set_local(group, DMat4::from_translation(DVec3::Z * -5.0))
+            .unwrap();
+        assert!(scene.generation() > before);
+        let moved = scene.world(child).transform_point3(DVec3::ONE);
+        assert_eq!(moved, DVec3::new(2.0, 2.0, -3.0));
+        assert_eq!(
+            scene.bounds(),
+            Some((DVec3::new(0.0, 0.0, -5.0), DVec3::new(2.0, 2.0, -3.0)))
+        );
+        assert_eq!(scene.node(group).unwrap().children(), &[child]);
+        assert_eq!(scene.find("cube"), Some(child));
+    }
+
+    #[test]
+    fn bad_transforms_and_unknown_nodes_are_refused() {
+        let mut scene = Scene::new();
+        let nan = DMat4::from_translation(DVec3::new(f64::NAN, 0.0, 0.0));
+        assert!(matches!(
+            scene.add("bad", nan, None, cube()),
+            Err(SceneError::BadTransform { .. })
+        ));
+        let flat = DMat4::from_scale(DVec3::new(1.0, 0.0, 1.0));
+        assert!(scene.add("flat", flat, None, cube()).is_err());
+        assert!(matches!(
+            scene.add("orphan", DMat4::IDENTITY, Some(NodeId(7)), cube()),
+            Err(SceneError::NoSuchNode(NodeId(7)))
+        ));
+        assert!(scene.nodes().is_empty(), "nothing half-added");
+    }
 }
