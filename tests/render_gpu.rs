@@ -66,17 +66,19 @@ const TRANSPARENT: FrameOptions = FrameOptions {
     measure: false,
 };
 
-#[test]
-fn gpu_frame_matches_the_cpu_reference_compositor() {
+/// The GPU frame of `camera` against the CPU reference compositor of the same order, which
+/// sees an orthographic camera as a very distant pinhole.
+fn gpu_against_cpu(
+    camera: SceneCamera,
+    size: (u32, u32),
+) -> (splatscene::composite::ImageDifference, usize) {
     let ctx = context();
     let volume = shells(20, [1.0, 1.0, 1.5]);
     let geometry = volume.geometry().unwrap();
-    let centre = geometry.centre_world();
-    let camera = SceneCamera::look_at(centre + DVec3::new(9.0, -38.0, 14.0), centre);
     let scene = volume_scene(volume.clone(), Ordering::IpPbtfImplicit);
     let mut renderer = Renderer::new();
     let shot = renderer
-        .screenshot(&ctx, &scene, &camera, (97, 81), &TRANSPARENT)
+        .screenshot(&ctx, &scene, &camera, size, &TRANSPARENT)
         .unwrap();
 
     let classified = classify(&volume, &TransferFunction::ct_bone(), 1.0 / 255.0).unwrap();
@@ -103,16 +105,40 @@ fn gpu_frame_matches_the_cpu_reference_compositor() {
         colors: &colors,
     };
     let (reference, _) = composite(&pinhole, &splats, &ids, &SplatStyle::default()).unwrap();
-    let d = compare(&shot.frame, &reference).unwrap();
-    let covered = reference.pixels.iter().filter(|p| p[3] > 0.05).count();
-    eprintln!(
-        "GPU vs CPU: {d:?}, {covered} covered pixels, {} splats",
-        shot.report.splats
-    );
-    assert!(covered > 2000, "the volume fills much of the image");
     assert_eq!(shot.report.splats, ids.len());
+    let covered = reference.pixels.iter().filter(|p| p[3] > 0.05).count();
+    (compare(&shot.frame, &reference).unwrap(), covered)
+}
+
+#[test]
+fn gpu_frame_matches_the_cpu_reference_compositor() {
+    let centre = shells(20, [1.0, 1.0, 1.5])
+        .geometry()
+        .unwrap()
+        .centre_world();
+    let camera = SceneCamera::look_at(centre + DVec3::new(9.0, -38.0, 14.0), centre);
+    let (d, covered) = gpu_against_cpu(camera, (97, 81));
+    eprintln!("GPU vs CPU, perspective: {d:?}, {covered} covered pixels");
+    assert!(covered > 2000, "the volume fills much of the image");
     // Measured on lavapipe (llvmpipe, LLVM 15): max 0.0038, no pixel off by more than 4/255.
     // The GPU blends in 16-bit float and evaluates the footprints in f32.
+    assert!(d.max_abs < 3.0 / 255.0, "{d:?}");
+    assert!(d.bad_pixel_share <= 0.002, "{d:?}");
+}
+
+#[test]
+fn orthographic_gpu_frame_matches_a_distant_cpu_pinhole() {
+    let centre = shells(20, [1.0, 1.0, 1.5])
+        .geometry()
+        .unwrap()
+        .centre_world();
+    let camera = SceneCamera {
+        projection: splatscene::scene::Projection::Orthographic { height: 40.0 },
+        ..SceneCamera::look_at(centre + DVec3::new(-20.0, -30.0, 12.0), centre)
+    };
+    let (d, covered) = gpu_against_cpu(camera, (80, 64));
+    eprintln!("GPU vs CPU, orthographic: {d:?}, {covered} covered pixels");
+    assert!(covered > 1000, "the volume fills much of the image");
     assert!(d.max_abs < 3.0 / 255.0, "{d:?}");
     assert!(d.bad_pixel_share <= 0.002, "{d:?}");
 }
