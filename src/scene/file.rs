@@ -690,3 +690,264 @@ fn camera(spec: Option<&CameraSpec>, scene: &Scene, aspect: f64) -> Result<Scene
     camera.pinhole(16, 16, 0.0).map_err(|e| e.to_string())?;
     Ok(camera)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::NodeId;
+    use crate::scene::shoulder::shoulder_scene;
+
+    /// A fresh folder for one test's files, removed when dropped.
+    struct TempDir(PathBuf);
+
+    impl TempDir {
+        fn new(name: &str) -> Self {
+            let dir = std::env::temp_dir().join(format!(
+                "splatscene-scene-file-{}-{name}",
+                std::process::id()
+            ));
+            let _ = std::fs::remove_dir_all(&dir);
+            std::fs::create_dir_all(&dir).expect("create a temporary folder");
+            Self(dir)
+        }
+
+        fn write(&self, name: &str, text: &str) -> PathBuf {
+            let path = self.0.join(name);
+            std::fs::write(&path, text).expect("write a temporary file");
+            path
+        }
+    }
+
+    impl Drop for TempDir {
+        fn drop(&mut self) {
+            let _ = std::fs::remove_dir_all(&self.0);
+        }
+    }
+
+    fn manifest_path(rel: &str) -> PathBuf {
+        Path::new(env!("CARGO_MANIFEST_DIR")).join(rel)
+    }
+
+    #[test]
+    fn data_paths_resolve_inside_the_data_folder() {
+        let base = Path::new("/scenes");
+        let data = Path::new("/mnt/data");
+        assert_eq!(
+            resolve_path("data:volumes/lidc2/ct.raw", base, data).unwrap(),
+            Path::new("/mnt/data/volumes/lidc2/ct.raw")
+        );
+        assert_eq!(
+            resolve_path("data:./meshes/bone.stl", base, data).unwrap(),
+            Path::new("/mnt/data/meshes/bone.stl")
+        );
+        // Paths without the prefix keep their old meaning.
+        assert_eq!(
+            resolve_path("meshes/bone.stl", base, data).unwrap(),
+            Path::new("/scenes/meshes/bone.stl")
+        );
+        assert_eq!(
+            resolve_path("/abs/bone.stl", base, data).unwrap(),
+            Path::new("/abs/bone.stl")
+        );
+        for bad in [
+            "data:",
+            "data:.",
+            "data:../secret",
+            "data:a/../../b",
+            "data:/etc/passwd",
+        ] {
+            let message = resolve_path(bad, base, data).unwrap_err();
+            assert!(message.contains(bad), "{bad}: {message}");
+        }
+    }
+
+    #[test]
+    fn the_data_folder_comes_from_the_variable_or_the_default() {
+        let default = Path::new(DEFAULT_DATA_DIR);
+        assert_eq!(data_dir_from(None), default);
+        assert_eq!(data_dir_from(Some(OsStr::new(""))), default);
+        assert_eq!(
+            data_dir_from(Some(OsStr::new("/srv/data"))),
+            Path::new("/srv/data")
+        );
+        assert_eq!(
+            data_dir(),
+            data_dir_from(std::env::var_os(DATA_ENV).as_deref())
+        );
+    }
+
+    #[test]
+    fn a_data_volume_loads_through_the_data_folder() {
+        let rel = "volumes/datraw_small/Bucky_32x32x32_uint8.raw";
+        if !data_dir().join(rel).exists() {
+            eprintln!(
+                "skipped: {} has no {rel} (set {DATA_ENV})",
+                data_dir().display()
+            );
+            return;
+        }
+        let dir = TempDir::new("data-volume");
+        let path = dir.write(
+            "bucky.toml",
+            &format!(
+                "[[volume]]\npath = \"data:{rel}\"\ndims = [32, 32, 32]\nscalar = \"u8\"\n\
+                 transfer = \"ramp\"\nwindow = [40, 200]\n"
+            ),
+        );
+        let loaded = load_scene_file(&path).unwrap();
+        let (_, node, _) = loaded.scene.volumes().next().unwrap();
+        assert_eq!(node.volume.dims, [32, 32, 32]);
+    }
+
+    #[test]
+    fn a_missing_data_file_says_what_to_set() {
+        let dir = TempDir::new("missing-data");
+        let path = dir.write("scene.toml", "[[mesh]]\npath = \"data:no/such/bone.stl\"\n");
+        let err = load_scene_file(&path).unwrap_err();
+        let SceneFileError::DataNotFound { file, .. } = &err else {
+            panic!("expected DataNotFound, got {err:?}");
+        };
+        assert!(file.ends_with("no/such/bone.stl"), "{}", file.display());
+        let message = err.to_string();
+        assert!(message.contains(DATA_ENV), "{message}");
+        assert!(message.contains("scene.toml"), "{message}");
+    }
+
+    #[test]
+    fn an_unknown_field_is_a_parse_error_naming_file_and_field() {
+        let dir = TempDir::new("unknown-field");
+        let path = dir.write(
+            "typo.toml",
+            "[[volume]]\npath = \"builtin:shoulder-phantom\"\ntransfer_function = \"ct-bone\"\n",
+        );
+        let err = SceneFile::read(&path).unwrap_err();
+        assert!(matches!(err, SceneFileError::Parse { .. }), "{err:?}");
+        let message = err.to_string();
+        assert!(message.contains("typo.toml"), "{message}");
+        assert!(message.contains("transfer_function"), "{message}");
+    }
+
+    #[test]
+    fn a_missing_mesh_file_is_a_typed_error_naming_the_path() {
+        let dir = TempDir::new("missing-mesh");
+        let path = dir.write("scene.toml", "[[mesh]]\npath = \"implants/stem.stl\"\n");
+        let err = load_scene_file(&path).unwrap_err();
+        let SceneFileError::Mesh(MeshError::Io { file, .. }) = &err else {
+            panic!("expected a mesh read error, got {err:?}");
+        };
+        assert_eq!(file, &dir.0.join("implants/stem.stl"));
+        assert!(err.to_string().contains("stem.stl"), "{err}");
+    }
+
+    #[test]
+    fn a_bad_ordering_is_named() {
+        let err = SceneFile::parse("[output]\nordering = \"zigzag\"\n", Path::new("o.toml"))
+            .unwrap()
+            .load(Path::new("o.toml"), Path::new("."))
+            .unwrap_err();
+        assert!(matches!(err, SceneFileError::Invalid { .. }), "{err:?}");
+        let message = err.to_string();
+        assert!(message.contains("zigzag"), "{message}");
+        assert!(message.contains("o.toml"), "{message}");
+    }
+
+    #[test]
+    fn a_raw_volume_without_dims_is_invalid() {
+        // The file does not exist: the missing dims must be reported before any read.
+        let err = SceneFile::parse(
+            "[[volume]]\npath = \"ct.raw\"\nscalar = \"u8\"\n",
+            Path::new("raw.toml"),
+        )
+        .unwrap()
+        .load(Path::new("raw.toml"), Path::new("."))
+        .unwrap_err();
+        assert!(matches!(err, SceneFileError::Invalid { .. }), "{err:?}");
+        assert!(err.to_string().contains("dims"), "{err}");
+    }
+
+    #[test]
+    fn a_scene_file_over_one_mebibyte_is_refused() {
+        let dir = TempDir::new("large");
+        let comment = format!("#{}\n", "x".repeat(1 << 20));
+        let path = dir.write("large.toml", &comment);
+        let err = SceneFile::read(&path).unwrap_err();
+        assert!(matches!(err, SceneFileError::Invalid { .. }), "{err:?}");
+        assert!(err.to_string().contains("too large"), "{err}");
+        // Exactly at the limit a file is read (an empty scene, all comment).
+        let path = dir.write("limit.toml", &format!("#{}\n", "x".repeat((1 << 20) - 2)));
+        assert_eq!(std::fs::metadata(&path).unwrap().len(), 1 << 20);
+        // `is_ok` rather than `unwrap`: a failure would print a mebibyte of parser context.
+        assert!(SceneFile::read(&path).is_ok());
+    }
+
+    #[test]
+    fn the_anterior_cutaway_applies_to_the_phantom_only() {
+        let load = |text: &str| {
+            SceneFile::parse(text, Path::new("c.toml"))
+                .unwrap()
+                .load(Path::new("c.toml"), Path::new("."))
+        };
+        let err = load(
+            "[[volume]]\npath = \"ct.raw\"\ndims = [2, 2, 2]\nscalar = \"u8\"\ncut_away_anterior_humerus = 30.0\n",
+        )
+        .unwrap_err();
+        assert!(
+            err.to_string().contains("builtin:shoulder-phantom"),
+            "{err}"
+        );
+        let err = load(
+            "[[volume]]\npath = \"builtin:shoulder-phantom\"\ncut_away_anterior_humerus = -1.0\n",
+        )
+        .unwrap_err();
+        assert!(err.to_string().contains("positive"), "{err}");
+    }
+
+    #[test]
+    fn the_shoulder_example_is_the_built_in_scene() {
+        let loaded = load_scene_file(&manifest_path("examples/scenes/shoulder.toml")).unwrap();
+        let built_in = shoulder_scene().unwrap();
+        let (file, code) = (&loaded.scene, &built_in);
+        assert_eq!(loaded.size, Some((800, 600)));
+        assert_eq!(file.nodes().len(), code.nodes().len());
+        for (i, (a, b)) in file.nodes().iter().zip(code.nodes()).enumerate() {
+            assert_eq!(a.name, b.name);
+            let (wa, wb) = (file.world(NodeId(i)), code.world(NodeId(i)));
+            assert!(wa.abs_diff_eq(wb, 1e-9), "{}: {wa} vs {wb}", a.name);
+        }
+        let (_, va, _) = file.volumes().next().unwrap();
+        let (_, vb, _) = code.volumes().next().unwrap();
+        assert!(*va.volume == *vb.volume, "the volumes differ");
+        assert_eq!(va.transfer, vb.transfer);
+        assert_eq!(va.splats, vb.splats);
+        let (ca, cb) = (file.camera.unwrap(), code.camera.unwrap());
+        assert!(ca.eye.abs_diff_eq(cb.eye, 1e-9), "{ca:?} vs {cb:?}");
+        assert!(ca.target.abs_diff_eq(cb.target, 1e-9));
+        assert_eq!(ca.up, cb.up);
+        assert_eq!(ca.projection, cb.projection);
+        assert_eq!(file.lights, code.lights);
+    }
+
+    #[test]
+    fn the_overlay_example_parses_and_loads_when_the_data_is_there() {
+        let path = manifest_path("examples/scenes/overlay-lidc2.toml");
+        let file = SceneFile::read(&path).unwrap();
+        assert_eq!(file.output.size, Some([512, 512]));
+        let ct = "volumes/lidc2/lidc2_256x256x133_uint8.raw";
+        if !data_dir().join(ct).exists() {
+            eprintln!("skipped loading: {} has no {ct}", data_dir().display());
+            return;
+        }
+        let loaded = load_scene_file(&path).unwrap();
+        let (_, node, _) = loaded.scene.volumes().next().unwrap();
+        assert_eq!(node.volume.dims, [256, 256, 133]);
+        // The prosthesis head centre, (-7.0004, 0, 7.0004) in its own frame, sits at the
+        // humeral head centre found in the scan, voxel (25.7, 116.2, 7.8).
+        let group = loaded.scene.find("prosthesis").unwrap();
+        let head = loaded
+            .scene
+            .world(group)
+            .transform_point3(DVec3::new(-7.0004, 0.0, 7.0004));
+        let expected = DVec3::new(25.71 * 1.40625, 116.19 * 1.40625, 7.82 * 2.5);
+        assert!(head.distance(expected) < 0.05, "{head} vs {expected}");
+    }
+}

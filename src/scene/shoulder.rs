@@ -32,19 +32,9 @@ pub fn resect_humeral_head(volume: &mut CpuVolume, marks: &ShoulderLandmarks) {
     let centre = DVec3::from_array(marks.head_centre);
     let normal = DVec3::from_array(marks.neck_normal);
     let reach = marks.head_radius + 3.0;
-    let [nx, ny, _] = volume.dims.map(|n| n as usize);
-    let placement = super::volume_placement(volume);
-    for (id, value) in volume.values.iter_mut().enumerate() {
-        let k = DVec3::new(
-            (id % nx) as f64,
-            (id / nx % ny) as f64,
-            (id / (nx * ny)) as f64,
-        );
-        let p = placement.transform_point3(k);
-        if (p - centre).length() < reach && (p - centre).dot(normal) > 0.0 {
-            *value = value.min(SOFT_TISSUE_HU);
-        }
-    }
+    soften_where(volume, |p| {
+        (p - centre).length() < reach && (p - centre).dot(normal) > 0.0
+    });
 }
 
 /// Cuts away the anterior half of the humerus (bone in front of the plane through the shaft
@@ -52,6 +42,11 @@ pub fn resect_humeral_head(volume: &mut CpuVolume, marks: &ShoulderLandmarks) {
 /// its canal.
 pub fn cut_away_anterior_humerus(volume: &mut CpuVolume, marks: &ShoulderLandmarks, reach: f64) {
     let axis = DVec3::from_array(marks.shaft_axis_bottom);
+    soften_where(volume, |p| p.y > axis.y && (p.x - axis.x).abs() < reach);
+}
+
+/// Lowers every voxel whose centre (in the volume's frame) satisfies `inside` to soft tissue.
+fn soften_where(volume: &mut CpuVolume, inside: impl Fn(DVec3) -> bool) {
     let [nx, ny, _] = volume.dims.map(|n| n as usize);
     let placement = super::volume_placement(volume);
     for (id, value) in volume.values.iter_mut().enumerate() {
@@ -60,9 +55,7 @@ pub fn cut_away_anterior_humerus(volume: &mut CpuVolume, marks: &ShoulderLandmar
             (id / nx % ny) as f64,
             (id / (nx * ny)) as f64,
         );
-        let p = placement.transform_point3(k);
-        let lateral = (p.x - axis.x).abs();
-        if p.y > axis.y && lateral < reach && p.x > axis.x - reach {
+        if inside(placement.transform_point3(k)) {
             *value = value.min(SOFT_TISSUE_HU);
         }
     }
