@@ -4,8 +4,14 @@ use glam::{DAffine3, DMat3};
 
 use crate::order::{OrderError, VolumeGeometry};
 
+pub mod dat;
+pub mod detect;
+pub mod dicom;
+pub mod nifti;
+pub mod nrrd;
 pub mod phantom;
 pub mod raw;
+pub mod vtk;
 
 pub use phantom::{
     ShoulderLandmarks, shoulder_landmarks, shoulder_phantom, shoulder_phantom_default,

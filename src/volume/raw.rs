@@ -21,6 +21,14 @@ use crate::grid::{GridError, voxel_count};
 /// Problems loading a volume; each names the file concerned.
 #[derive(Debug, Error)]
 pub enum VolumeError {
+    /// A DICOM file or series could not be used (see `volume::dicom`).
+    #[error("{}: {message}", path.display())]
+    Dicom {
+        /// The file or series folder.
+        path: PathBuf,
+        /// What is wrong.
+        message: String,
+    },
     /// The file could not be opened or read.
     #[error("{}: cannot read: {source}", path.display())]
     Io {
