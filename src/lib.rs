@@ -33,6 +33,7 @@ pub mod composite;
 pub mod grid;
 pub mod mesh;
 pub mod order;
+pub mod pick;
 pub mod render;
 pub mod report;
 pub mod scene;

@@ -5,7 +5,7 @@ use std::collections::HashMap;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use glam::{DAffine3, DMat3, DMat4};
+use glam::{DMat3, DMat4};
 
 use super::mesh_pass::{GpuMesh, MeshPass};
 use super::splat_pass::{GpuVolume, SplatPass};
@@ -15,7 +15,7 @@ use super::{GpuContext, RenderError};
 use crate::classify::{Classified, TransferFunction, classify};
 use crate::composite::Frame;
 use crate::order::{OrderOptions, Orderer, Ordering, ViewCase, VolumeGeometry};
-use crate::scene::{NodeId, Scene, SceneCamera, volume_placement};
+use crate::scene::{NodeId, Scene, SceneCamera, placed_geometry};
 use crate::volume::CpuVolume;
 
 /// Per-frame choices that are not part of the scene.
@@ -283,7 +283,7 @@ impl Renderer {
                 node: name.clone(),
                 message,
             };
-            let geometry = node_geometry(&node.volume, world).map_err(fail)?;
+            let geometry = placed_geometry(&node.volume, world).map_err(|e| fail(e.to_string()))?;
             let case = ViewCase::new(&geometry, pinhole.eye, pinhole.target)
                 .map_err(|e| fail(e.to_string()))?;
             let ordering = options.ordering.unwrap_or(node.splats.ordering);
@@ -488,15 +488,4 @@ fn class_key(
 
 fn linear_part(m: DMat4) -> DMat3 {
     DMat3::from_mat4(m)
-}
-
-/// The index-to-world placement of a volume under its node transform.
-pub(crate) fn node_geometry(volume: &CpuVolume, world: DMat4) -> Result<VolumeGeometry, String> {
-    let m = world * volume_placement(volume);
-    let affine = m.row(3).abs_diff_eq(glam::DVec4::W, 1e-12);
-    if !affine {
-        return Err("node transform is not affine".into());
-    }
-    let placement = DAffine3::from_mat3_translation(DMat3::from_mat4(m), m.w_axis.truncate());
-    VolumeGeometry::new(volume.dims, placement).map_err(|e| e.to_string())
 }

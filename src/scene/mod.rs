@@ -10,7 +10,7 @@ use thiserror::Error;
 use crate::classify::TransferFunction;
 use crate::composite::SplatStyle;
 use crate::mesh::{CpuMesh, Material};
-use crate::order::Ordering;
+use crate::order::{OrderError, Ordering, VolumeGeometry};
 use crate::volume::CpuVolume;
 
 pub mod file;
@@ -20,7 +20,8 @@ mod view;
 pub use view::{Light, Lights, Projection, SceneCamera};
 
 /// Index of a node in its [`Scene`].
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, serde::Serialize)]
+#[serde(transparent)]
 pub struct NodeId(pub usize);
 
 /// Why a scene edit was refused.
@@ -289,6 +290,19 @@ fn content_bounds(content: &NodeContent) -> Option<(DVec3, DVec3)> {
             Some((lo, hi))
         }
     }
+}
+
+/// The index-to-world placement of a volume under its node's world transform.
+pub fn placed_geometry(volume: &CpuVolume, world: DMat4) -> Result<VolumeGeometry, OrderError> {
+    let m = world * volume_placement(volume);
+    if !m.row(3).abs_diff_eq(glam::DVec4::W, 1e-12) {
+        return Err(OrderError::SingularTransform);
+    }
+    let linear = glam::DMat3::from_mat4(m);
+    VolumeGeometry::new(
+        volume.dims,
+        glam::DAffine3::from_mat3_translation(linear, m.w_axis.truncate()),
+    )
 }
 
 /// Voxel index coordinates to the volume node's frame: direction x spacing, then the origin.

@@ -1,0 +1,99 @@
+//! The voxel walk: from where a ray enters the grid, voxel by voxel in the order the ray
+//! crosses them (Amanatides & Woo 1987), to the first voxel whose opacity exceeds a threshold.
+
+use glam::DVec3;
+
+use super::{Ray, VolumeHit};
+use crate::order::VolumeGeometry;
+use crate::scene::{NodeId, VolumeNode};
+
+/// The first voxel of `node` along `ray`, nearer than `max_distance`, whose opacity under the
+/// node's transfer function exceeds `threshold`. Voxel `k` fills the cell `k - 0.5 .. k + 0.5`
+/// in index space.
+pub fn march_volume(
+    id: NodeId,
+    node: &VolumeNode,
+    geometry: &VolumeGeometry,
+    ray: &Ray,
+    threshold: f32,
+    max_distance: f64,
+) -> Option<VolumeHit> {
+    let dims = geometry.dims();
+    let o = geometry.world_to_index(ray.origin);
+    let d = geometry.world_dir_to_index(ray.direction);
+    let (mut t, t_exit) = enter_grid(o, d, dims)?;
+    t = t.max(ray.t_min);
+    if t >= t_exit.min(max_distance) {
+        return None;
+    }
+    let start = o + d * t;
+    let mut k: [i64; 3] = std::array::from_fn(|a| {
+        (start[a] + 0.5)
+            .floor()
+            .clamp(0.0, f64::from(dims[a]) - 1.0) as i64
+    });
+    let mut step = [0i64; 3];
+    let mut t_next = [f64::INFINITY; 3];
+    let mut t_delta = [f64::INFINITY; 3];
+    for a in 0..3 {
+        if d[a] != 0.0 {
+            step[a] = if d[a] > 0.0 { 1 } else { -1 };
+            let boundary = k[a] as f64 + 0.5 * step[a] as f64;
+            t_next[a] = (boundary - o[a]) / d[a];
+            t_delta[a] = 1.0 / d[a].abs();
+        }
+    }
+    let [nx, ny, _] = dims.map(|n| n as usize);
+    let limit = t_exit.min(max_distance);
+    let steps = dims.iter().map(|&n| n as usize).sum::<usize>() + 3;
+    for _ in 0..steps {
+        let [x, y, z] = k.map(|v| v as usize);
+        let value = node
+            .volume
+            .values
+            .get(x + nx * (y + ny * z))
+            .copied()
+            .unwrap_or(f32::NAN);
+        let opacity = node.transfer.sample(value)[3];
+        if opacity > threshold {
+            return Some(VolumeHit {
+                node: id,
+                voxel: k.map(|v| v as u32),
+                point: ray.at(t).to_array(),
+                value,
+                opacity,
+                distance: t,
+            });
+        }
+        let a = (0..3).min_by(|&i, &j| t_next[i].total_cmp(&t_next[j]))?;
+        t = t_next[a];
+        if t >= limit {
+            return None;
+        }
+        k[a] += step[a];
+        if k[a] < 0 || k[a] >= i64::from(dims[a]) {
+            return None;
+        }
+        t_next[a] += t_delta[a];
+    }
+    None
+}
+
+/// Where the ray `o + t d` enters and leaves the grid's box `[-0.5, n - 0.5]` on every axis.
+fn enter_grid(o: DVec3, d: DVec3, dims: [u32; 3]) -> Option<(f64, f64)> {
+    let (mut t0, mut t1) = (f64::NEG_INFINITY, f64::INFINITY);
+    for a in 0..3 {
+        let (lo, hi) = (-0.5, f64::from(dims[a]) - 0.5);
+        if d[a] == 0.0 {
+            if o[a] < lo || o[a] > hi {
+                return None;
+            }
+            continue;
+        }
+        let (ta, tb) = ((lo - o[a]) / d[a], (hi - o[a]) / d[a]);
+        t0 = t0.max(ta.min(tb));
+        t1 = t1.min(ta.max(tb));
+    }
+    // The direction is not zero, so some axis bounds t0 and t1.
+    (t0 <= t1 && t1 >= 0.0).then_some((t0.max(0.0), t1))
+}
