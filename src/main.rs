@@ -12,16 +12,12 @@ use indicatif::{ProgressBar, ProgressStyle};
 use splatscene::classify::{Classified, TransferFunction, classify};
 use splatscene::grid::SparseGrid;
 use splatscene::order::{OrderOptions, Orderer, Ordering, ViewCase, VolumeGeometry};
-use splatscene::render::{
-    FrameOptions, GpuContext, Renderer, depth_range, depth_to_luma16, encode_png, frame_to_rgba8,
-};
 use splatscene::report::{self, ReportSettings};
-use splatscene::scene::file::{LoadedScene, load_scene_file};
-use splatscene::scene::shoulder::shoulder_scene;
-use splatscene::scene::{Projection, SceneCamera};
 use splatscene::volume::CpuVolume;
 use splatscene::volume::phantom::shoulder_phantom_default;
 use splatscene::volume::raw::{RawSpec, ScalarFormat, load_raw, load_raw_slices, slice_stack};
+
+mod cli;
 
 #[derive(Parser)]
 #[command(
@@ -41,43 +37,11 @@ enum Command {
     /// Compare every ordering's run time and image error along a camera path.
     Orderings(OrderingsArgs),
     /// Render a scene file (the built-in shoulder scene without one) to a PNG.
-    Render(RenderArgs),
-}
-
-#[derive(clap::Args)]
-struct RenderArgs {
-    /// A TOML scene file; the built-in shoulder scene when absent.
-    scene: Option<PathBuf>,
-    /// Output PNG.
-    #[arg(long)]
-    out: PathBuf,
-    /// Image size WxH (default: the scene file's, else 800x600).
-    #[arg(long, value_parser = parse_size)]
-    size: Option<(u32, u32)>,
-    /// Splat ordering: btf, wbtf, pbtf, ip-pbtf, exact, bucketed...
-    #[arg(long)]
-    ordering: Option<Ordering>,
-    /// Eye position X,Y,Z in world millimetres.
-    #[arg(long, value_parser = parse_f64x3, allow_hyphen_values = true)]
-    eye: Option<[f64; 3]>,
-    /// Look-at point X,Y,Z (default: the scene's camera target).
-    #[arg(long, value_parser = parse_f64x3, allow_hyphen_values = true)]
-    target: Option<[f64; 3]>,
-    /// Turn the camera about its target: YAW,PITCH in degrees.
-    #[arg(long, value_parser = parse_f64x2, allow_hyphen_values = true)]
-    orbit: Option<[f64; 2]>,
-    /// Vertical field of view in degrees.
-    #[arg(long)]
-    fov: Option<f64>,
-    /// Orthographic projection showing this height in world units.
-    #[arg(long)]
-    orthographic: Option<f64>,
-    /// Also write the mesh depth as a 16-bit PNG (near black, far white).
-    #[arg(long)]
-    depth: Option<PathBuf>,
-    /// Transparent background (the PNG's alpha is the coverage).
-    #[arg(long)]
-    transparent: bool,
+    Render(cli::scenes::RenderArgs),
+    /// Pick what lies under a pixel: prints the hit as JSON (or that nothing was hit).
+    Pick(cli::scenes::PickArgs),
+    /// Measure a distance or an angle between picked pixels or given points, as JSON.
+    Measure(cli::scenes::MeasureArgs),
 }
 
 #[derive(clap::Args)]
@@ -144,7 +108,9 @@ fn main() -> Result<()> {
     match Cli::parse().command {
         Command::Order(args) => run_order(args),
         Command::Orderings(args) => run_orderings(args),
-        Command::Render(args) => run_render(args),
+        Command::Render(args) => cli::scenes::run_render(args),
+        Command::Pick(args) => cli::scenes::run_pick(args),
+        Command::Measure(args) => cli::scenes::run_measure(args),
     }
 }
 
@@ -156,81 +122,6 @@ fn quiet_device_select() {
         // SAFETY: called first thing in main, before any other thread exists.
         unsafe { std::env::set_var("NODEVICE_SELECT", "1") };
     }
-}
-
-fn run_render(args: RenderArgs) -> Result<()> {
-    let loaded = match &args.scene {
-        Some(path) => load_scene_file(path)?,
-        None => LoadedScene {
-            scene: shoulder_scene()?,
-            size: None,
-            background: Some([0.06, 0.07, 0.09]),
-            ordering: None,
-        },
-    };
-    let scene = loaded.scene;
-    let size = args.size.or(loaded.size).unwrap_or((800, 600));
-    let mut camera = scene.camera.context("the scene has no camera")?;
-    if let Some(eye) = args.eye {
-        camera = SceneCamera {
-            projection: camera.projection,
-            ..SceneCamera::look_at(
-                DVec3::from(eye),
-                args.target.map_or(camera.target, DVec3::from),
-            )
-        };
-    } else if let Some(target) = args.target {
-        camera.target = DVec3::from(target);
-    }
-    if let Some([yaw, pitch]) = args.orbit {
-        camera = camera.orbit(yaw, pitch);
-    }
-    if let Some(fov) = args.fov {
-        camera.projection = Projection::Perspective { fov_y_degrees: fov };
-    }
-    if let Some(height) = args.orthographic {
-        camera.projection = Projection::Orthographic { height };
-    }
-    let options = FrameOptions {
-        ordering: args.ordering.or(loaded.ordering),
-        background: if args.transparent {
-            None
-        } else {
-            loaded.background
-        },
-        measure: true,
-    };
-    let ctx = GpuContext::headless()?;
-    let shot = Renderer::new().screenshot(&ctx, &scene, &camera, size, &options)?;
-    let png = encode_png(&frame_to_rgba8(&shot.frame))?;
-    write_replacing(&args.out, &png)?;
-    if let Some(path) = &args.depth {
-        let bounds = scene.bounds().unwrap_or((DVec3::ZERO, DVec3::ONE));
-        let range = depth_range(&shot.view, bounds);
-        write_replacing(
-            path,
-            &encode_png(&depth_to_luma16(&shot.depth, &shot.view, range))?,
-        )?;
-    }
-    let r = &shot.report;
-    let ms = |d: std::time::Duration| d.as_secs_f64() * 1e3;
-    eprintln!(
-        "{}x{} on {}: {} meshes ({} triangles), {} splats; classify {:.0} ms, order {:.1} ms, upload {:.1} ms, mesh pass {:.1} ms, splat pass {:.1} ms, readback {:.1} ms",
-        size.0,
-        size.1,
-        ctx.describe(),
-        r.meshes,
-        r.triangles,
-        r.splats,
-        ms(r.timings.classify),
-        ms(r.timings.order),
-        ms(r.timings.upload),
-        ms(r.timings.mesh_pass),
-        ms(r.timings.splat_pass),
-        ms(r.timings.readback)
-    );
-    eprintln!("wrote {}", args.out.display());
-    Ok(())
 }
 
 fn run_order(args: OrderArgs) -> Result<()> {
@@ -267,7 +158,7 @@ fn run_order(args: OrderArgs) -> Result<()> {
 
 /// Writes `bytes` to `path` through a temporary file and a rename, so that a failed write
 /// leaves any earlier file whole; says so when an existing file is replaced.
-fn write_replacing(path: &Path, bytes: &[u8]) -> Result<()> {
+pub(crate) fn write_replacing(path: &Path, bytes: &[u8]) -> Result<()> {
     let existed = path.exists();
     let name = path
         .file_name()
@@ -399,7 +290,7 @@ fn parse_triple<T: std::str::FromStr>(s: &str) -> Result<[T; 3], String> {
         .map_err(|_| "expected three numbers".to_owned())
 }
 
-fn parse_f64x2(s: &str) -> Result<[f64; 2], String> {
+pub(crate) fn parse_f64x2(s: &str) -> Result<[f64; 2], String> {
     let parts: Vec<&str> = s.split(',').map(str::trim).collect();
     let [a, b] = parts.as_slice() else {
         return Err(format!("expected two comma-separated numbers, got {s:?}"));
@@ -411,15 +302,25 @@ fn parse_f64x2(s: &str) -> Result<[f64; 2], String> {
     Ok([parse(a)?, parse(b)?])
 }
 
+pub(crate) fn parse_u32x2(s: &str) -> Result<[u32; 2], String> {
+    let [a, b] = parse_f64x2(s)?;
+    let whole =
+        |v: f64| (v >= 0.0 && v.fract() == 0.0 && v <= f64::from(u32::MAX)).then_some(v as u32);
+    match (whole(a), whole(b)) {
+        (Some(a), Some(b)) => Ok([a, b]),
+        _ => Err(format!("expected two whole numbers, got {s:?}")),
+    }
+}
+
 fn parse_u32x3(s: &str) -> Result<[u32; 3], String> {
     parse_triple(s)
 }
 
-fn parse_f64x3(s: &str) -> Result<[f64; 3], String> {
+pub(crate) fn parse_f64x3(s: &str) -> Result<[f64; 3], String> {
     parse_triple(s)
 }
 
-fn parse_size(s: &str) -> Result<(u32, u32), String> {
+pub(crate) fn parse_size(s: &str) -> Result<(u32, u32), String> {
     let (w, h) = s
         .split_once(['x', 'X'])
         .ok_or_else(|| format!("expected WxH, got {s:?}"))?;

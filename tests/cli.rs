@@ -200,3 +200,87 @@ fn render_names_a_missing_scene_file() {
     assert!(!result.status.success());
     assert!(String::from_utf8_lossy(&result.stderr).contains("/nonexistent/plan.toml"));
 }
+
+fn json(output: &std::process::Output) -> serde_json::Value {
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    serde_json::from_slice(&output.stdout).expect("JSON on standard output")
+}
+
+#[test]
+fn pick_reports_the_prosthesis_head_and_misses_as_null() {
+    // In the built-in view at 800x600, pixel (400, 200) lies on the prosthesis head.
+    let hit = json(&splatscene(&["pick", "--pixel", "400,200"]));
+    assert_eq!(hit["hit"]["kind"], "mesh", "{hit}");
+    assert_eq!(hit["hit"]["node_name"], "head");
+    assert!(hit["hit"]["distance"].as_f64().unwrap() > 0.0);
+    let miss = json(&splatscene(&["pick", "--pixel", "0,0"]));
+    assert!(miss["hit"].is_null(), "{miss}");
+    let bone = json(&splatscene(&["pick", "--pixel", "300,300"]));
+    assert_eq!(bone["hit"]["kind"], "volume", "{bone}");
+    assert!(
+        bone["hit"]["value"].as_f64().unwrap() > 150.0,
+        "bone-like HU: {bone}"
+    );
+    let outside = splatscene(&["pick", "--pixel", "800,10"]);
+    assert!(!outside.status.success());
+    assert!(String::from_utf8_lossy(&outside.stderr).contains("outside the 800x600 image"));
+}
+
+#[test]
+fn measure_distances_and_angles_and_draws_them() {
+    let d = json(&splatscene(&[
+        "measure", "--point", "0,0,0", "--point", "3,4,0",
+    ]));
+    assert_eq!(
+        (d["kind"].as_str(), d["value"].as_f64(), d["unit"].as_str()),
+        (Some("distance"), Some(5.0), Some("mm"))
+    );
+    let out = temp_path("measure.png");
+    let a = json(&splatscene(&[
+        "measure",
+        "--pixel",
+        "400,200",
+        "--pixel",
+        "330,420",
+        "--pixel",
+        "480,260",
+        "--size",
+        "800x600",
+        "--out",
+        out.to_str().unwrap(),
+    ]));
+    assert_eq!(a["kind"], "angle");
+    let points: Vec<glam::DVec3> = a["hits"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|h| {
+            glam::DVec3::new(
+                h["point"][0].as_f64().unwrap(),
+                h["point"][1].as_f64().unwrap(),
+                h["point"][2].as_f64().unwrap(),
+            )
+        })
+        .collect();
+    let (u, v) = (points[0] - points[1], points[2] - points[1]);
+    let expected = u.angle_between(v).to_degrees();
+    assert!(
+        (a["value"].as_f64().unwrap() - expected).abs() < 1e-9,
+        "{a}"
+    );
+    let image = image::open(&out).unwrap().to_rgb8();
+    assert_eq!(image.dimensions(), (800, 600));
+    // The vertex marker is drawn over the stem in the measurement's colour (amber).
+    let p = image.get_pixel(330, 420);
+    assert!(
+        p[0] > 150 && p[1] > 100 && p[2] < 80,
+        "marker at the vertex: {p:?}"
+    );
+    std::fs::remove_file(&out).ok();
+    let one = splatscene(&["measure", "--point", "1,2,3"]);
+    assert!(!one.status.success());
+}

@@ -114,8 +114,8 @@ impl Default for MarkerStyle {
     }
 }
 
-/// Adds `measurement` to the scene as a group of marker spheres and line cylinders; returns
-/// the group node.
+/// Adds `measurement` to the scene as a group of marker spheres and line cylinders, drawn as
+/// overlays (always visible, never picked); returns the group node.
 pub fn annotate(
     scene: &mut Scene,
     measurement: &Measurement,
@@ -125,7 +125,7 @@ pub fn annotate(
     let sphere = Arc::new(uv_sphere(12, 8));
     let cylinder = Arc::new(unit_cylinder(12));
     let node = |mesh: &Arc<CpuMesh>| {
-        NodeContent::Mesh(MeshNode {
+        NodeContent::Overlay(MeshNode {
             mesh: Arc::clone(mesh),
             material: style.material,
         })

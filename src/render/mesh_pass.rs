@@ -43,10 +43,14 @@ struct Vertex {
     normal: [f32; 3],
 }
 
-/// The mesh pipeline and its per-frame uniforms.
+/// The mesh pipelines and their per-frame uniforms.
 #[derive(Debug)]
 pub(crate) struct MeshPass {
     pipeline: wgpu::RenderPipeline,
+    /// Overlays (measurement markers) drawn over everything: built on first use.
+    overlay: Option<wgpu::RenderPipeline>,
+    layout: wgpu::PipelineLayout,
+    module: wgpu::ShaderModule,
     object_layout: wgpu::BindGroupLayout,
     frame_buffer: wgpu::Buffer,
     frame_group: wgpu::BindGroup,
@@ -96,40 +100,13 @@ impl MeshPass {
             bind_group_layouts: &[Some(&frame_layout), Some(&object_layout)],
             immediate_size: 0,
         });
-        let attributes = wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x3];
-        let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-            label: Some("mesh"),
-            layout: Some(&layout),
-            vertex: wgpu::VertexState {
-                module: &module,
-                entry_point: Some("vs_main"),
-                compilation_options: Default::default(),
-                buffers: &[Some(wgpu::VertexBufferLayout {
-                    array_stride: size_of::<Vertex>() as u64,
-                    step_mode: wgpu::VertexStepMode::Vertex,
-                    attributes: &attributes,
-                })],
-            },
-            // Meshes from the wild are not reliably closed or consistently wound: draw both
-            // faces and flip the normal of back faces in the shader.
-            primitive: wgpu::PrimitiveState::default(),
-            depth_stencil: Some(wgpu::DepthStencilState {
-                format: DEPTH_FORMAT,
-                depth_write_enabled: Some(true),
-                depth_compare: Some(wgpu::CompareFunction::Greater),
-                stencil: Default::default(),
-                bias: Default::default(),
-            }),
-            multisample: Default::default(),
-            fragment: Some(wgpu::FragmentState {
-                module: &module,
-                entry_point: Some("fs_main"),
-                compilation_options: Default::default(),
-                targets: &[Some(COLOR_FORMAT.into())],
-            }),
-            multiview_mask: None,
-            cache: None,
-        });
+        let pipeline = mesh_pipeline(
+            device,
+            &layout,
+            &module,
+            wgpu::CompareFunction::Greater,
+            true,
+        );
         let frame_buffer = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("mesh frame"),
             size: size_of::<FrameUniforms>() as u64,
@@ -146,6 +123,9 @@ impl MeshPass {
         });
         Self {
             pipeline,
+            overlay: None,
+            layout,
+            module,
             object_layout,
             frame_buffer,
             frame_group,
@@ -251,7 +231,46 @@ impl MeshPass {
         pass: &mut wgpu::RenderPass<'_>,
         meshes: impl Iterator<Item = &'a GpuMesh>,
     ) {
-        pass.set_pipeline(&self.pipeline);
+        self.draw_with(&self.pipeline, pass, meshes);
+    }
+
+    /// Builds the overlay pipeline if it is not there yet.
+    pub(crate) fn prepare_overlay(&mut self, ctx: &GpuContext) {
+        if self.overlay.is_none() {
+            let compare = wgpu::CompareFunction::Always;
+            self.overlay = Some(mesh_pipeline(
+                &ctx.device,
+                &self.layout,
+                &self.module,
+                compare,
+                false,
+            ));
+        }
+    }
+
+    /// Whether the overlay pipeline exists.
+    pub(crate) fn has_overlay(&self) -> bool {
+        self.overlay.is_some()
+    }
+
+    /// Records overlay meshes, drawn over whatever is there (after [`Self::prepare_overlay`]).
+    pub(crate) fn draw_overlay<'a>(
+        &self,
+        pass: &mut wgpu::RenderPass<'_>,
+        meshes: impl Iterator<Item = &'a GpuMesh>,
+    ) {
+        if let Some(pipeline) = &self.overlay {
+            self.draw_with(pipeline, pass, meshes);
+        }
+    }
+
+    fn draw_with<'a>(
+        &self,
+        pipeline: &wgpu::RenderPipeline,
+        pass: &mut wgpu::RenderPass<'_>,
+        meshes: impl Iterator<Item = &'a GpuMesh>,
+    ) {
+        pass.set_pipeline(pipeline);
         pass.set_bind_group(0, &self.frame_group, &[]);
         for mesh in meshes {
             pass.set_bind_group(1, &mesh.group, &[]);
@@ -260,4 +279,48 @@ impl MeshPass {
             pass.draw_indexed(0..mesh.index_count, 0, 0..1);
         }
     }
+}
+
+/// A mesh pipeline with the given depth test; opaque meshes write depth, overlays do not.
+fn mesh_pipeline(
+    device: &wgpu::Device,
+    layout: &wgpu::PipelineLayout,
+    module: &wgpu::ShaderModule,
+    compare: wgpu::CompareFunction,
+    write_depth: bool,
+) -> wgpu::RenderPipeline {
+    let attributes = wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x3];
+    device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+        label: Some(if write_depth { "mesh" } else { "overlay" }),
+        layout: Some(layout),
+        vertex: wgpu::VertexState {
+            module,
+            entry_point: Some("vs_main"),
+            compilation_options: Default::default(),
+            buffers: &[Some(wgpu::VertexBufferLayout {
+                array_stride: size_of::<Vertex>() as u64,
+                step_mode: wgpu::VertexStepMode::Vertex,
+                attributes: &attributes,
+            })],
+        },
+        // Meshes from the wild are not reliably closed or consistently wound: draw both
+        // faces and flip the normal of back faces in the shader.
+        primitive: wgpu::PrimitiveState::default(),
+        depth_stencil: Some(wgpu::DepthStencilState {
+            format: DEPTH_FORMAT,
+            depth_write_enabled: Some(write_depth),
+            depth_compare: Some(compare),
+            stencil: Default::default(),
+            bias: Default::default(),
+        }),
+        multisample: Default::default(),
+        fragment: Some(wgpu::FragmentState {
+            module,
+            entry_point: Some("fs_main"),
+            compilation_options: Default::default(),
+            targets: &[Some(COLOR_FORMAT.into())],
+        }),
+        multiview_mask: None,
+        cache: None,
+    })
 }

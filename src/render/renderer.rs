@@ -65,10 +65,14 @@ pub struct FrameReport {
     pub mesh_pipeline: bool,
     /// Whether the splat pipeline exists.
     pub splat_pipeline: bool,
+    /// Whether the overlay pipeline (measurement markers) exists.
+    pub overlay_pipeline: bool,
     /// Meshes drawn.
     pub meshes: usize,
-    /// Triangles drawn.
+    /// Triangles drawn (opaque meshes).
     pub triangles: usize,
+    /// Overlay meshes drawn over everything.
+    pub overlays: usize,
     /// Splats drawn (significant voxels in front of the eye).
     pub splats: usize,
     /// Volumes classified this frame (0 when nothing changed).
@@ -165,8 +169,12 @@ impl Renderer {
             finish_drawing(ctx, color)?;
         }
         report.timings.splat_pass = started.elapsed();
+        if report.overlays > 0 {
+            self.overlay_stage(ctx, scene, color, depth);
+        }
         report.mesh_pipeline = self.mesh_pass.is_some();
         report.splat_pipeline = self.splat_pass.is_some();
+        report.overlay_pipeline = self.mesh_pass.as_ref().is_some_and(MeshPass::has_overlay);
         Ok(report)
     }
 
@@ -203,7 +211,11 @@ impl Renderer {
 
     fn sync_meshes(&mut self, ctx: &GpuContext, scene: &Scene) {
         let mut live = Vec::new();
-        for (id, node, _) in scene.meshes() {
+        if scene.overlays().next().is_some() {
+            let pass = self.mesh_pass.get_or_insert_with(|| MeshPass::new(ctx));
+            pass.prepare_overlay(ctx);
+        }
+        for (id, node, _) in scene.meshes().chain(scene.overlays()) {
             if node.mesh.indices.len() < 3 {
                 continue;
             }
@@ -336,6 +348,13 @@ impl Renderer {
         if let Some(pass) = &self.mesh_pass {
             pass.write_frame(ctx, view, &scene.lights);
         }
+        for (id, node, world) in scene.overlays() {
+            if let Some(gpu) = self.meshes.get(&id) {
+                let model = view.relative(world);
+                MeshPass::write_object(ctx, gpu, model, linear_part(world), &node.material);
+                report.overlays += 1;
+            }
+        }
         for (id, node, world) in scene.meshes() {
             if let Some(gpu) = self.meshes.get(&id) {
                 MeshPass::write_object(
@@ -397,6 +416,28 @@ impl Renderer {
                     splat_pass.draw(&mut pass, &state.gpu);
                 }
             }
+        }
+        ctx.queue.submit([encoder.finish()]);
+    }
+
+    /// Draws overlay meshes over the finished frame.
+    fn overlay_stage(
+        &self,
+        ctx: &GpuContext,
+        scene: &Scene,
+        color: &wgpu::TextureView,
+        depth: &wgpu::TextureView,
+    ) {
+        let Some(mesh_pass) = self.mesh_pass.as_ref().filter(|p| p.has_overlay()) else {
+            return;
+        };
+        let mut encoder = ctx.device.create_command_encoder(&Default::default());
+        {
+            let mut pass = begin(&mut encoder, color, depth, None, "overlay pass");
+            let overlays = scene
+                .overlays()
+                .filter_map(|(id, _, _)| self.meshes.get(&id));
+            mesh_pass.draw_overlay(&mut pass, overlays);
         }
         ctx.queue.submit([encoder.finish()]);
     }

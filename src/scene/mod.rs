@@ -92,6 +92,9 @@ pub enum NodeContent {
     Mesh(MeshNode),
     /// A volume.
     Volume(VolumeNode),
+    /// A mesh drawn over everything else, such as a measurement's markers: neither hidden by
+    /// nor hiding the scene, and never picked.
+    Overlay(MeshNode),
 }
 
 /// A node: a name, a transform relative to its parent, children and content.
@@ -237,6 +240,17 @@ impl Scene {
             })
     }
 
+    /// Overlay mesh nodes with their world transforms.
+    pub fn overlays(&self) -> impl Iterator<Item = (NodeId, &MeshNode, DMat4)> + '_ {
+        self.nodes
+            .iter()
+            .enumerate()
+            .filter_map(|(i, n)| match &n.content {
+                NodeContent::Overlay(m) => Some((NodeId(i), m, self.world[i])),
+                _ => None,
+            })
+    }
+
     /// Volume nodes with their world transforms.
     pub fn volumes(&self) -> impl Iterator<Item = (NodeId, &VolumeNode, DMat4)> + '_ {
         self.nodes
@@ -275,7 +289,7 @@ impl Scene {
 fn content_bounds(content: &NodeContent) -> Option<(DVec3, DVec3)> {
     match content {
         NodeContent::Empty => None,
-        NodeContent::Mesh(m) => m.mesh.bounds().map(|(lo, hi)| {
+        NodeContent::Mesh(m) | NodeContent::Overlay(m) => m.mesh.bounds().map(|(lo, hi)| {
             (
                 DVec3::from(lo.map(f64::from)),
                 DVec3::from(hi.map(f64::from)),

@@ -1,0 +1,3 @@
+//! Command-line commands that look at scenes.
+
+pub mod scenes;
