@@ -37,4 +37,5 @@ pub mod pick;
 pub mod render;
 pub mod report;
 pub mod scene;
+pub mod viewer;
 pub mod volume;

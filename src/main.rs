@@ -42,6 +42,8 @@ enum Command {
     Pick(cli::scenes::PickArgs),
     /// Measure a distance or an angle between picked pixels or given points, as JSON.
     Measure(cli::scenes::MeasureArgs),
+    /// Open a viewer window: orbit, pick, switch orderings and transfer functions.
+    View(cli::scenes::ViewerArgs),
 }
 
 #[derive(clap::Args)]
@@ -111,6 +113,7 @@ fn main() -> Result<()> {
         Command::Render(args) => cli::scenes::run_render(args),
         Command::Pick(args) => cli::scenes::run_pick(args),
         Command::Measure(args) => cli::scenes::run_measure(args),
+        Command::View(args) => cli::scenes::run_viewer(args),
     }
 }
 

@@ -309,3 +309,32 @@ pub fn run_measure(args: MeasureArgs) -> Result<()> {
     }
     Ok(())
 }
+
+/// `splatscene view`.
+#[derive(clap::Args)]
+pub struct ViewerArgs {
+    #[command(flatten)]
+    view: ViewArgs,
+    /// Folder for screenshots taken with the S key.
+    #[arg(long, default_value = ".")]
+    screenshots: PathBuf,
+}
+
+pub fn run_viewer(args: ViewerArgs) -> Result<()> {
+    let View {
+        mut loaded,
+        camera,
+        size,
+    } = args.view.load()?;
+    loaded.scene.camera = Some(camera);
+    let options = splatscene::viewer::ViewerOptions {
+        size,
+        screenshot_dir: args.screenshots,
+        background: loaded.background.unwrap_or([0.06, 0.07, 0.09]),
+    };
+    eprintln!(
+        "keys: 1 BTF, 2 PBTF, 3 IP-PBTF, 4 exact, 5 bucketed, T transfer function, S screenshot, R reset, Q quit; drag to orbit (right: pan), wheel to zoom, click to pick"
+    );
+    splatscene::viewer::run(loaded.scene, options)?;
+    Ok(())
+}

@@ -5,6 +5,7 @@
 
 use thiserror::Error;
 
+mod blit;
 mod context;
 mod mesh_pass;
 mod output;
@@ -13,6 +14,7 @@ mod splat_pass;
 mod target;
 mod view;
 
+pub use blit::Blit;
 pub use context::GpuContext;
 pub use output::{depth_range, depth_to_luma16, encode_png, frame_to_rgba8};
 pub use renderer::{FrameOptions, FrameReport, FrameTimings, Renderer, Screenshot};

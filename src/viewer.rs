@@ -1,0 +1,477 @@
+//! The viewer window (winit): orbit, pan and zoom with the mouse; click to pick (the hit is
+//! printed as a JSON line on standard output and marked); keys to switch the ordering and the
+//! transfer function; a screenshot key; frame and order time in the title.
+//!
+//! Keys: `1` BTF, `2` PBTF, `3` IP-PBTF, `4` exact, `5` bucketed; `T` next transfer function;
+//! `S` screenshot (a new `splatscene-view-N.png` in the screenshot folder); `R` reset the
+//! camera; `Q` or Escape quits. Mouse: left drag orbits, right drag pans, the wheel zooms, a
+//! left click without dragging picks.
+
+use std::path::PathBuf;
+use std::sync::Arc;
+
+use glam::DVec3;
+use winit::application::ApplicationHandler;
+use winit::dpi::{PhysicalPosition, PhysicalSize};
+use winit::event::{ElementState, MouseButton, MouseScrollDelta, WindowEvent};
+use winit::event_loop::{ActiveEventLoop, EventLoop};
+use winit::keyboard::{Key, NamedKey};
+use winit::window::{Window, WindowId};
+
+use crate::classify::TransferFunction;
+use crate::order::Ordering;
+use crate::pick::measure::{MarkerStyle, Measurement, annotate};
+use crate::pick::{PickOptions, Picker};
+use crate::render::{
+    Blit, FrameOptions, FrameReport, GpuContext, RenderError, RenderTarget, Renderer, ViewSetup,
+    encode_png, frame_to_rgba8,
+};
+use crate::scene::{NodeContent, NodeId, Scene, SceneCamera};
+
+/// Viewer settings.
+#[derive(Debug, Clone)]
+pub struct ViewerOptions {
+    /// Initial window size in pixels.
+    pub size: (u32, u32),
+    /// Where the screenshot key writes.
+    pub screenshot_dir: PathBuf,
+    /// Background colour.
+    pub background: [f32; 3],
+}
+
+impl Default for ViewerOptions {
+    fn default() -> Self {
+        Self {
+            size: (960, 720),
+            screenshot_dir: PathBuf::from("."),
+            background: [0.06, 0.07, 0.09],
+        }
+    }
+}
+
+/// Why the viewer stopped with an error.
+#[derive(Debug, thiserror::Error)]
+pub enum ViewerError {
+    /// No window system, or the event loop failed.
+    #[error("window system: {0}")]
+    Window(String),
+    /// The GPU side failed.
+    #[error(transparent)]
+    Render(#[from] RenderError),
+}
+
+/// Transfer functions the `T` key cycles through.
+fn presets() -> Vec<(&'static str, TransferFunction)> {
+    vec![
+        ("CT bone", TransferFunction::ct_bone()),
+        (
+            "dense bone",
+            TransferFunction::ramp(500.0, 1300.0, [1.0, 0.97, 0.92, 0.9]),
+        ),
+        (
+            "soft tissue and bone",
+            TransferFunction::new(vec![
+                (-200.0, [0.8, 0.45, 0.35, 0.0]),
+                (20.0, [0.85, 0.5, 0.4, 0.03]),
+                (150.0, [0.9, 0.75, 0.6, 0.05]),
+                (700.0, [1.0, 0.95, 0.88, 0.6]),
+            ]),
+        ),
+    ]
+}
+
+const ORDERINGS: [(&str, Ordering); 5] = [
+    ("1", Ordering::Btf),
+    ("2", Ordering::Pbtf),
+    ("3", Ordering::IpPbtfImplicit),
+    ("4", Ordering::Exact),
+    ("5", Ordering::Bucketed),
+];
+
+/// Opens a window on `scene` and runs until it is closed.
+pub fn run(scene: Scene, options: ViewerOptions) -> Result<(), ViewerError> {
+    let event_loop = EventLoop::new().map_err(|e| ViewerError::Window(e.to_string()))?;
+    let home = scene.camera.unwrap_or_else(|| {
+        let bounds = scene.bounds().unwrap_or((DVec3::splat(-1.0), DVec3::ONE));
+        SceneCamera::fit(
+            bounds,
+            DVec3::new(-0.3, -1.0, -0.35),
+            Default::default(),
+            4.0 / 3.0,
+        )
+    });
+    let mut app = App {
+        picker: Picker::new(&scene),
+        scene,
+        options,
+        home,
+        camera: home,
+        ordering: Ordering::IpPbtfImplicit,
+        preset: 0,
+        gpu: None,
+        cursor: (0.0, 0.0),
+        drag: None,
+        marker: None,
+        last: FrameReport::default(),
+        error: None,
+    };
+    event_loop
+        .run_app(&mut app)
+        .map_err(|e| ViewerError::Window(e.to_string()))?;
+    app.error.map_or(Ok(()), Err)
+}
+
+struct Gpu {
+    window: Arc<Window>,
+    ctx: GpuContext,
+    surface: wgpu::Surface<'static>,
+    config: wgpu::SurfaceConfiguration,
+    target: RenderTarget,
+    renderer: Renderer,
+    blit: Blit,
+}
+
+struct Drag {
+    button: MouseButton,
+    start: (f64, f64),
+    last: (f64, f64),
+    moved: bool,
+}
+
+struct App {
+    scene: Scene,
+    picker: Picker,
+    options: ViewerOptions,
+    home: SceneCamera,
+    camera: SceneCamera,
+    ordering: Ordering,
+    preset: usize,
+    gpu: Option<Gpu>,
+    cursor: (f64, f64),
+    drag: Option<Drag>,
+    marker: Option<NodeId>,
+    last: FrameReport,
+    error: Option<ViewerError>,
+}
+
+impl App {
+    fn start(&mut self, event_loop: &ActiveEventLoop) -> Result<(), ViewerError> {
+        let (w, h) = self.options.size;
+        let attributes = Window::default_attributes()
+            .with_title("splatscene")
+            .with_inner_size(PhysicalSize::new(w, h));
+        let window = Arc::new(
+            event_loop
+                .create_window(attributes)
+                .map_err(|e| ViewerError::Window(e.to_string()))?,
+        );
+        let instance =
+            wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
+        let surface = instance
+            .create_surface(Arc::clone(&window))
+            .map_err(|e| ViewerError::Window(e.to_string()))?;
+        let ctx = pollster::block_on(GpuContext::with_instance(instance, Some(&surface)))?;
+        let caps = surface.get_capabilities(&ctx.adapter);
+        // Frames hold display values already (as the PNGs do): present them unconverted.
+        let format = caps
+            .formats
+            .iter()
+            .copied()
+            .find(|f| !f.is_srgb())
+            .or_else(|| caps.formats.first().copied())
+            .ok_or_else(|| ViewerError::Window("the surface offers no format".into()))?;
+        let size = window.inner_size();
+        let config = wgpu::SurfaceConfiguration {
+            usage: wgpu::TextureUsages::RENDER_ATTACHMENT,
+            format,
+            width: size.width.max(1),
+            height: size.height.max(1),
+            present_mode: wgpu::PresentMode::AutoVsync,
+            desired_maximum_frame_latency: 2,
+            alpha_mode: caps
+                .alpha_modes
+                .first()
+                .copied()
+                .unwrap_or(wgpu::CompositeAlphaMode::Auto),
+            view_formats: vec![],
+            color_space: wgpu::SurfaceColorSpace::Auto,
+        };
+        surface.configure(&ctx.device, &config);
+        let target = RenderTarget::new(&ctx, config.width, config.height)?;
+        let blit = Blit::new(&ctx, format);
+        self.gpu = Some(Gpu {
+            window,
+            ctx,
+            surface,
+            config,
+            target,
+            renderer: Renderer::new(),
+            blit,
+        });
+        Ok(())
+    }
+
+    fn resize(&mut self, size: PhysicalSize<u32>) -> Result<(), ViewerError> {
+        let Some(gpu) = &mut self.gpu else {
+            return Ok(());
+        };
+        gpu.config.width = size.width.max(1);
+        gpu.config.height = size.height.max(1);
+        gpu.surface.configure(&gpu.ctx.device, &gpu.config);
+        gpu.target = RenderTarget::new(&gpu.ctx, gpu.config.width, gpu.config.height)?;
+        gpu.window.request_redraw();
+        Ok(())
+    }
+
+    fn view(&self) -> Option<Result<ViewSetup, RenderError>> {
+        let gpu = self.gpu.as_ref()?;
+        Some(ViewSetup::new(
+            &self.camera,
+            gpu.target.size,
+            self.scene.bounds(),
+        ))
+    }
+
+    fn redraw(&mut self) -> Result<(), ViewerError> {
+        let Some(view) = self.view().transpose()? else {
+            return Ok(());
+        };
+        let Some(gpu) = &mut self.gpu else {
+            return Ok(());
+        };
+        let options = FrameOptions {
+            ordering: Some(self.ordering),
+            background: Some(self.options.background),
+            measure: false,
+        };
+        let started = std::time::Instant::now();
+        let target = &gpu.target;
+        self.last = gpu.renderer.render(
+            &gpu.ctx,
+            &self.scene,
+            &view,
+            &target.color_view,
+            &target.depth_view,
+            &options,
+        )?;
+        let frame = match gpu.surface.get_current_texture() {
+            wgpu::CurrentSurfaceTexture::Success(frame)
+            | wgpu::CurrentSurfaceTexture::Suboptimal(frame) => frame,
+            other => {
+                // Lost or outdated: configure again and draw on the next request.
+                log::warn!("surface: {other:?}");
+                gpu.surface.configure(&gpu.ctx.device, &gpu.config);
+                gpu.window.request_redraw();
+                return Ok(());
+            }
+        };
+        let surface_view = frame.texture.create_view(&Default::default());
+        gpu.blit.copy(&gpu.ctx, &target.color_view, &surface_view);
+        gpu.window.pre_present_notify();
+        gpu.ctx.queue.present(frame);
+        let preset = presets()[self.preset].0;
+        gpu.window.set_title(&format!(
+            "splatscene: {} | {preset} | frame {:.0} ms, order {:.1} ms | {} splats",
+            self.ordering,
+            started.elapsed().as_secs_f64() * 1e3,
+            self.last.timings.order.as_secs_f64() * 1e3,
+            self.last.splats
+        ));
+        Ok(())
+    }
+
+    fn pick(&mut self, x: f64, y: f64) -> Result<(), ViewerError> {
+        let Some(view) = self.view().transpose()? else {
+            return Ok(());
+        };
+        let (px, py) = (x.max(0.0) as u32, y.max(0.0) as u32);
+        if px >= view.size.0 || py >= view.size.1 {
+            return Ok(());
+        }
+        self.picker.update(&self.scene);
+        let hit = self
+            .picker
+            .pick_pixel(&self.scene, &view, px, py, &PickOptions::default());
+        let name = hit.and_then(|h| {
+            let node = match h {
+                crate::pick::Hit::Mesh(m) => m.node,
+                crate::pick::Hit::Volume(v) => v.node,
+            };
+            self.scene.node(node).ok().map(|n| n.name.clone())
+        });
+        let line = serde_json::json!({ "pixel": [px, py], "hit": hit, "node_name": name });
+        println!("pick {line}");
+        if let Some(old) = self.marker.take() {
+            // Hide the previous marker: an empty group in its place.
+            let _ = self.scene.set_content(old, NodeContent::Empty);
+            for child in self
+                .scene
+                .node(old)
+                .map(|n| n.children().to_vec())
+                .unwrap_or_default()
+            {
+                let _ = self.scene.set_content(child, NodeContent::Empty);
+            }
+        }
+        if let Some(hit) = hit {
+            let radius = self
+                .scene
+                .bounds()
+                .map_or(1.0, |(lo, hi)| (hi - lo).length() * 0.006);
+            let style = MarkerStyle {
+                point_radius: radius,
+                ..MarkerStyle::default()
+            };
+            let point = Measurement::distance(hit.point(), hit.point());
+            self.marker = annotate(&mut self.scene, &point, &style).ok();
+        }
+        Ok(())
+    }
+
+    fn next_preset(&mut self) {
+        self.preset = (self.preset + 1) % presets().len();
+        let transfer = Arc::new(presets().swap_remove(self.preset).1);
+        let ids: Vec<NodeId> = self.scene.volumes().map(|(id, _, _)| id).collect();
+        for id in ids {
+            if let Ok(node) = self.scene.node(id)
+                && let NodeContent::Volume(v) = &node.content
+            {
+                let mut v = v.clone();
+                v.transfer = Arc::clone(&transfer);
+                let _ = self.scene.set_content(id, NodeContent::Volume(v));
+            }
+        }
+        println!("transfer function {}", presets()[self.preset].0);
+    }
+
+    fn screenshot(&mut self) -> Result<(), ViewerError> {
+        let Some(gpu) = &self.gpu else {
+            return Ok(());
+        };
+        let frame = gpu.target.read_color(&gpu.ctx)?;
+        let png =
+            encode_png(&frame_to_rgba8(&frame)).map_err(|e| ViewerError::Window(e.to_string()))?;
+        let dir = &self.options.screenshot_dir;
+        let path = (1..)
+            .map(|n| dir.join(format!("splatscene-view-{n}.png")))
+            .find(|p| !p.exists())
+            .unwrap_or_else(|| dir.join("splatscene-view.png"));
+        match std::fs::write(&path, png) {
+            Ok(()) => println!("screenshot {}", path.display()),
+            Err(e) => eprintln!("screenshot {}: {e}", path.display()),
+        }
+        Ok(())
+    }
+
+    fn key(&mut self, event_loop: &ActiveEventLoop, key: &Key) -> Result<(), ViewerError> {
+        match key {
+            Key::Named(NamedKey::Escape) => event_loop.exit(),
+            Key::Character(c) => match c.to_lowercase().as_str() {
+                "q" => event_loop.exit(),
+                "s" => self.screenshot()?,
+                "t" => self.next_preset(),
+                "r" => self.camera = self.home,
+                digit => {
+                    if let Some((_, ordering)) = ORDERINGS.iter().find(|(k, _)| *k == digit) {
+                        self.ordering = *ordering;
+                        println!("ordering {ordering}");
+                    }
+                }
+            },
+            _ => {}
+        }
+        Ok(())
+    }
+
+    fn mouse_moved(&mut self, position: PhysicalPosition<f64>) {
+        self.cursor = (position.x, position.y);
+        let Some(drag) = &mut self.drag else {
+            return;
+        };
+        let (dx, dy) = (position.x - drag.last.0, position.y - drag.last.1);
+        drag.last = self.cursor;
+        if (self.cursor.0 - drag.start.0).abs() + (self.cursor.1 - drag.start.1).abs() > 3.0 {
+            drag.moved = true;
+        }
+        match drag.button {
+            MouseButton::Left => self.camera = self.camera.orbit(-0.4 * dx, 0.4 * dy),
+            MouseButton::Right => {
+                let distance = (self.camera.target - self.camera.eye).length();
+                let forward = (self.camera.target - self.camera.eye).normalize_or(DVec3::Y);
+                let right = forward.cross(self.camera.up).normalize_or(DVec3::X);
+                let up = right.cross(forward);
+                let shift = (-dx * right + dy * up) * distance * 0.0015;
+                self.camera.eye += shift;
+                self.camera.target += shift;
+            }
+            _ => {}
+        }
+    }
+
+    fn zoom(&mut self, steps: f64) {
+        let offset = self.camera.eye - self.camera.target;
+        self.camera.eye = self.camera.target + offset * 0.9f64.powf(steps);
+    }
+
+    fn handle(
+        &mut self,
+        event_loop: &ActiveEventLoop,
+        event: WindowEvent,
+    ) -> Result<(), ViewerError> {
+        match event {
+            WindowEvent::CloseRequested => event_loop.exit(),
+            WindowEvent::Resized(size) => self.resize(size)?,
+            WindowEvent::RedrawRequested => return self.redraw(),
+            WindowEvent::KeyboardInput { event, .. } if event.state == ElementState::Pressed => {
+                self.key(event_loop, &event.logical_key)?;
+            }
+            WindowEvent::CursorMoved { position, .. } => self.mouse_moved(position),
+            WindowEvent::MouseInput { state, button, .. } => match state {
+                ElementState::Pressed => {
+                    self.drag = Some(Drag {
+                        button,
+                        start: self.cursor,
+                        last: self.cursor,
+                        moved: false,
+                    });
+                }
+                ElementState::Released => {
+                    let click = self
+                        .drag
+                        .take()
+                        .filter(|d| !d.moved && d.button == MouseButton::Left);
+                    if click.is_some() {
+                        self.pick(self.cursor.0, self.cursor.1)?;
+                    }
+                }
+            },
+            WindowEvent::MouseWheel { delta, .. } => self.zoom(match delta {
+                MouseScrollDelta::LineDelta(_, y) => f64::from(y),
+                MouseScrollDelta::PixelDelta(p) => p.y / 40.0,
+            }),
+            _ => return Ok(()),
+        }
+        if let Some(gpu) = &self.gpu {
+            gpu.window.request_redraw();
+        }
+        Ok(())
+    }
+}
+
+impl ApplicationHandler for App {
+    fn resumed(&mut self, event_loop: &ActiveEventLoop) {
+        if self.gpu.is_none()
+            && let Err(e) = self.start(event_loop)
+        {
+            self.error = Some(e);
+            event_loop.exit();
+        }
+    }
+
+    fn window_event(&mut self, event_loop: &ActiveEventLoop, _id: WindowId, event: WindowEvent) {
+        if let Err(e) = self.handle(event_loop, event) {
+            self.error = Some(e);
+            event_loop.exit();
+        }
+    }
+}

@@ -1,0 +1,419 @@
+//! Loads the shared clinical CT series with `volume::dicom` and checks it against values read
+//! here straight from the files with `dicom-object` and `dicom-pixeldata`; then feeds the loader
+//! damaged copies of the series, which must give typed errors rather than panics.
+//!
+//! The data live outside the repository: `$SPLATSCENE_DATA`, by default `../shared/data` next to
+//! the crate. Tests that need the series print a note and pass when its folder is missing.
+//!
+//! Attribution: `volumes/totalseg_ct/example_ct_dicom` is the example CT series from the
+//! TotalSegmentator tests (Wasserthal et al.), Apache-2.0.
+
+use std::fs;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use dicom_dictionary_std::{tags, uids};
+use dicom_object::{FileMetaTableBuilder, InMemDicomObject, open_file};
+use dicom_pixeldata::PixelDecoder;
+use glam::{DMat3, DVec3};
+use splatscene::volume::dicom::{is_dicom, load_dicom_series};
+use splatscene::volume::{CpuVolume, VolumeError};
+
+fn series_dir() -> Option<PathBuf> {
+    let data = std::env::var_os("SPLATSCENE_DATA")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data"));
+    let dir = data.join("volumes/totalseg_ct/example_ct_dicom");
+    if !dir.is_dir() {
+        eprintln!(
+            "skipped: {} not found (set SPLATSCENE_DATA to the shared data directory)",
+            dir.display()
+        );
+        return None;
+    }
+    Some(dir)
+}
+
+/// An empty scratch folder for one test, unique to this process.
+fn scratch(test: &str) -> PathBuf {
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR"))
+        .join(format!("dicom_series-{test}-{}", std::process::id()));
+    let _ = fs::remove_dir_all(&dir);
+    fs::create_dir_all(&dir).expect("create scratch folder");
+    dir
+}
+
+fn series_files(dir: &Path) -> Vec<PathBuf> {
+    let mut files: Vec<PathBuf> = fs::read_dir(dir)
+        .expect("list series")
+        .map(|e| e.expect("list series").path())
+        .collect();
+    files.sort();
+    files
+}
+
+/// One file's placement, read independently of the loader.
+struct Header {
+    path: PathBuf,
+    /// ImagePositionPatient, LPS.
+    position: DVec3,
+    /// ImageOrientationPatient row and column directions, LPS.
+    row: DVec3,
+    col: DVec3,
+    /// PixelSpacing: between rows, between columns.
+    pixel_spacing: [f64; 2],
+}
+
+fn header(path: &Path) -> Header {
+    let obj = open_file(path).expect("open series file");
+    let floats = |tag| {
+        obj.element(tag)
+            .expect("attribute")
+            .to_multi_float64()
+            .expect("numbers")
+    };
+    let (ipp, iop, ps) = (
+        floats(tags::IMAGE_POSITION_PATIENT),
+        floats(tags::IMAGE_ORIENTATION_PATIENT),
+        floats(tags::PIXEL_SPACING),
+    );
+    Header {
+        path: path.into(),
+        position: DVec3::from_slice(&ipp),
+        row: DVec3::from_slice(&iop[..3]),
+        col: DVec3::from_slice(&iop[3..]),
+        pixel_spacing: [ps[0], ps[1]],
+    }
+}
+
+/// The series' headers from the lowest to the highest position along the slice normal.
+fn headers_in_order(dir: &Path) -> Vec<Header> {
+    let mut headers: Vec<Header> = series_files(dir).iter().map(|p| header(p)).collect();
+    let normal = headers[0].row.cross(headers[0].col);
+    headers.sort_by(|a, b| a.position.dot(normal).total_cmp(&b.position.dot(normal)));
+    headers
+}
+
+fn lps_to_ras(v: DVec3) -> DVec3 {
+    DVec3::new(-v.x, -v.y, v.z)
+}
+
+fn world(volume: &CpuVolume, index: [f64; 3]) -> DVec3 {
+    DVec3::from(volume.origin)
+        + volume.direction * (DVec3::from(volume.spacing) * DVec3::from(index))
+}
+
+fn block_mean(
+    volume: &CpuVolume,
+    z: usize,
+    xs: std::ops::Range<usize>,
+    ys: std::ops::Range<usize>,
+) -> f64 {
+    let [nx, ny, _] = volume.dims.map(|n| n as usize);
+    let ids = ys.flat_map(|y| xs.clone().map(move |x| x + nx * (y + ny * z)));
+    let (sum, count) = ids.fold((0.0, 0), |(s, n), id| {
+        (s + f64::from(volume.values[id]), n + 1)
+    });
+    sum / f64::from(count)
+}
+
+#[test]
+fn shared_series_loads_with_its_geometry() {
+    let Some(dir) = series_dir() else { return };
+    let start = Instant::now();
+    let volume = load_dicom_series(&dir).expect("load the shared series");
+    eprintln!(
+        "loaded 512x512x20 JPEG 2000 series in {:?}",
+        start.elapsed()
+    );
+
+    assert_eq!(volume.dims, [512, 512, 20]);
+    assert_eq!(volume.values.len(), 512 * 512 * 20);
+    let headers = headers_in_order(&dir);
+    let (first, last) = (&headers[0], &headers[headers.len() - 1]);
+    // PixelSpacing lists the distance between rows (y) first.
+    assert_eq!(volume.spacing[0], first.pixel_spacing[1]);
+    assert_eq!(volume.spacing[1], first.pixel_spacing[0]);
+    assert!((volume.spacing[0] - 0.977).abs() < 1e-3 && (volume.spacing[2] - 2.0).abs() < 1e-9);
+
+    let expected = DMat3::from_cols(
+        lps_to_ras(first.row),
+        lps_to_ras(first.col),
+        lps_to_ras(first.row.cross(first.col)),
+    );
+    assert!(
+        volume.direction.abs_diff_eq(expected, 1e-12),
+        "{:?}",
+        volume.direction
+    );
+    // This series is axial with identity orientation in LPS, so RAS flips x and y.
+    assert_eq!(
+        volume.direction,
+        DMat3::from_diagonal(DVec3::new(-1.0, -1.0, 1.0))
+    );
+    assert!(DVec3::from(volume.origin).abs_diff_eq(lps_to_ras(first.position), 1e-9));
+    let top = world(&volume, [0.0, 0.0, 19.0]);
+    assert!(
+        top.abs_diff_eq(lps_to_ras(last.position), 1e-9),
+        "{top} vs {}",
+        last.position
+    );
+    for (k, h) in headers.iter().enumerate() {
+        let placed = world(&volume, [0.0, 0.0, k as f64]);
+        assert!(
+            placed.abs_diff_eq(lps_to_ras(h.position), 1e-6),
+            "slice {k}"
+        );
+    }
+}
+
+#[test]
+fn shared_series_values_are_hounsfield_units_in_slice_order() {
+    let Some(dir) = series_dir() else { return };
+    let volume = load_dicom_series(&dir).expect("load the shared series");
+    let plane = 512 * 512;
+    // Decode each file with dicom-pixeldata's own modality LUT: an independent path to HU.
+    for (k, h) in headers_in_order(&dir).iter().enumerate() {
+        let obj = open_file(&h.path).expect("open slice");
+        let hu: Vec<f32> = obj
+            .decode_pixel_data()
+            .and_then(|p| p.to_vec())
+            .expect("decode slice");
+        assert!(hu == volume.values[k * plane..(k + 1) * plane], "slice {k}");
+    }
+
+    let corner = block_mean(&volume, 10, 0..32, 0..32);
+    let above_patient = block_mean(&volume, 10, 224..288, 64..96);
+    eprintln!("corner {corner:.1} HU, air above the patient {above_patient:.1} HU");
+    assert!((-1100.0..=-900.0).contains(&corner), "corner {corner}");
+    assert!(
+        (-1050.0..=-950.0).contains(&above_patient),
+        "air {above_patient}"
+    );
+    let (min, max) = volume
+        .values
+        .iter()
+        .fold((f32::MAX, f32::MIN), |(lo, hi), &v| (lo.min(v), hi.max(v)));
+    let bone = volume.values.iter().filter(|&&v| v > 300.0).count() as f64;
+    let share = bone / volume.values.len() as f64;
+    eprintln!("HU range {min}..{max}, {:.2}% above 300 HU", share * 100.0);
+    assert!(min >= -1100.0 && max > 300.0 && max < 4000.0);
+    assert!((0.002..0.2).contains(&share), "share above 300 HU: {share}");
+}
+
+#[test]
+fn magic_is_checked_at_offset_128() {
+    let mut bytes = vec![0u8; 132];
+    assert!(!is_dicom(&bytes));
+    bytes[128..].copy_from_slice(b"DICM");
+    assert!(is_dicom(&bytes));
+    assert!(!is_dicom(&bytes[..131]));
+    assert!(!is_dicom(b"DICM"));
+}
+
+/// A CT instance with position and orientation but no PixelData, built in memory.
+fn write_no_pixel_file(path: &Path, series: &str) {
+    // dicom-core is not a direct dependency, so VR values come from their names.
+    let vr = |name: &str| name.parse().expect("a VR name");
+    let mut obj = InMemDicomObject::new_empty();
+    obj.put_str(tags::SOP_CLASS_UID, vr("UI"), uids::CT_IMAGE_STORAGE);
+    obj.put_str(tags::SOP_INSTANCE_UID, vr("UI"), "2.25.1001");
+    obj.put_str(tags::SERIES_INSTANCE_UID, vr("UI"), series);
+    obj.put_str(tags::MODALITY, vr("CS"), "CT");
+    obj.put_str(tags::IMAGE_POSITION_PATIENT, vr("DS"), "0\\0\\0");
+    obj.put_str(
+        tags::IMAGE_ORIENTATION_PATIENT,
+        vr("DS"),
+        "1\\0\\0\\0\\1\\0",
+    );
+    obj.put_str(tags::PIXEL_SPACING, vr("DS"), "1\\1");
+    let meta = FileMetaTableBuilder::new().transfer_syntax(uids::EXPLICIT_VR_LITTLE_ENDIAN);
+    let file = obj.with_meta(meta).expect("meta table");
+    file.write_to_file(path).expect("write DICOM file");
+}
+
+fn expect_dicom_error(result: Result<CpuVolume, VolumeError>, path: &Path, words: &str) {
+    match result {
+        Err(VolumeError::Dicom { path: p, message }) => {
+            eprintln!("{}: {message}", p.display());
+            assert_eq!(p, path, "{message}");
+            assert!(message.contains(words), "{message:?} lacks {words:?}");
+        }
+        other => panic!("expected a DICOM error about {words:?}, got {other:?}"),
+    }
+}
+
+#[test]
+fn folder_without_image_slices_is_an_error() {
+    let dir = scratch("no_pixels");
+    let file = dir.join("no_pixels.dcm");
+    write_no_pixel_file(&file, "2.25.2002");
+    let bytes = fs::read(&file).expect("read back");
+    assert!(is_dicom(&bytes));
+    fs::write(dir.join("notes.txt"), "not DICOM").expect("write text file");
+    expect_dicom_error(load_dicom_series(&dir), &dir, "no DICOM image slices");
+    fs::remove_dir_all(&dir).expect("clean up");
+}
+
+#[test]
+fn missing_folder_is_an_io_error() {
+    let parent = scratch("missing");
+    let dir = parent.join("absent");
+    assert!(matches!(load_dicom_series(&dir), Err(VolumeError::Io { path, .. }) if path == dir));
+    fs::remove_dir_all(&parent).expect("clean up");
+}
+
+/// Copies the shared series into a scratch folder, leaving out the files `skip` picks.
+fn copy_series(from: &Path, test: &str, skip: impl Fn(&Path) -> bool) -> PathBuf {
+    let dir = scratch(test);
+    for file in series_files(from).iter().filter(|f| !skip(f)) {
+        let name = file.file_name().expect("file name");
+        fs::copy(file, dir.join(name)).expect("copy series file");
+    }
+    dir
+}
+
+#[test]
+fn extra_files_and_a_smaller_series_are_skipped() {
+    let Some(shared) = series_dir() else { return };
+    let dir = copy_series(&shared, "extras", |_| false);
+    write_no_pixel_file(&dir.join("DICOMDIR"), "2.25.3003");
+    fs::write(dir.join("README.txt"), "a non-DICOM file").expect("write text file");
+    fs::write(dir.join("short"), b"DICM").expect("write short file");
+    // Slices of the series rewritten as another series, at positions the main one uses; one
+    // has lost its position, which only matters in the series that is loaded.
+    let vr = |name: &str| name.parse().expect("a VR name");
+    for (i, file) in series_files(&shared).iter().take(3).enumerate() {
+        let mut obj = open_file(file).expect("open slice");
+        obj.put_str(tags::SERIES_INSTANCE_UID, vr("UI"), "2.25.4004");
+        obj.put_str(tags::SOP_INSTANCE_UID, vr("UI"), format!("2.25.400{i}"));
+        if i == 0 {
+            obj.remove_element(tags::IMAGE_POSITION_PATIENT);
+        }
+        obj.write_to_file(dir.join(format!("other_series_{i}.dcm")))
+            .expect("write slice");
+    }
+    let copied = load_dicom_series(&dir).expect("load the series among extra files");
+    let original = load_dicom_series(&shared).expect("load the shared series");
+    assert_eq!(copied, original);
+    fs::remove_dir_all(&dir).expect("clean up");
+}
+
+#[test]
+fn a_missing_slice_is_reported_with_its_position() {
+    let Some(shared) = series_dir() else { return };
+    let headers = headers_in_order(&shared);
+    let removed = headers[9].path.clone();
+    let dir = copy_series(&shared, "gap", |f| f == removed);
+    let result = load_dicom_series(&dir);
+    expect_dicom_error(
+        result,
+        &dir,
+        "missing slice: gap of 4.000 mm where the step is 2.000 mm",
+    );
+    fs::remove_dir_all(&dir).expect("clean up");
+}
+
+#[test]
+fn a_slice_without_position_names_the_file() {
+    let Some(shared) = series_dir() else { return };
+    let dir = copy_series(&shared, "no_position", |_| false);
+    let victim = series_files(&dir)[7].clone();
+    let mut obj = open_file(&victim).expect("open slice");
+    obj.remove_element(tags::IMAGE_POSITION_PATIENT);
+    obj.write_to_file(&victim).expect("write slice");
+    expect_dicom_error(load_dicom_series(&dir), &victim, "no ImagePositionPatient");
+    fs::remove_dir_all(&dir).expect("clean up");
+}
+
+/// Overwrites the value of the first explicit-VR little-endian element `header` (tag, VR and
+/// length bytes) in `bytes`.
+fn patch(bytes: &mut [u8], header: &[u8], value: &[u8]) {
+    let at = bytes
+        .windows(header.len())
+        .position(|w| w == header)
+        .expect("element in file")
+        + header.len();
+    bytes[at..at + value.len()].copy_from_slice(value);
+}
+
+#[test]
+fn mismatched_pixel_spacing_names_the_file() {
+    let Some(shared) = series_dir() else { return };
+    let dir = copy_series(&shared, "spacing", |_| false);
+    let victim = series_files(&dir)[5].clone();
+    let mut bytes = fs::read(&victim).expect("read slice");
+    patch(
+        &mut bytes,
+        b"\x28\x00\x30\x00DS\x14\x00",
+        b"0.8765625\\0.8765625 ",
+    );
+    fs::write(&victim, bytes).expect("write slice");
+    expect_dicom_error(load_dicom_series(&dir), &victim, "PixelSpacing differs");
+    fs::remove_dir_all(&dir).expect("clean up");
+}
+
+#[test]
+fn rows_smaller_than_the_coded_image_is_an_error_not_a_panic() {
+    let Some(shared) = series_dir() else { return };
+    let dir = scratch("rows");
+    let file = dir.join("slice.dcm");
+    let mut bytes = fs::read(&series_files(&shared)[0]).expect("read slice");
+    // 256 rows: the JPEG 2000 stream still holds 512 x 512 samples.
+    patch(
+        &mut bytes,
+        b"\x28\x00\x10\x00US\x02\x00",
+        &256u16.to_le_bytes(),
+    );
+    fs::write(&file, bytes).expect("write slice");
+    let result = load_dicom_series(&dir);
+    assert!(
+        matches!(result, Err(VolumeError::Dicom { ref path, .. }) if *path == file),
+        "{result:?}"
+    );
+    fs::remove_dir_all(&dir).expect("clean up");
+}
+
+#[test]
+fn truncated_files_give_typed_errors() {
+    let Some(shared) = series_dir() else { return };
+    let dir = scratch("truncated");
+    let file = dir.join("slice.dcm");
+    let bytes = fs::read(&series_files(&shared)[0]).expect("read slice");
+    fs::write(&file, &bytes).expect("write slice");
+    let intact = load_dicom_series(&dir).expect("load one intact slice");
+    // The file ends with an 8-byte sequence delimiter; cutting into the data before it, from
+    // the JPEG 2000 end marker back to the file meta group, must fail.
+    let n = bytes.len();
+    for len in [
+        140,
+        200,
+        1000,
+        2560,
+        4830,
+        5000,
+        n / 2,
+        n - 100,
+        n - 10,
+        n - 9,
+    ] {
+        fs::write(&file, &bytes[..len]).expect("write truncated slice");
+        match load_dicom_series(&dir) {
+            Err(VolumeError::Dicom { path, message }) => {
+                assert_eq!(path, file, "{len} bytes: {message}");
+                eprintln!("{len} bytes: {message}");
+            }
+            other => panic!("{len} bytes: expected a DICOM error, got {other:?}"),
+        }
+    }
+    // Without its closing delimiter the pixel data are still complete, and load unchanged.
+    fs::write(&file, &bytes[..n - 8]).expect("write truncated slice");
+    assert_eq!(
+        load_dicom_series(&dir).expect("load without delimiter"),
+        intact
+    );
+    // Cut before the magic, the file is no longer DICOM and the folder holds no image.
+    fs::write(&file, &bytes[..100]).expect("write truncated slice");
+    expect_dicom_error(load_dicom_series(&dir), &dir, "no DICOM image slices");
+    fs::remove_dir_all(&dir).expect("clean up");
+}

@@ -1,0 +1,217 @@
+//! The viewer tried as a user would: under Xvfb, with lavapipe, the test starts
+//! `splatscene view`, clicks on the prosthesis, presses the ordering, transfer-function and
+//! screenshot keys (xdotool), takes screenshots of the screen (xwd), and checks that the pick
+//! was reported at the right place and that the picture changed with each key.
+//!
+//! Needs `xvfb`, `xdotool` and `x11-apps` (CI installs them). Without them the test says so
+//! and passes, except under CI (`CI` set), where it fails.
+
+use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::sync::mpsc::{Receiver, channel};
+use std::time::{Duration, Instant};
+
+fn have(tool: &str) -> bool {
+    Command::new("sh")
+        .args(["-c", &format!("command -v {tool}")])
+        .output()
+        .is_ok_and(|o| o.status.success())
+}
+
+/// Kills the child when dropped, so a failed assertion leaves no X server or viewer behind.
+struct Guard(Child);
+
+impl Drop for Guard {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+fn start_xvfb() -> (Guard, String) {
+    for n in 90..140 {
+        if Path::new(&format!("/tmp/.X{n}-lock")).exists() {
+            continue;
+        }
+        let display = format!(":{n}");
+        let child = Command::new("Xvfb")
+            .args([
+                display.as_str(),
+                "-screen",
+                "0",
+                "1024x768x24",
+                "-nolisten",
+                "tcp",
+            ])
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .expect("start Xvfb");
+        let guard = Guard(child);
+        let started = Instant::now();
+        while started.elapsed() < Duration::from_secs(10) {
+            if xdo(&display, &["getmouselocation"]).is_some() {
+                return (guard, display);
+            }
+            std::thread::sleep(Duration::from_millis(100));
+        }
+    }
+    panic!("no X display could be started");
+}
+
+fn xdo(display: &str, args: &[&str]) -> Option<String> {
+    let out = Command::new("xdotool")
+        .args(args)
+        .env("DISPLAY", display)
+        .output()
+        .ok()?;
+    out.status
+        .success()
+        .then(|| String::from_utf8_lossy(&out.stdout).trim().to_owned())
+}
+
+/// Waits until `check` gives something, or panics after `secs` seconds.
+fn wait_for<T>(what: &str, secs: u64, mut check: impl FnMut() -> Option<T>) -> T {
+    let started = Instant::now();
+    loop {
+        if let Some(v) = check() {
+            return v;
+        }
+        assert!(
+            started.elapsed() < Duration::from_secs(secs),
+            "timed out waiting for {what}"
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+}
+
+fn screen(display: &str, dir: &Path, name: &str) -> Vec<u8> {
+    let path = dir.join(format!("{name}.xwd"));
+    let ok = Command::new("xwd")
+        .args(["-root", "-silent", "-out", path.to_str().unwrap()])
+        .env("DISPLAY", display)
+        .status()
+        .is_ok_and(|s| s.success());
+    assert!(ok, "xwd");
+    std::fs::read(path).unwrap()
+}
+
+/// The next stdout line of the viewer that starts with `prefix`.
+fn line(lines: &Receiver<String>, prefix: &str) -> String {
+    let deadline = Instant::now() + Duration::from_secs(60);
+    loop {
+        let left = deadline.saturating_duration_since(Instant::now());
+        let line = lines
+            .recv_timeout(left)
+            .unwrap_or_else(|_| panic!("no '{prefix}' line from the viewer"));
+        if let Some(rest) = line.strip_prefix(prefix) {
+            return rest.trim().to_owned();
+        }
+    }
+}
+
+/// Waits for the window title to contain `text` (the title changes after each frame).
+fn title(display: &str, window: &str, text: &str) {
+    wait_for(&format!("a title with {text:?}"), 60, || {
+        xdo(display, &["getwindowname", window]).filter(|t| t.contains(text))
+    });
+    // The title is set after the frame is presented; give the X server a moment to show it.
+    std::thread::sleep(Duration::from_millis(300));
+}
+
+#[test]
+fn viewer_picks_switches_orderings_and_takes_screenshots_under_xvfb() {
+    if !(have("Xvfb") && have("xdotool") && have("xwd")) {
+        assert!(
+            std::env::var_os("CI").is_none(),
+            "CI must install xvfb, xdotool and x11-apps"
+        );
+        eprintln!("skipped: needs Xvfb, xdotool and xwd (apt-get install xvfb xdotool x11-apps)");
+        return;
+    }
+    let (_xvfb, display) = start_xvfb();
+    let dir: PathBuf =
+        std::env::temp_dir().join(format!("splatscene-viewer-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let mut viewer = Command::new(env!("CARGO_BIN_EXE_splatscene"))
+        .args([
+            "view",
+            "--size",
+            "640x480",
+            "--screenshots",
+            dir.to_str().unwrap(),
+        ])
+        .env("DISPLAY", &display)
+        .env("NODEVICE_SELECT", "1")
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("start the viewer");
+    let stdout = viewer.stdout.take().unwrap();
+    let viewer = Guard(viewer);
+    let (send, lines) = channel();
+    std::thread::spawn(move || {
+        for l in BufReader::new(stdout).lines().map_while(Result::ok) {
+            let _ = send.send(l);
+        }
+    });
+    let window = wait_for("the viewer window", 60, || {
+        xdo(&display, &["search", "--name", "^splatscene"])
+            .and_then(|s| s.lines().next().map(str::to_owned))
+    });
+    title(&display, &window, "splats");
+    xdo(&display, &["windowfocus", "--sync", &window]);
+    let first = screen(&display, &dir, "first");
+
+    // The built-in view at 640x480 shows the prosthesis head at (320, 160).
+    xdo(
+        &display,
+        &["mousemove", "--window", &window, "320", "160", "click", "1"],
+    )
+    .expect("click");
+    let pick: serde_json::Value = serde_json::from_str(&line(&lines, "pick")).unwrap();
+    assert_eq!(pick["node_name"], "head", "{pick}");
+    assert_eq!(pick["pixel"], serde_json::json!([320, 160]));
+    let point = glam::DVec3::from_array(std::array::from_fn(|i| {
+        pick["hit"]["point"][i].as_f64().unwrap()
+    }));
+    let marks = splatscene::volume::shoulder_landmarks(
+        splatscene::volume::phantom::DEFAULT_DIMS,
+        splatscene::volume::phantom::DEFAULT_SPACING,
+    );
+    let from_centre = point.distance(glam::DVec3::from_array(marks.head_centre));
+    let radius = splatscene::mesh::prosthesis::ProsthesisParams::default().head_radius;
+    assert!(
+        (from_centre - radius).abs() < 0.5,
+        "the pick lies on the head's sphere: {from_centre} mm from its centre"
+    );
+    title(&display, &window, "splats");
+    let marked = screen(&display, &dir, "marked");
+    assert_ne!(first, marked, "the pick marker shows");
+
+    xdo(&display, &["key", "2"]).expect("key 2");
+    assert_eq!(line(&lines, "ordering"), "pbtf");
+    title(&display, &window, "pbtf");
+    let pbtf = screen(&display, &dir, "pbtf");
+    assert_ne!(marked, pbtf, "PBTF draws a different picture from IP-PBTF");
+
+    xdo(&display, &["key", "t"]).expect("key t");
+    assert_eq!(line(&lines, "transfer function"), "dense bone");
+    title(&display, &window, "dense bone");
+    let dense = screen(&display, &dir, "dense");
+    assert_ne!(pbtf, dense, "the transfer function changes the picture");
+
+    xdo(&display, &["key", "s"]).expect("key s");
+    let shot = PathBuf::from(line(&lines, "screenshot"));
+    let image = image::open(&shot).unwrap();
+    assert_eq!((image.width(), image.height()), (640, 480));
+
+    xdo(&display, &["key", "q"]).expect("key q");
+    let mut viewer = viewer;
+    let status = wait_for("the viewer to quit", 30, || {
+        viewer.0.try_wait().ok().flatten()
+    });
+    assert!(status.success(), "{status:?}");
+    std::fs::remove_dir_all(&dir).ok();
+}
