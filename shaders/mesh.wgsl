@@ -8,11 +8,13 @@ struct Frame {
     view_proj: mat4x4<f32>,
     // xyz: direction the camera looks (world), w: headlight intensity.
     forward: vec4<f32>,
-    // x: ambient, y: number of directional lights, z: 1 for orthographic.
+    // x: ambient, y: number of directional lights, z: 1 for orthographic, w: clip planes.
     params: vec4<f32>,
     // Directional lights: xyz direction of travel (world, unit), then rgb colour.
     light_dir: array<vec4<f32>, 4>,
     light_color: array<vec4<f32>, 4>,
+    // Clip planes in camera-relative world space: kept where dot(xyz, p) <= w. params.w counts.
+    clip: array<vec4<f32>, 12>,
 }
 
 struct Object {
@@ -57,6 +59,11 @@ fn shade(n: vec3<f32>, l: vec3<f32>, v: vec3<f32>, color: vec3<f32>) -> vec3<f32
 
 @fragment
 fn fs_main(in: VsOut, @builtin(front_facing) front: bool) -> @location(0) vec4<f32> {
+    for (var i = 0u; i < u32(frame.params.w); i++) {
+        if dot(frame.clip[i].xyz, in.rel) > frame.clip[i].w {
+            discard;
+        }
+    }
     var n = normalize(in.normal);
     if !front {
         n = -n;

@@ -23,13 +23,16 @@ struct Splat {
     size: vec4<f32>,
     // x: perspective depth scale (near plane); orthographic: y near, z far.
     depth: vec4<f32>,
-    // Grid size, w unused.
+    // Grid size; w: clip planes in use.
     dims: vec4<u32>,
     // Rows of the index-space gradient -> camera-space normal matrix (R L^-T); n0.w is the
     // shading strength (0: flat colour, 1: fully headlight-shaded).
     n0: vec4<f32>,
     n1: vec4<f32>,
     n2: vec4<f32>,
+    // Clip planes in camera space (x right, y up, z forward, eye at the origin): a splat is
+    // kept where dot(xyz, p) <= w for each; dims.w counts them.
+    clip: array<vec4<f32>, 12>,
 }
 
 @group(0) @binding(0) var<uniform> u: Splat;
@@ -65,6 +68,11 @@ fn vs_main(@builtin(vertex_index) corner: u32, @location(0) id: u32) -> VsOut {
     let ortho = u.size.w > 0.5;
     if straight.a <= 0.0 || (!ortho && p.z <= u.eye.w) || (ortho && p.z <= u.depth.y) {
         return discarded();
+    }
+    for (var i = 0u; i < u.dims.w; i++) {
+        if dot(u.clip[i].xyz, p) > u.clip[i].w {
+            return discarded();
+        }
     }
     let f = u.screen.z;
     var j0 = vec3<f32>(f, 0.0, 0.0);

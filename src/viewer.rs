@@ -3,8 +3,9 @@
 //! transfer function; a screenshot key; frame and order time in the title.
 //!
 //! Keys: `1` BTF, `2` PBTF, `3` IP-PBTF, `4` exact, `5` bucketed; `T` next transfer function;
-//! `S` screenshot (a new `splatscene-view-N.png` in the screenshot folder); `R` reset the
-//! camera; `Q` or Escape quits. Mouse: left drag orbits, right drag pans, the wheel zooms, a
+//! `S` screenshot (a new `splatscene-view-N.png` in the screenshot folder); `C` a clip plane
+//! facing the eye through the target (cutting the volume, not the meshes), or off again, and
+//! `[` / `]` move it away from or toward the eye; `R` reset the camera; `Q` or Escape quits. Mouse: left drag orbits, right drag pans, the wheel zooms, a
 //! left click without dragging picks.
 
 use std::path::PathBuf;
@@ -26,7 +27,7 @@ use crate::render::{
     Blit, FrameOptions, FrameReport, GpuContext, RenderError, RenderTarget, Renderer, ViewSetup,
     encode_png, frame_to_rgba8,
 };
-use crate::scene::{NodeContent, NodeId, Scene, SceneCamera};
+use crate::scene::{ClipPlane, NodeContent, NodeId, Scene, SceneCamera};
 
 /// Viewer settings.
 #[derive(Debug, Clone)]
@@ -344,6 +345,26 @@ impl App {
         println!("transfer function {}", presets()[self.preset].0);
     }
 
+    fn toggle_clip(&mut self) {
+        if self.scene.clipping.planes.pop().is_none() {
+            let toward_eye = (self.camera.eye - self.camera.target).normalize_or(DVec3::Y);
+            let plane = ClipPlane::through(self.camera.target, toward_eye, false);
+            self.scene.clipping.planes.push(plane);
+            println!("clip plane on, offset {:.1}", plane.offset);
+        } else {
+            println!("clip plane off");
+        }
+    }
+
+    /// Moves the clip plane by 2% of the scene's size: `sign` 1 toward the eye (cutting less).
+    fn move_clip(&mut self, sign: f64) {
+        let step = self.scene.bounds().map_or(1.0, |(lo, hi)| (hi - lo).length() * 0.02);
+        if let Some(plane) = self.scene.clipping.planes.last_mut() {
+            plane.offset += sign * step * plane.normal.length();
+            println!("clip plane offset {:.1}", plane.offset);
+        }
+    }
+
     fn screenshot(&mut self) -> Result<(), ViewerError> {
         let Some(gpu) = &self.gpu else {
             return Ok(());
@@ -371,6 +392,9 @@ impl App {
                 "s" => self.screenshot()?,
                 "t" => self.next_preset(),
                 "r" => self.camera = self.home,
+                "c" => self.toggle_clip(),
+                "[" => self.move_clip(-1.0),
+                "]" => self.move_clip(1.0),
                 digit => {
                     if let Some((_, ordering)) = ORDERINGS.iter().find(|(k, _)| *k == digit) {
                         self.ordering = *ordering;

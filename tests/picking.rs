@@ -370,8 +370,8 @@ fn the_voxel_walk_finds_the_first_opaque_voxel_as_dense_sampling_does() {
             node,
             &geometry,
             &ray,
-            options.opacity_threshold,
-            f64::INFINITY,
+            (options.opacity_threshold, f64::INFINITY),
+            &scene.clipping,
         );
         // Reference: sample the ray every 0.02 mm and take the voxel containing each sample.
         let dims = geometry.dims();
@@ -437,5 +437,42 @@ fn the_voxel_walk_finds_the_first_opaque_voxel_as_dense_sampling_does() {
     assert!(
         bone.value > 150.0
             && bone.distance < (DVec3::from_array(marks.glenoid_centre) - eye).length() + 5.0
+    );
+}
+
+#[test]
+fn picks_pass_through_what_clipping_cuts_away() {
+    let mut scene = shoulder_scene().unwrap();
+    let marks = splatscene::volume::shoulder_landmarks(
+        splatscene::volume::phantom::DEFAULT_DIMS,
+        splatscene::volume::phantom::DEFAULT_SPACING,
+    );
+    let head = DVec3::from_array(marks.head_centre);
+    let eye = scene.camera.unwrap().eye;
+    let ray = Ray::new(eye, head - eye).unwrap();
+    let picker = Picker::new(&scene);
+    let options = PickOptions::default();
+    let Some(Hit::Mesh(first)) = picker.pick(&scene, &ray, &options) else {
+        panic!("the prosthesis head is in front");
+    };
+    // Cut away everything nearer to the eye than 5 mm in front of the head centre, meshes too.
+    let toward_eye = (eye - head).normalize();
+    scene
+        .clipping
+        .planes
+        .push(splatscene::scene::ClipPlane::through(
+            head + 5.0 * toward_eye,
+            toward_eye,
+            true,
+        ));
+    let behind = picker
+        .pick(&scene, &ray, &options)
+        .expect("something behind the cut");
+    assert!(
+        behind.distance() > first.distance + 10.0,
+        "{behind:?} after {first:?}"
+    );
+    assert!(
+        scene.clipping.keeps_mesh(behind.point()) && scene.clipping.keeps_splat(behind.point())
     );
 }

@@ -436,3 +436,75 @@ fn twenty_million_splats_render() {
     assert_eq!(corner[3], 0.0, "the fitted cube leaves the corner empty");
     eprintln!("20M splats: {:?}", shot.report.timings);
 }
+
+#[test]
+fn clipped_voxels_vanish_and_the_rest_draw_as_before() {
+    let ctx = context();
+    let volume = shells(20, [1.0; 3]);
+    let centre = volume.geometry().unwrap().centre_world();
+    let camera = SceneCamera::look_at(centre + DVec3::new(14.0, -40.0, 9.0), centre);
+    let size = (72, 64);
+    // Keep x <= 7.5 and the crop box 2..17 in z: voxels beyond are cut away.
+    let clipping = splatscene::scene::Clipping {
+        planes: vec![splatscene::scene::ClipPlane::through(
+            DVec3::new(7.5, 0.0, 0.0),
+            DVec3::X,
+            true,
+        )],
+        crop: Some((DVec3::new(-1.0, -1.0, 1.5), DVec3::new(30.0, 30.0, 17.5))),
+        crop_meshes: false,
+    };
+    let mut clipped = volume_scene(volume.clone(), Ordering::IpPbtfImplicit);
+    clipped.clipping = clipping.clone();
+    add_wall(&mut clipped);
+    // The same voxels made air where the clipping cuts them, and the wall without its cut part.
+    let mut cut = volume.clone();
+    for (id, v) in cut.values.iter_mut().enumerate() {
+        let (x, z) = (id % 20, id / 400);
+        if x > 7 || !(2..=17).contains(&z) {
+            *v = -1000.0;
+        }
+    }
+    let mut expected = volume_scene(cut, Ordering::IpPbtfImplicit);
+    expected.clipping.planes = clipping
+        .planes
+        .iter()
+        .map(|p| splatscene::scene::ClipPlane { meshes: true, ..*p })
+        .collect();
+    add_wall(&mut expected);
+    let shoot = |scene: &Scene| {
+        let view = splatscene::render::ViewSetup::new(
+            &camera,
+            size,
+            volume_scene(volume.clone(), Ordering::Exact).bounds(),
+        )
+        .unwrap();
+        let target = splatscene::render::RenderTarget::new(&ctx, size.0, size.1).unwrap();
+        let options = FrameOptions {
+            background: Some([0.0; 3]),
+            ..TRANSPARENT
+        };
+        Renderer::new()
+            .render(
+                &ctx,
+                scene,
+                &view,
+                &target.color_view,
+                &target.depth_view,
+                &options,
+            )
+            .unwrap();
+        (
+            target.read_color(&ctx).unwrap(),
+            target.read_depth(&ctx).unwrap(),
+        )
+    };
+    let (a, a_depth) = shoot(&clipped);
+    let (b, b_depth) = shoot(&expected);
+    assert_eq!(a_depth, b_depth, "the plane cuts the wall alike");
+    assert_eq!(a.pixels, b.pixels, "clipping equals removing the voxels");
+    let (unclipped, _) = shoot(&volume_scene(volume.clone(), Ordering::IpPbtfImplicit));
+    assert_ne!(a.pixels, unclipped.pixels, "the clipping removed something");
+    let wall_pixels = a_depth.iter().filter(|d| **d > 0.0).count();
+    assert!(wall_pixels > 100, "part of the wall stays: {wall_pixels}");
+}

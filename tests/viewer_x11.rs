@@ -202,6 +202,14 @@ fn viewer_picks_switches_orderings_and_takes_screenshots_under_xvfb() {
     let dense = screen(&display, &dir, "dense");
     assert_ne!(pbtf, dense, "the transfer function changes the picture");
 
+    xdo(&display, &["key", "c"]).expect("key c");
+    assert!(line(&lines, "clip plane").starts_with("on"));
+    xdo(&display, &["key", "bracketleft"]).expect("key [");
+    line(&lines, "clip plane offset");
+    title(&display, &window, "splats");
+    let clipped = screen(&display, &dir, "clipped");
+    assert_ne!(dense, clipped, "the clip plane cuts the volume");
+
     xdo(&display, &["key", "s"]).expect("key s");
     let shot = PathBuf::from(line(&lines, "screenshot"));
     let image = image::open(&shot).unwrap();

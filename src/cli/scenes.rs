@@ -333,7 +333,7 @@ pub fn run_viewer(args: ViewerArgs) -> Result<()> {
         background: loaded.background.unwrap_or([0.06, 0.07, 0.09]),
     };
     eprintln!(
-        "keys: 1 BTF, 2 PBTF, 3 IP-PBTF, 4 exact, 5 bucketed, T transfer function, S screenshot, R reset, Q quit; drag to orbit (right: pan), wheel to zoom, click to pick"
+        "keys: 1 BTF, 2 PBTF, 3 IP-PBTF, 4 exact, 5 bucketed, T transfer function, S screenshot, C clip plane ([ and ] move it), R reset, Q quit; drag to orbit (right: pan), wheel to zoom, click to pick"
     );
     splatscene::viewer::run(loaded.scene, options)?;
     Ok(())

@@ -5,18 +5,18 @@ use glam::DVec3;
 
 use super::{Ray, VolumeHit};
 use crate::order::VolumeGeometry;
-use crate::scene::{NodeId, VolumeNode};
+use crate::scene::{Clipping, NodeId, VolumeNode};
 
 /// The first voxel of `node` along `ray`, nearer than `max_distance`, whose opacity under the
-/// node's transfer function exceeds `threshold`. Voxel `k` fills the cell `k - 0.5 .. k + 0.5`
-/// in index space.
+/// node's transfer function exceeds `threshold` and whose centre `clipping` keeps (as the
+/// renderer keeps its splat). Voxel `k` fills the cell `k - 0.5 .. k + 0.5` in index space.
 pub fn march_volume(
     id: NodeId,
     node: &VolumeNode,
     geometry: &VolumeGeometry,
     ray: &Ray,
-    threshold: f32,
-    max_distance: f64,
+    (threshold, max_distance): (f32, f64),
+    clipping: &Clipping,
 ) -> Option<VolumeHit> {
     let dims = geometry.dims();
     let o = geometry.world_to_index(ray.origin);
@@ -55,7 +55,9 @@ pub fn march_volume(
             .copied()
             .unwrap_or(f32::NAN);
         let opacity = node.transfer.sample(value)[3];
-        if opacity > threshold {
+        let centre =
+            || geometry.index_to_world_point(DVec3::new(k[0] as f64, k[1] as f64, k[2] as f64));
+        if opacity > threshold && (clipping.is_empty() || clipping.keeps_splat(centre())) {
             return Some(VolumeHit {
                 node: id,
                 voxel: k.map(|v| v as u32),

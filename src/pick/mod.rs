@@ -16,7 +16,7 @@ use obvhs::triangle::Triangle;
 use serde::Serialize;
 
 use crate::render::ViewSetup;
-use crate::scene::{NodeId, Scene, placed_geometry};
+use crate::scene::{Clipping, NodeId, Scene, placed_geometry};
 
 mod march;
 pub mod measure;
@@ -270,10 +270,24 @@ impl Picker {
 
     /// The nearest mesh hit through the BVH.
     pub fn pick_mesh(&self, ray: &Ray) -> Option<MeshHit> {
+        self.pick_mesh_clipped(ray, &Clipping::default())
+    }
+
+    /// The nearest mesh hit through the BVH that `clipping` keeps (hits on parts of meshes cut
+    /// away by a plane or the crop box are passed through).
+    pub fn pick_mesh_clipped(&self, ray: &Ray, clipping: &Clipping) -> Option<MeshHit> {
         let bvh = self.bvh.as_ref()?;
         let mut hit = RayHit::none();
         let found = bvh.ray_traverse(self.bvh_ray(ray), &mut hit, |r, id| {
-            self.triangles[bvh.primitive_indices[id] as usize].intersect(r)
+            let t = self.triangles[bvh.primitive_indices[id] as usize].intersect(r);
+            if clipping.is_empty()
+                || !t.is_finite()
+                || clipping.keeps_mesh(ray.at(f64::from(t) * self.scale))
+            {
+                t
+            } else {
+                f32::INFINITY
+            }
         });
         found.then(|| {
             self.mesh_hit(
@@ -328,7 +342,7 @@ impl Picker {
 
     /// The nearest hit over meshes and (when `options.volumes`) volumes.
     pub fn pick(&self, scene: &Scene, ray: &Ray, options: &PickOptions) -> Option<Hit> {
-        let mesh = self.pick_mesh(ray);
+        let mesh = self.pick_mesh_clipped(ray, &scene.clipping);
         let limit = mesh.map_or(f64::INFINITY, |h| h.distance);
         let mut best = mesh.map(Hit::Mesh);
         if options.volumes {
@@ -337,14 +351,8 @@ impl Picker {
                     continue;
                 };
                 let best_distance = best.map_or(limit, |h| h.distance());
-                if let Some(hit) = march_volume(
-                    id,
-                    node,
-                    &geometry,
-                    ray,
-                    options.opacity_threshold,
-                    best_distance,
-                ) {
+                let limits = (options.opacity_threshold, best_distance);
+                if let Some(hit) = march_volume(id, node, &geometry, ray, limits, &scene.clipping) {
                     best = Some(Hit::Volume(hit));
                 }
             }

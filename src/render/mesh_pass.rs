@@ -10,7 +10,7 @@ use super::GpuContext;
 use super::target::{COLOR_FORMAT, DEPTH_FORMAT};
 use super::view::ViewSetup;
 use crate::mesh::{CpuMesh, Material};
-use crate::scene::Lights;
+use crate::scene::{ClipPlane, Clipping, Lights};
 
 /// Keep in sync with `Frame` in shaders/mesh.wgsl.
 #[repr(C)]
@@ -21,8 +21,9 @@ struct FrameUniforms {
     params: [f32; 4],
     light_dir: [[f32; 4]; 4],
     light_color: [[f32; 4]; 4],
+    clip: [[f32; 4]; 12],
 }
-const _: () = assert!(size_of::<FrameUniforms>() == 224);
+const _: () = assert!(size_of::<FrameUniforms>() == 416);
 
 /// Keep in sync with `Object` in shaders/mesh.wgsl.
 #[repr(C)]
@@ -183,8 +184,20 @@ impl MeshPass {
     }
 
     /// Writes the camera and lights of this frame.
-    pub(crate) fn write_frame(&self, ctx: &GpuContext, view: &ViewSetup, lights: &Lights) {
+    pub(crate) fn write_frame(
+        &self,
+        ctx: &GpuContext,
+        view: &ViewSetup,
+        lights: &Lights,
+        clipping: &Clipping,
+    ) {
         let forward = view.axes.z_axis.as_vec3();
+        let planes: Vec<ClipPlane> = clipping
+            .all_planes()
+            .into_iter()
+            .filter(|p| p.meshes)
+            .take(12)
+            .collect();
         let mut u = FrameUniforms {
             view_proj: view.view_proj().to_cols_array_2d(),
             forward: forward.extend(lights.headlight).to_array(),
@@ -192,11 +205,17 @@ impl MeshPass {
                 lights.ambient,
                 lights.directional.len().min(4) as f32,
                 if view.is_orthographic() { 1.0 } else { 0.0 },
-                0.0,
+                planes.len() as f32,
             ],
             light_dir: [[0.0; 4]; 4],
             light_color: [[0.0; 4]; 4],
+            clip: [[0.0; 4]; 12],
         };
+        for (slot, plane) in u.clip.iter_mut().zip(&planes) {
+            // Camera-relative world: the offset moves with the eye, in f64.
+            let d = plane.offset - plane.normal.dot(view.camera.eye);
+            *slot = plane.normal.as_vec3().extend(d as f32).to_array();
+        }
         for (i, light) in lights.directional.iter().take(4).enumerate() {
             let d = light.direction.normalize_or(glam::DVec3::NEG_Z).as_vec3();
             u.light_dir[i] = d.extend(0.0).to_array();

@@ -343,10 +343,10 @@ impl Renderer {
                 .map(|(_, node, _)| node.splats)
                 .unwrap_or_default();
             SplatPass::upload_order(ctx, &mut state.gpu, &state.ids)?;
-            SplatPass::write_uniforms(ctx, &state.gpu, geometry, view, &settings);
+            SplatPass::write_uniforms(ctx, &state.gpu, geometry, view, &settings, &scene.clipping);
         }
         if let Some(pass) = &self.mesh_pass {
-            pass.write_frame(ctx, view, &scene.lights);
+            pass.write_frame(ctx, view, &scene.lights, &scene.clipping);
         }
         for (id, node, world) in scene.overlays() {
             if let Some(gpu) = self.meshes.get(&id) {

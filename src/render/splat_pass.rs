@@ -14,7 +14,7 @@ use super::view::ViewSetup;
 use super::{GpuContext, RenderError};
 use crate::classify::Classified;
 use crate::order::VolumeGeometry;
-use crate::scene::SplatSettings;
+use crate::scene::{ClipPlane, Clipping, SplatSettings};
 use crate::volume::CpuVolume;
 
 /// Keep in sync with `Splat` in shaders/splat.wgsl.
@@ -29,8 +29,9 @@ struct SplatUniforms {
     depth: [f32; 4],
     dims: [u32; 4],
     normal: [[f32; 4]; 3],
+    clip: [[f32; 4]; 12],
 }
-const _: () = assert!(size_of::<SplatUniforms>() == 224);
+const _: () = assert!(size_of::<SplatUniforms>() == 416);
 
 /// The splat pipeline.
 #[derive(Debug)]
@@ -342,6 +343,7 @@ impl SplatPass {
         geometry: &VolumeGeometry,
         view: &ViewSetup,
         settings: &SplatSettings,
+        clipping: &Clipping,
     ) {
         let style = &settings.style;
         let linear = geometry.index_to_world().matrix3;
@@ -382,7 +384,8 @@ impl SplatPass {
             ],
             dims: {
                 let d = geometry.dims();
-                [d[0], d[1], d[2], 0]
+                let planes = clipping.all_planes().len().min(12) as u32;
+                [d[0], d[1], d[2], planes]
             },
             normal: {
                 let n = view.axes.transpose() * linear.inverse().transpose();
@@ -390,6 +393,7 @@ impl SplatPass {
                 rows[0][3] = settings.shading.clamp(0.0, 1.0);
                 rows
             },
+            clip: camera_planes(view, clipping.all_planes().iter()),
         };
         ctx.queue
             .write_buffer(&volume.uniforms, 0, bytemuck::bytes_of(&u));
@@ -408,4 +412,19 @@ impl SplatPass {
         pass.set_vertex_buffer(0, order.slice(..u64::from(volume.count) * 4));
         pass.draw(0..4, 0..volume.count);
     }
+}
+
+/// Clip planes in camera space (rows right, up, forward; the eye at the origin), taken in f64
+/// relative to the eye before they become f32.
+pub(crate) fn camera_planes<'a>(
+    view: &ViewSetup,
+    planes: impl Iterator<Item = &'a ClipPlane>,
+) -> [[f32; 4]; 12] {
+    let mut out = [[0.0; 4]; 12];
+    for (slot, plane) in out.iter_mut().zip(planes) {
+        let n = view.axes.transpose() * plane.normal;
+        let d = plane.offset - plane.normal.dot(view.camera.eye);
+        *slot = [n.x as f32, n.y as f32, n.z as f32, d as f32];
+    }
+    out
 }

@@ -13,10 +13,12 @@ use crate::mesh::{CpuMesh, Material};
 use crate::order::{OrderError, Ordering, VolumeGeometry};
 use crate::volume::CpuVolume;
 
+mod clip;
 pub mod file;
 pub mod shoulder;
 mod view;
 
+pub use clip::{ClipPlane, Clipping, MAX_CLIP_PLANES};
 pub use view::{Light, Lights, Projection, SceneCamera};
 
 /// Index of a node in its [`Scene`].
@@ -140,6 +142,8 @@ pub struct Scene {
     pub camera: Option<SceneCamera>,
     /// The lights.
     pub lights: Lights,
+    /// Clip planes and crop box (world space); changing them needs no new classification.
+    pub clipping: Clipping,
 }
 
 impl Scene {

@@ -1,0 +1,113 @@
+//! Clipping: up to six planes and a crop box in world space. Splats whose voxel centre is cut
+//! away vanish (the order of the rest is unchanged: the draw order is the same list with the
+//! clipped voxels skipped); meshes are cut too where a plane or the box says so. Picking
+//! respects the same cuts.
+
+use glam::DVec3;
+
+/// The most planes a scene may have (the crop box comes on top).
+pub const MAX_CLIP_PLANES: usize = 6;
+
+/// A plane that keeps the half-space `normal . p <= offset` and cuts away the rest.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ClipPlane {
+    /// Points out of the kept half-space (need not be unit length).
+    pub normal: DVec3,
+    /// Kept where `normal . p <= offset`.
+    pub offset: f64,
+    /// Whether meshes are cut too (splats always are).
+    pub meshes: bool,
+}
+
+impl ClipPlane {
+    /// The plane through `point` cutting away the side `normal` points to.
+    pub fn through(point: DVec3, normal: DVec3, meshes: bool) -> Self {
+        Self {
+            normal,
+            offset: normal.dot(point),
+            meshes,
+        }
+    }
+
+    /// Whether `p` is kept.
+    pub fn keeps(&self, p: DVec3) -> bool {
+        self.normal.dot(p) <= self.offset
+    }
+}
+
+/// A scene's clipping.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Clipping {
+    /// Clip planes (the first [`MAX_CLIP_PLANES`] are used).
+    pub planes: Vec<ClipPlane>,
+    /// Keep only what lies inside this world box `(min, max)`.
+    pub crop: Option<(DVec3, DVec3)>,
+    /// Whether the crop box cuts meshes too.
+    pub crop_meshes: bool,
+}
+
+impl Clipping {
+    /// Every plane in force, the crop box as six of them.
+    pub fn all_planes(&self) -> Vec<ClipPlane> {
+        let mut planes: Vec<ClipPlane> =
+            self.planes.iter().take(MAX_CLIP_PLANES).copied().collect();
+        if let Some((lo, hi)) = self.crop {
+            for axis in [DVec3::X, DVec3::Y, DVec3::Z] {
+                planes.push(ClipPlane::through(hi, axis, self.crop_meshes));
+                planes.push(ClipPlane::through(lo, -axis, self.crop_meshes));
+            }
+        }
+        planes
+    }
+
+    /// Whether a voxel centre at `p` is kept.
+    pub fn keeps_splat(&self, p: DVec3) -> bool {
+        self.all_planes().iter().all(|c| c.keeps(p))
+    }
+
+    /// Whether a mesh point at `p` is kept.
+    pub fn keeps_mesh(&self, p: DVec3) -> bool {
+        self.all_planes()
+            .iter()
+            .filter(|c| c.meshes)
+            .all(|c| c.keeps(p))
+    }
+
+    /// Whether nothing is clipped.
+    pub fn is_empty(&self) -> bool {
+        self.planes.is_empty() && self.crop.is_none()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn planes_and_the_crop_box_keep_their_insides() {
+        let clip = Clipping {
+            planes: vec![ClipPlane::through(
+                DVec3::new(0.0, 5.0, 0.0),
+                DVec3::Y,
+                false,
+            )],
+            crop: Some((DVec3::splat(-10.0), DVec3::splat(10.0))),
+            crop_meshes: true,
+        };
+        assert_eq!(clip.all_planes().len(), 7);
+        assert!(clip.keeps_splat(DVec3::new(0.0, 4.9, 0.0)));
+        assert!(!clip.keeps_splat(DVec3::new(0.0, 5.1, 0.0)));
+        assert!(
+            clip.keeps_mesh(DVec3::new(0.0, 5.1, 0.0)),
+            "the plane spares meshes"
+        );
+        assert!(
+            !clip.keeps_mesh(DVec3::new(0.0, 0.0, 10.5)),
+            "the box does not"
+        );
+        assert!(!clip.keeps_splat(DVec3::new(-10.5, 0.0, 0.0)));
+        assert!(
+            Clipping::default().is_empty() && Clipping::default().keeps_splat(DVec3::splat(1e9))
+        );
+    }
+}
