@@ -1,5 +1,6 @@
-//! Frame time of the renderer: the engine and the CT head (classified with a ramp transfer
-//! function) with the prosthesis seated in them, at 512x512, on whatever adapter wgpu finds
+//! Frame time of the renderer: the built-in shoulder scene at the viewer's default 960x720,
+//! and the engine and the CT head (classified with a ramp transfer function) with the
+//! prosthesis seated in them at 512x512, on whatever adapter wgpu finds
 //! (lavapipe on machines without a GPU). Criterion times whole frames read back to the CPU;
 //! afterwards a few frames with stage timing print the split (order, upload, mesh pass, splat
 //! pass, readback), medians over the frames.
@@ -67,7 +68,10 @@ fn scenes() -> Vec<(&'static str, Scene)> {
         &head_spec,
     )
     .expect("CT head volume");
+    // The built-in scene as `splatscene view` first shows it, at the viewer's default size.
+    let shoulder = splatscene::scene::shoulder::shoulder_scene().unwrap();
     vec![
+        ("shoulder", shoulder),
         (
             "engine",
             scene(
@@ -93,13 +97,20 @@ fn median(mut v: Vec<Duration>) -> f64 {
 fn frames(c: &mut Criterion) {
     let ctx = GpuContext::headless().expect("a GPU adapter (install mesa-vulkan-drivers)");
     eprintln!("adapter: {}", ctx.describe());
-    let size = (512, 512);
+    let size_of = |name: &str| {
+        if name == "shoulder" {
+            (960, 720)
+        } else {
+            (512, 512)
+        }
+    };
     let mut group = c.benchmark_group("frame");
     group
         .sample_size(10)
         .warm_up_time(Duration::from_secs(1))
         .measurement_time(Duration::from_secs(10));
     for (name, scene) in scenes() {
+        let size = size_of(name);
         let mut renderer = Renderer::new();
         let base = scene.camera.unwrap();
         let options = FrameOptions {
