@@ -36,6 +36,86 @@ impl TransferFunction {
         ])
     }
 
+    /// CT soft tissue with bone: faint skin and muscle (about -100 to 100 HU) under bone.
+    pub fn ct_soft_tissue() -> Self {
+        Self::new(vec![
+            (-250.0, [0.75, 0.45, 0.35, 0.0]),
+            (-50.0, [0.8, 0.5, 0.4, 0.015]),
+            (100.0, [0.85, 0.55, 0.45, 0.03]),
+            (200.0, [0.9, 0.75, 0.6, 0.06]),
+            (700.0, [0.96, 0.9, 0.82, 0.5]),
+            (1200.0, [1.0, 0.97, 0.92, 0.8]),
+        ])
+    }
+
+    /// CT metal implants: bone faint, and the very dense values of metal (from about 2000 HU,
+    /// stent-grafts, stems, screws) bright and nearly opaque, in a cool tint.
+    pub fn ct_metal() -> Self {
+        Self::new(vec![
+            (300.0, [0.9, 0.8, 0.7, 0.0]),
+            (1000.0, [0.95, 0.9, 0.85, 0.08]),
+            (1800.0, [0.8, 0.85, 0.95, 0.1]),
+            (2500.0, [0.75, 0.85, 1.0, 0.9]),
+        ])
+    }
+
+    /// An MR default: a grey ramp over the upper part of a 0 to 1000 intensity range.
+    pub fn mr_default() -> Self {
+        Self::new(vec![
+            (150.0, [0.8, 0.8, 0.8, 0.0]),
+            (500.0, [0.9, 0.88, 0.85, 0.3]),
+            (1000.0, [1.0, 1.0, 1.0, 0.7]),
+        ])
+    }
+
+    /// A preset by name: `ct-bone`, `ct-soft-tissue`, `ct-metal` or `mr-default`.
+    pub fn preset(name: &str) -> Option<Self> {
+        match name {
+            "ct-bone" => Some(Self::ct_bone()),
+            "ct-soft-tissue" => Some(Self::ct_soft_tissue()),
+            "ct-metal" => Some(Self::ct_metal()),
+            "mr-default" => Some(Self::mr_default()),
+            _ => None,
+        }
+    }
+
+    /// Names accepted by [`Self::preset`].
+    pub const PRESETS: [&'static str; 4] = ["ct-bone", "ct-soft-tissue", "ct-metal", "mr-default"];
+
+    /// The same function moved along the value axis by `shift` (positive: it starts higher).
+    pub fn shifted(&self, shift: f32) -> Self {
+        Self::new(self.points.iter().map(|(v, c)| (v + shift, *c)).collect())
+    }
+
+    /// The same function stretched so that its points span the window `level - width / 2` to
+    /// `level + width / 2` (the usual window and level of CT viewers); a function with a single
+    /// point is moved to `level`.
+    pub fn windowed(&self, level: f32, width: f32) -> Self {
+        let (Some(first), Some(last)) = (self.points.first(), self.points.last()) else {
+            return self.clone();
+        };
+        let span = last.0 - first.0;
+        let lo = level - 0.5 * width.abs();
+        let points = self
+            .points
+            .iter()
+            .map(|(v, c)| {
+                let t = if span > 0.0 {
+                    (v - first.0) / span
+                } else {
+                    0.5
+                };
+                (lo + t * width.abs(), *c)
+            })
+            .collect();
+        Self::new(points)
+    }
+
+    /// The points, sorted by value.
+    pub fn points(&self) -> &[(f32, [f32; 4])] {
+        &self.points
+    }
+
     /// Straight RGBA at `value`.
     pub fn sample(&self, value: f32) -> [f32; 4] {
         let Some(first) = self.points.first() else {
@@ -64,11 +144,35 @@ pub struct Classified {
     pub colors: Vec<[f32; 4]>,
 }
 
+/// Opacity corrected for the distance a ray travels through one splat: the transfer
+/// function's opacity is defined for `reference` millimetres; a splat standing for `length`
+/// millimetres of tissue absorbs as much as that length of it would
+/// (`1 - (1 - alpha)^(length / reference)`), so the same transfer function looks the same at
+/// any voxel spacing.
+pub fn corrected_opacity(alpha: f32, length: f64, reference: f64) -> f32 {
+    if !(length > 0.0 && reference > 0.0) || alpha >= 1.0 {
+        return alpha;
+    }
+    let exponent = (length / reference) as f32;
+    1.0 - (1.0 - alpha.max(0.0)).powf(exponent)
+}
+
 /// Classifies every voxel; those with opacity at or below `min_opacity` are left out.
 pub fn classify(
     volume: &CpuVolume,
     tf: &TransferFunction,
     min_opacity: f32,
+) -> Result<Classified, GridError> {
+    classify_corrected(volume, tf, min_opacity, 1.0)
+}
+
+/// [`classify`] with every opacity corrected by [`corrected_opacity`] for a splat standing for
+/// `length_ratio` times the transfer function's reference length.
+pub fn classify_corrected(
+    volume: &CpuVolume,
+    tf: &TransferFunction,
+    min_opacity: f32,
+    length_ratio: f64,
 ) -> Result<Classified, GridError> {
     let mut colors = Vec::new();
     let grid = SparseGrid::from_mask(volume.dims, |id| {
@@ -76,6 +180,7 @@ pub fn classify(
             return false;
         };
         let [r, g, b, a] = tf.sample(value);
+        let a = corrected_opacity(a, length_ratio, 1.0);
         let keep = a > min_opacity;
         if keep {
             colors.push([r * a, g * a, b * a, a]);
@@ -97,6 +202,46 @@ mod tests {
         assert!((tf.sample(150.0)[3] - 0.4).abs() < 1e-6);
         assert_eq!(tf.sample(500.0), [1.0, 0.5, 0.0, 0.8]);
         assert_eq!(tf.sample(f32::NAN)[3], 0.0);
+    }
+
+    #[test]
+    fn presets_windows_and_shifts() {
+        for name in TransferFunction::PRESETS {
+            let tf = TransferFunction::preset(name).unwrap();
+            assert!(tf.points().len() >= 2, "{name}");
+            assert_eq!(tf.sample(-5000.0)[3], 0.0, "{name}: air is clear");
+        }
+        assert!(TransferFunction::preset("ct-lung").is_none());
+        let bone = TransferFunction::ct_bone();
+        assert_eq!(bone.shifted(100.0).sample(400.0), bone.sample(300.0));
+        let w = bone.windowed(500.0, 1000.0);
+        assert_eq!(
+            (w.points()[0].0, w.points().last().unwrap().0),
+            (0.0, 1000.0)
+        );
+        assert_eq!(w.sample(1000.0), bone.sample(1200.0));
+        // The metal preset keeps bone faint and metal nearly opaque.
+        let metal = TransferFunction::ct_metal();
+        assert!(metal.sample(700.0)[3] < 0.1 && metal.sample(3000.0)[3] > 0.8);
+    }
+
+    #[test]
+    fn opacity_correction_compounds_with_length() {
+        assert_eq!(corrected_opacity(0.5, 1.0, 1.0), 0.5);
+        assert!(
+            (corrected_opacity(0.5, 2.0, 1.0) - 0.75).abs() < 1e-6,
+            "two layers of 0.5"
+        );
+        assert!(
+            (corrected_opacity(0.75, 0.5, 1.0) - 0.5).abs() < 1e-6,
+            "half a layer"
+        );
+        assert_eq!(corrected_opacity(1.0, 0.3, 1.0), 1.0);
+        assert_eq!(
+            corrected_opacity(0.4, 0.0, 1.0),
+            0.4,
+            "no length, no change"
+        );
     }
 
     #[test]

@@ -61,24 +61,12 @@ pub enum ViewerError {
     Render(#[from] RenderError),
 }
 
-/// Transfer functions the `T` key cycles through.
+/// Transfer functions the `T` key cycles through: the presets.
 fn presets() -> Vec<(&'static str, TransferFunction)> {
-    vec![
-        ("CT bone", TransferFunction::ct_bone()),
-        (
-            "dense bone",
-            TransferFunction::ramp(500.0, 1300.0, [1.0, 0.97, 0.92, 0.9]),
-        ),
-        (
-            "soft tissue and bone",
-            TransferFunction::new(vec![
-                (-200.0, [0.8, 0.45, 0.35, 0.0]),
-                (20.0, [0.85, 0.5, 0.4, 0.03]),
-                (150.0, [0.9, 0.75, 0.6, 0.05]),
-                (700.0, [1.0, 0.95, 0.88, 0.6]),
-            ]),
-        ),
-    ]
+    TransferFunction::PRESETS
+        .iter()
+        .filter_map(|name| Some((*name, TransferFunction::preset(name)?)))
+        .collect()
 }
 
 const ORDERINGS: [(&str, Ordering); 5] = [
@@ -358,7 +346,10 @@ impl App {
 
     /// Moves the clip plane by 2% of the scene's size: `sign` 1 toward the eye (cutting less).
     fn move_clip(&mut self, sign: f64) {
-        let step = self.scene.bounds().map_or(1.0, |(lo, hi)| (hi - lo).length() * 0.02);
+        let step = self
+            .scene
+            .bounds()
+            .map_or(1.0, |(lo, hi)| (hi - lo).length() * 0.02);
         if let Some(plane) = self.scene.clipping.planes.last_mut() {
             plane.offset += sign * step * plane.normal.length();
             println!("clip plane offset {:.1}", plane.offset);

@@ -197,8 +197,8 @@ fn viewer_picks_switches_orderings_and_takes_screenshots_under_xvfb() {
     assert_ne!(marked, pbtf, "PBTF draws a different picture from IP-PBTF");
 
     xdo(&display, &["key", "t"]).expect("key t");
-    assert_eq!(line(&lines, "transfer function"), "dense bone");
-    title(&display, &window, "dense bone");
+    assert_eq!(line(&lines, "transfer function"), "ct-soft-tissue");
+    title(&display, &window, "ct-soft-tissue");
     let dense = screen(&display, &dir, "dense");
     assert_ne!(pbtf, dense, "the transfer function changes the picture");
 

@@ -12,11 +12,10 @@ use super::splat_pass::{GpuVolume, SplatPass};
 use super::target::RenderTarget;
 use super::view::ViewSetup;
 use super::{GpuContext, RenderError};
-use crate::classify::{Classified, TransferFunction, classify};
+use crate::classify::{Classified, classify_corrected};
 use crate::composite::Frame;
 use crate::order::{OrderOptions, Orderer, Ordering, ViewCase, VolumeGeometry};
-use crate::scene::{NodeId, Scene, SceneCamera, placed_geometry};
-use crate::volume::CpuVolume;
+use crate::scene::{NodeId, Scene, SceneCamera, VolumeNode, placed_geometry};
 
 /// Per-frame choices that are not part of the scene.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -95,7 +94,7 @@ pub struct Screenshot {
 }
 
 /// Identity of a classification: the volume, the transfer function and the threshold.
-type ClassKey = (usize, usize, u32);
+type ClassKey = (usize, usize, u32, Option<u64>);
 
 struct VolumeState {
     key: ClassKey,
@@ -239,13 +238,18 @@ impl Renderer {
         let mut classified = 0;
         for (id, node, _) in scene.volumes() {
             live.push(id);
-            let key = class_key(&node.volume, &node.transfer, node.splats.min_opacity);
+            let key = class_key(node);
             if self.volumes.get(&id).is_some_and(|v| v.key == key) {
                 continue;
             }
             let name = &scene.nodes()[id.0].name;
+            let ratio = node.splats.opacity_reference_mm.map_or(1.0, |r| {
+                let [x, y, z] = node.volume.spacing;
+                (x * y * z).cbrt() / r
+            });
+            let min = node.splats.min_opacity;
             let result =
-                classify(&node.volume, &node.transfer, node.splats.min_opacity).map_err(|e| {
+                classify_corrected(&node.volume, &node.transfer, min, ratio).map_err(|e| {
                     RenderError::Volume {
                         node: name.clone(),
                         message: e.to_string(),
@@ -515,15 +519,12 @@ fn begin<'e>(
         .forget_lifetime()
 }
 
-fn class_key(
-    volume: &Arc<CpuVolume>,
-    transfer: &Arc<TransferFunction>,
-    min_opacity: f32,
-) -> ClassKey {
+fn class_key(node: &VolumeNode) -> ClassKey {
     (
-        Arc::as_ptr(volume) as usize,
-        Arc::as_ptr(transfer) as usize,
-        min_opacity.to_bits(),
+        Arc::as_ptr(&node.volume) as usize,
+        Arc::as_ptr(&node.transfer) as usize,
+        node.splats.min_opacity.to_bits(),
+        node.splats.opacity_reference_mm.map(f64::to_bits),
     )
 }
 

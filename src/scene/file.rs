@@ -234,8 +234,18 @@ pub struct VolumeSpec {
     pub spacing: Option<[f64; 3]>,
     /// Raw: world position of the first voxel.
     pub origin: Option<[f64; 3]>,
-    /// Transfer-function preset: `ct-bone` (default) or `ramp` (with `window` and `color`).
+    /// Transfer function: a preset (`ct-bone`, the default, `ct-soft-tissue`, `ct-metal`,
+    /// `mr-default`) or `ramp` (with `window` and `color`).
     pub transfer: Option<String>,
+    /// Moves the transfer function along the value axis (after `level_width`).
+    pub shift: Option<f32>,
+    /// Stretches the transfer function over the window `[level, width]`.
+    pub level_width: Option<[f32; 2]>,
+    /// The transfer function's opacities hold for this many millimetres; corrected for the
+    /// voxel size.
+    pub opacity_reference_mm: Option<f64>,
+    /// Headlight shading of the splats from 0 (flat) to 1.
+    pub shading: Option<f32>,
     /// Ramp: transparent at the first value, `color` at the second.
     pub window: Option<[f32; 2]>,
     /// Ramp: straight RGBA at the top of the window.
@@ -501,20 +511,32 @@ fn load_volume(
         let file = resolve_spec_path(&spec.path, scene_file, base, data, invalid)?;
         load_raw_volume(spec, &file, invalid)?
     };
-    let transfer = match spec.transfer.as_deref().unwrap_or("ct-bone") {
-        "ct-bone" => TransferFunction::ct_bone(),
+    let mut transfer = match spec.transfer.as_deref().unwrap_or("ct-bone") {
         "ramp" => {
             let [lo, hi] = spec.window.ok_or_else(|| {
                 invalid("the ramp transfer function needs window = [lo, hi]".into())
             })?;
             TransferFunction::ramp(lo, hi, spec.color.unwrap_or([1.0, 0.93, 0.85, 0.6]))
         }
-        other => {
-            return Err(invalid(format!(
-                "unknown transfer function {other:?} (ct-bone or ramp)"
-            )));
-        }
+        other => TransferFunction::preset(other).ok_or_else(|| {
+            invalid(format!(
+                "unknown transfer function {other:?} ({} or ramp)",
+                TransferFunction::PRESETS.join(", ")
+            ))
+        })?,
     };
+    if let Some([level, width]) = spec.level_width {
+        transfer = transfer.windowed(level, width);
+    }
+    if let Some(shift) = spec.shift {
+        transfer = transfer.shifted(shift);
+    }
+    if spec
+        .opacity_reference_mm
+        .is_some_and(|r| !(r.is_finite() && r > 0.0))
+    {
+        return Err(invalid("opacity_reference_mm must be positive".into()));
+    }
     let min_opacity = spec.min_opacity.unwrap_or(1.0 / 255.0);
     if !(0.0..1.0).contains(&min_opacity) {
         return Err(invalid(format!(
@@ -526,6 +548,10 @@ fn load_volume(
         transfer: Arc::new(transfer),
         splats: SplatSettings {
             min_opacity,
+            opacity_reference_mm: spec.opacity_reference_mm,
+            shading: spec
+                .shading
+                .map_or(SplatSettings::default().shading, |v| v.clamp(0.0, 1.0)),
             ..Default::default()
         },
     })
@@ -849,6 +875,30 @@ mod tests {
         let message = err.to_string();
         assert!(message.contains("zigzag"), "{message}");
         assert!(message.contains("o.toml"), "{message}");
+    }
+
+    #[test]
+    fn transfer_presets_windows_shifts_and_opacity_reference() {
+        let load = |extra: &str| {
+            let text = format!("[[volume]]\npath = \"builtin:shoulder-phantom\"\n{extra}");
+            SceneFile::parse(&text, Path::new("tf.toml"))
+                .unwrap()
+                .load(Path::new("tf.toml"), Path::new("."))
+        };
+        let loaded = load("transfer = \"ct-metal\"\nlevel_width = [1500, 2000]\nshift = 100\nopacity_reference_mm = 1.0\nshading = 0.0\n").unwrap();
+        let (_, node, _) = loaded.scene.volumes().next().unwrap();
+        let expected = TransferFunction::ct_metal()
+            .windowed(1500.0, 2000.0)
+            .shifted(100.0);
+        assert_eq!(*node.transfer, expected);
+        assert_eq!(node.splats.opacity_reference_mm, Some(1.0));
+        assert_eq!(node.splats.shading, 0.0);
+        let err = load("transfer = \"ct-lung\"\n").unwrap_err().to_string();
+        assert!(
+            err.contains("ct-lung") && err.contains("ct-soft-tissue"),
+            "{err}"
+        );
+        assert!(load("opacity_reference_mm = -1\n").is_err());
     }
 
     #[test]

@@ -61,6 +61,10 @@ pub struct SplatSettings {
     /// Headlight shading from the gradient: 0 keeps the transfer function's flat colour
     /// (what the CPU reference compositor draws), 1 fully shades.
     pub shading: f32,
+    /// When set, the transfer function's opacities hold for this many millimetres of tissue
+    /// and are corrected for the voxel size (geometric mean spacing), so that a volume looks
+    /// alike at any resolution; `None` takes them as they are per splat.
+    pub opacity_reference_mm: Option<f64>,
 }
 
 impl Default for SplatSettings {
@@ -70,6 +74,7 @@ impl Default for SplatSettings {
             min_opacity: 1.0 / 255.0,
             ordering: Ordering::IpPbtfImplicit,
             shading: 0.8,
+            opacity_reference_mm: None,
         }
     }
 }
