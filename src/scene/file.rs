@@ -562,6 +562,17 @@ fn load_raw_volume(
     path: &Path,
     invalid: &dyn Fn(String) -> SceneFileError,
 ) -> Result<CpuVolume, SceneFileError> {
+    if spec.dims.is_none() && spec.scalar.is_none() {
+        // Not described as raw: a format with its own header (NRRD, NIfTI, VTK, Voreen .dat)
+        // or a DICOM series folder, found from the first bytes and the name.
+        return match crate::volume::detect::load_volume(path) {
+            Err(VolumeError::NoHeader { .. }) => Err(invalid(format!(
+                "volume {}: a raw volume needs dims and scalar",
+                path.display()
+            ))),
+            other => Ok(other?),
+        };
+    }
     let (Some(dims), Some(scalar)) = (spec.dims, &spec.scalar) else {
         return Err(invalid(format!(
             "volume {}: a raw volume needs dims and scalar",

@@ -1,1 +1,1042 @@
-//! (being written)
+//! NRRD volumes (teem's "nearly raw raster data"), with the header attached (`.nrrd`) or
+//! detached (`.nhdr`).
+//!
+//! Read: 3-D arrays of 8- to 32-bit integers, `float` and `double`; encodings `raw` and
+//! `gzip`; `endian`; `byte skip` (including `-1`, data at the end of a raw file) and
+//! `line skip`; `data file` as a single name, a `LIST` of names on the following lines, or a
+//! printf-style pattern (`quarter.%d 1 93 1`, `slice%03d.raw 0 9 1`), each file holding an
+//! equal run of whole z slices; placement from `space directions` and `space origin`, or from
+//! `spacings` when there are no space directions.
+//!
+//! **World frame.** This project's world is RAS (+x toward the patient's right, +y anterior,
+//! +z head). A `space` of `left-posterior-superior` (LPS, as ITK and DICOM write) is converted
+//! by negating the x and y components of the space directions and the space origin, and
+//! `left-anterior-superior` by negating x. Non-anatomical spaces (`scanner-xyz`,
+//! `3D-right-handed`, `3D-left-handed`) and a bare `space dimension: 3` are taken as they are.
+//!
+//! Not read (a typed [`VolumeError::Unsupported`]): other dimensions than 3 (vectors, time
+//! series, images), 64-bit integers and `block`, the `ascii`/`text`, `hex` and `bzip2`
+//! encodings, `none` axes in `space directions`, spaces with a time axis, and data files that
+//! do not each hold whole z slices.
+//!
+//! Every declared size is checked before voxel memory is allocated: raw data against the data
+//! files' lengths (through [`load_raw`] and [`load_raw_slices`]), gzip data by inflating at
+//! most the declared bytes, with output memory growing only as the data actually inflate.
+
+use std::fs::File;
+use std::io::{BufRead, BufReader, Read, Seek, SeekFrom};
+use std::path::{Path, PathBuf};
+
+use flate2::read::MultiGzDecoder;
+use glam::DVec3;
+
+use super::detect::{
+    HeaderLines, LoadedVolume, Placement, VolumeFormat, expect_end, header_error, inflate_values,
+    io_error, skip_inflated, unsupported,
+};
+use super::{
+    ByteOrder, CpuVolume, RawSpec, ScalarFormat, ScalarType, VolumeError, load_raw, load_raw_slices,
+};
+use crate::grid::voxel_count;
+
+/// Loads an NRRD volume from its attached (`.nrrd`) or detached (`.nhdr`) header.
+pub fn load_nrrd(path: &Path) -> Result<LoadedVolume, VolumeError> {
+    let header = Header::read(path)?;
+    let placement = Placement::from_columns(path, header.columns, header.origin)?;
+    let volume = match header.encoding {
+        Encoding::Raw => read_raw(path, &header)?,
+        Encoding::Gzip => read_gzip(path, &header)?,
+    };
+    Ok(LoadedVolume {
+        volume: placement.apply(volume),
+        format: VolumeFormat::Nrrd,
+        scalar_type: Some(header.format.scalar),
+    })
+}
+
+/// How the data are stored.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Encoding {
+    Raw,
+    Gzip,
+}
+
+/// Where the data are: after the header in the same file, or in other files.
+#[derive(Debug, Clone, PartialEq)]
+enum Data {
+    /// In the header's own file, from this byte on.
+    Attached(u64),
+    /// In these files, each holding an equal run of z slices.
+    Files(Vec<PathBuf>),
+}
+
+/// What the header says, checked and interpreted.
+#[derive(Debug, Clone, PartialEq)]
+struct Header {
+    dims: [u32; 3],
+    format: ScalarFormat,
+    encoding: Encoding,
+    /// Bytes before the data in each data file (after decompression for gzip); `None` for
+    /// `-1`: the data end the file.
+    byte_skip: Option<u64>,
+    line_skip: u64,
+    data: Data,
+    /// The step between neighbouring voxels along each axis, in RAS.
+    columns: [DVec3; 3],
+    /// The position of the first voxel, in RAS.
+    origin: DVec3,
+}
+
+/// One `field: description` line of the header.
+#[derive(Debug, Clone)]
+struct Field {
+    /// The field name, lower case and without spaces (`data file` and `datafile` alike).
+    key: String,
+    value: String,
+    line: usize,
+}
+
+/// The fields of a header, with the names a `data file: LIST` gives after it.
+struct Fields {
+    path: PathBuf,
+    fields: Vec<Field>,
+    list: Vec<String>,
+}
+
+impl Fields {
+    /// Reads the header lines up to the blank line that ends them (or the end of a detached
+    /// header); returns the fields and the offset of the data that may follow.
+    fn read(path: &Path) -> Result<(Self, u64), VolumeError> {
+        let mut lines = HeaderLines::open(path)?;
+        match lines.next_line()? {
+            Some(magic) if is_magic(&magic) => {}
+            _ => return Err(header_error(path, "no NRRD000x magic on the first line")),
+        }
+        let mut fields = Self {
+            path: path.into(),
+            fields: Vec::new(),
+            list: Vec::new(),
+        };
+        let mut listing = false;
+        while let Some(line) = lines.next_line()? {
+            if line.trim().is_empty() {
+                break;
+            }
+            if listing {
+                fields.list.push(line.trim().to_owned());
+            } else if !line.starts_with('#') {
+                fields.add(&line, lines.number())?;
+                listing = fields.fields.last().is_some_and(|f| {
+                    f.key == "datafile" && f.value.split_whitespace().next() == Some("LIST")
+                });
+            }
+        }
+        Ok((fields, lines.offset()))
+    }
+
+    /// Adds a `field: value` line; `key:=value` pairs carry no geometry and are skipped.
+    fn add(&mut self, line: &str, number: usize) -> Result<(), VolumeError> {
+        let field_end = line.find(": ");
+        if let Some(pair) = line.find(":=")
+            && field_end.is_none_or(|f| pair < f)
+        {
+            return Ok(());
+        }
+        let Some(at) = field_end.or_else(|| line.strip_suffix(':').map(str::len)) else {
+            return Err(self.error(number, format!("{line:?} is not `field: value`")));
+        };
+        let key: String = line[..at]
+            .chars()
+            .filter(|c| *c != ' ')
+            .collect::<String>()
+            .to_ascii_lowercase();
+        if self.fields.iter().any(|f| f.key == key) {
+            return Err(self.error(number, format!("field {:?} given twice", &line[..at])));
+        }
+        self.fields.push(Field {
+            key,
+            value: line.get(at + 2..).unwrap_or_default().trim().to_owned(),
+            line: number,
+        });
+        Ok(())
+    }
+
+    fn error(&self, line: usize, message: impl std::fmt::Display) -> VolumeError {
+        header_error(&self.path, format!("line {line}: {message}"))
+    }
+
+    fn get(&self, key: &str) -> Option<&Field> {
+        self.fields.iter().find(|f| f.key == key)
+    }
+
+    fn require(&self, key: &str, name: &str) -> Result<&Field, VolumeError> {
+        self.get(key)
+            .ok_or_else(|| header_error(&self.path, format!("no `{name}` field")))
+    }
+
+    /// Parses a field's whitespace-separated numbers, which must number `N`.
+    fn numbers<T: std::str::FromStr, const N: usize>(
+        &self,
+        field: &Field,
+    ) -> Result<[T; N], VolumeError> {
+        let parsed: Option<Vec<T>> = field
+            .value
+            .split_whitespace()
+            .map(|w| w.parse().ok())
+            .collect();
+        parsed.and_then(|v| v.try_into().ok()).ok_or_else(|| {
+            self.error(
+                field.line,
+                format!("expected {N} numbers, got {:?}", field.value),
+            )
+        })
+    }
+}
+
+fn is_magic(line: &str) -> bool {
+    line.strip_prefix("NRRD000")
+        .is_some_and(|v| matches!(v.trim_end(), "1" | "2" | "3" | "4" | "5"))
+}
+
+impl Header {
+    fn read(path: &Path) -> Result<Self, VolumeError> {
+        let (fields, offset) = Fields::read(path)?;
+        let dimension = fields.require("dimension", "dimension")?;
+        let [n]: [u32; 1] = fields.numbers(dimension)?;
+        if n != 3 {
+            return Err(unsupported(
+                path,
+                format!("{n}-D NRRD; only 3-D volumes are read"),
+            ));
+        }
+        let dims = fields.numbers(fields.require("sizes", "sizes")?)?;
+        let format = scalar_format(&fields)?;
+        let encoding = encoding(&fields)?;
+        let (byte_skip, line_skip) = skips(&fields, encoding)?;
+        let data = match fields.get("datafile") {
+            None => Data::Attached(offset),
+            Some(field) => Data::Files(data_files(&fields, field, dims[2])?),
+        };
+        let (columns, origin) = placement(&fields)?;
+        Ok(Self {
+            dims,
+            format,
+            encoding,
+            byte_skip,
+            line_skip,
+            data,
+            columns,
+            origin,
+        })
+    }
+
+    /// The files holding the data, each with the offset its data (or stream) start at.
+    fn sources(&self, path: &Path) -> Result<Vec<(PathBuf, u64)>, VolumeError> {
+        let files = match &self.data {
+            Data::Attached(offset) => {
+                return Ok(vec![(path.into(), self.after_lines(path, *offset)?)]);
+            }
+            Data::Files(files) => files,
+        };
+        if let Some(missing) = files.iter().find(|f| !f.is_file()) {
+            return Err(VolumeError::MissingDataFile {
+                path: path.into(),
+                data_file: missing.clone(),
+            });
+        }
+        files
+            .iter()
+            .map(|f| Ok((f.clone(), self.after_lines(f, 0)?)))
+            .collect()
+    }
+
+    /// The offset `line_skip` lines after `start` in `file`; scanning stops at the file's
+    /// length so that a device file cannot keep it reading.
+    fn after_lines(&self, file: &Path, start: u64) -> Result<u64, VolumeError> {
+        if self.line_skip == 0 {
+            return Ok(start);
+        }
+        let mut f = File::open(file).map_err(io_error(file))?;
+        let len = f.metadata().map_err(io_error(file))?.len();
+        f.seek(SeekFrom::Start(start)).map_err(io_error(file))?;
+        let mut reader = BufReader::new(f.take(len.saturating_sub(start)));
+        let mut offset = start;
+        for skipped in 0..self.line_skip {
+            // Skipping, not reading, so that one long "line" costs no memory.
+            let n = reader.skip_until(b'\n').map_err(io_error(file))?;
+            if n == 0 {
+                let message = format!("line skip {} but only {skipped} lines", self.line_skip);
+                return Err(header_error(file, message));
+            }
+            offset += n as u64;
+        }
+        Ok(offset)
+    }
+}
+
+/// NRRD's type names, and what each reads as; `None` for types not read.
+const TYPE_NAMES: [(&[&str], Option<ScalarType>); 9] = [
+    (&["signed char", "int8", "int8_t"], Some(ScalarType::I8)),
+    (
+        &["uchar", "unsigned char", "uint8", "uint8_t"],
+        Some(ScalarType::U8),
+    ),
+    (
+        &[
+            "short",
+            "short int",
+            "signed short",
+            "signed short int",
+            "int16",
+            "int16_t",
+        ],
+        Some(ScalarType::I16),
+    ),
+    (
+        &[
+            "ushort",
+            "unsigned short",
+            "unsigned short int",
+            "uint16",
+            "uint16_t",
+        ],
+        Some(ScalarType::U16),
+    ),
+    (
+        &["int", "signed int", "int32", "int32_t"],
+        Some(ScalarType::I32),
+    ),
+    (
+        &["uint", "unsigned int", "uint32", "uint32_t"],
+        Some(ScalarType::U32),
+    ),
+    (&["float"], Some(ScalarType::F32)),
+    (&["double"], Some(ScalarType::F64)),
+    (
+        &[
+            "longlong",
+            "long long",
+            "long long int",
+            "signed long long",
+            "signed long long int",
+            "int64",
+            "int64_t",
+            "ulonglong",
+            "unsigned long long",
+            "unsigned long long int",
+            "uint64",
+            "uint64_t",
+            "block",
+        ],
+        None,
+    ),
+];
+
+/// The value type and byte order; `endian` is needed only for multi-byte types but checked
+/// whenever given.
+fn scalar_format(fields: &Fields) -> Result<ScalarFormat, VolumeError> {
+    let field = fields.require("type", "type")?;
+    let name = field.value.split_whitespace().collect::<Vec<_>>().join(" ");
+    let lower = name.to_ascii_lowercase();
+    let scalar = match TYPE_NAMES
+        .iter()
+        .find(|(names, _)| names.contains(&lower.as_str()))
+    {
+        Some((_, Some(scalar))) => *scalar,
+        Some((_, None)) => return Err(unsupported(&fields.path, format!("type {name}"))),
+        None => return Err(fields.error(field.line, format!("unknown type {name:?}"))),
+    };
+    let order = match fields.get("endian") {
+        Some(f) if f.value.eq_ignore_ascii_case("little") => ByteOrder::Little,
+        Some(f) if f.value.eq_ignore_ascii_case("big") => ByteOrder::Big,
+        Some(f) => {
+            let message = format!("endian {:?} is neither little nor big", f.value);
+            return Err(fields.error(f.line, message));
+        }
+        None if scalar.size() == 1 => ByteOrder::Little,
+        None => {
+            let message = format!("no `endian` field for {name}");
+            return Err(header_error(&fields.path, message));
+        }
+    };
+    Ok(ScalarFormat { scalar, order })
+}
+
+fn encoding(fields: &Fields) -> Result<Encoding, VolumeError> {
+    let field = fields.require("encoding", "encoding")?;
+    match field.value.to_ascii_lowercase().as_str() {
+        "raw" => Ok(Encoding::Raw),
+        "gzip" | "gz" => Ok(Encoding::Gzip),
+        "txt" | "text" | "ascii" | "hex" | "bzip2" | "bz2" => Err(unsupported(
+            &fields.path,
+            format!("encoding {}; only raw and gzip are read", field.value),
+        )),
+        other => Err(fields.error(field.line, format!("unknown encoding {other:?}"))),
+    }
+}
+
+/// `byte skip` (`None` for -1) and `line skip`.
+fn skips(fields: &Fields, encoding: Encoding) -> Result<(Option<u64>, u64), VolumeError> {
+    let byte_skip = match fields.get("byteskip") {
+        None => Some(0),
+        Some(f) if f.value == "-1" && encoding == Encoding::Raw => None,
+        Some(f) => match f.value.parse::<u64>() {
+            Ok(n) => Some(n),
+            Err(_) => {
+                let message = format!("byte skip {:?} is not a count (or -1 for raw)", f.value);
+                return Err(fields.error(f.line, message));
+            }
+        },
+    };
+    let line_skip = match fields.get("lineskip") {
+        None => 0,
+        Some(f) => {
+            let [n]: [u64; 1] = fields.numbers(f)?;
+            n
+        }
+    };
+    Ok((byte_skip, line_skip))
+}
+
+/// The data files a `data file` field names, relative to the header's folder; there must be a
+/// whole number of z slices per file.
+fn data_files(fields: &Fields, field: &Field, nz: u32) -> Result<Vec<PathBuf>, VolumeError> {
+    let words: Vec<&str> = field.value.split_whitespace().collect();
+    let names = match words.as_slice() {
+        ["LIST", ..] => fields.list.clone(),
+        [pattern, min, max, step, ..] if pattern.contains('%') => {
+            let range = [min, max, step].map(|w| w.parse::<i64>().ok());
+            let [Some(min), Some(max), Some(step)] = range else {
+                return Err(fields.error(field.line, "pattern range is not three integers"));
+            };
+            expand_pattern(fields, field, pattern, (min, max, step), nz)?
+        }
+        _ => vec![field.value.clone()],
+    };
+    if names.is_empty() || names.iter().any(String::is_empty) {
+        return Err(fields.error(field.line, "empty data file name"));
+    }
+    if names.len() > nz as usize || !nz.is_multiple_of(names.len() as u32) {
+        let message = format!(
+            "{} data files do not split {nz} z slices evenly",
+            names.len()
+        );
+        return Err(fields.error(field.line, message));
+    }
+    let dir = fields.path.parent().unwrap_or(Path::new(""));
+    Ok(names.iter().map(|n| dir.join(n)).collect())
+}
+
+/// The names of a `<format> <min> <max> <step>` file list; more files than z slices is an
+/// error found before any name is made.
+fn expand_pattern(
+    fields: &Fields,
+    field: &Field,
+    pattern: &str,
+    (min, max, step): (i64, i64, i64),
+    nz: u32,
+) -> Result<Vec<String>, VolumeError> {
+    let count = max
+        .checked_sub(min)
+        .and_then(|span| span.checked_div(step))
+        .filter(|&n| n >= 0)
+        .and_then(|n| n.checked_add(1));
+    let count = match count {
+        Some(n) if n <= i64::from(nz) => n,
+        _ => {
+            let message = format!(
+                "pattern range {min}..={max} step {step} is empty, backwards or longer than \
+                 the {nz} slices"
+            );
+            return Err(fields.error(field.line, message));
+        }
+    };
+    (0..count)
+        .map(|i| {
+            format_pattern(pattern, min + i * step).ok_or_else(|| {
+                fields.error(field.line, format!("pattern {pattern:?} needs one %d"))
+            })
+        })
+        .collect()
+}
+
+/// `pattern` with its one integer conversion (`%d`, `%i`, `%u`, optionally `%0Nd` or `%Nd`)
+/// replaced by `n`; `%%` is a percent sign. `None` for any other conversion or count of them.
+fn format_pattern(pattern: &str, n: i64) -> Option<String> {
+    let mut out = String::new();
+    let mut used = false;
+    let mut rest = pattern;
+    while let Some(at) = rest.find('%') {
+        out.push_str(&rest[..at]);
+        let spec = &rest[at + 1..];
+        if let Some(after) = spec.strip_prefix('%') {
+            out.push('%');
+            rest = after;
+            continue;
+        }
+        let digits = spec.bytes().take_while(u8::is_ascii_digit).count();
+        let (flags, after) = spec.split_at(digits);
+        let after = after.strip_prefix(['d', 'i', 'u'])?;
+        if used {
+            return None;
+        }
+        let width: usize = if flags.is_empty() {
+            0
+        } else {
+            flags.parse().ok()?
+        };
+        // A width past any file name's would only build a huge string.
+        if width > 32 {
+            return None;
+        }
+        match flags.starts_with('0') {
+            true => out.push_str(&format!("{n:0width$}")),
+            false => out.push_str(&format!("{n:width$}")),
+        }
+        used = true;
+        rest = after;
+    }
+    out.push_str(rest);
+    used.then_some(out)
+}
+
+/// The voxel steps and the origin in RAS, from `space directions` (else `spacings`, else unit
+/// steps) and `space origin`.
+fn placement(fields: &Fields) -> Result<([DVec3; 3], DVec3), VolumeError> {
+    let flip = space_flip(fields)?;
+    let columns = match (fields.get("spacedirections"), fields.get("spacings")) {
+        (Some(f), _) => {
+            let vectors = vectors(fields, f)?;
+            match <[Option<DVec3>; 3]>::try_from(vectors) {
+                Ok([Some(x), Some(y), Some(z)]) => [x, y, z],
+                Ok(_) => {
+                    return Err(unsupported(
+                        &fields.path,
+                        "a `none` axis in space directions",
+                    ));
+                }
+                Err(_) => return Err(fields.error(f.line, "expected 3 space directions")),
+            }
+        }
+        (None, Some(f)) => {
+            // `nan` marks an unknown spacing: a unit step keeps the volume usable.
+            let s: [f64; 3] = fields.numbers(f)?;
+            let s = s.map(|v| if v.is_nan() { 1.0 } else { v });
+            [DVec3::X * s[0], DVec3::Y * s[1], DVec3::Z * s[2]]
+        }
+        (None, None) => [DVec3::X, DVec3::Y, DVec3::Z],
+    };
+    let origin = match fields.get("spaceorigin") {
+        Some(f) => match vectors(fields, f)?.as_slice() {
+            [Some(o)] => *o,
+            _ => return Err(fields.error(f.line, "expected one origin vector")),
+        },
+        None => DVec3::ZERO,
+    };
+    Ok((columns.map(|c| c * flip), origin * flip))
+}
+
+/// The sign flips that take the header's `space` into RAS.
+fn space_flip(fields: &Fields) -> Result<DVec3, VolumeError> {
+    let ras = DVec3::ONE;
+    let Some(field) = fields.get("space") else {
+        return match fields.get("spacedimension") {
+            Some(f) if f.value.trim() != "3" => Err(unsupported(
+                &fields.path,
+                format!("space dimension {}", f.value),
+            )),
+            _ => Ok(ras),
+        };
+    };
+    match field.value.to_ascii_lowercase().as_str() {
+        "right-anterior-superior" | "ras" => Ok(ras),
+        "left-anterior-superior" | "las" => Ok(DVec3::new(-1.0, 1.0, 1.0)),
+        "left-posterior-superior" | "lps" => Ok(DVec3::new(-1.0, -1.0, 1.0)),
+        "scanner-xyz" | "3d-right-handed" | "3d-left-handed" => Ok(ras),
+        "right-anterior-superior-time"
+        | "rast"
+        | "left-anterior-superior-time"
+        | "last"
+        | "left-posterior-superior-time"
+        | "lpst"
+        | "scanner-xyz-time"
+        | "3d-right-handed-time"
+        | "3d-left-handed-time" => Err(unsupported(&fields.path, format!("space {}", field.value))),
+        _ => Err(fields.error(field.line, format!("unknown space {:?}", field.value))),
+    }
+}
+
+/// The `(x,y,z)` vectors of a field, `None` for each `none`; every vector must have 3 finite
+/// components (a non-finite one is refused later, by the placement).
+fn vectors(fields: &Fields, field: &Field) -> Result<Vec<Option<DVec3>>, VolumeError> {
+    let bad = || {
+        fields.error(
+            field.line,
+            format!("{:?} is not a list of (x,y,z) vectors", field.value),
+        )
+    };
+    let mut out = Vec::new();
+    let mut rest = field.value.trim();
+    while !rest.is_empty() {
+        if let Some(after) = rest.strip_prefix("none") {
+            out.push(None);
+            rest = after.trim_start();
+            continue;
+        }
+        let inner = rest.strip_prefix('(').ok_or_else(bad)?;
+        let (inside, after) = inner.split_once(')').ok_or_else(bad)?;
+        let parts: Option<Vec<f64>> = inside.split(',').map(|p| p.trim().parse().ok()).collect();
+        let v: [f64; 3] = parts.and_then(|p| p.try_into().ok()).ok_or_else(bad)?;
+        out.push(Some(DVec3::from(v)));
+        rest = after.trim_start();
+    }
+    Ok(out)
+}
+
+/// Bytes of values in each data file.
+fn bytes_per_file(path: &Path, header: &Header, files: usize) -> Result<(usize, u64), VolumeError> {
+    let count = voxel_count(header.dims).map_err(|source| VolumeError::Grid {
+        path: path.into(),
+        source,
+    })?;
+    let per_file = count / files as u64;
+    let bytes = per_file
+        .checked_mul(header.format.scalar.size() as u64)
+        .ok_or_else(|| header_error(path, "declared size overflows"))?;
+    let count =
+        usize::try_from(count).map_err(|_| header_error(path, "declared size overflows"))?;
+    Ok((count, bytes))
+}
+
+/// Raw data: every file's length is checked against the declared size by the raw loaders
+/// before the volume is allocated.
+fn read_raw(path: &Path, header: &Header) -> Result<CpuVolume, VolumeError> {
+    let sources = header.sources(path)?;
+    let (_, bytes) = bytes_per_file(path, header, sources.len())?;
+    let spec = RawSpec {
+        header_bytes: common_start(path, header, &sources, bytes)?,
+        ..RawSpec::new(header.dims, header.format.scalar, header.format.order)
+    };
+    let mut volume = match sources.as_slice() {
+        [(file, _)] => load_raw(file, &spec)?,
+        _ => {
+            let files: Vec<PathBuf> = sources.into_iter().map(|(f, _)| f).collect();
+            load_raw_slices(&files, &slab_spec(path, spec, files.len())?)?
+        }
+    };
+    volume.dims = header.dims;
+    Ok(volume)
+}
+
+/// The offset of the data in every file, which must be the same for all of them.
+fn common_start(
+    path: &Path,
+    header: &Header,
+    sources: &[(PathBuf, u64)],
+    bytes: u64,
+) -> Result<u64, VolumeError> {
+    let mut starts = Vec::with_capacity(sources.len());
+    for (file, start) in sources {
+        starts.push(match header.byte_skip {
+            Some(skip) => start
+                .checked_add(skip)
+                .ok_or_else(|| header_error(path, "byte skip overflows"))?,
+            None => data_at_end(file, bytes)?,
+        });
+    }
+    match starts.split_first() {
+        Some((first, rest)) if rest.iter().all(|s| s == first) => Ok(*first),
+        _ => Err(unsupported(
+            path,
+            "data files whose data start at different offsets",
+        )),
+    }
+}
+
+/// The raw slice loader wants one z slice per file: a file holding a run of z slices is
+/// loaded as one taller slice, which is the same bytes in the same order.
+fn slab_spec(path: &Path, spec: RawSpec, files: usize) -> Result<RawSpec, VolumeError> {
+    let [nx, ny, nz] = spec.dims;
+    let files = u32::try_from(files).map_err(|_| header_error(path, "too many data files"))?;
+    let tall = ny
+        .checked_mul(nz / files)
+        .ok_or_else(|| header_error(path, "a data file holds too many slices"))?;
+    Ok(RawSpec {
+        dims: [nx, tall, files],
+        ..spec
+    })
+}
+
+/// Where `bytes` bytes of data start when they end the file (`byte skip: -1`).
+fn data_at_end(file: &Path, bytes: u64) -> Result<u64, VolumeError> {
+    let len = std::fs::metadata(file).map_err(io_error(file))?.len();
+    len.checked_sub(bytes).ok_or(VolumeError::TooShort {
+        path: file.into(),
+        expected: bytes,
+        actual: len,
+    })
+}
+
+/// Gzip data: each file's stream must inflate to exactly its share of the declared size.
+fn read_gzip(path: &Path, header: &Header) -> Result<CpuVolume, VolumeError> {
+    let sources = header.sources(path)?;
+    let (count, bytes) = bytes_per_file(path, header, sources.len())?;
+    let skip = header.byte_skip.unwrap_or(0);
+    let mut values = Vec::new();
+    for (file, start) in &sources {
+        let mut f = File::open(file).map_err(io_error(file))?;
+        f.seek(SeekFrom::Start(*start)).map_err(io_error(file))?;
+        let mut reader = MultiGzDecoder::new(BufReader::new(f));
+        skip_inflated(file, &mut reader, skip, bytes)?;
+        inflate_values(file, &mut reader, bytes, header.format, count, &mut values)?;
+        expect_end(file, &mut reader, skip.saturating_add(bytes))?;
+    }
+    Ok(CpuVolume {
+        dims: header.dims,
+        spacing: [1.0; 3],
+        origin: [0.0; 3],
+        direction: glam::DMat3::IDENTITY,
+        values,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::volume::detect::tests::{gzip, scratch};
+
+    fn header(body: &str) -> String {
+        format!("NRRD0004\n# a comment\n{body}")
+    }
+
+    fn load(dir: &Path, name: &str, text: &[u8]) -> Result<LoadedVolume, VolumeError> {
+        let path = dir.join(name);
+        std::fs::write(&path, text).unwrap();
+        load_nrrd(&path)
+    }
+
+    fn attached(fields: &str, data: &[u8]) -> Vec<u8> {
+        let mut bytes = header(fields).into_bytes();
+        bytes.extend(b"\n");
+        bytes.extend(data);
+        bytes
+    }
+
+    const U16_2X2X2: &str = "dimension: 3\nsizes: 2 2 2\ntype: unsigned short\nendian: big\n";
+
+    fn be16(values: &[u16]) -> Vec<u8> {
+        values.iter().flat_map(|v| v.to_be_bytes()).collect()
+    }
+
+    #[test]
+    fn attached_raw_and_gzip_with_lps_space_directions() {
+        let dir = scratch("nrrd-attached");
+        let values: Vec<u16> = (0..8).map(|v| v * 300).collect();
+        let geometry = "space: left-posterior-superior\nspace directions: (0,0,2) (0,-1.5,0) (3,0,0)\nspace origin: (10,20,30)\nkey:=value: ignored\n";
+        let raw = attached(
+            &format!("{U16_2X2X2}encoding: raw\n{geometry}"),
+            &be16(&values),
+        );
+        let loaded = load(&dir, "a.nrrd", &raw).unwrap();
+        let v = &loaded.volume;
+        assert_eq!(
+            v.values,
+            values.iter().map(|&x| f32::from(x)).collect::<Vec<_>>()
+        );
+        assert_eq!(
+            (v.dims, v.spacing, v.origin),
+            ([2, 2, 2], [2.0, 1.5, 3.0], [-10.0, -20.0, 30.0])
+        );
+        // LPS to RAS negates x and y: (0,0,2) stays +z, (0,-1.5,0) becomes +y, (3,0,0) becomes -x.
+        assert_eq!(
+            v.direction,
+            glam::DMat3::from_cols(DVec3::Z, DVec3::Y, -DVec3::X)
+        );
+        assert_eq!(
+            (loaded.format, loaded.scalar_type),
+            (VolumeFormat::Nrrd, Some(ScalarType::U16))
+        );
+        let gz = attached(
+            &format!("{U16_2X2X2}encoding: gzip\n{geometry}"),
+            &gzip(&be16(&values)),
+        );
+        assert_eq!(load(&dir, "b.nrrd", &gz).unwrap(), loaded);
+        std::fs::remove_dir_all(dir).ok();
+    }
+
+    #[test]
+    fn detached_list_pattern_and_skips() {
+        let dir = scratch("nrrd-detached");
+        for z in 0..4u8 {
+            let mut bytes = b"junk line\n".to_vec();
+            bytes.extend([0xee; 3]);
+            bytes.extend([z, z + 10]);
+            std::fs::write(dir.join(format!("s{z:02}.raw")), bytes).unwrap();
+        }
+        let common = "dimension: 3\nsizes: 2 1 4\ntype: uchar\nencoding: raw\nline skip: 1\nbyte skip: 3\nspacings: 1 2 nan\n";
+        let pattern = load(
+            &dir,
+            "p.nhdr",
+            header(&format!("{common}data file: s%02d.raw 0 3 1\n")).as_bytes(),
+        )
+        .unwrap();
+        assert_eq!(
+            pattern.volume.values,
+            [0.0, 10.0, 1.0, 11.0, 2.0, 12.0, 3.0, 13.0]
+        );
+        assert_eq!(pattern.volume.spacing, [1.0, 2.0, 1.0]);
+        let list = header(&format!(
+            "{common}data file: LIST\ns00.raw\ns01.raw\ns02.raw\ns03.raw\n"
+        ));
+        assert_eq!(load(&dir, "l.nhdr", list.as_bytes()).unwrap(), pattern);
+        // Two files of two slices each, found by a descending pattern.
+        std::fs::write(dir.join("pair1"), [5, 6, 7, 8]).unwrap();
+        std::fs::write(dir.join("pair2"), [1, 2, 3, 4]).unwrap();
+        let pairs = header(
+            "dimension: 3\nsizes: 2 1 4\ntype: uchar\nencoding: raw\nbyte skip: -1\ndata file: pair%d 2 1 -1\n",
+        );
+        assert_eq!(
+            load(&dir, "d.nhdr", pairs.as_bytes())
+                .unwrap()
+                .volume
+                .values,
+            [1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0]
+        );
+        std::fs::remove_dir_all(dir).ok();
+    }
+
+    #[test]
+    fn patterns_format_like_printf() {
+        assert_eq!(
+            format_pattern("quarter.%d", 7).as_deref(),
+            Some("quarter.7")
+        );
+        assert_eq!(format_pattern("s%03i.raw", 7).as_deref(), Some("s007.raw"));
+        assert_eq!(format_pattern("100%%_%u", 2).as_deref(), Some("100%_2"));
+        for bad in ["none", "%s", "%d_%d", "%x", "%", "%999999999d"] {
+            assert_eq!(format_pattern(bad, 1), None, "{bad}");
+        }
+    }
+
+    fn expect_header_error(result: Result<LoadedVolume, VolumeError>, name: &str, text: &str) {
+        match result {
+            Err(err @ (VolumeError::Header { .. } | VolumeError::Unsupported { .. })) => {
+                let message = err.to_string();
+                assert!(
+                    message.contains(name) && message.contains(text),
+                    "{message}"
+                );
+            }
+            other => panic!("expected a header error with {text:?}, got {other:?}"),
+        }
+    }
+
+    #[test]
+    fn bad_headers_are_typed_errors_naming_the_file() {
+        let dir = scratch("nrrd-bad");
+        let base = "dimension: 3\nsizes: 2 2 2\nencoding: raw\n";
+        let cases = [
+            (
+                "type.nrrd",
+                format!("{base}type: complex\n"),
+                "unknown type",
+            ),
+            (
+                "i64.nrrd",
+                format!("{base}type: int64\nendian: little\n"),
+                "int64",
+            ),
+            (
+                "endian.nrrd",
+                format!("{base}type: short\nendian: middle\n"),
+                "neither little nor big",
+            ),
+            (
+                "noendian.nrrd",
+                format!("{base}type: short\n"),
+                "no `endian`",
+            ),
+            (
+                "dim.nrrd",
+                "dimension: 4\nsizes: 1 2 2 2\ntype: uchar\nencoding: raw\n".into(),
+                "4-D",
+            ),
+            (
+                "sizes.nrrd",
+                "dimension: 3\nsizes: 2 x 2\ntype: uchar\nencoding: raw\n".into(),
+                "expected 3 numbers",
+            ),
+            (
+                "big.nrrd",
+                "dimension: 3\nsizes: 2 2 99999999999\ntype: uchar\nencoding: raw\n".into(),
+                "expected 3 numbers",
+            ),
+            (
+                "twice.nrrd",
+                format!("{base}type: uchar\ntype: uchar\n"),
+                "given twice",
+            ),
+            (
+                "enc.nrrd",
+                "dimension: 3\nsizes: 2 2 2\ntype: uchar\nencoding: bzip2\n".into(),
+                "bzip2",
+            ),
+            (
+                "none.nrrd",
+                format!("{base}type: uchar\nspace directions: none (1,0,0) (0,1,0)\n"),
+                "none",
+            ),
+            (
+                "vec.nrrd",
+                format!("{base}type: uchar\nspace directions: (1,0) (0,1,0) (0,0,1)\n"),
+                "vectors",
+            ),
+            (
+                "flat.nrrd",
+                format!("{base}type: uchar\nspace directions: (1,0,0) (2,0,0) (0,0,1)\n"),
+                "span",
+            ),
+            (
+                "space.nrrd",
+                format!("{base}type: uchar\nspace: sideways\n"),
+                "unknown space",
+            ),
+            (
+                "noline.nrrd",
+                format!("{base}type: uchar\nnonsense\n"),
+                "not `field: value`",
+            ),
+            (
+                "skip.nrrd",
+                format!("{base}type: uchar\nbyte skip: -2\n"),
+                "byte skip",
+            ),
+            (
+                "overflow.nrrd",
+                format!("{base}type: uchar\nbyte skip: {}\n", u64::MAX),
+                "byte skip overflows",
+            ),
+        ];
+        for (name, body, text) in cases {
+            let bytes = attached(&body, &[0; 64]);
+            expect_header_error(load(&dir, name, &bytes), name, text);
+        }
+        expect_header_error(load(&dir, "magic.nrrd", b"NRRD9\n"), "magic.nrrd", "magic");
+        std::fs::remove_dir_all(dir).ok();
+    }
+
+    #[test]
+    fn sizes_beyond_the_data_are_refused_before_allocating() {
+        let dir = scratch("nrrd-sizes");
+        let huge = attached(
+            "dimension: 3\nsizes: 65536 65536 2\ntype: float\nendian: little\nencoding: raw\n",
+            &[0; 16],
+        );
+        let err = load(&dir, "huge.nrrd", &huge).unwrap_err();
+        assert!(matches!(err, VolumeError::Grid { .. }), "{err}");
+        let short = attached(
+            "dimension: 3\nsizes: 100 100 100\ntype: float\nendian: little\nencoding: raw\n",
+            &[0; 16],
+        );
+        let err = load(&dir, "short.nrrd", &short).unwrap_err();
+        assert!(
+            matches!(err, VolumeError::TooShort { expected, .. } if expected > 4_000_000),
+            "{err}"
+        );
+        assert!(err.to_string().contains("short.nrrd"), "{err}");
+        std::fs::remove_dir_all(dir).ok();
+    }
+
+    #[test]
+    fn gzip_must_inflate_to_exactly_the_declared_size() {
+        let dir = scratch("nrrd-gzip");
+        let fields = format!("{U16_2X2X2}encoding: gzip\n");
+        let long = attached(&fields, &gzip(&[1; 17]));
+        let err = load(&dir, "long.nrrd", &long).unwrap_err();
+        assert!(
+            matches!(err, VolumeError::InflatesPast { declared: 16, .. }),
+            "{err}"
+        );
+        let short = attached(&fields, &gzip(&[1; 15]));
+        let err = load(&dir, "short.nrrd", &short).unwrap_err();
+        assert!(
+            matches!(
+                err,
+                VolumeError::InflatesShort {
+                    expected: 16,
+                    actual: 15,
+                    ..
+                }
+            ),
+            "{err}"
+        );
+        let corrupt = attached(&fields, b"\x1f\x8bnot really gzip");
+        let err = load(&dir, "corrupt.nrrd", &corrupt).unwrap_err();
+        assert!(matches!(err, VolumeError::Decompress { .. }), "{err}");
+        // A tiny stream claiming 2^32 voxels fails after inflating what it holds.
+        let bomb = attached(
+            "dimension: 3\nsizes: 65536 65536 1\ntype: uchar\nencoding: gzip\n",
+            &gzip(&[0; 1000]),
+        );
+        let err = load(&dir, "bomb.nrrd", &bomb).unwrap_err();
+        assert!(
+            matches!(err, VolumeError::InflatesShort { actual: 1000, .. }),
+            "{err}"
+        );
+        std::fs::remove_dir_all(dir).ok();
+    }
+
+    #[test]
+    fn missing_data_files_and_slices_are_named() {
+        let dir = scratch("nrrd-missing");
+        let base = "dimension: 3\nsizes: 1 1 3\ntype: uchar\nencoding: raw\n";
+        let err = load(
+            &dir,
+            "one.nhdr",
+            header(&format!("{base}data file: gone.raw\n")).as_bytes(),
+        )
+        .unwrap_err();
+        assert!(
+            matches!(&err, VolumeError::MissingDataFile { data_file, .. } if data_file.ends_with("gone.raw")),
+            "{err}"
+        );
+        std::fs::write(dir.join("q.1"), [1]).unwrap();
+        std::fs::write(dir.join("q.3"), [3]).unwrap();
+        let err = load(
+            &dir,
+            "gap.nhdr",
+            header(&format!("{base}data file: q.%d 1 3 1\n")).as_bytes(),
+        )
+        .unwrap_err();
+        assert!(
+            err.to_string().contains("q.2") && err.to_string().contains("gap.nhdr"),
+            "{err}"
+        );
+        let err = load(
+            &dir,
+            "many.nhdr",
+            header(&format!("{base}data file: q.%d 1 4 1\n")).as_bytes(),
+        )
+        .unwrap_err();
+        assert!(
+            err.to_string().contains("longer than the 3 slices"),
+            "{err}"
+        );
+        let err = load(
+            &dir,
+            "uneven.nhdr",
+            header(&format!("{base}data file: LIST\nq.1\nq.3\n")).as_bytes(),
+        )
+        .unwrap_err();
+        assert!(err.to_string().contains("evenly"), "{err}");
+        std::fs::write(dir.join("empty"), []).unwrap();
+        let err = load(
+            &dir,
+            "lines.nhdr",
+            header(&format!("{base}line skip: 2\ndata file: empty\n")).as_bytes(),
+        )
+        .unwrap_err();
+        assert!(err.to_string().contains("only 0 lines"), "{err}");
+        std::fs::remove_dir_all(dir).ok();
+    }
+}

@@ -107,6 +107,70 @@ pub enum VolumeError {
         /// The first file numbered after the gap.
         later: PathBuf,
     },
+    /// A volume header is malformed: a field is missing, repeated, unknown or has a value that
+    /// cannot be used (an unknown type or byte order, a size that is not a number).
+    #[error("{}: bad header: {message}", path.display())]
+    Header {
+        /// The header file.
+        path: PathBuf,
+        /// What is wrong, naming the field.
+        message: String,
+    },
+    /// The file uses a variant of its format that is not read (an encoding, a data layout).
+    #[error("{}: unsupported: {feature}", path.display())]
+    Unsupported {
+        /// The file.
+        path: PathBuf,
+        /// The variant, and what is read instead.
+        feature: String,
+    },
+    /// No volume header was recognised: headerless data needs its layout stated.
+    #[error(
+        "{}: no volume header recognised (NRRD, VTK, NIfTI, .dat or DICOM); a headerless raw \
+         file or slice stack needs the raw options (size, scalar type, byte order, spacing)",
+        path.display()
+    )]
+    NoHeader {
+        /// The file.
+        path: PathBuf,
+    },
+    /// A data file that a header names does not exist.
+    #[error("{}: data file {} does not exist", path.display(), data_file.display())]
+    MissingDataFile {
+        /// The header naming it.
+        path: PathBuf,
+        /// The missing data file.
+        data_file: PathBuf,
+    },
+    /// Compressed data could not be decompressed.
+    #[error("{}: corrupt compressed data: {source}", path.display())]
+    Decompress {
+        /// The file holding the compressed data.
+        path: PathBuf,
+        /// What the decompressor said.
+        source: std::io::Error,
+    },
+    /// Compressed data inflate to more bytes than the header declares.
+    #[error("{}: compressed data inflate past the declared {declared} bytes", path.display())]
+    InflatesPast {
+        /// The file holding the compressed data.
+        path: PathBuf,
+        /// Bytes the header declares.
+        declared: u64,
+    },
+    /// Compressed data end before the bytes the header declares.
+    #[error(
+        "{}: compressed data end after {actual} of the declared {expected} bytes",
+        path.display()
+    )]
+    InflatesShort {
+        /// The file holding the compressed data.
+        path: PathBuf,
+        /// Bytes the header declares.
+        expected: u64,
+        /// Bytes the data inflated to.
+        actual: u64,
+    },
 }
 
 /// The type of one stored value.
@@ -478,7 +542,9 @@ fn read_values(
     Ok(())
 }
 
-fn decode(bytes: &[u8], scalar: ScalarType, order: ByteOrder, out: &mut Vec<f32>) {
+/// Appends the values in `bytes` (whole values only; a trailing partial value is ignored).
+/// Shared with the header formats' loaders, which read compressed or embedded data.
+pub(super) fn decode(bytes: &[u8], scalar: ScalarType, order: ByteOrder, out: &mut Vec<f32>) {
     let big = order == ByteOrder::Big;
     match scalar {
         ScalarType::U8 => out.extend(bytes.iter().map(|&b| f32::from(b))),

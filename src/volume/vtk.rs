@@ -1,1 +1,1061 @@
-//! (being written)
+//! VTK image volumes: legacy `STRUCTURED_POINTS` files and XML `ImageData` (`.vti`) files.
+//!
+//! **Legacy** (`# vtk DataFile Version x.y`): `BINARY` data (big-endian, as the VTK file-format
+//! specification fixes it), `DATASET STRUCTURED_POINTS` with `DIMENSIONS`, `SPACING` (or the
+//! old `ASPECT_RATIO`) and `ORIGIN`, then `POINT_DATA n` and one-component `SCALARS` of an 8-
+//! to 32-bit integer type, `float` or `double`, followed by a `LOOKUP_TABLE` line and the
+//! values. The file's length is checked against the declared size before allocating.
+//!
+//! **XML** (`<VTKFile type="ImageData">`): one `Piece` covering the `WholeExtent`; the point-data
+//! array named by `PointData Scalars` (else the first), one component; `format="binary"`
+//! (inline base64) or `format="appended"` (`AppendedData` base64 or raw); no compression or
+//! `vtkZLibDataCompressor`, with `header_type` `UInt32` or `UInt64`; `byte_order` little or big;
+//! `Origin`, `Spacing` and `Direction` (row-major, columns the axes). A `WholeExtent` that does
+//! not start at 0 moves the origin to the first voxel. The whole file is read into memory
+//! (never more than its length); compressed blocks inflate to exactly their declared sizes.
+//!
+//! Not read (a typed [`VolumeError::Unsupported`]): `ASCII` legacy data, other dataset types,
+//! cell data, vectors and multi-component arrays, 64-bit integers, `ascii` XML arrays, LZ4 and
+//! LZMA compression, and multi-piece files.
+//!
+//! VTK has no anatomical frame: coordinates are taken as they are in the project's RAS world.
+
+use std::path::Path;
+
+use base64::Engine;
+use base64::engine::general_purpose::STANDARD as BASE64;
+use flate2::read::ZlibDecoder;
+use glam::{DMat3, DVec3};
+
+use super::detect::{
+    HeaderLines, LoadedVolume, Placement, VolumeFormat, expect_end, header_error, inflate_values,
+    io_error, unsupported,
+};
+use super::raw::decode;
+use super::{ByteOrder, CpuVolume, RawSpec, ScalarFormat, ScalarType, VolumeError, load_raw};
+use crate::grid::voxel_count;
+
+/// Loads a legacy VTK `STRUCTURED_POINTS` file with binary scalars.
+pub fn load_vtk_legacy(path: &Path) -> Result<LoadedVolume, VolumeError> {
+    let header = LegacyHeader::read(path)?;
+    let placement = Placement::axis_aligned(path, header.spacing, header.origin)?;
+    let spec = RawSpec {
+        header_bytes: header.data_offset,
+        ..RawSpec::new(header.dims, header.scalar, ByteOrder::Big)
+    };
+    Ok(LoadedVolume {
+        volume: placement.apply(load_raw(path, &spec)?),
+        format: VolumeFormat::VtkLegacy,
+        scalar_type: Some(header.scalar),
+    })
+}
+
+/// What a legacy header says.
+struct LegacyHeader {
+    dims: [u32; 3],
+    spacing: [f64; 3],
+    origin: [f64; 3],
+    scalar: ScalarType,
+    data_offset: u64,
+}
+
+impl LegacyHeader {
+    fn read(path: &Path) -> Result<Self, VolumeError> {
+        let mut lines = HeaderLines::open(path)?;
+        let first = lines.next_line()?.unwrap_or_default();
+        if !first.starts_with("# vtk DataFile") {
+            return Err(header_error(path, "no `# vtk DataFile` first line"));
+        }
+        // The title line is free text, even empty; blank lines elsewhere are skipped.
+        let _title = lines.next_line()?;
+        let mut partial = PartialLegacy::default();
+        while let Some(line) = lines.next_line()? {
+            let words: Vec<&str> = line.split_whitespace().collect();
+            if partial.take(path, lines.number(), &words)? {
+                return partial.finish(path, lines.offset());
+            }
+        }
+        Err(header_error(path, "ends before LOOKUP_TABLE and the data"))
+    }
+}
+
+/// The legacy header's keywords seen so far.
+#[derive(Default)]
+struct PartialLegacy {
+    binary: bool,
+    dataset: bool,
+    dims: Option<[u32; 3]>,
+    spacing: Option<[f64; 3]>,
+    origin: Option<[f64; 3]>,
+    points: Option<u64>,
+    scalar: Option<ScalarType>,
+}
+
+impl PartialLegacy {
+    /// Takes one header line; `true` once the `LOOKUP_TABLE` line before the data is read.
+    fn take(&mut self, path: &Path, line: usize, words: &[&str]) -> Result<bool, VolumeError> {
+        let at = |message: String| header_error(path, format!("line {line}: {message}"));
+        let Some(keyword) = words.first().map(|w| w.to_ascii_uppercase()) else {
+            return Ok(false);
+        };
+        let rest = &words[1..];
+        let three = || numbers(rest).ok_or_else(|| at(format!("{keyword} needs 3 numbers")));
+        match (keyword.as_str(), rest) {
+            ("BINARY", []) => self.binary = true,
+            ("ASCII", []) => return Err(unsupported(path, "ASCII legacy VTK data")),
+            ("DATASET", [kind]) if kind.eq_ignore_ascii_case("STRUCTURED_POINTS") => {
+                self.dataset = true;
+            }
+            ("DIMENSIONS", _) => {
+                let dims = numbers(rest).ok_or_else(|| at("DIMENSIONS needs 3 counts".into()))?;
+                self.dims = Some(dims);
+            }
+            ("SPACING" | "ASPECT_RATIO", _) => self.spacing = Some(three()?),
+            ("ORIGIN", _) => self.origin = Some(three()?),
+            ("POINT_DATA", [n]) => {
+                let n = n
+                    .parse()
+                    .map_err(|_| at(format!("POINT_DATA {n:?} is not a count")))?;
+                self.points = Some(n);
+            }
+            ("SCALARS", [_name, kind, components @ ..]) => {
+                if components.first().is_some_and(|c| *c != "1") {
+                    return Err(unsupported(path, "multi-component SCALARS"));
+                }
+                self.scalar = Some(match legacy_type(kind) {
+                    Some(Some(scalar)) => scalar,
+                    Some(None) => return Err(unsupported(path, format!("scalar type {kind}"))),
+                    None => return Err(at(format!("unknown scalar type {kind:?}"))),
+                });
+            }
+            ("LOOKUP_TABLE", _) if self.scalar.is_some() => return Ok(true),
+            // Other datasets, cell data, fields, vectors, or keywords out of order.
+            _ => {
+                return Err(unsupported(
+                    path,
+                    format!("line {line}: {}", words.join(" ")),
+                ));
+            }
+        }
+        Ok(false)
+    }
+
+    fn finish(self, path: &Path, data_offset: u64) -> Result<LegacyHeader, VolumeError> {
+        let missing = |what: &str| header_error(path, format!("no {what} before the data"));
+        if !self.binary {
+            return Err(missing("BINARY"));
+        }
+        if !self.dataset {
+            return Err(missing("DATASET STRUCTURED_POINTS"));
+        }
+        let dims = self.dims.ok_or_else(|| missing("DIMENSIONS"))?;
+        let count = grid_count(path, dims)?;
+        let points = self.points.ok_or_else(|| missing("POINT_DATA"))?;
+        if points != count {
+            let message = format!("POINT_DATA {points} but DIMENSIONS {dims:?} make {count}");
+            return Err(header_error(path, message));
+        }
+        Ok(LegacyHeader {
+            dims,
+            spacing: self.spacing.unwrap_or([1.0; 3]),
+            origin: self.origin.unwrap_or([0.0; 3]),
+            scalar: self.scalar.ok_or_else(|| missing("SCALARS"))?,
+            data_offset,
+        })
+    }
+}
+
+/// Exactly three parsed words.
+fn numbers<T: std::str::FromStr>(words: &[&str]) -> Option<[T; 3]> {
+    let parsed: Option<Vec<T>> = words.iter().map(|w| w.parse().ok()).collect();
+    parsed?.try_into().ok()
+}
+
+fn grid_count(path: &Path, dims: [u32; 3]) -> Result<u64, VolumeError> {
+    voxel_count(dims).map_err(|source| VolumeError::Grid {
+        path: path.into(),
+        source,
+    })
+}
+
+/// A legacy scalar type name: `Some(None)` for a known type that is not read, `None` for an
+/// unknown name.
+fn legacy_type(name: &str) -> Option<Option<ScalarType>> {
+    Some(Some(match name.to_ascii_lowercase().as_str() {
+        "unsigned_char" => ScalarType::U8,
+        "char" | "signed_char" => ScalarType::I8,
+        "unsigned_short" => ScalarType::U16,
+        "short" => ScalarType::I16,
+        "unsigned_int" => ScalarType::U32,
+        "int" => ScalarType::I32,
+        "float" => ScalarType::F32,
+        "double" => ScalarType::F64,
+        // `long` is 4 or 8 bytes depending on the writer's platform.
+        "bit" | "unsigned_long" | "long" | "vtktypeint64" | "vtktypeuint64" => return Some(None),
+        _ => return None,
+    }))
+}
+
+/// Loads a VTK XML `ImageData` (`.vti`) file.
+pub fn load_vti(path: &Path) -> Result<LoadedVolume, VolumeError> {
+    let bytes = std::fs::read(path).map_err(io_error(path))?;
+    let xml = Xml::split(path, &bytes)?;
+    let encoding = Encoding::from_file_tag(path, &xml.tag("VTKFile")?)?;
+    let grid = Grid::read(path, &xml)?;
+    let array = xml.scalars_array()?;
+    let format = array_format(path, &array, encoding.order)?;
+    let count = grid_count(path, grid.dims)?;
+    let values = encoding.values(path, xml.array_data(&array)?, format, count)?;
+    let volume = CpuVolume {
+        dims: grid.dims,
+        spacing: [1.0; 3],
+        origin: [0.0; 3],
+        direction: DMat3::IDENTITY,
+        values,
+    };
+    Ok(LoadedVolume {
+        volume: grid.placement.apply(volume),
+        format: VolumeFormat::VtkXml,
+        scalar_type: Some(format.scalar),
+    })
+}
+
+/// One XML start tag and its attributes.
+struct Tag<'a> {
+    attrs: Vec<(&'a str, &'a str)>,
+    /// Byte offset just past the tag's `>`.
+    end: usize,
+}
+
+impl<'a> Tag<'a> {
+    fn attr(&self, name: &str) -> Option<&'a str> {
+        self.attrs.iter().find(|(n, _)| *n == name).map(|(_, v)| *v)
+    }
+}
+
+/// The XML text of a `.vti` file, and its appended data if any.
+struct Xml<'a> {
+    path: &'a Path,
+    text: &'a str,
+    /// The bytes after the `_` that starts the appended data, with their encoding.
+    appended: Option<(&'a [u8], &'a str)>,
+}
+
+impl<'a> Xml<'a> {
+    /// Separates the XML text from appended data, which may be raw binary.
+    fn split(path: &'a Path, bytes: &'a [u8]) -> Result<Self, VolumeError> {
+        let marker = b"<AppendedData";
+        let start = bytes.windows(marker.len()).position(|w| w == marker);
+        let (head, appended) = match start {
+            None => (bytes, None),
+            Some(at) => {
+                let underscore = bytes[at..].iter().position(|&b| b == b'_');
+                let u = at
+                    + underscore
+                        .ok_or_else(|| header_error(path, "AppendedData without its `_`"))?;
+                (&bytes[..u], Some(&bytes[u + 1..]))
+            }
+        };
+        let text = std::str::from_utf8(head)
+            .map_err(|_| header_error(path, "the XML is not UTF-8 text"))?;
+        let mut xml = Self {
+            path,
+            text,
+            appended: None,
+        };
+        if let Some(data) = appended {
+            let encoding = xml
+                .tag("AppendedData")?
+                .attr("encoding")
+                .unwrap_or("base64");
+            xml.appended = Some((data, encoding));
+        }
+        Ok(xml)
+    }
+
+    /// The first start tag named `name` at or after byte `from`.
+    fn find(&self, name: &str, from: usize) -> Result<Option<Tag<'a>>, VolumeError> {
+        let mut search = from;
+        while let Some(found) = self.text.get(search..).and_then(|t| t.find('<')) {
+            let at = search + found + 1;
+            let after = self.text[at..]
+                .strip_prefix(name)
+                .and_then(|r| r.chars().next());
+            if after.is_some_and(|c| c.is_whitespace() || c == '>' || c == '/') {
+                let tag = parse_tag(self.text, at + name.len());
+                return tag
+                    .map(Some)
+                    .ok_or_else(|| header_error(self.path, format!("malformed <{name}> tag")));
+            }
+            search = at;
+        }
+        Ok(None)
+    }
+
+    fn tag(&self, name: &str) -> Result<Tag<'a>, VolumeError> {
+        self.find(name, 0)?
+            .ok_or_else(|| header_error(self.path, format!("no <{name}> element")))
+    }
+
+    /// The `DataArray` of the point data that `Scalars` names, else the first one.
+    fn scalars_array(&self) -> Result<Tag<'a>, VolumeError> {
+        let Some(point_data) = self.find("PointData", 0)? else {
+            return Err(unsupported(
+                self.path,
+                "no PointData (cell data are not read)",
+            ));
+        };
+        let close = self.text[point_data.end..]
+            .find("</PointData>")
+            .map_or(self.text.len(), |c| point_data.end + c);
+        let wanted = point_data.attr("Scalars");
+        let mut first = None;
+        let mut from = point_data.end;
+        while let Some(array) = self.find("DataArray", from)?.filter(|a| a.end <= close) {
+            from = array.end;
+            if wanted.is_none() || array.attr("Name") == wanted {
+                return Ok(array);
+            }
+            first.get_or_insert(array);
+        }
+        first.ok_or_else(|| header_error(self.path, "PointData holds no DataArray"))
+    }
+
+    /// The encoded bytes of an array's data: inline base64, or appended from its offset.
+    fn array_data(&self, array: &Tag<'a>) -> Result<Blob<'a>, VolumeError> {
+        match array.attr("format") {
+            Some("binary") => {
+                let end = self.text[array.end..].find("</DataArray>");
+                let end = end.ok_or_else(|| header_error(self.path, "DataArray not closed"))?;
+                Ok(Blob::Base64(
+                    &self.text.as_bytes()[array.end..array.end + end],
+                ))
+            }
+            Some("appended") => self.appended_data(array),
+            other => {
+                let feature = format!(
+                    "DataArray format {}; only binary and appended are read",
+                    other.unwrap_or("(none)")
+                );
+                Err(unsupported(self.path, feature))
+            }
+        }
+    }
+
+    fn appended_data(&self, array: &Tag<'a>) -> Result<Blob<'a>, VolumeError> {
+        let error = |message: &str| header_error(self.path, message);
+        let (data, encoding) = self
+            .appended
+            .ok_or_else(|| error("appended array but no AppendedData"))?;
+        let offset: usize = array
+            .attr("offset")
+            .and_then(|o| o.trim().parse().ok())
+            .ok_or_else(|| error("appended DataArray without a valid offset"))?;
+        let data = data
+            .get(offset..)
+            .ok_or_else(|| error("DataArray offset past the appended data"))?;
+        match encoding {
+            "base64" => Ok(Blob::Base64(data)),
+            "raw" => Ok(Blob::Raw(data)),
+            other => Err(unsupported(
+                self.path,
+                format!("AppendedData encoding {other}"),
+            )),
+        }
+    }
+}
+
+/// The attributes of the tag whose name ends at `at`, up to its `>`; `None` if malformed.
+fn parse_tag(text: &str, mut at: usize) -> Option<Tag<'_>> {
+    let mut attrs = Vec::new();
+    loop {
+        let rest = text.get(at..)?.trim_start();
+        if let Some(after) = rest.strip_prefix("/>").or_else(|| rest.strip_prefix('>')) {
+            return Some(Tag {
+                attrs,
+                end: text.len() - after.len(),
+            });
+        }
+        let (name, value) = rest.split_once('=')?;
+        let value = value.trim_start();
+        let quote = value.chars().next().filter(|q| *q == '"' || *q == '\'')?;
+        let close = value[1..].find(quote)?;
+        attrs.push((name.trim(), &value[1..1 + close]));
+        // Past the closing quote.
+        at = text.len() - value.len() + close + 2;
+    }
+}
+
+/// An array's bytes, still base64-encoded or raw.
+#[derive(Clone, Copy)]
+enum Blob<'a> {
+    Base64(&'a [u8]),
+    Raw(&'a [u8]),
+}
+
+/// The value type of a `DataArray`, which must have one component.
+fn array_format(
+    path: &Path,
+    array: &Tag<'_>,
+    order: ByteOrder,
+) -> Result<ScalarFormat, VolumeError> {
+    if array
+        .attr("NumberOfComponents")
+        .is_some_and(|n| n.trim() != "1")
+    {
+        return Err(unsupported(path, "multi-component point data"));
+    }
+    let name = array.attr("type").unwrap_or("");
+    let scalar = match name {
+        "Int8" => ScalarType::I8,
+        "UInt8" => ScalarType::U8,
+        "Int16" => ScalarType::I16,
+        "UInt16" => ScalarType::U16,
+        "Int32" => ScalarType::I32,
+        "UInt32" => ScalarType::U32,
+        "Float32" => ScalarType::F32,
+        "Float64" => ScalarType::F64,
+        "Int64" | "UInt64" => return Err(unsupported(path, format!("DataArray type {name}"))),
+        _ => {
+            return Err(header_error(
+                path,
+                format!("unknown DataArray type {name:?}"),
+            ));
+        }
+    };
+    Ok(ScalarFormat { scalar, order })
+}
+
+/// The size and placement of the image.
+struct Grid {
+    dims: [u32; 3],
+    placement: Placement,
+}
+
+impl Grid {
+    fn read(path: &Path, xml: &Xml<'_>) -> Result<Self, VolumeError> {
+        let image = xml.tag("ImageData")?;
+        let extent = image
+            .attr("WholeExtent")
+            .ok_or_else(|| header_error(path, "ImageData without WholeExtent"))?;
+        let piece = xml.tag("Piece")?;
+        let same = |e: &str| e.split_whitespace().eq(extent.split_whitespace());
+        if xml.text.matches("<Piece").count() != 1 || !piece.attr("Extent").is_some_and(same) {
+            return Err(unsupported(
+                path,
+                "pieces other than one covering the WholeExtent",
+            ));
+        }
+        let (dims, start) = extent_dims(path, extent)?;
+        let origin: [f64; 3] = attr_numbers(path, &image, "Origin", [0.0; 3])?;
+        let spacing: [f64; 3] = attr_numbers(path, &image, "Spacing", [1.0; 3])?;
+        let identity = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0];
+        let rows: [f64; 9] = attr_numbers(path, &image, "Direction", identity)?;
+        // Direction is written row by row; its columns are the grid axes.
+        let direction = DMat3::from_cols_array(&rows).transpose();
+        let steps = DMat3::from_cols(
+            direction.x_axis * spacing[0],
+            direction.y_axis * spacing[1],
+            direction.z_axis * spacing[2],
+        );
+        // Voxel (0, 0, 0) of the loaded grid is the extent's first index.
+        let first = DVec3::from(origin) + steps * start;
+        let placement =
+            Placement::from_columns(path, [steps.x_axis, steps.y_axis, steps.z_axis], first)?;
+        Ok(Self { dims, placement })
+    }
+}
+
+/// The grid size of an extent `x0 x1 y0 y1 z0 z1`, and its first index.
+fn extent_dims(path: &Path, extent: &str) -> Result<([u32; 3], DVec3), VolumeError> {
+    let bad = || {
+        header_error(
+            path,
+            format!("WholeExtent {extent:?} is not 6 bounds of a non-empty grid"),
+        )
+    };
+    let parsed: Option<Vec<i64>> = extent.split_whitespace().map(|w| w.parse().ok()).collect();
+    let e: [i64; 6] = parsed.and_then(|p| p.try_into().ok()).ok_or_else(bad)?;
+    let mut dims = [0u32; 3];
+    for (axis, d) in dims.iter_mut().enumerate() {
+        let n = e[2 * axis + 1]
+            .checked_sub(e[2 * axis])
+            .and_then(|n| n.checked_add(1));
+        *d = n
+            .and_then(|n| u32::try_from(n).ok())
+            .filter(|&n| n > 0)
+            .ok_or_else(bad)?;
+    }
+    Ok((dims, DVec3::new(e[0] as f64, e[2] as f64, e[4] as f64)))
+}
+
+/// `N` numbers from an attribute, or `default` when it is absent.
+fn attr_numbers<const N: usize>(
+    path: &Path,
+    tag: &Tag<'_>,
+    name: &str,
+    default: [f64; N],
+) -> Result<[f64; N], VolumeError> {
+    let Some(value) = tag.attr(name) else {
+        return Ok(default);
+    };
+    let parsed: Option<Vec<f64>> = value.split_whitespace().map(|w| w.parse().ok()).collect();
+    parsed
+        .and_then(|p| p.try_into().ok())
+        .ok_or_else(|| header_error(path, format!("{name} {value:?} is not {N} numbers")))
+}
+
+/// How the file encodes binary data: byte order, header word size and compression.
+struct Encoding {
+    order: ByteOrder,
+    /// Bytes per header word (4 for `UInt32`, 8 for `UInt64`).
+    word: usize,
+    zlib: bool,
+}
+
+impl Encoding {
+    /// Reads the `VTKFile` element, which must describe `ImageData`.
+    fn from_file_tag(path: &Path, file: &Tag<'_>) -> Result<Self, VolumeError> {
+        let kind = file.attr("type").unwrap_or("");
+        if kind != "ImageData" {
+            return Err(unsupported(
+                path,
+                format!("VTKFile type {kind:?}; only ImageData is read"),
+            ));
+        }
+        let order = match file.attr("byte_order") {
+            Some("LittleEndian") | None => ByteOrder::Little,
+            Some("BigEndian") => ByteOrder::Big,
+            Some(other) => {
+                return Err(header_error(
+                    path,
+                    format!("byte_order {other:?} is neither LittleEndian nor BigEndian"),
+                ));
+            }
+        };
+        let word = match file.attr("header_type") {
+            Some("UInt32") | None => 4,
+            Some("UInt64") => 8,
+            Some(other) => {
+                return Err(header_error(
+                    path,
+                    format!("header_type {other:?} is neither UInt32 nor UInt64"),
+                ));
+            }
+        };
+        let zlib = match file.attr("compressor") {
+            None | Some("") => false,
+            Some("vtkZLibDataCompressor") => true,
+            Some(other) => {
+                return Err(unsupported(
+                    path,
+                    format!("compressor {other}; only vtkZLibDataCompressor is read"),
+                ));
+            }
+        };
+        Ok(Self { order, word, zlib })
+    }
+
+    /// Header word `index` of `bytes`, if there.
+    fn word_at(&self, bytes: &[u8], index: usize) -> Option<u64> {
+        let start = index.checked_mul(self.word)?;
+        let w = bytes.get(start..start.checked_add(self.word)?)?;
+        let mut b = [0u8; 8];
+        match self.order {
+            ByteOrder::Little => {
+                b[..self.word].copy_from_slice(w);
+                Some(u64::from_le_bytes(b))
+            }
+            ByteOrder::Big => {
+                b[8 - self.word..].copy_from_slice(w);
+                Some(u64::from_be_bytes(b))
+            }
+        }
+    }
+
+    /// The array's `count` values from its encoded bytes.
+    fn values(
+        &self,
+        path: &Path,
+        blob: Blob<'_>,
+        format: ScalarFormat,
+        count: u64,
+    ) -> Result<Vec<f32>, VolumeError> {
+        let overflow = || header_error(path, "declared size overflows");
+        let bytes = count
+            .checked_mul(format.scalar.size() as u64)
+            .ok_or_else(overflow)?;
+        let count = usize::try_from(count).map_err(|_| overflow())?;
+        if self.zlib {
+            let (header, data) = self.split_compressed(path, blob)?;
+            return self.inflate_blocks(path, &header, &data, format, (count, bytes));
+        }
+        let data = match blob {
+            Blob::Base64(text) => base64(path, text)?,
+            Blob::Raw(data) => data.to_vec(),
+        };
+        let stated = self
+            .word_at(&data, 0)
+            .ok_or_else(|| header_error(path, "array data shorter than its header"))?;
+        if stated != bytes {
+            return Err(header_error(
+                path,
+                format!("array holds {stated} bytes but the extent needs {bytes}"),
+            ));
+        }
+        let body = &data[self.word..];
+        let values = body
+            .get(..count * format.scalar.size())
+            .ok_or(VolumeError::TooShort {
+                path: path.into(),
+                expected: bytes,
+                actual: body.len() as u64,
+            })?;
+        let mut out = Vec::with_capacity(count);
+        decode(values, format.scalar, format.order, &mut out);
+        Ok(out)
+    }
+
+    /// The compression header and the compressed bytes behind it. In base64, VTK encodes the
+    /// header on its own (with its own padding), then all blocks together.
+    fn split_compressed(
+        &self,
+        path: &Path,
+        blob: Blob<'_>,
+    ) -> Result<(Vec<u8>, Vec<u8>), VolumeError> {
+        let short = || header_error(path, "compressed array shorter than its header");
+        match blob {
+            Blob::Raw(data) => {
+                let blocks = self.word_at(data, 0).ok_or_else(short)?;
+                let len = header_len(self.word, blocks)
+                    .filter(|&l| l <= data.len())
+                    .ok_or_else(short)?;
+                Ok((data[..len].to_vec(), data[len..].to_vec()))
+            }
+            Blob::Base64(text) => {
+                let text: Vec<u8> = text
+                    .iter()
+                    .copied()
+                    .filter(|b| !b.is_ascii_whitespace())
+                    .collect();
+                // The first base64 groups covering one header word give the block count.
+                let first = base64(path, text.get(..encoded_len(self.word)).ok_or_else(short)?)?;
+                let blocks = self.word_at(&first, 0).ok_or_else(short)?;
+                let len = header_len(self.word, blocks)
+                    .map(encoded_len)
+                    .filter(|&l| l <= text.len())
+                    .ok_or_else(short)?;
+                Ok((base64(path, &text[..len])?, base64(path, &text[len..])?))
+            }
+        }
+    }
+
+    /// Inflates each block to exactly its declared size; together they must make the array.
+    fn inflate_blocks(
+        &self,
+        path: &Path,
+        header: &[u8],
+        data: &[u8],
+        format: ScalarFormat,
+        (count, bytes): (usize, u64),
+    ) -> Result<Vec<f32>, VolumeError> {
+        let word = |i: u64| {
+            let word = usize::try_from(i)
+                .ok()
+                .and_then(|i| self.word_at(header, i));
+            word.ok_or_else(|| header_error(path, "truncated compression header"))
+        };
+        let (blocks, block, last) = (word(0)?, word(1)?, word(2)?);
+        check_blocks(
+            path,
+            (blocks, block, last),
+            format.scalar.size() as u64,
+            bytes,
+        )?;
+        let mut out = Vec::new();
+        let mut at = 0usize;
+        for i in 0..blocks {
+            let end = usize::try_from(word(3 + i)?)
+                .ok()
+                .and_then(|s| at.checked_add(s))
+                .filter(|&e| e <= data.len());
+            let end =
+                end.ok_or_else(|| header_error(path, format!("block {i} runs past the data")))?;
+            let inflated = if i + 1 == blocks && last != 0 {
+                last
+            } else {
+                block
+            };
+            let mut reader = ZlibDecoder::new(&data[at..end]);
+            inflate_values(path, &mut reader, inflated, format, count, &mut out)?;
+            expect_end(path, &mut reader, inflated)?;
+            at = end;
+        }
+        Ok(out)
+    }
+}
+
+/// The blocks (count, size, size of the last or 0 when full) must hold exactly `bytes` bytes,
+/// and whole values per block so that no value straddles two.
+fn check_blocks(
+    path: &Path,
+    (blocks, block, last): (u64, u64, u64),
+    value: u64,
+    bytes: u64,
+) -> Result<(), VolumeError> {
+    let last_size = if last == 0 { block } else { last };
+    let total = match blocks {
+        0 => Some(0),
+        n => (n - 1)
+            .checked_mul(block)
+            .and_then(|b| b.checked_add(last_size)),
+    };
+    if total != Some(bytes) || !block.is_multiple_of(value) || last > block {
+        let message = format!(
+            "{blocks} compressed blocks of {block} bytes (last {last}) do not hold the \
+             {bytes} bytes of the extent"
+        );
+        return Err(header_error(path, message));
+    }
+    Ok(())
+}
+
+/// Bytes of a compression header with `blocks` blocks: count, block size, last size, sizes.
+fn header_len(word: usize, blocks: u64) -> Option<usize> {
+    usize::try_from(blocks)
+        .ok()?
+        .checked_add(3)?
+        .checked_mul(word)
+}
+
+/// Base64 characters encoding `bytes` bytes, padded.
+fn encoded_len(bytes: usize) -> usize {
+    bytes.div_ceil(3) * 4
+}
+
+fn base64(path: &Path, text: &[u8]) -> Result<Vec<u8>, VolumeError> {
+    let text: Vec<u8> = text
+        .iter()
+        .copied()
+        .filter(|b| !b.is_ascii_whitespace())
+        .collect();
+    BASE64
+        .decode(&text)
+        .map_err(|e| header_error(path, format!("bad base64 data: {e}")))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::volume::detect::tests::scratch;
+    use std::io::Write;
+
+    fn write(dir: &Path, name: &str, bytes: &[u8]) -> std::path::PathBuf {
+        let path = dir.join(name);
+        std::fs::write(&path, bytes).unwrap();
+        path
+    }
+
+    fn legacy(fields: &str, data: &[u8]) -> Vec<u8> {
+        let mut bytes = format!(
+            "# vtk DataFile Version 3.0\ntitle\nBINARY\nDATASET STRUCTURED_POINTS\n{fields}"
+        )
+        .into_bytes();
+        bytes.extend(data);
+        bytes
+    }
+
+    #[test]
+    fn legacy_binary_is_big_endian() {
+        let dir = scratch("vtk-legacy");
+        let fields = "DIMENSIONS 2 1 2\nSPACING 0.5 1 2\nORIGIN 1 2 3\nPOINT_DATA 4\nSCALARS s short 1\nLOOKUP_TABLE default\n";
+        let data: Vec<u8> = [-1000i16, 0, 1, 3000]
+            .iter()
+            .flat_map(|v| v.to_be_bytes())
+            .collect();
+        let loaded = load_vtk_legacy(&write(&dir, "v.vtk", &legacy(fields, &data))).unwrap();
+        assert_eq!(loaded.volume.values, [-1000.0, 0.0, 1.0, 3000.0]);
+        assert_eq!(
+            (loaded.volume.spacing, loaded.volume.origin),
+            ([0.5, 1.0, 2.0], [1.0, 2.0, 3.0])
+        );
+        assert_eq!(loaded.scalar_type, Some(ScalarType::I16));
+        std::fs::remove_dir_all(dir).ok();
+    }
+
+    #[test]
+    fn legacy_problems_are_typed_errors() {
+        let dir = scratch("vtk-legacy-bad");
+        let ok = "DIMENSIONS 2 2 2\nPOINT_DATA 8\nSCALARS s unsigned_char\nLOOKUP_TABLE default\n";
+        let cases = [
+            ("short.vtk", legacy(ok, &[0; 7]), "needs"),
+            (
+                "count.vtk",
+                legacy(
+                    "DIMENSIONS 2 2 2\nPOINT_DATA 9\nSCALARS s unsigned_char\nLOOKUP_TABLE default\n",
+                    &[0; 9],
+                ),
+                "POINT_DATA 9",
+            ),
+            (
+                "type.vtk",
+                legacy(
+                    "DIMENSIONS 2 2 2\nPOINT_DATA 8\nSCALARS s quaternion\nLOOKUP_TABLE default\n",
+                    &[0; 8],
+                ),
+                "unknown scalar type",
+            ),
+            (
+                "long.vtk",
+                legacy(
+                    "DIMENSIONS 2 2 2\nPOINT_DATA 8\nSCALARS s long\nLOOKUP_TABLE default\n",
+                    &[0; 64],
+                ),
+                "long",
+            ),
+            (
+                "vec.vtk",
+                legacy(
+                    "DIMENSIONS 2 2 2\nPOINT_DATA 8\nVECTORS v float\n",
+                    &[0; 96],
+                ),
+                "VECTORS",
+            ),
+            (
+                "dims.vtk",
+                legacy("DIMENSIONS 2 -2 2\n", &[]),
+                "DIMENSIONS needs 3 counts",
+            ),
+            (
+                "huge.vtk",
+                legacy(
+                    "DIMENSIONS 100000 100000 100000\nPOINT_DATA 1\nSCALARS s float\nLOOKUP_TABLE default\n",
+                    &[0; 8],
+                ),
+                "declared grid size",
+            ),
+            (
+                "end.vtk",
+                legacy("DIMENSIONS 2 2 2\n", &[]),
+                "ends before LOOKUP_TABLE",
+            ),
+            (
+                "ascii.vtk",
+                b"# vtk DataFile Version 3.0\nt\nASCII\n".to_vec(),
+                "ASCII",
+            ),
+            (
+                "grid.vtk",
+                b"# vtk DataFile Version 3.0\nt\nBINARY\nDATASET POLYDATA\n".to_vec(),
+                "POLYDATA",
+            ),
+        ];
+        for (name, bytes, expected) in cases {
+            let err = load_vtk_legacy(&write(&dir, name, &bytes))
+                .unwrap_err()
+                .to_string();
+            assert!(
+                err.contains(expected) && err.contains(name),
+                "{name}: {err}"
+            );
+        }
+        std::fs::remove_dir_all(dir).ok();
+    }
+
+    /// A `.vti` document around one point-data array and optional appended data.
+    fn vti(file_attrs: &str, array: &str, appended: &[u8]) -> Vec<u8> {
+        let mut bytes = format!(
+            "<?xml version=\"1.0\"?>\n<VTKFile type=\"ImageData\" version=\"1.0\" {file_attrs}>\n\
+             <ImageData WholeExtent=\"1 2 0 0 0 1\" Origin=\"10 0 0\" Spacing=\"2 1 3\" Direction=\"0 -1 0 1 0 0 0 0 1\">\n\
+             <Piece Extent=\"1 2 0 0 0 1\"><PointData Scalars=\"s\">\n\
+             <DataArray type=\"Float32\" Name=\"other\" format=\"binary\">AAAA</DataArray>\n\
+             {array}\n</PointData></Piece></ImageData>\n"
+        )
+        .into_bytes();
+        if !appended.is_empty() {
+            bytes.extend(b"<AppendedData encoding=\"raw\">_");
+            bytes.extend(appended);
+            bytes.extend(b"</AppendedData>");
+        }
+        bytes.extend(b"</VTKFile>\n");
+        bytes
+    }
+
+    const VALUES: [u16; 4] = [1, 2, 300, 40000];
+
+    fn le16(values: &[u16]) -> Vec<u8> {
+        values.iter().flat_map(|v| v.to_le_bytes()).collect()
+    }
+
+    fn zlib(bytes: &[u8]) -> Vec<u8> {
+        let mut encoder = flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::fast());
+        encoder.write_all(bytes).unwrap();
+        encoder.finish().unwrap()
+    }
+
+    /// VTK's compressed layout: a header of `word`-byte counts, then the zlib blocks.
+    fn compressed(word: usize, block: usize, data: &[u8]) -> (Vec<u8>, Vec<u8>) {
+        let blocks: Vec<Vec<u8>> = data.chunks(block).map(zlib).collect();
+        let last = data.len() % block;
+        let mut header = vec![blocks.len() as u64, block as u64, last as u64];
+        header.extend(blocks.iter().map(|b| b.len() as u64));
+        let header: Vec<u8> = header
+            .iter()
+            .flat_map(|w| w.to_le_bytes()[..word].to_vec())
+            .collect();
+        (header, blocks.concat())
+    }
+
+    #[test]
+    fn vti_inline_appended_and_compressed_arrays() {
+        let dir = scratch("vti");
+        let data = le16(&VALUES);
+        let array = |attrs: &str, text: &str| {
+            format!("<DataArray type=\"UInt16\" Name=\"s\" {attrs}>{text}</DataArray>")
+        };
+        let mut plain = 8u32.to_le_bytes().to_vec();
+        plain.extend(&data);
+        let inline = vti("", &array("format=\"binary\"", &BASE64.encode(&plain)), &[]);
+        let expected = load_vti(&write(&dir, "inline.vti", &inline)).unwrap();
+        assert_eq!(expected.volume.values, VALUES.map(f32::from));
+        assert_eq!(expected.volume.dims, [2, 1, 2]);
+        // Direction rows (0 -1 0), (1 0 0): the x axis runs along +y, the y axis along -x; the
+        // extent starts at x index 1, one 2-unit step along +y from the origin.
+        assert_eq!(
+            expected.volume.direction,
+            DMat3::from_cols(DVec3::Y, -DVec3::X, DVec3::Z)
+        );
+        assert_eq!(
+            (expected.volume.spacing, expected.volume.origin),
+            ([2.0, 1.0, 3.0], [10.0, 2.0, 0.0])
+        );
+        let appended = vti(
+            "",
+            &array("format=\"appended\" offset=\"3\"", ""),
+            &[[9u8; 3].as_slice(), &plain].concat(),
+        );
+        assert_eq!(
+            load_vti(&write(&dir, "appended.vti", &appended)).unwrap(),
+            expected
+        );
+        let zlib_attrs = "compressor=\"vtkZLibDataCompressor\" header_type=\"UInt64\"";
+        let (header, blocks) = compressed(8, 4, &data);
+        let text = format!("{}{}", BASE64.encode(&header), BASE64.encode(&blocks));
+        let inline_z = vti(zlib_attrs, &array("format=\"binary\"", &text), &[]);
+        assert_eq!(
+            load_vti(&write(&dir, "inline_z.vti", &inline_z)).unwrap(),
+            expected
+        );
+        let (header, blocks) = compressed(4, 6, &data);
+        let raw_z = vti(
+            "compressor=\"vtkZLibDataCompressor\"",
+            &array("format=\"appended\" offset=\"0\"", ""),
+            &[header, blocks].concat(),
+        );
+        assert_eq!(
+            load_vti(&write(&dir, "raw_z.vti", &raw_z)).unwrap(),
+            expected
+        );
+        std::fs::remove_dir_all(dir).ok();
+    }
+
+    #[test]
+    fn vti_problems_are_typed_errors() {
+        let dir = scratch("vti-bad");
+        let data = le16(&VALUES);
+        let array = |attrs: &str| {
+            format!(
+                "<DataArray type=\"UInt16\" Name=\"s\" format=\"appended\" offset=\"0\" {attrs}/>"
+            )
+        };
+        let z = "compressor=\"vtkZLibDataCompressor\"";
+        let (header, mut blocks) = compressed(4, 8, &data);
+        let mut past = header.clone();
+        let longer = zlib(&[data.as_slice(), &[0]].concat());
+        past[12..16].copy_from_slice(&(longer.len() as u32).to_le_bytes());
+        // Inline data end at </DataArray>; raw appended data would run on to the file's end.
+        let truncated = [8u32.to_le_bytes().as_slice(), &data[..5]].concat();
+        let inline_short = format!(
+            "<DataArray type=\"UInt16\" Name=\"s\" format=\"binary\">{}</DataArray>",
+            BASE64.encode(truncated)
+        );
+        let mut huge = header.clone();
+        huge[12..16].copy_from_slice(&10_000u32.to_le_bytes());
+        let mut sized = 7u32.to_le_bytes().to_vec();
+        sized.extend(&data);
+        let cases = [
+            (
+                "past.vti",
+                vti(z, &array(""), &[past, longer].concat()),
+                "inflate past",
+            ),
+            (
+                "blocks.vti",
+                vti(z, &array(""), &[huge, blocks.clone()].concat()),
+                "block 0 runs past",
+            ),
+            ("stated.vti", vti("", &array(""), &sized), "holds 7 bytes"),
+            ("short.vti", vti("", &inline_short, &[]), "needs 8 bytes"),
+            (
+                "order.vti",
+                vti("byte_order=\"Middle\"", &array(""), &data),
+                "byte_order",
+            ),
+            (
+                "lz4.vti",
+                vti("compressor=\"vtkLZ4DataCompressor\"", &array(""), &data),
+                "vtkLZ4DataCompressor",
+            ),
+            (
+                "type.vti",
+                vti("", &array("").replace("UInt16", "Bits"), &data),
+                "unknown DataArray type",
+            ),
+            (
+                "comp.vti",
+                vti("", &array("NumberOfComponents=\"3\""), &data),
+                "multi-component",
+            ),
+            (
+                "ascii.vti",
+                vti("", &array("").replace("appended", "ascii"), &data),
+                "ascii",
+            ),
+            (
+                "poly.vti",
+                b"<VTKFile type=\"PolyData\"></VTKFile>".to_vec(),
+                "PolyData",
+            ),
+            (
+                "offset.vti",
+                vti(
+                    "",
+                    &array("").replace("offset=\"0\"", "offset=\"99\""),
+                    &data,
+                ),
+                "offset",
+            ),
+        ];
+        for (name, bytes, expected) in cases {
+            let err = load_vti(&write(&dir, name, &bytes))
+                .unwrap_err()
+                .to_string();
+            assert!(
+                err.contains(expected) && err.contains(name),
+                "{name}: {err}"
+            );
+        }
+        let end = blocks.len() - 1;
+        blocks[end] ^= 0xff;
+        let corrupt = vti(z, &array(""), &[header, blocks].concat());
+        let err = load_vti(&write(&dir, "corrupt.vti", &corrupt)).unwrap_err();
+        assert!(
+            matches!(
+                err,
+                VolumeError::Decompress { .. } | VolumeError::InflatesShort { .. }
+            ),
+            "{err}"
+        );
+        std::fs::remove_dir_all(dir).ok();
+    }
+}
