@@ -44,6 +44,17 @@ enum Command {
     Measure(cli::scenes::MeasureArgs),
     /// Open a viewer window: orbit, pick, switch orderings and transfer functions.
     View(cli::scenes::ViewerArgs),
+    /// Describe volumes as JSON: size, spacing, origin, direction, scalar type, minimum,
+    /// maximum and mean (one object for one file, an array for several). A DICOM series is
+    /// given as its folder, a .dat or .nhdr volume as its header.
+    Info(InfoArgs),
+}
+
+#[derive(clap::Args)]
+struct InfoArgs {
+    /// Volume files (or DICOM series folders).
+    #[arg(required = true)]
+    files: Vec<PathBuf>,
 }
 
 #[derive(clap::Args)]
@@ -114,6 +125,7 @@ fn main() -> Result<()> {
         Command::Pick(args) => cli::scenes::run_pick(args),
         Command::Measure(args) => cli::scenes::run_measure(args),
         Command::View(args) => cli::scenes::run_viewer(args),
+        Command::Info(args) => run_info(args),
     }
 }
 
@@ -125,6 +137,19 @@ fn quiet_device_select() {
         // SAFETY: called first thing in main, before any other thread exists.
         unsafe { std::env::set_var("NODEVICE_SELECT", "1") };
     }
+}
+
+fn run_info(args: InfoArgs) -> Result<()> {
+    let mut infos = Vec::with_capacity(args.files.len());
+    for file in &args.files {
+        infos.push(splatscene::volume::detect::volume_info(file)?);
+    }
+    let out = match infos.len() {
+        1 => infos.remove(0),
+        _ => serde_json::Value::Array(infos),
+    };
+    println!("{}", serde_json::to_string_pretty(&out)?);
+    Ok(())
 }
 
 fn run_order(args: OrderArgs) -> Result<()> {

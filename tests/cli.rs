@@ -284,3 +284,42 @@ fn measure_distances_and_angles_and_draws_them() {
     let one = splatscene(&["measure", "--point", "1,2,3"]);
     assert!(!one.status.success());
 }
+
+#[test]
+fn info_describes_volumes_as_json_and_names_bad_files() {
+    let data = std::env::var_os("SPLATSCENE_DATA").map_or(
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data"),
+        std::path::PathBuf::from,
+    );
+    let nhdr = data.join("volumes/vtk_headsq/quarter.nhdr");
+    if !nhdr.exists() {
+        eprintln!(
+            "skipped: no data under {} (set SPLATSCENE_DATA)",
+            data.display()
+        );
+        return;
+    }
+    // VTKData head, quarter resolution (BSD).
+    let info = json(&splatscene(&["info", nhdr.to_str().unwrap()]));
+    assert_eq!(info["format"], "nrrd");
+    assert_eq!(info["size"], serde_json::json!([64, 64, 93]));
+    assert_eq!(info["spacing"], serde_json::json!([3.2, 3.2, 1.5]));
+    assert_eq!(info["scalar_type"], "int16");
+    for key in ["origin", "direction", "min", "max", "mean"] {
+        assert!(!info[key].is_null(), "{key} in {info}");
+    }
+    let two = json(&splatscene(&[
+        "info",
+        nhdr.to_str().unwrap(),
+        nhdr.to_str().unwrap(),
+    ]));
+    assert_eq!(two.as_array().map(Vec::len), Some(2));
+    let raw = data.join("volumes/engine/engine_256x256x128_uint8.raw");
+    let refused = splatscene(&["info", raw.to_str().unwrap()]);
+    assert!(!refused.status.success());
+    let stderr = String::from_utf8_lossy(&refused.stderr);
+    assert!(
+        stderr.contains("engine_256x256x128_uint8.raw") && stderr.contains("raw options"),
+        "{stderr}"
+    );
+}
