@@ -190,6 +190,59 @@ pub fn classify_corrected(
     Ok(Classified { grid, colors })
 }
 
+/// Shell classification, as the original ShellSplatting did: a voxel becomes a splat when its
+/// opacity exceeds `min_opacity` and at least one of its six neighbours has opacity at or
+/// below `high` (voxels outside the grid count as transparent). The inside of a thick opaque
+/// region, which can never show, is left out. Opacities are corrected as in
+/// [`classify_corrected`].
+pub fn classify_shell(
+    volume: &CpuVolume,
+    tf: &TransferFunction,
+    min_opacity: f32,
+    high: f32,
+    length_ratio: f64,
+) -> Result<Classified, GridError> {
+    let [nx, ny, nz] = volume.dims.map(|n| n as usize);
+    let alpha = |x: usize, y: usize, z: usize| {
+        let value = volume
+            .values
+            .get(x + nx * (y + ny * z))
+            .copied()
+            .unwrap_or(f32::NAN);
+        corrected_opacity(tf.sample(value)[3], length_ratio, 1.0)
+    };
+    let mut colors = Vec::new();
+    let grid = SparseGrid::from_mask(volume.dims, |id| {
+        let id = id as usize;
+        let (x, y, z) = (id % nx, id / nx % ny, id / (nx * ny));
+        let Some(&value) = volume.values.get(id) else {
+            return false;
+        };
+        let [r, g, b, a] = tf.sample(value);
+        let a = corrected_opacity(a, length_ratio, 1.0);
+        if a <= min_opacity {
+            return false;
+        }
+        let at_face = x == 0 || y == 0 || z == 0 || x + 1 == nx || y + 1 == ny || z + 1 == nz;
+        let open = at_face
+            || [
+                alpha(x - 1, y, z),
+                alpha(x + 1, y, z),
+                alpha(x, y - 1, z),
+                alpha(x, y + 1, z),
+                alpha(x, y, z - 1),
+                alpha(x, y, z + 1),
+            ]
+            .iter()
+            .any(|&n| n <= high);
+        if open {
+            colors.push([r * a, g * a, b * a, a]);
+        }
+        open
+    })?;
+    Ok(Classified { grid, colors })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -241,6 +294,44 @@ mod tests {
             corrected_opacity(0.4, 0.0, 1.0),
             0.4,
             "no length, no change"
+        );
+    }
+
+    #[test]
+    fn the_shell_keeps_the_surface_of_an_opaque_block() {
+        // A 6^3 grid with an opaque 4^3 block inside: its 2^3 core has only opaque neighbours.
+        let values = (0..216u32)
+            .map(|id| {
+                let k = [id % 6, id / 6 % 6, id / 36];
+                if k.iter().all(|&c| (1..=4).contains(&c)) {
+                    1000.0
+                } else {
+                    0.0
+                }
+            })
+            .collect();
+        let volume = CpuVolume {
+            dims: [6; 3],
+            spacing: [1.0; 3],
+            origin: [0.0; 3],
+            direction: DMat3::IDENTITY,
+            values,
+        };
+        let tf = TransferFunction::ramp(100.0, 200.0, [1.0; 4]);
+        let full = classify(&volume, &tf, 0.0).unwrap();
+        let shell = classify_shell(&volume, &tf, 0.0, 0.5, 1.0).unwrap();
+        assert_eq!(full.grid.len(), 64);
+        assert_eq!(shell.grid.len(), 64 - 8, "the 2x2x2 core is left out");
+        let core = 2 + 6 * (2 + 6 * 2);
+        assert!(full.grid.contains(core) && !shell.grid.contains(core));
+        assert_eq!(shell.colors.len(), shell.grid.len());
+        // With `high` at full opacity every visible voxel is on the shell.
+        assert_eq!(
+            classify_shell(&volume, &tf, 0.0, 1.0, 1.0)
+                .unwrap()
+                .grid
+                .len(),
+            64
         );
     }
 

@@ -16,6 +16,8 @@ use splatscene::scene::Scene;
 use splatscene::scene::file::load_scene_file;
 use splatscene::scene::shoulder::shoulder_scene;
 
+mod common;
+
 const CHANNEL_THRESHOLD: u8 = 3;
 const PIXEL_BUDGET: f64 = 0.005;
 
@@ -92,6 +94,24 @@ fn built_in_shoulder_scene() {
     check_golden(
         "shoulder",
         &render(&scene, (320, 240), Some([0.06, 0.07, 0.09])),
+    );
+}
+
+#[test]
+fn rotated_anisotropic_volume() {
+    // Patient orientation: the volume is placed by direction x spacing + origin.
+    let volume = common::rotated_anisotropic();
+    let centre = volume.geometry().unwrap().centre_world();
+    let mut scene = common::volume_scene(volume, splatscene::order::Ordering::IpPbtfImplicit);
+    let eye = centre + glam::DVec3::new(-18.0, -45.0, 33.0);
+    scene.camera = Some(splatscene::scene::SceneCamera::look_at(eye, centre));
+    // Cut open toward the viewer so that the inner shells show.
+    let toward_eye = (eye - centre).normalize();
+    let cut = splatscene::scene::ClipPlane::through(centre, toward_eye, false);
+    scene.clipping.planes.push(cut);
+    check_golden(
+        "rotated-anisotropic",
+        &render(&scene, (128, 112), Some([0.0, 0.0, 0.0])),
     );
 }
 

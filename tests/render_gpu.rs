@@ -10,54 +10,14 @@ use splatscene::composite::{SplatStyle, SplatVolume, compare, composite};
 use splatscene::mesh::{CpuMesh, Material};
 use splatscene::order::{OrderOptions, Orderer, Ordering, ViewCase};
 use splatscene::render::{FrameOptions, GpuContext, Renderer, gpu_colors};
-use splatscene::scene::{MeshNode, NodeContent, Scene, SceneCamera, SplatSettings, VolumeNode};
+use splatscene::scene::{MeshNode, NodeContent, Scene, SceneCamera};
 use splatscene::volume::CpuVolume;
+
+mod common;
+use common::{shells, volume_scene};
 
 fn context() -> GpuContext {
     GpuContext::headless().expect("a GPU adapter (install mesa-vulkan-drivers)")
-}
-
-/// Nested shells of "bone" in an n^3 grid (denser outside).
-fn shells(n: u32, spacing: [f64; 3]) -> CpuVolume {
-    let c = (f64::from(n) - 1.0) / 2.0;
-    let r_out = c;
-    let values = (0..n * n * n)
-        .map(|id| {
-            let (x, y, z) = (id % n, id / n % n, id / n / n);
-            let r = DVec3::new(f64::from(x) - c, f64::from(y) - c, f64::from(z) - c).length();
-            match r / r_out {
-                r if r > 0.98 => -1000.0,
-                r if r > 0.82 => 1300.0,
-                r if r > 0.45 => 400.0 + 40.0 * (id % 7) as f32,
-                _ => 40.0,
-            }
-        })
-        .collect();
-    CpuVolume {
-        dims: [n; 3],
-        spacing,
-        origin: [0.0; 3],
-        direction: glam::DMat3::IDENTITY,
-        values,
-    }
-}
-
-fn volume_scene(volume: CpuVolume, ordering: Ordering) -> Scene {
-    let mut scene = Scene::new();
-    let node = VolumeNode {
-        volume: Arc::new(volume),
-        transfer: Arc::new(TransferFunction::ct_bone()),
-        // Flat colours: the CPU reference compositor does not shade.
-        splats: SplatSettings {
-            ordering,
-            shading: 0.0,
-            ..Default::default()
-        },
-    };
-    scene
-        .add("volume", DMat4::IDENTITY, None, NodeContent::Volume(node))
-        .unwrap();
-    scene
 }
 
 const TRANSPARENT: FrameOptions = FrameOptions {
@@ -72,8 +32,15 @@ fn gpu_against_cpu(
     camera: SceneCamera,
     size: (u32, u32),
 ) -> (splatscene::composite::ImageDifference, usize) {
+    gpu_against_cpu_of(shells(20, [1.0, 1.0, 1.5]), camera, size)
+}
+
+fn gpu_against_cpu_of(
+    volume: CpuVolume,
+    camera: SceneCamera,
+    size: (u32, u32),
+) -> (splatscene::composite::ImageDifference, usize) {
     let ctx = context();
-    let volume = shells(20, [1.0, 1.0, 1.5]);
     let geometry = volume.geometry().unwrap();
     let scene = volume_scene(volume.clone(), Ordering::IpPbtfImplicit);
     let mut renderer = Renderer::new();
@@ -507,4 +474,22 @@ fn clipped_voxels_vanish_and_the_rest_draw_as_before() {
     assert_ne!(a.pixels, unclipped.pixels, "the clipping removed something");
     let wall_pixels = a_depth.iter().filter(|d| **d > 0.0).count();
     assert!(wall_pixels > 100, "part of the wall stays: {wall_pixels}");
+}
+
+#[test]
+fn a_rotated_anisotropic_volume_renders_as_the_cpu_reference() {
+    // Patient orientation: direction x spacing + origin, here turned about two axes, with
+    // CT-like anisotropic spacing, far from the world origin.
+    let volume = common::rotated_anisotropic();
+    let geometry = volume.geometry().unwrap();
+    let centre = geometry.centre_world();
+    let camera = SceneCamera::look_at(centre + DVec3::new(-12.0, -30.0, 22.0), centre);
+    let (d, covered) = gpu_against_cpu_of(volume, camera, (96, 80));
+    eprintln!("GPU vs CPU, rotated anisotropic: {d:?}, {covered} covered pixels");
+    assert!(
+        covered > 1500,
+        "the volume fills much of the image: {covered}"
+    );
+    assert!(d.max_abs < 3.0 / 255.0, "{d:?}");
+    assert!(d.bad_pixel_share <= 0.002, "{d:?}");
 }

@@ -12,7 +12,7 @@ use super::splat_pass::{GpuVolume, SplatPass};
 use super::target::RenderTarget;
 use super::view::ViewSetup;
 use super::{GpuContext, RenderError};
-use crate::classify::{Classified, classify_corrected};
+use crate::classify::{Classified, classify_corrected, classify_shell};
 use crate::composite::Frame;
 use crate::order::{OrderOptions, Orderer, Ordering, ViewCase, VolumeGeometry};
 use crate::scene::{NodeId, Scene, SceneCamera, VolumeNode, placed_geometry};
@@ -94,7 +94,7 @@ pub struct Screenshot {
 }
 
 /// Identity of a classification: the volume, the transfer function and the threshold.
-type ClassKey = (usize, usize, u32, Option<u64>);
+type ClassKey = (usize, usize, u32, Option<u64>, Option<u32>);
 
 struct VolumeState {
     key: ClassKey,
@@ -248,13 +248,14 @@ impl Renderer {
                 (x * y * z).cbrt() / r
             });
             let min = node.splats.min_opacity;
-            let result =
-                classify_corrected(&node.volume, &node.transfer, min, ratio).map_err(|e| {
-                    RenderError::Volume {
-                        node: name.clone(),
-                        message: e.to_string(),
-                    }
-                })?;
+            let result = match node.splats.shell {
+                Some(high) => classify_shell(&node.volume, &node.transfer, min, high, ratio),
+                None => classify_corrected(&node.volume, &node.transfer, min, ratio),
+            };
+            let result = result.map_err(|e| RenderError::Volume {
+                node: name.clone(),
+                message: e.to_string(),
+            })?;
             classified += 1;
             if result.grid.is_empty() {
                 self.volumes.remove(&id);
@@ -525,6 +526,7 @@ fn class_key(node: &VolumeNode) -> ClassKey {
         Arc::as_ptr(&node.transfer) as usize,
         node.splats.min_opacity.to_bits(),
         node.splats.opacity_reference_mm.map(f64::to_bits),
+        node.splats.shell.map(f32::to_bits),
     )
 }
 

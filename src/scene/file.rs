@@ -246,6 +246,8 @@ pub struct VolumeSpec {
     pub opacity_reference_mm: Option<f64>,
     /// Headlight shading of the splats from 0 (flat) to 1.
     pub shading: Option<f32>,
+    /// Shell mode: only voxels with a neighbour at or below this opacity become splats.
+    pub shell: Option<f32>,
     /// Ramp: transparent at the first value, `color` at the second.
     pub window: Option<[f32; 2]>,
     /// Ramp: straight RGBA at the top of the window.
@@ -549,6 +551,7 @@ fn load_volume(
         splats: SplatSettings {
             min_opacity,
             opacity_reference_mm: spec.opacity_reference_mm,
+            shell: spec.shell.map(|v| v.clamp(0.0, 1.0)),
             shading: spec
                 .shading
                 .map_or(SplatSettings::default().shading, |v| v.clamp(0.0, 1.0)),

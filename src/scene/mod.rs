@@ -65,6 +65,9 @@ pub struct SplatSettings {
     /// and are corrected for the voxel size (geometric mean spacing), so that a volume looks
     /// alike at any resolution; `None` takes them as they are per splat.
     pub opacity_reference_mm: Option<f64>,
+    /// Shell mode: only voxels with a neighbour at or below this opacity become splats (the
+    /// hidden inside of opaque tissue is left out); `None` keeps every visible voxel.
+    pub shell: Option<f32>,
 }
 
 impl Default for SplatSettings {
@@ -75,6 +78,7 @@ impl Default for SplatSettings {
             ordering: Ordering::IpPbtfImplicit,
             shading: 0.8,
             opacity_reference_mm: None,
+            shell: None,
         }
     }
 }

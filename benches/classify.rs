@@ -1,0 +1,76 @@
+//! Classification: the engine (256x256x128 u8) and the CT head (256x256x113 u16) turned into
+//! significant voxels with their colours, in full and in shell mode.
+//!
+//! `cargo bench --bench classify`; the data comes from `SPLATSCENE_DATA` (default
+//! `../shared/data`).
+
+use std::hint::black_box;
+use std::path::PathBuf;
+use std::time::Duration;
+
+use criterion::{Criterion, criterion_group, criterion_main};
+use splatscene::classify::{TransferFunction, classify, classify_shell};
+use splatscene::volume::raw::{
+    ByteOrder, RawSpec, ScalarType, load_raw, load_raw_slices, slice_stack,
+};
+
+fn data_dir() -> PathBuf {
+    std::env::var_os("SPLATSCENE_DATA")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/data"))
+}
+
+fn classification(c: &mut Criterion) {
+    let dir = data_dir().join("volumes");
+    let engine = load_raw(
+        &dir.join("engine/engine_256x256x128_uint8.raw"),
+        &RawSpec::new([256, 256, 128], ScalarType::U8, ByteOrder::Little),
+    )
+    .expect("engine volume (set SPLATSCENE_DATA)");
+    let head_spec = RawSpec {
+        spacing: [1.0, 1.0, 2.0],
+        ..RawSpec::new([256, 256, 113], ScalarType::U16, ByteOrder::Big)
+    };
+    let head = load_raw_slices(
+        &slice_stack(&dir.join("stanford_cthead/CThead.1")).expect("CT head"),
+        &head_spec,
+    )
+    .expect("CT head volume");
+    let cases = [
+        (
+            "engine",
+            engine,
+            TransferFunction::ramp(100.0, 200.0, [0.85, 0.8, 0.75, 0.5]),
+        ),
+        (
+            "cthead",
+            head,
+            TransferFunction::ramp(1200.0, 1800.0, [1.0, 0.93, 0.85, 0.6]),
+        ),
+    ];
+    let mut group = c.benchmark_group("classify");
+    group
+        .sample_size(10)
+        .warm_up_time(Duration::from_millis(500))
+        .measurement_time(Duration::from_secs(5));
+    for (name, volume, tf) in &cases {
+        let full = classify(volume, tf, 1.0 / 255.0).unwrap().grid.len();
+        let shell = classify_shell(volume, tf, 1.0 / 255.0, 0.5, 1.0)
+            .unwrap()
+            .grid
+            .len();
+        eprintln!(
+            "{name}: {full} significant voxels, {shell} on the shell (neighbour at or below 0.5)"
+        );
+        group.bench_function(format!("{name}/full"), |b| {
+            b.iter(|| black_box(classify(volume, tf, 1.0 / 255.0)))
+        });
+        group.bench_function(format!("{name}/shell"), |b| {
+            b.iter(|| black_box(classify_shell(volume, tf, 1.0 / 255.0, 0.5, 1.0)))
+        });
+    }
+    group.finish();
+}
+
+criterion_group!(benches, classification);
+criterion_main!(benches);

@@ -1,0 +1,63 @@
+//! Test volumes shared by the GPU tests and the golden images.
+
+#![allow(dead_code)]
+
+use std::sync::Arc;
+
+use glam::{DMat3, DMat4, DVec3};
+use splatscene::classify::TransferFunction;
+use splatscene::order::Ordering;
+use splatscene::scene::{NodeContent, Scene, SplatSettings, VolumeNode};
+use splatscene::volume::CpuVolume;
+
+/// Nested shells of "bone" in an n^3 grid (denser outside).
+pub fn shells(n: u32, spacing: [f64; 3]) -> CpuVolume {
+    let c = (f64::from(n) - 1.0) / 2.0;
+    let r_out = c;
+    let values = (0..n * n * n)
+        .map(|id| {
+            let (x, y, z) = (id % n, id / n % n, id / n / n);
+            let r = DVec3::new(f64::from(x) - c, f64::from(y) - c, f64::from(z) - c).length();
+            match r / r_out {
+                r if r > 0.98 => -1000.0,
+                r if r > 0.82 => 1300.0,
+                r if r > 0.45 => 400.0 + 40.0 * (id % 7) as f32,
+                _ => 40.0,
+            }
+        })
+        .collect();
+    CpuVolume {
+        dims: [n; 3],
+        spacing,
+        origin: [0.0; 3],
+        direction: DMat3::IDENTITY,
+        values,
+    }
+}
+
+pub fn volume_scene(volume: CpuVolume, ordering: Ordering) -> Scene {
+    let mut scene = Scene::new();
+    let node = VolumeNode {
+        volume: Arc::new(volume),
+        transfer: Arc::new(TransferFunction::ct_bone()),
+        // Flat colours: the CPU reference compositor does not shade.
+        splats: SplatSettings {
+            ordering,
+            shading: 0.0,
+            ..Default::default()
+        },
+    };
+    scene
+        .add("volume", DMat4::IDENTITY, None, NodeContent::Volume(node))
+        .unwrap();
+    scene
+}
+
+/// Shells with CT-like spacing (0.7, 0.7, 2.5), turned about z and x and placed at
+/// (100, -50, 30) mm: the patient-orientation case.
+pub fn rotated_anisotropic() -> CpuVolume {
+    let mut volume = shells(20, [0.7, 0.7, 2.5]);
+    volume.direction = DMat3::from_rotation_z(0.5) * DMat3::from_rotation_x(0.35);
+    volume.origin = [100.0, -50.0, 30.0];
+    volume
+}
