@@ -277,7 +277,13 @@ fn load_for_report(args: &OrderingsArgs) -> Result<(String, CpuVolume, Classifie
         .context("give --threshold for a raw volume")?;
     let (lo, hi) = value_range(&volume.values);
     let ramp_top = threshold + 0.25 * (hi - threshold).max(1.0);
-    let tf = TransferFunction::ramp(threshold, ramp_top, [1.0, 0.93, 0.85, 0.6]);
+    // The colour must change with the value: with one colour, "over" gives the same image in
+    // any order and every ordering would show no error.
+    let tf = TransferFunction::new(vec![
+        (threshold, [0.85, 0.45, 0.3, 0.0]),
+        (ramp_top, [1.0, 0.93, 0.85, 0.6]),
+        (hi.max(ramp_top + 1.0), [0.7, 0.85, 1.0, 0.8]),
+    ]);
     let classified = classify(&volume, &tf, 1.0 / 255.0)?;
     eprintln!("values {lo} to {hi}; splats from {threshold}, fully opaque-ish from {ramp_top}");
     Ok((path.display().to_string(), volume, classified))

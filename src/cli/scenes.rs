@@ -6,6 +6,7 @@ use anyhow::{Context, Result, bail};
 use glam::DVec3;
 use serde_json::{Value, json};
 
+use splatscene::camera::Camera;
 use splatscene::order::Ordering;
 use splatscene::pick::measure::{MarkerStyle, Measurement, annotate};
 use splatscene::pick::{Hit, PickOptions, Picker};
@@ -64,13 +65,17 @@ impl ViewArgs {
         };
         let mut camera = loaded.scene.camera.context("the scene has no camera")?;
         if let Some(eye) = self.eye {
-            let target = self.target.map_or(camera.target, DVec3::from);
-            camera = SceneCamera {
-                projection: camera.projection,
-                ..SceneCamera::look_at(DVec3::from(eye), target)
-            };
-        } else if let Some(target) = self.target {
+            camera.eye = DVec3::from(eye);
+        }
+        if let Some(target) = self.target {
             camera.target = DVec3::from(target);
+        }
+        if self.eye.is_some() || self.target.is_some() {
+            // Keep the scene's up vector unless the new view runs along it.
+            let forward = (camera.target - camera.eye).normalize_or_zero();
+            if forward.cross(camera.up.normalize_or_zero()).length() < 1e-6 {
+                camera.up = Camera::safe_up(camera.eye, camera.target);
+            }
         }
         if let Some([yaw, pitch]) = self.orbit {
             camera = camera.orbit(yaw, pitch);
