@@ -157,6 +157,28 @@ pub fn corrected_opacity(alpha: f32, length: f64, reference: f64) -> f32 {
     1.0 - (1.0 - alpha.max(0.0)).powf(exponent)
 }
 
+/// The splat standard deviation, in voxels, that transfer-function opacities are meant for
+/// (the original ShellSplatting's 0.7).
+pub const REFERENCE_SIGMA: f64 = 0.7;
+
+/// How many times the transfer function's reference length of tissue one splat stands for,
+/// for [`corrected_opacity`]: the voxel's size (geometric mean of the spacing) over the
+/// reference length, times `(REFERENCE_SIGMA / sigma)^2`. The second factor keeps the look
+/// when splats grow: a ray through a slab of splats of standard deviation `sigma` voxels meets
+/// the footprints of about `2 pi sigma^2` of them per voxel layer (the Gaussian's integral
+/// over the image plane), so each must absorb that much less. Splats that project to about a
+/// pixel or less are widened by the screen-space low-pass term, which this does not model.
+pub fn opacity_length_ratio(spacing: [f64; 3], sigma: f64, reference_mm: f64) -> f64 {
+    let size = (spacing[0] * spacing[1] * spacing[2]).cbrt();
+    let footprint = (REFERENCE_SIGMA / sigma).powi(2);
+    let ratio = size / reference_mm * footprint;
+    if ratio.is_finite() && ratio > 0.0 {
+        ratio
+    } else {
+        1.0
+    }
+}
+
 /// Classifies every voxel; those with opacity at or below `min_opacity` are left out.
 pub fn classify(
     volume: &CpuVolume,
@@ -276,6 +298,22 @@ mod tests {
         // The metal preset keeps bone faint and metal nearly opaque.
         let metal = TransferFunction::ct_metal();
         assert!(metal.sample(700.0)[3] < 0.1 && metal.sample(3000.0)[3] > 0.8);
+    }
+
+    #[test]
+    fn the_length_ratio_follows_voxel_size_and_splat_size() {
+        assert!((opacity_length_ratio([1.0; 3], REFERENCE_SIGMA, 1.0) - 1.0).abs() < 1e-12);
+        assert!((opacity_length_ratio([2.0; 3], REFERENCE_SIGMA, 1.0) - 2.0).abs() < 1e-12);
+        assert!((opacity_length_ratio([0.5, 0.5, 4.0], REFERENCE_SIGMA, 1.0) - 1.0).abs() < 1e-12);
+        assert!(
+            (opacity_length_ratio([1.0; 3], 1.4, 1.0) - 0.25).abs() < 1e-12,
+            "twice the sigma"
+        );
+        assert_eq!(
+            opacity_length_ratio([1.0; 3], 0.0, 1.0),
+            1.0,
+            "degenerate input changes nothing"
+        );
     }
 
     #[test]

@@ -493,3 +493,75 @@ fn a_rotated_anisotropic_volume_renders_as_the_cpu_reference() {
     assert!(d.max_abs < 3.0 / 255.0, "{d:?}");
     assert!(d.bad_pixel_share <= 0.002, "{d:?}");
 }
+
+/// Centre alpha of a uniform slab 8 mm thick seen face-on through its thickness, orthographic,
+/// with splats of `sigma` voxels and voxels of `spacing` mm, opacity corrected or not.
+fn slab_alpha(ctx: &GpuContext, sigma: f64, spacing: f64, corrected: bool) -> f32 {
+    let n_xy = (24.0 / spacing).round() as u32;
+    let n_z = (8.0 / spacing).round() as u32;
+    let volume = CpuVolume {
+        dims: [n_xy, n_xy, n_z],
+        spacing: [spacing; 3],
+        origin: [0.0; 3],
+        direction: glam::DMat3::IDENTITY,
+        values: vec![500.0; (n_xy * n_xy * n_z) as usize],
+    };
+    let mut scene = volume_scene(volume, Ordering::IpPbtfImplicit);
+    let id = scene.find("volume").unwrap();
+    let NodeContent::Volume(mut node) = scene.node(id).unwrap().content.clone() else {
+        unreachable!()
+    };
+    node.transfer = Arc::new(TransferFunction::ramp(0.0, 1000.0, [1.0, 1.0, 1.0, 0.2]));
+    node.splats.style.sigma = sigma;
+    node.splats.style.cutoff = sigma * 2.0 / 0.7;
+    node.splats.opacity_reference_mm = corrected.then_some(1.0);
+    scene.set_content(id, NodeContent::Volume(node)).unwrap();
+    let centre = DVec3::new(12.0, 12.0, 4.0);
+    let camera = SceneCamera {
+        up: DVec3::Y,
+        projection: splatscene::scene::Projection::Orthographic { height: 12.0 },
+        ..SceneCamera::look_at(centre + DVec3::Z * 40.0, centre)
+    };
+    // Splats several pixels wide: the screen-space low-pass term (0.3 square pixels) would
+    // otherwise widen sub-pixel splats and add opacity the correction does not model.
+    let shot = Renderer::new()
+        .screenshot(ctx, &scene, &camera, (128, 128), &TRANSPARENT)
+        .unwrap();
+    shot.frame.pixels[64 * 128 + 64][3]
+}
+
+#[test]
+fn corrected_opacity_keeps_the_look_across_splat_and_voxel_sizes() {
+    let ctx = context();
+    let reference = slab_alpha(&ctx, 0.7, 1.0, true);
+    let bigger_splats = slab_alpha(&ctx, 1.0, 1.0, true);
+    let finer_voxels = slab_alpha(&ctx, 0.7, 0.5, true);
+    let uncorrected_splats = slab_alpha(&ctx, 1.0, 1.0, false);
+    let uncorrected_voxels = slab_alpha(&ctx, 0.7, 0.5, false);
+    eprintln!(
+        "slab alpha: reference {reference}, sigma 1.0 {bigger_splats} (uncorrected {uncorrected_splats}), spacing 0.5 {finer_voxels} (uncorrected {uncorrected_voxels})"
+    );
+    assert!(
+        reference > 0.3 && reference < 0.999,
+        "a translucent slab: {reference}"
+    );
+    // Compare optical depths, -ln(1 - alpha): the correction keeps them within 10%.
+    let depth = |a: f32| -(1.0 - f64::from(a)).ln();
+    let off = |a: f32| (depth(a) / depth(reference) - 1.0).abs();
+    assert!(
+        off(bigger_splats) < 0.1,
+        "bigger splats: {bigger_splats} against {reference}"
+    );
+    assert!(
+        off(finer_voxels) < 0.1,
+        "finer voxels: {finer_voxels} against {reference}"
+    );
+    assert!(
+        off(uncorrected_splats) > 2.0 * off(bigger_splats),
+        "the correction matters for splat size"
+    );
+    assert!(
+        off(uncorrected_voxels) > 2.0 * off(finer_voxels),
+        "the correction matters for voxel size"
+    );
+}

@@ -12,7 +12,7 @@ use super::splat_pass::{GpuVolume, SplatPass};
 use super::target::RenderTarget;
 use super::view::ViewSetup;
 use super::{GpuContext, RenderError};
-use crate::classify::{Classified, classify_corrected, classify_shell};
+use crate::classify::{Classified, classify_corrected, classify_shell, opacity_length_ratio};
 use crate::composite::Frame;
 use crate::order::{OrderOptions, Orderer, Ordering, ViewCase, VolumeGeometry};
 use crate::scene::{NodeId, Scene, SceneCamera, VolumeNode, placed_geometry};
@@ -244,8 +244,7 @@ impl Renderer {
             }
             let name = &scene.nodes()[id.0].name;
             let ratio = node.splats.opacity_reference_mm.map_or(1.0, |r| {
-                let [x, y, z] = node.volume.spacing;
-                (x * y * z).cbrt() / r
+                opacity_length_ratio(node.volume.spacing, node.splats.style.sigma, r)
             });
             let min = node.splats.min_opacity;
             let result = match node.splats.shell {

@@ -62,8 +62,9 @@ pub struct SplatSettings {
     /// (what the CPU reference compositor draws), 1 fully shades.
     pub shading: f32,
     /// When set, the transfer function's opacities hold for this many millimetres of tissue
-    /// and are corrected for the voxel size (geometric mean spacing), so that a volume looks
-    /// alike at any resolution; `None` takes them as they are per splat.
+    /// and are corrected for the voxel size and the splat size
+    /// ([`crate::classify::opacity_length_ratio`]), so that a volume looks alike at any
+    /// resolution and splat size; `None` takes them as they are per splat.
     pub opacity_reference_mm: Option<f64>,
     /// Shell mode: only voxels with a neighbour at or below this opacity become splats (the
     /// hidden inside of opaque tissue is left out); `None` keeps every visible voxel.
