@@ -417,3 +417,19 @@ fn truncated_files_give_typed_errors() {
     expect_dicom_error(load_dicom_series(&dir), &dir, "no DICOM image slices");
     fs::remove_dir_all(&dir).expect("clean up");
 }
+
+#[test]
+fn info_reports_the_stored_type_of_the_series() {
+    let Some(dir) = series_dir() else {
+        return;
+    };
+    let info = splatscene::volume::detect::volume_info(&dir).unwrap();
+    assert_eq!(info["format"], "dicom");
+    // BitsAllocated 16, PixelRepresentation 0 in the shared series; HU come from the rescale.
+    assert_eq!(info["scalar_type"], "uint16", "{info}");
+    assert_eq!(info["size"], serde_json::json!([512, 512, 20]));
+    assert!(
+        info["min"].as_f64().unwrap() <= -1000.0 && info["max"].as_f64().unwrap() > 300.0,
+        "{info}"
+    );
+}

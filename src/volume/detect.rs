@@ -141,10 +141,11 @@ pub fn load_volume_with_info(path: &Path) -> Result<LoadedVolume, VolumeError> {
                 Some(parent) if !parent.as_os_str().is_empty() => parent,
                 _ => Path::new("."),
             };
+            let (volume, scalar_type) = dicom::load_dicom_series_with_type(dir)?;
             Ok(LoadedVolume {
-                volume: dicom::load_dicom_series(dir)?,
+                volume,
                 format,
-                scalar_type: None,
+                scalar_type,
             })
         }
         VolumeFormat::Nrrd => nrrd::load_nrrd(path),
@@ -158,7 +159,7 @@ pub fn load_volume_with_info(path: &Path) -> Result<LoadedVolume, VolumeError> {
 /// Loads the volume at `path` and describes it as JSON: `file`, `format` (see
 /// [`VolumeFormat::name`]), `size` `[nx, ny, nz]`, `spacing`, `origin`, `direction` (three
 /// rows of the orientation matrix, whose columns are the grid axes), `scalar_type` (the stored
-/// type, see [`scalar_type_name`]; `null` for DICOM) and the `min`, `max` and `mean` of the
+/// type, see [`scalar_type_name`]; `null` when a DICOM series stores a type it does not name) and the `min`, `max` and `mean` of the
 /// finite loaded values (after any rescale; `null` when there are none).
 pub fn volume_info(path: &Path) -> Result<Value, VolumeError> {
     load_volume_with_info(path).map(|loaded| loaded.info(path))

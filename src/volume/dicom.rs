@@ -47,6 +47,8 @@ use dicom_dictionary_std::tags;
 use dicom_object::{DefaultDicomObject, OpenFileOptions, Tag};
 use dicom_pixeldata::{DecodedPixelData, PixelDecoder, PixelRepresentation};
 use glam::{DMat3, DVec3};
+
+use super::raw::ScalarType;
 use rayon::prelude::*;
 
 use super::CpuVolume;
@@ -99,6 +101,8 @@ struct SliceHeader {
     pixel_spacing: [f64; 2],
     slice_thickness: Option<f64>,
     file_len: u64,
+    /// The stored value type (BitsAllocated and PixelRepresentation), when it is one of ours.
+    stored: Option<ScalarType>,
 }
 
 /// Where the ordered slices sit in the RAS world.
@@ -117,6 +121,14 @@ struct Placement {
 /// the file or folder for everything else (no image slices, a missing slice, mismatched slices,
 /// a file that cannot be parsed or decoded).
 pub fn load_dicom_series(dir: &Path) -> Result<CpuVolume, VolumeError> {
+    load_dicom_series_with_type(dir).map(|(volume, _)| volume)
+}
+
+/// [`load_dicom_series`], with the stored value type of the first slice (before rescale), when
+/// it is a type [`ScalarType`] names.
+pub fn load_dicom_series_with_type(
+    dir: &Path,
+) -> Result<(CpuVolume, Option<ScalarType>), VolumeError> {
     let paths = dicom_files(dir)?;
     let images = first_error(paths.par_iter().map(|p| read_image(p)).collect())?;
     let mut slices = select_series(dir, images.into_iter().flatten().collect())?;
@@ -133,13 +145,14 @@ pub fn load_dicom_series(dir: &Path) -> Result<CpuVolume, VolumeError> {
         .map(|(out, slice)| decode_slice(slice, out))
         .collect();
     first_error(decoded)?;
-    Ok(CpuVolume {
+    let volume = CpuVolume {
         dims,
         spacing: placement.spacing,
         origin: placement.origin,
         direction: placement.direction,
         values,
-    })
+    };
+    Ok((volume, slices[0].stored))
 }
 
 /// The first error in file order, so that a folder with several bad files always reports the
@@ -261,7 +274,19 @@ fn slice_header(
         .ok()
         .map(|[t]| t)
         .filter(|t| t.is_finite() && *t > 0.0);
+    let bits = unsigned(obj, tags::BITS_ALLOCATED, "BitsAllocated").ok();
+    let signed = unsigned(obj, tags::PIXEL_REPRESENTATION, "PixelRepresentation").ok() == Some(1);
+    let stored = match (bits, signed) {
+        (Some(8), false) => Some(ScalarType::U8),
+        (Some(8), true) => Some(ScalarType::I8),
+        (Some(16), false) => Some(ScalarType::U16),
+        (Some(16), true) => Some(ScalarType::I16),
+        (Some(32), false) => Some(ScalarType::U32),
+        (Some(32), true) => Some(ScalarType::I32),
+        _ => None,
+    };
     Ok(SliceHeader {
+        stored,
         path: path.into(),
         rows: unsigned(obj, tags::ROWS, "Rows")?,
         columns: unsigned(obj, tags::COLUMNS, "Columns")?,
