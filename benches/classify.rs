@@ -5,37 +5,15 @@
 //! `../shared/data`).
 
 use std::hint::black_box;
-use std::path::PathBuf;
 use std::time::Duration;
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use splatscene::classify::{TransferFunction, classify, classify_shell};
-use splatscene::volume::raw::{
-    ByteOrder, RawSpec, ScalarType, load_raw, load_raw_slices, slice_stack,
-};
 
-fn data_dir() -> PathBuf {
-    std::env::var_os("SPLATSCENE_DATA")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/data"))
-}
+mod common;
 
 fn classification(c: &mut Criterion) {
-    let dir = data_dir().join("volumes");
-    let engine = load_raw(
-        &dir.join("engine/engine_256x256x128_uint8.raw"),
-        &RawSpec::new([256, 256, 128], ScalarType::U8, ByteOrder::Little),
-    )
-    .expect("engine volume (set SPLATSCENE_DATA)");
-    let head_spec = RawSpec {
-        spacing: [1.0, 1.0, 2.0],
-        ..RawSpec::new([256, 256, 113], ScalarType::U16, ByteOrder::Big)
-    };
-    let head = load_raw_slices(
-        &slice_stack(&dir.join("stanford_cthead/CThead.1")).expect("CT head"),
-        &head_spec,
-    )
-    .expect("CT head volume");
+    let (engine, head) = (common::engine(), common::ct_head());
     let cases = [
         (
             "engine",

@@ -8,7 +8,6 @@
 //! `cargo bench --bench frame`; the data comes from `SPLATSCENE_DATA` (default
 //! `../shared/data`).
 
-use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::Duration;
 
@@ -19,15 +18,8 @@ use splatscene::render::{FrameOptions, FrameTimings, GpuContext, Renderer};
 use splatscene::scene::shoulder::{add_model, prosthesis_model};
 use splatscene::scene::{NodeContent, Scene, SceneCamera, SplatSettings, VolumeNode};
 use splatscene::volume::CpuVolume;
-use splatscene::volume::raw::{
-    ByteOrder, RawSpec, ScalarType, load_raw, load_raw_slices, slice_stack,
-};
 
-fn data_dir() -> PathBuf {
-    std::env::var_os("SPLATSCENE_DATA")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/data"))
-}
+mod common;
 
 fn scene(volume: CpuVolume, tf: TransferFunction) -> Scene {
     let mut scene = Scene::new();
@@ -53,21 +45,7 @@ fn scene(volume: CpuVolume, tf: TransferFunction) -> Scene {
 }
 
 fn scenes() -> Vec<(&'static str, Scene)> {
-    let dir = data_dir().join("volumes");
-    let engine = load_raw(
-        &dir.join("engine/engine_256x256x128_uint8.raw"),
-        &RawSpec::new([256, 256, 128], ScalarType::U8, ByteOrder::Little),
-    )
-    .expect("engine volume (set SPLATSCENE_DATA)");
-    let head_spec = RawSpec {
-        spacing: [1.0, 1.0, 2.0],
-        ..RawSpec::new([256, 256, 113], ScalarType::U16, ByteOrder::Big)
-    };
-    let head = load_raw_slices(
-        &slice_stack(&dir.join("stanford_cthead/CThead.1")).expect("CT head"),
-        &head_spec,
-    )
-    .expect("CT head volume");
+    let (engine, head) = (common::engine(), common::ct_head());
     // The built-in scene as `splatscene view` first shows it, at the viewer's default size.
     let shoulder = splatscene::scene::shoulder::shoulder_scene().unwrap();
     vec![

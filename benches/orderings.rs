@@ -5,7 +5,6 @@
 //! the University of North Carolina (Stanford volume archive).
 
 use std::hint::black_box;
-use std::path::PathBuf;
 use std::time::Duration;
 
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
@@ -14,15 +13,8 @@ use splatscene::classify::{TransferFunction, classify};
 use splatscene::grid::SparseGrid;
 use splatscene::order::{OrderOptions, Orderer, Ordering, ViewCase, VolumeGeometry};
 use splatscene::volume::CpuVolume;
-use splatscene::volume::raw::{
-    ByteOrder, RawSpec, ScalarType, load_raw, load_raw_slices, slice_stack,
-};
 
-fn data_dir() -> PathBuf {
-    std::env::var_os("SPLATSCENE_DATA")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/data"))
-}
+mod common;
 
 fn sparse(volume: &CpuVolume, threshold: f32) -> SparseGrid {
     let tf = TransferFunction::ramp(threshold, threshold + 1.0, [1.0; 4]);
@@ -30,21 +22,7 @@ fn sparse(volume: &CpuVolume, threshold: f32) -> SparseGrid {
 }
 
 fn datasets() -> Vec<(&'static str, VolumeGeometry, SparseGrid)> {
-    let dir = data_dir().join("volumes");
-    let engine = load_raw(
-        &dir.join("engine/engine_256x256x128_uint8.raw"),
-        &RawSpec::new([256, 256, 128], ScalarType::U8, ByteOrder::Little),
-    )
-    .expect("engine volume (set SPLATSCENE_DATA)");
-    let head_spec = RawSpec {
-        spacing: [1.0, 1.0, 2.0],
-        ..RawSpec::new([256, 256, 113], ScalarType::U16, ByteOrder::Big)
-    };
-    let head = load_raw_slices(
-        &slice_stack(&dir.join("stanford_cthead/CThead.1")).expect("CT head"),
-        &head_spec,
-    )
-    .expect("CT head volume");
+    let (engine, head) = (common::engine(), common::ct_head());
     let dense = VolumeGeometry::axis_aligned([256; 3], [1.0; 3], [0.0; 3]).unwrap();
     vec![
         ("engine", engine.geometry().unwrap(), sparse(&engine, 100.0)),
