@@ -45,6 +45,7 @@ pub fn march_volume(
     }
     let [nx, ny, _] = dims.map(|n| n as usize);
     let limit = t_exit.min(max_distance);
+    let planes = clipping.all_planes();
     let steps = dims.iter().map(|&n| n as usize).sum::<usize>() + 3;
     for _ in 0..steps {
         let [x, y, z] = k.map(|v| v as usize);
@@ -55,9 +56,12 @@ pub fn march_volume(
             .copied()
             .unwrap_or(f32::NAN);
         let opacity = node.transfer.sample(value)[3];
-        let centre =
-            || geometry.index_to_world_point(DVec3::new(k[0] as f64, k[1] as f64, k[2] as f64));
-        if opacity > threshold && (clipping.is_empty() || clipping.keeps_splat(centre())) {
+        let kept = || {
+            let centre = DVec3::new(k[0] as f64, k[1] as f64, k[2] as f64);
+            let p = geometry.index_to_world_point(centre);
+            planes.iter().all(|c| c.keeps(p))
+        };
+        if opacity > threshold && kept() {
             return Some(VolumeHit {
                 node: id,
                 voxel: k.map(|v| v as u32),

@@ -16,7 +16,7 @@ use obvhs::triangle::Triangle;
 use serde::Serialize;
 
 use crate::render::ViewSetup;
-use crate::scene::{Clipping, NodeId, Scene, placed_geometry};
+use crate::scene::{ClipPlane, Clipping, NodeId, Scene, placed_geometry};
 
 mod march;
 pub mod measure;
@@ -277,13 +277,16 @@ impl Picker {
     /// away by a plane or the crop box are passed through).
     pub fn pick_mesh_clipped(&self, ray: &Ray, clipping: &Clipping) -> Option<MeshHit> {
         let bvh = self.bvh.as_ref()?;
+        let planes: Vec<ClipPlane> = clipping
+            .all_planes()
+            .into_iter()
+            .filter(|p| p.meshes)
+            .collect();
         let mut hit = RayHit::none();
         let found = bvh.ray_traverse(self.bvh_ray(ray), &mut hit, |r, id| {
             let t = self.triangles[bvh.primitive_indices[id] as usize].intersect(r);
-            if clipping.is_empty()
-                || !t.is_finite()
-                || clipping.keeps_mesh(ray.at(f64::from(t) * self.scale))
-            {
+            let at = || ray.at(f64::from(t) * self.scale);
+            if planes.is_empty() || !t.is_finite() || planes.iter().all(|c| c.keeps(at())) {
                 t
             } else {
                 f32::INFINITY
