@@ -120,3 +120,25 @@ fn ct_like_spacing_bucketed_halves_ip_pbtf() {
         "bucketed {bucketed} against IP-PBTF {ip}"
     );
 }
+
+#[test]
+fn a_rotated_anisotropic_volume_orders_correctly() {
+    // Patient orientation: direction x spacing + origin, turned about two axes, far from the
+    // world origin. The exact order stays free of inversions (checked in `errors`) and the
+    // orderings keep their ranking.
+    let mut volume = shells([0.7, 0.7, 2.5]);
+    volume.direction = glam::DMat3::from_rotation_z(0.5) * glam::DMat3::from_rotation_x(0.35);
+    volume.origin = [1.0e4, -2.0e4, 3.0e3];
+    let e = errors(
+        &volume,
+        &[[12.3, 15.6, -4.0], [14.2, -12.0, 9.5], [13.1, 12.7, 14.2]],
+    );
+    let (pbtf, ip, bucketed) = (
+        get(&e, Ordering::Pbtf),
+        get(&e, Ordering::IpPbtfImplicit),
+        get(&e, Ordering::Bucketed),
+    );
+    assert_eq!(get(&e, Ordering::Exact), 0.0);
+    assert!(ip < pbtf, "IP-PBTF {ip} against PBTF {pbtf}");
+    assert!(bucketed < ip, "bucketed {bucketed} against IP-PBTF {ip}");
+}
