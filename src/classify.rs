@@ -1,6 +1,8 @@
 //! Classification: a transfer function turns scalar values into colour and opacity, and only
 //! voxels that are not (nearly) transparent become splats.
 
+use rayon::prelude::*;
+
 use crate::grid::{GridError, SparseGrid};
 use crate::volume::CpuVolume;
 
@@ -188,6 +190,39 @@ pub fn classify(
     classify_corrected(volume, tf, min_opacity, 1.0)
 }
 
+/// Classifies z-slices in parallel: `colour(id)` gives the premultiplied colour of a splat or
+/// `None`; the slices' ids come out in increasing order, as the grid wants them.
+fn classify_slices(
+    volume: &CpuVolume,
+    colour: impl Fn(usize) -> Option<[f32; 4]> + Sync,
+) -> Result<Classified, GridError> {
+    let count = crate::grid::voxel_count(volume.dims)? as usize;
+    let plane = (volume.dims[0] as usize * volume.dims[1] as usize).max(1);
+    let slices: Vec<(Vec<u32>, Vec<[f32; 4]>)> = (0..count.div_ceil(plane))
+        .into_par_iter()
+        .map(|z| {
+            let (mut ids, mut colors) = (Vec::new(), Vec::new());
+            for id in z * plane..((z + 1) * plane).min(count) {
+                if let Some(c) = colour(id) {
+                    ids.push(id as u32);
+                    colors.push(c);
+                }
+            }
+            (ids, colors)
+        })
+        .collect();
+    let total = slices.iter().map(|(ids, _)| ids.len()).sum();
+    let (mut ids, mut colors) = (Vec::with_capacity(total), Vec::with_capacity(total));
+    for (i, c) in slices {
+        ids.extend(i);
+        colors.extend(c);
+    }
+    Ok(Classified {
+        grid: SparseGrid::from_sorted_ids(volume.dims, &ids)?,
+        colors,
+    })
+}
+
 /// [`classify`] with every opacity corrected by [`corrected_opacity`] for a splat standing for
 /// `length_ratio` times the transfer function's reference length.
 pub fn classify_corrected(
@@ -196,20 +231,11 @@ pub fn classify_corrected(
     min_opacity: f32,
     length_ratio: f64,
 ) -> Result<Classified, GridError> {
-    let mut colors = Vec::new();
-    let grid = SparseGrid::from_mask(volume.dims, |id| {
-        let Some(&value) = volume.values.get(id as usize) else {
-            return false;
-        };
-        let [r, g, b, a] = tf.sample(value);
+    classify_slices(volume, |id| {
+        let [r, g, b, a] = tf.sample(*volume.values.get(id)?);
         let a = corrected_opacity(a, length_ratio, 1.0);
-        let keep = a > min_opacity;
-        if keep {
-            colors.push([r * a, g * a, b * a, a]);
-        }
-        keep
-    })?;
-    Ok(Classified { grid, colors })
+        (a > min_opacity).then_some([r * a, g * a, b * a, a])
+    })
 }
 
 /// Shell classification, as the original ShellSplatting did: a voxel becomes a splat when its
@@ -233,17 +259,12 @@ pub fn classify_shell(
             .unwrap_or(f32::NAN);
         corrected_opacity(tf.sample(value)[3], length_ratio, 1.0)
     };
-    let mut colors = Vec::new();
-    let grid = SparseGrid::from_mask(volume.dims, |id| {
-        let id = id as usize;
+    classify_slices(volume, |id| {
         let (x, y, z) = (id % nx, id / nx % ny, id / (nx * ny));
-        let Some(&value) = volume.values.get(id) else {
-            return false;
-        };
-        let [r, g, b, a] = tf.sample(value);
+        let [r, g, b, a] = tf.sample(*volume.values.get(id)?);
         let a = corrected_opacity(a, length_ratio, 1.0);
         if a <= min_opacity {
-            return false;
+            return None;
         }
         let at_face = x == 0 || y == 0 || z == 0 || x + 1 == nx || y + 1 == ny || z + 1 == nz;
         let open = at_face
@@ -257,12 +278,8 @@ pub fn classify_shell(
             ]
             .iter()
             .any(|&n| n <= high);
-        if open {
-            colors.push([r * a, g * a, b * a, a]);
-        }
-        open
-    })?;
-    Ok(Classified { grid, colors })
+        open.then_some([r * a, g * a, b * a, a])
+    })
 }
 
 #[cfg(test)]
