@@ -13,8 +13,7 @@ mod common;
 
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context, Result, bail};
-use splatscene::render::{FrameOptions, GpuContext, Renderer};
+use anyhow::{Result, bail};
 use splatscene::scene::file::{DATA_ENV, SceneFileError, load_scene_file};
 
 fn main() -> Result<()> {
@@ -34,17 +33,9 @@ fn main() -> Result<()> {
         ),
         Err(e) => return Err(e.into()),
     };
-    let scene = &loaded.scene;
-    let camera = scene.camera.context("the overlay scene has no camera")?;
-    let size = loaded.size.unwrap_or((512, 512));
-    let options = FrameOptions {
-        ordering: loaded.ordering,
-        background: loaded.background,
-        ..FrameOptions::default()
-    };
-
-    let ctx = GpuContext::headless()?;
-    let shot = Renderer::new().screenshot(&ctx, scene, &camera, size, &options)?;
+    let shot = common::render_loaded(&loaded, (512, 512))?;
+    let camera = shot.view.camera;
+    let size = shot.view.size;
     common::write_color_png(&shot, &out)?;
     println!(
         "{} ({}x{}, eye {:?}, target {:?}): {}",

@@ -13,7 +13,6 @@ mod common;
 use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
-use splatscene::render::{FrameOptions, GpuContext, Renderer};
 use splatscene::scene::file::load_scene_file;
 
 const USAGE: &str = "usage: screenshot SCENE.toml OUT.png [DEPTH.png]";
@@ -28,16 +27,7 @@ fn main() -> Result<()> {
 
     let loaded = load_scene_file(scene_path)?;
     let scene = &loaded.scene;
-    let camera = scene.camera.context("the scene has no camera")?;
-    let size = loaded.size.unwrap_or((800, 600));
-    let options = FrameOptions {
-        ordering: loaded.ordering,
-        background: loaded.background,
-        ..FrameOptions::default()
-    };
-
-    let ctx = GpuContext::headless()?;
-    let shot = Renderer::new().screenshot(&ctx, scene, &camera, size, &options)?;
+    let shot = common::render_loaded(&loaded, (800, 600))?;
     common::write_color_png(&shot, out)?;
     println!("{}: {}", out.display(), common::describe(&shot.report));
     if let Some(depth) = depth {

@@ -61,13 +61,8 @@ pub enum ViewerError {
     Render(#[from] RenderError),
 }
 
-/// Transfer functions the `T` key cycles through: the presets.
-fn presets() -> Vec<(&'static str, TransferFunction)> {
-    TransferFunction::PRESETS
-        .iter()
-        .filter_map(|name| Some((*name, TransferFunction::preset(name)?)))
-        .collect()
-}
+/// Transfer functions the `T` key cycles through: the presets, by name.
+const PRESETS: [&str; 4] = TransferFunction::PRESETS;
 
 const ORDERINGS: [(&str, Ordering); 5] = [
     ("1", Ordering::Btf),
@@ -258,7 +253,7 @@ impl App {
         gpu.blit.copy(&gpu.ctx, &target.color_view, &surface_view);
         gpu.window.pre_present_notify();
         gpu.ctx.queue.present(frame);
-        let preset = presets()[self.preset].0;
+        let preset = PRESETS[self.preset];
         gpu.window.set_title(&format!(
             "splatscene: {} | {preset} | frame {:.0} ms, order {:.1} ms | {} splats",
             self.ordering,
@@ -318,8 +313,10 @@ impl App {
     }
 
     fn next_preset(&mut self) {
-        self.preset = (self.preset + 1) % presets().len();
-        let transfer = Arc::new(presets().swap_remove(self.preset).1);
+        self.preset = (self.preset + 1) % PRESETS.len();
+        let Some(transfer) = TransferFunction::preset(PRESETS[self.preset]).map(Arc::new) else {
+            return;
+        };
         let ids: Vec<NodeId> = self.scene.volumes().map(|(id, _, _)| id).collect();
         for id in ids {
             if let Ok(node) = self.scene.node(id)
@@ -330,7 +327,7 @@ impl App {
                 let _ = self.scene.set_content(id, NodeContent::Volume(v));
             }
         }
-        println!("transfer function {}", presets()[self.preset].0);
+        println!("transfer function {}", PRESETS[self.preset]);
     }
 
     fn toggle_clip(&mut self) {

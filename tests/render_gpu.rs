@@ -20,6 +20,34 @@ fn context() -> GpuContext {
     GpuContext::headless().expect("a GPU adapter (install mesa-vulkan-drivers)")
 }
 
+/// Renders `scene` with a view fitted to `bounds` (so that scenes with different contents
+/// share one view) and reads colour and depth back.
+fn render_fixed_view(
+    ctx: &GpuContext,
+    scene: &Scene,
+    camera: &SceneCamera,
+    size: (u32, u32),
+    bounds: Option<(DVec3, DVec3)>,
+    options: &FrameOptions,
+) -> (splatscene::composite::Frame, Vec<f32>) {
+    let view = splatscene::render::ViewSetup::new(camera, size, bounds).unwrap();
+    let target = splatscene::render::RenderTarget::new(ctx, size.0, size.1).unwrap();
+    Renderer::new()
+        .render(
+            ctx,
+            scene,
+            &view,
+            &target.color_view,
+            &target.depth_view,
+            options,
+        )
+        .unwrap();
+    (
+        target.read_color(ctx).unwrap(),
+        target.read_depth(ctx).unwrap(),
+    )
+}
+
 const TRANSPARENT: FrameOptions = FrameOptions {
     ordering: None,
     background: None,
@@ -152,6 +180,8 @@ fn splats_behind_a_mesh_are_hidden_and_write_no_depth() {
             *v = -1000.0;
         }
     }
+    // Every scene shares one view: the bounds of the full volume.
+    let bounds = volume_scene(shells(20, [1.0; 3]), Ordering::Exact).bounds();
     let shoot = |volume: Option<&CpuVolume>, with_wall: bool| {
         let mut scene = volume.map_or_else(Scene::new, |v| {
             volume_scene(v.clone(), Ordering::IpPbtfImplicit)
@@ -159,25 +189,7 @@ fn splats_behind_a_mesh_are_hidden_and_write_no_depth() {
         if with_wall {
             add_wall(&mut scene);
         }
-        // Every scene shares one view: the bounds of the full volume.
-        let mut renderer = Renderer::new();
-        let view_scene = volume_scene(shells(20, [1.0; 3]), Ordering::Exact);
-        let view = splatscene::render::ViewSetup::new(&camera, size, view_scene.bounds()).unwrap();
-        let target = splatscene::render::RenderTarget::new(&ctx, size.0, size.1).unwrap();
-        renderer
-            .render(
-                &ctx,
-                &scene,
-                &view,
-                &target.color_view,
-                &target.depth_view,
-                &options,
-            )
-            .unwrap();
-        (
-            target.read_color(&ctx).unwrap(),
-            target.read_depth(&ctx).unwrap(),
-        )
+        render_fixed_view(&ctx, &scene, &camera, size, bounds, &options)
     };
     let (all, all_depth) = shoot(Some(&volume), true);
     let (wall_only, wall_depth) = shoot(None, true);
@@ -439,33 +451,12 @@ fn clipped_voxels_vanish_and_the_rest_draw_as_before() {
         .map(|p| splatscene::scene::ClipPlane { meshes: true, ..*p })
         .collect();
     add_wall(&mut expected);
-    let shoot = |scene: &Scene| {
-        let view = splatscene::render::ViewSetup::new(
-            &camera,
-            size,
-            volume_scene(volume.clone(), Ordering::Exact).bounds(),
-        )
-        .unwrap();
-        let target = splatscene::render::RenderTarget::new(&ctx, size.0, size.1).unwrap();
-        let options = FrameOptions {
-            background: Some([0.0; 3]),
-            ..TRANSPARENT
-        };
-        Renderer::new()
-            .render(
-                &ctx,
-                scene,
-                &view,
-                &target.color_view,
-                &target.depth_view,
-                &options,
-            )
-            .unwrap();
-        (
-            target.read_color(&ctx).unwrap(),
-            target.read_depth(&ctx).unwrap(),
-        )
+    let bounds = volume_scene(volume.clone(), Ordering::Exact).bounds();
+    let options = FrameOptions {
+        background: Some([0.0; 3]),
+        ..TRANSPARENT
     };
+    let shoot = |scene: &Scene| render_fixed_view(&ctx, scene, &camera, size, bounds, &options);
     let (a, a_depth) = shoot(&clipped);
     let (b, b_depth) = shoot(&expected);
     assert_eq!(a_depth, b_depth, "the plane cuts the wall alike");

@@ -9,8 +9,10 @@ use std::path::Path;
 use anyhow::{Context, Result};
 use glam::DVec3;
 use splatscene::render::{
-    FrameReport, Screenshot, depth_range, depth_to_luma16, encode_png, frame_to_rgba8,
+    FrameOptions, FrameReport, GpuContext, Renderer, Screenshot, depth_range, depth_to_luma16,
+    encode_png, frame_to_rgba8,
 };
+use splatscene::scene::file::LoadedScene;
 
 /// Writes `bytes` to `path` through a temporary file next to it and a rename, so that a failed
 /// or interrupted write never leaves a truncated image where a reader expects a whole one (an
@@ -62,4 +64,18 @@ pub fn describe(report: &FrameReport) -> String {
         ms(t.splat_pass),
         ms(t.readback)
     )
+}
+
+/// Renders a loaded scene file with its own camera, ordering and background, at its own size
+/// or `default_size`.
+pub fn render_loaded(loaded: &LoadedScene, default_size: (u32, u32)) -> Result<Screenshot> {
+    let camera = loaded.scene.camera.context("the scene has no camera")?;
+    let size = loaded.size.unwrap_or(default_size);
+    let options = FrameOptions {
+        ordering: loaded.ordering,
+        background: loaded.background,
+        ..FrameOptions::default()
+    };
+    let ctx = GpuContext::headless()?;
+    Ok(Renderer::new().screenshot(&ctx, &loaded.scene, &camera, size, &options)?)
 }

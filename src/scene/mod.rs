@@ -243,37 +243,38 @@ impl Scene {
         self.nodes.iter().position(|n| n.name == name).map(NodeId)
     }
 
+    /// Nodes whose content `pick` selects, with their world transforms.
+    fn contents<'a, T: 'a>(
+        &'a self,
+        pick: impl Fn(&'a NodeContent) -> Option<&'a T> + 'a,
+    ) -> impl Iterator<Item = (NodeId, &'a T, DMat4)> + 'a {
+        let world = &self.world;
+        (self.nodes.iter().enumerate())
+            .filter_map(move |(i, n)| Some((NodeId(i), pick(&n.content)?, world[i])))
+    }
+
     /// Mesh nodes with their world transforms.
     pub fn meshes(&self) -> impl Iterator<Item = (NodeId, &MeshNode, DMat4)> + '_ {
-        self.nodes
-            .iter()
-            .enumerate()
-            .filter_map(|(i, n)| match &n.content {
-                NodeContent::Mesh(m) => Some((NodeId(i), m, self.world[i])),
-                _ => None,
-            })
+        self.contents(|c| match c {
+            NodeContent::Mesh(m) => Some(m),
+            _ => None,
+        })
     }
 
     /// Overlay mesh nodes with their world transforms.
     pub fn overlays(&self) -> impl Iterator<Item = (NodeId, &MeshNode, DMat4)> + '_ {
-        self.nodes
-            .iter()
-            .enumerate()
-            .filter_map(|(i, n)| match &n.content {
-                NodeContent::Overlay(m) => Some((NodeId(i), m, self.world[i])),
-                _ => None,
-            })
+        self.contents(|c| match c {
+            NodeContent::Overlay(m) => Some(m),
+            _ => None,
+        })
     }
 
     /// Volume nodes with their world transforms.
     pub fn volumes(&self) -> impl Iterator<Item = (NodeId, &VolumeNode, DMat4)> + '_ {
-        self.nodes
-            .iter()
-            .enumerate()
-            .filter_map(|(i, n)| match &n.content {
-                NodeContent::Volume(v) => Some((NodeId(i), v, self.world[i])),
-                _ => None,
-            })
+        self.contents(|c| match c {
+            NodeContent::Volume(v) => Some(v),
+            _ => None,
+        })
     }
 
     /// World-space bounds `(min, max)` of every mesh and volume, or `None` for a scene with
