@@ -34,47 +34,15 @@ pub(crate) fn width(view: &ViewCase, requested: Option<f64>) -> Result<f64, Orde
 pub(crate) struct Scratch {
     cursors: Vec<u32>,
     terms: [Vec<f32>; 3],
+    /// `edges[b]` is the smallest squared distance of bucket `b` (`edges[0]` is minus
+    /// infinity and a last entry of plus infinity closes the last bucket), so a voxel's bucket
+    /// is the `b` with `edges[b] <= q < edges[b + 1]`: one definition, whichever way it is
+    /// found.
+    edges: Vec<f32>,
     orthogonal: bool,
     view: Option<ViewCase>,
     nearest: f32,
     inverse_width: f32,
-    last: usize,
-}
-
-/// Per-row state shared by both walks: the row's fixed squared-distance part.
-struct RowDistance<'a> {
-    scratch: &'a Scratch,
-    k: [u32; 3],
-    axis: usize,
-    partial: f32,
-}
-
-impl RowDistance<'_> {
-    #[inline]
-    fn start_row(&mut self, k: [u32; 3], axis: usize) {
-        self.k = k;
-        self.axis = axis;
-        if self.scratch.orthogonal {
-            let t = &self.scratch.terms;
-            let (b, c) = crate::grid::other_axes(axis);
-            self.partial = t[b][k[b] as usize] + t[c][k[c] as usize];
-        }
-    }
-
-    #[inline(always)]
-    fn bucket(&mut self, k: u32) -> usize {
-        let s = self.scratch;
-        let q = if s.orthogonal {
-            self.partial + s.terms[self.axis][k as usize]
-        } else {
-            self.k[self.axis] = k;
-            s.view
-                .as_ref()
-                .map_or(0.0, |v| v.distance_squared(self.k) as f32)
-        };
-        // Saturating float-to-int cast: anything below the nearest bound is bucket 0.
-        (((q.max(0.0).sqrt() - s.nearest) * s.inverse_width) as usize).min(s.last)
-    }
 }
 
 impl Scratch {
@@ -103,7 +71,13 @@ impl Scratch {
         }
         self.nearest = nearest as f32;
         self.inverse_width = (1.0 / width) as f32;
-        self.last = buckets - 1;
+        self.edges.clear();
+        self.edges.push(f32::NEG_INFINITY);
+        self.edges.extend((1..buckets).map(|b| {
+            let r = nearest + b as f64 * width;
+            (r * r) as f32
+        }));
+        self.edges.push(f32::INFINITY);
         self.cursors.clear();
         self.cursors.resize(buckets, 0);
     }
@@ -124,7 +98,6 @@ impl Scratch {
         let mut count = Count {
             row: self.row(),
             counts: &mut counts,
-            current: 0,
             pending: 0,
         };
         walk(grid, plan, cull, &mut count);
@@ -142,7 +115,6 @@ impl Scratch {
             row: self.row(),
             cursors: &mut counts,
             out,
-            current: usize::MAX,
             slot: 0,
         };
         walk(grid, plan, cull, &mut scatter);
@@ -150,31 +122,160 @@ impl Scratch {
         self.cursors = counts;
     }
 
-    fn row(&self) -> RowDistance<'_> {
-        RowDistance {
+    fn row(&self) -> RowBuckets<'_> {
+        RowBuckets {
             scratch: self,
             k: [0; 3],
             axis: 0,
             partial: 0.0,
+            terms: &self.terms[0],
+            current: Current {
+                bucket: 0,
+                lo: f32::NEG_INFINITY,
+                hi: f32::NEG_INFINITY,
+            },
         }
     }
 }
 
-/// Counts voxels per bucket. Neighbouring voxels mostly share a bucket, so a run of equal
-/// buckets is counted in a register and written once (no store-to-load chain per voxel).
+/// The bucket of the last voxel and its bounds in squared distance.
+#[derive(Debug, Clone, Copy)]
+struct Current {
+    bucket: usize,
+    lo: f32,
+    hi: f32,
+}
+
+impl Current {
+    /// Whether the bucket changes for a voxel at squared distance `q`.
+    #[inline(always)]
+    fn leaves(&self, q: f32) -> bool {
+        !(q >= self.lo && q < self.hi)
+    }
+
+    /// Moves to the bucket of `q`. Along a run toward the eye that is mostly the next nearer
+    /// bucket, tried first.
+    #[inline(always)]
+    fn locate(&mut self, q: f32, scratch: &Scratch) {
+        let b = self.bucket;
+        if b > 0 && q < self.lo {
+            let below = scratch.edges[b - 1];
+            if q >= below {
+                *self = Self {
+                    bucket: b - 1,
+                    lo: below,
+                    hi: self.lo,
+                };
+                return;
+            }
+        }
+        self.search(q, scratch);
+    }
+
+    /// Moves to the bucket of `q` from a square-root estimate, corrected against the edges.
+    #[inline(never)]
+    fn search(&mut self, q: f32, scratch: &Scratch) {
+        let edges = &scratch.edges;
+        let last = edges.len() - 2;
+        // Saturating float-to-int cast: anything below the nearest bound is bucket 0.
+        let mut b =
+            (((q.max(0.0).sqrt() - scratch.nearest) * scratch.inverse_width) as usize).min(last);
+        while q < edges[b] {
+            b -= 1;
+        }
+        while q >= edges[b + 1] {
+            b += 1;
+        }
+        *self = Self {
+            bucket: b,
+            lo: edges[b],
+            hi: edges[b + 1],
+        };
+    }
+}
+
+/// Per-row state shared by both walks: the row's fixed squared-distance part and the bucket of
+/// the last voxel. Neighbouring voxels of a row mostly share a bucket or sit in the next one,
+/// so most voxels cost two comparisons and no square root.
+struct RowBuckets<'a> {
+    scratch: &'a Scratch,
+    k: [u32; 3],
+    axis: usize,
+    partial: f32,
+    terms: &'a [f32],
+    current: Current,
+}
+
+impl RowBuckets<'_> {
+    #[inline]
+    fn start_row(&mut self, k: [u32; 3], axis: usize) {
+        self.k = k;
+        self.axis = axis;
+        if self.scratch.orthogonal {
+            let t = &self.scratch.terms;
+            let (b, c) = crate::grid::other_axes(axis);
+            self.partial = t[b][k[b] as usize] + t[c][k[c] as usize];
+            self.terms = &t[axis];
+        }
+    }
+}
+
+/// Runs `$body` for each `(id, k)` of `$voxels` with `$q` bound to its squared distance, summed
+/// the same way in both walks (per-axis table terms for orthogonal axes, the quadratic form
+/// otherwise). A macro, so that the loop body is inlined in both branches.
+macro_rules! each_voxel {
+    ($row:expr, $voxels:expr, |$id:pat_param, $q:ident| $body:block) => {{
+        let row = &$row;
+        if row.scratch.orthogonal {
+            let (partial, terms) = (row.partial, row.terms);
+            for ($id, k) in $voxels {
+                let $q = partial + terms[k as usize];
+                $body
+            }
+        } else if let Some(view) = &row.scratch.view {
+            let (mut at, axis) = (row.k, row.axis);
+            for ($id, k) in $voxels {
+                at[axis] = k;
+                let $q = view.distance_squared(at) as f32;
+                $body
+            }
+        }
+    }};
+}
+
+/// Counts voxels per bucket, the current bucket's count held in a register.
 struct Count<'a> {
-    row: RowDistance<'a>,
+    row: RowBuckets<'a>,
     counts: &'a mut [u32],
-    current: usize,
     pending: u32,
 }
 
 impl Count<'_> {
     fn flush(&mut self) {
         if self.pending > 0 {
-            self.counts[self.current] += self.pending;
+            self.counts[self.row.current.bucket] += self.pending;
             self.pending = 0;
         }
+    }
+
+    #[inline(always)]
+    fn add(&mut self, voxels: impl Iterator<Item = (u32, u32)>) {
+        let scratch = self.row.scratch;
+        let counts = &mut *self.counts;
+        let mut current = self.row.current;
+        let mut pending = self.pending;
+        each_voxel!(self.row, voxels, |_, q| {
+            if current.leaves(q) {
+                if pending > 0 {
+                    counts[current.bucket] += pending;
+                    pending = 0;
+                }
+                current.locate(q, scratch);
+            }
+            pending += 1;
+        });
+        self.row.current = current;
+        self.pending = pending;
     }
 }
 
@@ -185,31 +286,61 @@ impl Sink for Count<'_> {
     }
 
     #[inline(always)]
-    fn voxel(&mut self, _id: u32, k: u32) {
-        let b = self.row.bucket(k);
-        if b != self.current {
-            self.flush();
-            self.current = b;
-        }
-        self.pending += 1;
+    fn voxel(&mut self, id: u32, k: u32) {
+        self.add(std::iter::once((id, k)));
+    }
+
+    #[inline]
+    fn run_up(&mut self, _base: u32, _stride: u32, from: u32, to: u32) {
+        self.add((from..to).map(|k| (0, k)));
+    }
+
+    #[inline]
+    fn run_down(&mut self, _base: u32, _stride: u32, from: u32, to: u32) {
+        self.add((from..to).rev().map(|k| (0, k)));
+    }
+
+    #[inline]
+    fn slice(&mut self, _base: u32, coords: &[u32], _offsets: &[u32]) {
+        self.add(coords.iter().map(|&k| (0, k)));
     }
 }
 
 /// Writes each voxel after the farther buckets, keeping the current bucket's write position
 /// in a register while the bucket stays the same.
 struct Scatter<'a> {
-    row: RowDistance<'a>,
+    row: RowBuckets<'a>,
     cursors: &'a mut [u32],
     out: &'a mut [u32],
-    current: usize,
     slot: u32,
 }
 
 impl Scatter<'_> {
     fn flush(&mut self) {
-        if let Some(c) = self.cursors.get_mut(self.current) {
-            *c = self.slot;
+        if self.row.current.lo < self.row.current.hi {
+            self.cursors[self.row.current.bucket] = self.slot;
         }
+    }
+
+    #[inline(always)]
+    fn put(&mut self, voxels: impl Iterator<Item = (u32, u32)>) {
+        let scratch = self.row.scratch;
+        let (cursors, out) = (&mut *self.cursors, &mut *self.out);
+        let mut current = self.row.current;
+        let mut slot = self.slot;
+        each_voxel!(self.row, voxels, |id, q| {
+            if current.leaves(q) {
+                if current.lo < current.hi {
+                    cursors[current.bucket] = slot;
+                }
+                current.locate(q, scratch);
+                slot = cursors[current.bucket];
+            }
+            out[slot as usize] = id;
+            slot += 1;
+        });
+        self.row.current = current;
+        self.slot = slot;
     }
 }
 
@@ -221,14 +352,22 @@ impl Sink for Scatter<'_> {
 
     #[inline(always)]
     fn voxel(&mut self, id: u32, k: u32) {
-        let b = self.row.bucket(k);
-        if b != self.current {
-            self.flush();
-            self.current = b;
-            self.slot = self.cursors[b];
-        }
-        self.out[self.slot as usize] = id;
-        self.slot += 1;
+        self.put(std::iter::once((id, k)));
+    }
+
+    #[inline]
+    fn run_up(&mut self, base: u32, stride: u32, from: u32, to: u32) {
+        self.put((from..to).map(|k| (base + k * stride, k)));
+    }
+
+    #[inline]
+    fn run_down(&mut self, base: u32, stride: u32, from: u32, to: u32) {
+        self.put((from..to).rev().map(|k| (base + k * stride, k)));
+    }
+
+    #[inline]
+    fn slice(&mut self, base: u32, coords: &[u32], offsets: &[u32]) {
+        self.put(coords.iter().zip(offsets).map(|(&k, &o)| (base + o, k)));
     }
 }
 
@@ -260,4 +399,81 @@ fn distance_bounds(view: &ViewCase) -> (f64, f64) {
         0.0
     };
     (nearest.min(farthest.sqrt()), farthest.sqrt())
+}
+
+#[cfg(test)]
+mod tests {
+    use glam::{DAffine3, DMat3, DVec3};
+
+    use super::*;
+    use crate::order::{OrderOptions, Ordering, VolumeGeometry, order};
+
+    /// The bucketed order is, by definition, the IP-PBTF list stably sorted by bucket, farthest
+    /// first. Checked with the bucket of each voxel found by scanning the edges, the squared
+    /// distance summed as the walks sum it.
+    fn check(geometry: &VolumeGeometry, eye: DVec3, keep: impl Fn(u32) -> bool, cull: bool) {
+        let dims = geometry.dims();
+        let grid = SparseGrid::from_mask(dims, keep).unwrap();
+        let view = ViewCase::new(geometry, eye, geometry.centre_world()).unwrap();
+        let options = OrderOptions {
+            cull_behind_eye: cull,
+            ..OrderOptions::default()
+        };
+        let mut scratch = Scratch::default();
+        scratch.prepare(&view, width(&view, None).unwrap());
+        let inner = view.permutation[2];
+        let (b, c) = crate::grid::other_axes(inner);
+        let bucket = |id: u32| {
+            let k = grid.coords(id);
+            let q = if scratch.orthogonal {
+                let t = &scratch.terms;
+                (t[b][k[b] as usize] + t[c][k[c] as usize]) + t[inner][k[inner] as usize]
+            } else {
+                view.distance_squared(k) as f32
+            };
+            (0..scratch.edges.len() - 1)
+                .find(|&i| scratch.edges[i] <= q && q < scratch.edges[i + 1])
+                .unwrap()
+        };
+        let mut expected = order(&grid, &view, Ordering::IpPbtfImplicit, &options).unwrap();
+        expected.sort_by_key(|&id| std::cmp::Reverse(bucket(id)));
+        let got = order(&grid, &view, Ordering::Bucketed, &options).unwrap();
+        assert_eq!(got, expected, "eye {eye} on {:?}", view.kind);
+    }
+
+    #[test]
+    fn bucketed_is_ip_pbtf_stably_sorted_by_bucket() {
+        let sparse = |id: u32| id.wrapping_mul(0x9E37_79B9).rotate_left(11) % 3 != 0;
+        let axis_aligned =
+            VolumeGeometry::axis_aligned([23, 17, 11], [0.7, 0.7, 2.5], [3.0, -2.0, 1.0]).unwrap();
+        let sheared = VolumeGeometry::new(
+            [13, 9, 15],
+            DAffine3::from_mat3_translation(
+                DMat3::from_cols(
+                    DVec3::new(1.0, 0.2, 0.0),
+                    DVec3::new(0.0, 0.8, 0.3),
+                    DVec3::new(0.1, 0.0, 2.0),
+                ),
+                DVec3::new(-4.0, 5.0, 0.5),
+            ),
+        )
+        .unwrap();
+        for geometry in [&axis_aligned, &sheared] {
+            let dims = geometry.dims().map(f64::from);
+            for f in [
+                [0.43, 0.56, -0.35],
+                [0.41, 0.37, 0.45],
+                [0.47, -0.45, -0.4],
+                [-0.6, -0.5, 1.45],
+                [0.5, 0.5, 0.5],
+            ] {
+                let at = DVec3::new(f[0] * dims[0], f[1] * dims[1], f[2] * dims[2]);
+                let eye = geometry.index_to_world_point(at);
+                for cull in [false, true] {
+                    check(geometry, eye, sparse, cull);
+                    check(geometry, eye, |_| true, cull);
+                }
+            }
+        }
+    }
 }

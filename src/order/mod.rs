@@ -172,6 +172,7 @@ pub struct OrderOptions {
 #[derive(Debug, Default)]
 pub struct Orderer {
     sequences: [Vec<u32>; 3],
+    offsets: Vec<u32>,
     exact: exact::Scratch,
     buckets: bucketed::Scratch,
 }
@@ -220,7 +221,7 @@ impl Orderer {
             Ordering::Bucketed => {
                 let width = bucketed::width(view, options.bucket_width)?;
                 let [s0, s1, s2] = &mut self.sequences;
-                let plan = ip_pbtf_plan(view, false, [s0, s1, s2]);
+                let plan = ip_pbtf_plan(view, false, [s0, s1, s2], &mut self.offsets);
                 self.buckets.order(grid, view, width, &plan, cull, out);
             }
         }
@@ -295,13 +296,23 @@ impl Orderer {
 
     fn ip_pbtf(&mut self, view: &ViewCase, explicit: bool, run: impl FnOnce(&Plan<'_>)) {
         let [s0, s1, s2] = &mut self.sequences;
-        run(&ip_pbtf_plan(view, explicit, [s0, s1, s2]));
+        run(&ip_pbtf_plan(
+            view,
+            explicit,
+            [s0, s1, s2],
+            &mut self.offsets,
+        ));
     }
 }
 
 /// The IP-PBTF traversal: interleaved far-to-near sequences for the outer axes, the inner axis
 /// merged over runs (implicit) or walked through its whole sequence (explicit).
-fn ip_pbtf_plan<'a>(view: &ViewCase, explicit: bool, seqs: [&'a mut Vec<u32>; 3]) -> Plan<'a> {
+fn ip_pbtf_plan<'a>(
+    view: &ViewCase,
+    explicit: bool,
+    seqs: [&'a mut Vec<u32>; 3],
+    offsets: &'a mut Vec<u32>,
+) -> Plan<'a> {
     let perm = view.permutation;
     let [s0, s1, s2] = seqs;
     for (seq, axis) in [
@@ -325,10 +336,18 @@ fn ip_pbtf_plan<'a>(view: &ViewCase, explicit: bool, seqs: [&'a mut Vec<u32>; 3]
                 lo: 0,
                 hi: inner_axis.n,
             },
-            AxisView::Split { kv } => Inner::Merge {
-                kv,
-                c: inner_axis.merge_threshold(),
-            },
+            AxisView::Split { kv } => {
+                let dims = view.axes.map(|a| a.n);
+                let stride = [1, dims[0], dims[0].wrapping_mul(dims[1])][perm[2]];
+                offsets.clear();
+                offsets.extend(s2.iter().map(|&k| k * stride));
+                Inner::Merge {
+                    kv,
+                    c: inner_axis.merge_threshold(),
+                    sequence: s2,
+                    offsets,
+                }
+            }
         }
     };
     Plan {

@@ -29,6 +29,15 @@ pub(crate) trait Sink {
             self.voxel(base + k * stride, k);
         }
     }
+
+    /// Voxels at inner coordinates `coords` in this order; `offsets` holds `coord * stride`
+    /// for each of them.
+    #[inline]
+    fn slice(&mut self, base: u32, coords: &[u32], offsets: &[u32]) {
+        for (&k, &offset) in coords.iter().zip(offsets) {
+            self.voxel(base + offset, k);
+        }
+    }
 }
 
 /// Appends ids to a list.
@@ -49,6 +58,11 @@ impl Sink for Collect<'_> {
     fn run_down(&mut self, base: u32, stride: u32, from: u32, to: u32) {
         self.0.extend((from..to).rev().map(|k| base + k * stride));
     }
+
+    #[inline]
+    fn slice(&mut self, base: u32, _coords: &[u32], offsets: &[u32]) {
+        self.0.extend(offsets.iter().map(|&offset| base + offset));
+    }
 }
 
 /// How the inner axis of each row is walked.
@@ -60,8 +74,15 @@ pub(crate) enum Inner<'a> {
     Down { lo: u32, hi: u32 },
     /// A split axis, implicitly interleaved (paper Algorithm 4): the lower side `..kv` walked up
     /// and the upper side `kv..` walked down, merged so that a lower voxel `kl` comes before an
-    /// upper voxel `ku` exactly when `kl + ku <= c`.
-    Merge { kv: u32, c: i64 },
+    /// upper voxel `ku` exactly when `kl + ku <= c`. `sequence` is the whole axis in that
+    /// order and `offsets` its coordinates times the axis stride: where a lower and an upper
+    /// run overlap in the order, their voxels are one slice of it.
+    Merge {
+        kv: u32,
+        c: i64,
+        sequence: &'a [u32],
+        offsets: &'a [u32],
+    },
     /// Every position of the sequence in turn, each tested for significance (explicit
     /// interleaving, paper Algorithms 2 and 3).
     Explicit(&'a [u32]),
@@ -112,8 +133,20 @@ pub(crate) fn walk<S: Sink>(
                 Inner::Down { lo, hi } => {
                     walk_down(runs, base, stride, lo.max(clo), hi.min(chi), sink)
                 }
-                Inner::Merge { kv, c } => {
-                    merge(runs, base, stride, (clo, kv.clamp(clo, chi), chi), c, sink)
+                Inner::Merge {
+                    kv,
+                    c,
+                    sequence,
+                    offsets,
+                } => {
+                    let axis = MergeAxis {
+                        n,
+                        kv,
+                        c,
+                        sequence,
+                        offsets,
+                    };
+                    merge(runs, base, stride, (clo, chi), &axis, sink)
                 }
                 Inner::Explicit(seq) => {
                     for &kk in seq {
@@ -186,17 +219,59 @@ fn walk_down<S: Sink>(runs: &[Run], base: u32, stride: u32, lo: u32, hi: u32, si
     }
 }
 
-/// Merges the lower side `lo..kv` (walked up) with the upper side `kv..hi` (walked down).
-/// Each step emits the largest batch of one side that precedes the other side's next voxel.
+/// The far-to-near order of a split inner axis, with the position of each coordinate in it
+/// computed rather than looked up.
+pub(crate) struct MergeAxis<'a> {
+    n: u32,
+    kv: u32,
+    c: i64,
+    sequence: &'a [u32],
+    offsets: &'a [u32],
+}
+
+impl MergeAxis<'_> {
+    /// Number of lower voxels drawn before upper voxel `ku`: those with `kl + ku <= c`.
+    #[inline]
+    fn lower_before(&self, ku: u32) -> u32 {
+        (self.c - i64::from(ku) + 1).clamp(0, i64::from(self.kv)) as u32
+    }
+
+    /// The first upper coordinate drawn before lower voxel `kl`: upper voxels from it to the
+    /// top are those with `kl + ku > c`.
+    #[inline]
+    fn upper_from(&self, kl: u32) -> u32 {
+        (self.c - i64::from(kl) + 1).clamp(i64::from(self.kv), i64::from(self.n)) as u32
+    }
+
+    /// Position of lower voxel `kl` in the order.
+    #[inline]
+    fn rank_lower(&self, kl: u32) -> usize {
+        (kl + self.n - self.upper_from(kl)) as usize
+    }
+
+    /// Position of upper voxel `ku` in the order.
+    #[inline]
+    fn rank_upper(&self, ku: u32) -> usize {
+        (self.n - 1 - ku + self.lower_before(ku)) as usize
+    }
+}
+
+/// Merges the lower side `lo..kv` (walked up) with the upper side `kv..hi` (walked down) of one
+/// row. While a lower run and an upper run are both live, the voxels of one that precede the
+/// other's next voxel go first; from there on, every voxel of the axis order up to the end of
+/// the first of the two runs to finish belongs to one of them, so that stretch is one slice of
+/// the precomputed order, however finely the two sides alternate.
 #[inline]
 fn merge<S: Sink>(
     runs: &[Run],
     base: u32,
     stride: u32,
-    (lo, kv, hi): (u32, u32, u32),
-    c: i64,
+    (lo, hi): (u32, u32),
+    axis: &MergeAxis<'_>,
     sink: &mut S,
 ) {
+    let kv = axis.kv.clamp(lo, hi);
+    let c = axis.c;
     // Lower cursor: run index and next voxel; upper cursor: run index and one past next voxel.
     let mut li = runs.partition_point(|r| r.end() <= lo);
     let lower_runs_end = runs.partition_point(|r| r.start < kv);
@@ -211,52 +286,69 @@ fn merge<S: Sink>(
     loop {
         let lower_live = li < lower_runs_end && lk < kv;
         let upper_live = ui > upper_runs_start && uk > kv;
-        match (lower_live, upper_live) {
-            (false, false) => return,
-            (true, false) => {
-                let end = runs[li].end().min(kv);
-                sink.run_up(base, stride, lk, end);
-                li += 1;
-                lk = runs.get(li).map_or(kv, |r| r.start);
-            }
-            (false, true) => {
-                let start = runs[ui - 1].start.max(kv);
-                sink.run_down(base, stride, start, uk);
-                ui -= 1;
-                uk = if ui > upper_runs_start {
-                    runs[ui - 1].end()
+        if lower_live && upper_live {
+            let lend = runs[li].end().min(kv);
+            let ustart = runs[ui - 1].start.max(kv);
+            let (rl, ru) = (axis.rank_lower(lk), axis.rank_upper(uk - 1));
+            // The side that comes first runs alone up to the other side's next voxel.
+            if rl < ru {
+                let m = axis.lower_before(uk - 1);
+                if m < lend {
+                    sink.run_up(base, stride, lk, m);
+                    lk = m;
                 } else {
-                    kv
-                };
-            }
-            (true, true) => {
-                let ku = i64::from(uk - 1);
-                if i64::from(lk) + ku <= c {
-                    // Lower voxels up to c - ku come first.
-                    let run_end = runs[li].end().min(kv);
-                    let end = (c - ku + 1).min(i64::from(run_end)) as u32;
-                    sink.run_up(base, stride, lk, end);
-                    lk = end;
-                    if lk == run_end {
-                        li += 1;
-                        lk = runs.get(li).map_or(kv, |r| r.start);
-                    }
+                    sink.run_up(base, stride, lk, lend);
+                    li += 1;
+                    lk = runs.get(li).map_or(kv, |r| r.start);
+                    continue;
+                }
+            } else {
+                let s = axis.upper_from(lk);
+                if s > ustart {
+                    sink.run_down(base, stride, s, uk);
+                    uk = s;
                 } else {
-                    // Upper voxels down to c - kl + 1 come first.
-                    let run_start = runs[ui - 1].start.max(kv);
-                    let start = (c - i64::from(lk) + 1).max(i64::from(run_start)) as u32;
-                    sink.run_down(base, stride, start, uk);
-                    uk = start;
-                    if uk == run_start {
-                        ui -= 1;
-                        uk = if ui > upper_runs_start {
-                            runs[ui - 1].end()
-                        } else {
-                            kv
-                        };
-                    }
+                    sink.run_down(base, stride, ustart, uk);
+                    ui -= 1;
+                    uk = next_upper(runs, ui, upper_runs_start, kv);
+                    continue;
                 }
             }
+            // Both runs interleave from `rl.max(ru)` until the first of them ends.
+            let (ql, qu) = (axis.rank_lower(lend - 1), axis.rank_upper(ustart));
+            let (from, to) = (rl.max(ru), ql.min(qu) + 1);
+            sink.slice(base, &axis.sequence[from..to], &axis.offsets[from..to]);
+            if ql < qu {
+                uk = (c - i64::from(lend) + 2).clamp(i64::from(ustart), i64::from(uk)) as u32;
+                li += 1;
+                lk = runs.get(li).map_or(kv, |r| r.start);
+            } else {
+                lk = (c - i64::from(ustart) + 1).clamp(i64::from(lk), i64::from(lend)) as u32;
+                ui -= 1;
+                uk = next_upper(runs, ui, upper_runs_start, kv);
+            }
+        } else if lower_live {
+            let end = runs[li].end().min(kv);
+            sink.run_up(base, stride, lk, end);
+            li += 1;
+            lk = runs.get(li).map_or(kv, |r| r.start);
+        } else if upper_live {
+            let start = runs[ui - 1].start.max(kv);
+            sink.run_down(base, stride, start, uk);
+            ui -= 1;
+            uk = next_upper(runs, ui, upper_runs_start, kv);
+        } else {
+            return;
         }
+    }
+}
+
+/// One past the top voxel of the upper run before index `ui`, or `kv` when none is left.
+#[inline]
+fn next_upper(runs: &[Run], ui: usize, upper_runs_start: usize, kv: u32) -> u32 {
+    if ui > upper_runs_start {
+        runs[ui - 1].end()
+    } else {
+        kv
     }
 }
