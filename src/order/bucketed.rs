@@ -443,7 +443,11 @@ mod tests {
 
     #[test]
     fn bucketed_is_ip_pbtf_stably_sorted_by_bucket() {
-        let sparse = |id: u32| id.wrapping_mul(0x9E37_79B9).rotate_left(11) % 3 != 0;
+        let sparse = |id: u32| {
+            !id.wrapping_mul(0x9E37_79B9)
+                .rotate_left(11)
+                .is_multiple_of(3)
+        };
         let axis_aligned =
             VolumeGeometry::axis_aligned([23, 17, 11], [0.7, 0.7, 2.5], [3.0, -2.0, 1.0]).unwrap();
         let sheared = VolumeGeometry::new(
