@@ -273,11 +273,21 @@ fn merge<S: Sink>(
     let kv = axis.kv.clamp(lo, hi);
     let c = axis.c;
     // Lower cursor: run index and next voxel; upper cursor: run index and one past next voxel.
-    let mut li = runs.partition_point(|r| r.end() <= lo);
-    let lower_runs_end = runs.partition_point(|r| r.start < kv);
-    let mut lk = runs.get(li).map_or(kv, |r| r.start.max(lo));
-    let mut ui = runs.partition_point(|r| r.start < hi);
+    // Runs wholly below the split, and whether the next one straddles it.
     let upper_runs_start = runs.partition_point(|r| r.end() <= kv);
+    let lower_runs_end =
+        upper_runs_start + usize::from(runs.get(upper_runs_start).is_some_and(|r| r.start < kv));
+    let mut li = if lo == 0 {
+        0
+    } else {
+        runs[..lower_runs_end].partition_point(|r| r.end() <= lo)
+    };
+    let mut lk = runs.get(li).map_or(kv, |r| r.start.max(lo));
+    let mut ui = if hi == axis.n {
+        runs.len()
+    } else {
+        upper_runs_start + runs[upper_runs_start..].partition_point(|r| r.start < hi)
+    };
     let mut uk = if ui > upper_runs_start {
         runs[ui - 1].end().min(hi)
     } else {
