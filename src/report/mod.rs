@@ -338,3 +338,27 @@ pub fn per_view_table(results: &[ViewResult]) -> String {
     }
     s
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn case_views_make_the_case_they_name() {
+        let geometry = VolumeGeometry::axis_aligned([112, 80, 112], [0.85, 0.85, 1.0], [5.0; 3])
+            .expect("geometry");
+        for view in case_views(&geometry) {
+            let case = ViewCase::new(&geometry, view.eye, view.target).expect("view");
+            assert!(
+                view.name.starts_with(case.kind.name()),
+                "{} is {}",
+                view.name,
+                case.kind.name()
+            );
+            if view.name.ends_with("along z") {
+                let dir = geometry.world_dir_to_index(view.target - view.eye);
+                assert!(dir.x == 0.0 && dir.y == 0.0 && dir.z > 0.0, "{}", view.name);
+            }
+        }
+    }
+}
