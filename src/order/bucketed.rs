@@ -8,7 +8,7 @@
 //! every voxel lands in the bucket it was counted in.
 
 use super::OrderError;
-use super::distance::is_orthogonal;
+use super::distance::{axis_terms, is_orthogonal};
 use super::traverse::{Plan, Sink, walk};
 use super::view::ViewCase;
 use crate::grid::SparseGrid;
@@ -47,18 +47,12 @@ pub(crate) struct Scratch {
 
 impl Scratch {
     fn prepare(&mut self, view: &ViewCase, width: f64) {
-        let g = view.gram;
-        self.orthogonal = is_orthogonal(&g);
+        self.orthogonal = is_orthogonal(&view.gram);
         self.view = Some(*view);
         for (a, terms) in self.terms.iter_mut().enumerate() {
             terms.clear();
             if self.orthogonal {
-                let axis = &view.axes[a];
-                let weight = g.col(a)[a];
-                terms.extend((0..axis.n).map(|k| {
-                    let d = f64::from(k) - axis.eye;
-                    (weight * d * d) as f32
-                }));
+                terms.extend(axis_terms(view, a).map(|t| t as f32));
             }
         }
         let (nearest, farthest) = distance_bounds(view);

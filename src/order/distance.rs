@@ -22,20 +22,26 @@ pub(crate) struct DistanceTable {
     view: Option<ViewCase>,
 }
 
+/// The squared world distance along axis `a` from the eye's plane to each voxel coordinate,
+/// `g_aa (k - e_a)^2`: summed over the three axes, a voxel's squared distance when the axes are
+/// orthogonal.
+pub(crate) fn axis_terms(view: &ViewCase, a: usize) -> impl Iterator<Item = f64> + '_ {
+    let axis = &view.axes[a];
+    let weight = view.gram.col(a)[a];
+    (0..axis.n).map(move |k| {
+        let d = f64::from(k) - axis.eye;
+        weight * d * d
+    })
+}
+
 impl DistanceTable {
     pub(crate) fn prepare(&mut self, view: &ViewCase) {
-        let g = view.gram;
-        self.orthogonal = is_orthogonal(&g);
+        self.orthogonal = is_orthogonal(&view.gram);
         self.view = Some(*view);
         for (a, terms) in self.terms.iter_mut().enumerate() {
             terms.clear();
             if self.orthogonal {
-                let axis = &view.axes[a];
-                let weight = g.col(a)[a];
-                terms.extend((0..axis.n).map(|k| {
-                    let d = f64::from(k) - axis.eye;
-                    weight * d * d
-                }));
+                terms.extend(axis_terms(view, a));
             }
         }
     }
