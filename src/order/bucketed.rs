@@ -273,30 +273,15 @@ impl Count<'_> {
     }
 }
 
-impl Sink for Count<'_> {
+impl Pass for Count<'_> {
     #[inline]
-    fn row(&mut self, k: [u32; 3], axis: usize) {
+    fn start_row(&mut self, k: [u32; 3], axis: usize) {
         self.row.start_row(k, axis);
     }
 
     #[inline(always)]
-    fn voxel(&mut self, id: u32, k: u32) {
-        self.add(std::iter::once((id, k)));
-    }
-
-    #[inline]
-    fn run_up(&mut self, _base: u32, _stride: u32, from: u32, to: u32) {
-        self.add((from..to).map(|k| (0, k)));
-    }
-
-    #[inline]
-    fn run_down(&mut self, _base: u32, _stride: u32, from: u32, to: u32) {
-        self.add((from..to).rev().map(|k| (0, k)));
-    }
-
-    #[inline]
-    fn slice(&mut self, _base: u32, coords: &[u32], _offsets: &[u32]) {
-        self.add(coords.iter().map(|&k| (0, k)));
+    fn feed(&mut self, voxels: impl Iterator<Item = (u32, u32)>) {
+        self.add(voxels);
     }
 }
 
@@ -338,30 +323,49 @@ impl Scatter<'_> {
     }
 }
 
-impl Sink for Scatter<'_> {
+impl Pass for Scatter<'_> {
     #[inline]
-    fn row(&mut self, k: [u32; 3], axis: usize) {
+    fn start_row(&mut self, k: [u32; 3], axis: usize) {
         self.row.start_row(k, axis);
     }
 
     #[inline(always)]
+    fn feed(&mut self, voxels: impl Iterator<Item = (u32, u32)>) {
+        self.put(voxels);
+    }
+}
+
+/// One of the two walks: it takes the voxels of a row as `(id, inner coordinate)` pairs, in
+/// walk order, whichever way the traversal hands them over.
+trait Pass {
+    fn start_row(&mut self, k: [u32; 3], axis: usize);
+    fn feed(&mut self, voxels: impl Iterator<Item = (u32, u32)>);
+}
+
+impl<P: Pass> Sink for P {
+    #[inline]
+    fn row(&mut self, k: [u32; 3], axis: usize) {
+        self.start_row(k, axis);
+    }
+
+    #[inline(always)]
     fn voxel(&mut self, id: u32, k: u32) {
-        self.put(std::iter::once((id, k)));
+        self.feed(std::iter::once((id, k)));
     }
 
     #[inline]
     fn run_up(&mut self, base: u32, stride: u32, from: u32, to: u32) {
-        self.put((from..to).map(|k| (base + k * stride, k)));
+        self.feed((from..to).map(|k| (base + k * stride, k)));
     }
 
     #[inline]
     fn run_down(&mut self, base: u32, stride: u32, from: u32, to: u32) {
-        self.put((from..to).rev().map(|k| (base + k * stride, k)));
+        self.feed((from..to).rev().map(|k| (base + k * stride, k)));
     }
 
     #[inline]
     fn slice(&mut self, base: u32, coords: &[u32], offsets: &[u32]) {
-        self.put(coords.iter().zip(offsets).map(|(&k, &o)| (base + o, k)));
+        self.feed(coords.iter().zip(offsets).map(|(&k, &o)| (base + o, k)));
     }
 }
 

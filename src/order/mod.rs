@@ -209,9 +209,9 @@ impl Orderer {
             Ordering::Pbtf => self.pbtf(grid, view, cull, out),
             Ordering::IpPbtfImplicit | Ordering::IpPbtfExplicit => {
                 let explicit = ordering == Ordering::IpPbtfExplicit;
-                self.ip_pbtf(view, explicit, |plan| {
-                    walk(grid, plan, cull, &mut Collect(out))
-                });
+                let [s0, s1, s2] = &mut self.sequences;
+                let plan = ip_pbtf_plan(grid, view, explicit, [s0, s1, s2], &mut self.offsets);
+                walk(grid, &plan, cull, &mut Collect(out));
             }
             Ordering::Exact => {
                 let [s0, s1, _] = &mut self.sequences;
@@ -221,7 +221,7 @@ impl Orderer {
             Ordering::Bucketed => {
                 let width = bucketed::width(view, options.bucket_width)?;
                 let [s0, s1, s2] = &mut self.sequences;
-                let plan = ip_pbtf_plan(view, false, [s0, s1, s2], &mut self.offsets);
+                let plan = ip_pbtf_plan(grid, view, false, [s0, s1, s2], &mut self.offsets);
                 self.buckets.order(grid, view, width, &plan, cull, out);
             }
         }
@@ -293,21 +293,12 @@ impl Orderer {
             walk(grid, &plan, cull, &mut Collect(out));
         }
     }
-
-    fn ip_pbtf(&mut self, view: &ViewCase, explicit: bool, run: impl FnOnce(&Plan<'_>)) {
-        let [s0, s1, s2] = &mut self.sequences;
-        run(&ip_pbtf_plan(
-            view,
-            explicit,
-            [s0, s1, s2],
-            &mut self.offsets,
-        ));
-    }
 }
 
 /// The IP-PBTF traversal: interleaved far-to-near sequences for the outer axes, the inner axis
 /// merged over runs (implicit) or walked through its whole sequence (explicit).
 fn ip_pbtf_plan<'a>(
+    grid: &SparseGrid,
     view: &ViewCase,
     explicit: bool,
     seqs: [&'a mut Vec<u32>; 3],
@@ -337,8 +328,7 @@ fn ip_pbtf_plan<'a>(
                 hi: inner_axis.n,
             },
             AxisView::Split { kv } => {
-                let dims = view.axes.map(|a| a.n);
-                let stride = [1, dims[0], dims[0].wrapping_mul(dims[1])][perm[2]];
+                let stride = grid.strides()[perm[2]];
                 offsets.clear();
                 offsets.extend(s2.iter().map(|&k| k * stride));
                 Inner::Merge {
