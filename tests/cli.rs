@@ -29,6 +29,7 @@ fn order_writes_little_endian_ids_matching_the_library() {
         "ip-pbtf-implicit",
         "exact",
         "bucketed",
+        "pyramid",
     ] {
         let result = splatscene(&[
             "order",

@@ -142,3 +142,19 @@ fn a_rotated_anisotropic_volume_orders_correctly() {
     assert!(ip < pbtf, "IP-PBTF {ip} against PBTF {pbtf}");
     assert!(bucketed < ip, "bucketed {bucketed} against IP-PBTF {ip}");
 }
+
+#[test]
+fn volume_on_pyramid_beats_ip_pbtf() {
+    // Eyes inside the volume, looking at its centre along no axis: IP-PBTF draws whole slabs
+    // of one axis where many rays run closer to another; the pyramid order does not.
+    let volume = shells([1.0; 3]);
+    let e = errors(
+        &volume,
+        &[[7.5, 8.2, 10.4], [19.1, 8.7, 17.3], [8.4, 18.6, 9.2]],
+    );
+    let (ip, pyramid) = (
+        get(&e, Ordering::IpPbtfImplicit),
+        get(&e, Ordering::Pyramid),
+    );
+    assert!(pyramid * 2.0 < ip, "pyramid {pyramid} against IP-PBTF {ip}");
+}

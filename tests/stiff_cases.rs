@@ -141,6 +141,7 @@ fn eye_inside_one_voxel_draws_that_voxel_last() {
                 | Ordering::IpPbtfExplicit
                 | Ordering::Exact
                 | Ordering::Bucketed
+                | Ordering::Pyramid
         ) {
             assert_eq!(*out.last().unwrap(), inside, "{ordering}");
         }

@@ -3,8 +3,9 @@
 //! Every ordering is a permutation of the significant voxels of a [`SparseGrid`], first drawn
 //! first (back to front). The grid orderings (BTF, WBTF, PBTF, IP-PBTF) share one traversal
 //! engine whose inner loop walks run-length rows, so empty space costs nothing there; the exact
-//! order is a parallel radix sort by world distance; the bucketed order is ours: a counting sort
-//! on quantised distance with IP-PBTF order inside each bucket, in O(N).
+//! order is a parallel radix sort by world distance; two orderings are ours, both O(N): the
+//! bucketed order, a counting sort on quantised distance with IP-PBTF order inside each bucket,
+//! and the pyramid order, which gives every voxel the slab axis its own ray runs along.
 //!
 //! # Definitions
 //! Voxel centres sit at integer index coordinates; the eye `e` is taken into index space in f64
@@ -30,10 +31,15 @@
 //! - **Exact**: world distance from the eye, descending; equal distances by increasing id.
 //! - **Bucketed**: world distance quantised into buckets (half the smallest spacing wide by
 //!   default), farthest bucket first, IP-PBTF order inside each bucket.
+//! - **Pyramid**: the planes through the eye where two axes' weighted distances
+//!   `|k_a - e_a| * g_aa` are equal cut the grid into six pyramids; each is drawn slab by slab
+//!   along its own axis, all slabs interleaved far to near (see the `pyramid` module for the
+//!   exact rule and the tie order).
 
 mod bucketed;
 mod distance;
 mod exact;
+mod pyramid;
 pub mod reference;
 mod traverse;
 mod view;
@@ -98,16 +104,20 @@ pub enum Ordering {
     Exact,
     /// Counting sort on quantised distance, IP-PBTF inside a bucket.
     Bucketed,
+    /// Six pyramids with their apex at the eye, each walked slab by slab along its own axis,
+    /// the slabs of all six interleaved far to near.
+    Pyramid,
 }
 
 impl Ordering {
     /// Every ordering, in report order.
-    pub const ALL: [Ordering; 7] = [
+    pub const ALL: [Ordering; 8] = [
         Self::Btf,
         Self::Wbtf,
         Self::Pbtf,
         Self::IpPbtfExplicit,
         Self::IpPbtfImplicit,
+        Self::Pyramid,
         Self::Bucketed,
         Self::Exact,
     ];
@@ -122,6 +132,7 @@ impl Ordering {
             Self::IpPbtfImplicit => "ip-pbtf-implicit",
             Self::Exact => "exact",
             Self::Bucketed => "bucketed",
+            Self::Pyramid => "pyramid",
         }
     }
 }
@@ -135,7 +146,7 @@ impl fmt::Display for Ordering {
 /// An ordering name that is not known.
 #[derive(Debug, Error, Clone, PartialEq, Eq)]
 #[error(
-    "unknown ordering {0:?}; expected one of btf, wbtf, pbtf, ip-pbtf, ip-pbtf-explicit, ip-pbtf-implicit, exact, bucketed"
+    "unknown ordering {0:?}; expected one of btf, wbtf, pbtf, ip-pbtf, ip-pbtf-explicit, ip-pbtf-implicit, exact, bucketed, pyramid"
 )]
 pub struct UnknownOrdering(pub String);
 
@@ -151,6 +162,7 @@ impl FromStr for Ordering {
             "ip-pbtf-explicit" => Ok(Self::IpPbtfExplicit),
             "exact" | "sort" => Ok(Self::Exact),
             "bucketed" | "bucket" => Ok(Self::Bucketed),
+            "pyramid" => Ok(Self::Pyramid),
             _ => Err(UnknownOrdering(s.to_owned())),
         }
     }
@@ -175,6 +187,7 @@ pub struct Orderer {
     offsets: Vec<u32>,
     exact: exact::Scratch,
     buckets: bucketed::Scratch,
+    pyramid: pyramid::Scratch,
 }
 
 impl Orderer {
@@ -224,6 +237,7 @@ impl Orderer {
                 let plan = ip_pbtf_plan(grid, view, false, [s0, s1, s2], &mut self.offsets);
                 self.buckets.order(grid, view, width, &plan, cull, out);
             }
+            Ordering::Pyramid => self.pyramid.order(grid, view, cull, &mut Collect(out)),
         }
         Ok(())
     }
@@ -332,6 +346,8 @@ fn ip_pbtf_plan<'a>(
                 offsets.clear();
                 offsets.extend(s2.iter().map(|&k| k * stride));
                 Inner::Merge {
+                    lo: 0,
+                    hi: inner_axis.n,
                     kv,
                     c: inner_axis.merge_threshold(),
                     sequence: s2,

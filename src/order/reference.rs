@@ -42,6 +42,7 @@ pub fn order(grid: &SparseGrid, view: &ViewCase, ordering: Ordering, cull: bool)
             let (da, db) = (view.distance_squared(key(a)), view.distance_squared(key(b)));
             db.total_cmp(&da).then(a.cmp(&b))
         }),
+        Ordering::Pyramid => ids.sort_by(|&a, &b| super::pyramid::compare(view, key(a), key(b))),
         Ordering::Bucketed => {
             panic!("the bucketed order has no comparison-sort reference; test it against exact")
         }

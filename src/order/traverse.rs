@@ -76,8 +76,10 @@ pub(crate) enum Inner<'a> {
     /// and the upper side `kv..` walked down, merged so that a lower voxel `kl` comes before an
     /// upper voxel `ku` exactly when `kl + ku <= c`. `sequence` is the whole axis in that
     /// order and `offsets` its coordinates times the axis stride: where a lower and an upper
-    /// run overlap in the order, their voxels are one slice of it.
+    /// run overlap in the order, their voxels are one slice of it. Only `lo..hi` is walked.
     Merge {
+        lo: u32,
+        hi: u32,
         kv: u32,
         c: i64,
         sequence: &'a [u32],
@@ -105,56 +107,73 @@ pub(crate) fn walk<S: Sink>(
     cull: Option<&ViewCase>,
     sink: &mut S,
 ) {
-    let axis = plan.perm[2];
-    let (b, c) = other_axes(axis);
     let strides = grid.strides();
-    let stride = strides[axis];
-    let n = grid.dims()[axis];
     for &k0 in plan.outer[0] {
         for &k1 in plan.outer[1] {
             let mut k = [0u32; 3];
             k[plan.perm[0]] = k0;
             k[plan.perm[1]] = k1;
-            let runs = grid.row(axis, k[b], k[c]);
-            if runs.is_empty() {
-                continue;
-            }
-            let (clo, chi) = match cull {
-                Some(view) => in_front(view, k, axis, n),
-                None => (0, n),
-            };
-            if clo >= chi {
-                continue;
-            }
             let base = k0 * strides[plan.perm[0]] + k1 * strides[plan.perm[1]];
-            sink.row(k, axis);
-            match plan.inner {
-                Inner::Up { lo, hi } => walk_up(runs, base, stride, lo.max(clo), hi.min(chi), sink),
-                Inner::Down { lo, hi } => {
-                    walk_down(runs, base, stride, lo.max(clo), hi.min(chi), sink)
-                }
-                Inner::Merge {
-                    kv,
-                    c,
-                    sequence,
-                    offsets,
-                } => {
-                    let axis = MergeAxis {
-                        n,
-                        kv,
-                        c,
-                        sequence,
-                        offsets,
-                    };
-                    merge(runs, base, stride, (clo, chi), &axis, sink)
-                }
-                Inner::Explicit(seq) => {
-                    for &kk in seq {
-                        let id = base + kk * stride;
-                        if kk >= clo && kk < chi && grid.contains(id) {
-                            sink.voxel(id, kk);
-                        }
-                    }
+            walk_row(grid, k, base, plan.perm[2], &plan.inner, cull, sink);
+        }
+    }
+}
+
+/// Walks one row along `axis`: `k` holds its two fixed coordinates (the inner one is
+/// ignored) and `base` their part of the id.
+#[inline]
+pub(crate) fn walk_row<S: Sink>(
+    grid: &SparseGrid,
+    k: [u32; 3],
+    base: u32,
+    axis: usize,
+    inner: &Inner<'_>,
+    cull: Option<&ViewCase>,
+    sink: &mut S,
+) {
+    let (b, c) = other_axes(axis);
+    let runs = grid.row(axis, k[b], k[c]);
+    if runs.is_empty() {
+        return;
+    }
+    let n = grid.dims()[axis];
+    let (clo, chi) = match cull {
+        Some(view) => in_front(view, k, axis, n),
+        None => (0, n),
+    };
+    if clo >= chi {
+        return;
+    }
+    let stride = grid.strides()[axis];
+    sink.row(k, axis);
+    match *inner {
+        Inner::Up { lo, hi } => walk_up(runs, base, stride, lo.max(clo), hi.min(chi), sink),
+        Inner::Down { lo, hi } => walk_down(runs, base, stride, lo.max(clo), hi.min(chi), sink),
+        Inner::Merge {
+            lo,
+            hi,
+            kv,
+            c,
+            sequence,
+            offsets,
+        } => {
+            let axis = MergeAxis {
+                n,
+                kv,
+                c,
+                sequence,
+                offsets,
+            };
+            let range = (lo.max(clo), hi.min(chi));
+            if range.0 < range.1 {
+                merge(runs, base, stride, range, &axis, sink)
+            }
+        }
+        Inner::Explicit(seq) => {
+            for &kk in seq {
+                let id = base + kk * stride;
+                if kk >= clo && kk < chi && grid.contains(id) {
+                    sink.voxel(id, kk);
                 }
             }
         }
