@@ -1,6 +1,7 @@
 //! The ordering shows in the error measure: on a small CT-like shell phantom seen from close
-//! eyes, IP-PBTF is well below PBTF, the bucketed order below IP-PBTF, and the exact order has
-//! no nearer-before-farther fragments.
+//! eyes, IP-PBTF is well below PBTF, the bucketed order below IP-PBTF, the pyramid order below
+//! half of IP-PBTF from inside the volume, and the exact order has no nearer-before-farther
+//! fragments.
 
 use glam::DVec3;
 use splatscene::camera::Camera;

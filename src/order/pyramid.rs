@@ -11,7 +11,8 @@
 //! order; inside a slab the same happens between its two axes. Here each voxel is drawn in the
 //! slab of the axis along which it is farthest from the eye, weighted by the squared spacing, so
 //! the slab axis is the one its ray runs most nearly along (for two neighbours one step apart on
-//! two axes, the weighting is exactly the condition for slab order to agree with distance).
+//! two axes, the weighting is, to first order, the condition for slab order to agree with
+//! distance).
 //! Every ray from the eye crosses the slabs of its pyramid in distance order, and two pyramids
 //! meet only along planes through the eye, which project to lines on the screen.
 //!
