@@ -332,29 +332,16 @@ fn ip_pbtf_plan<'a>(
     let inner = if explicit {
         Inner::Explicit(s2)
     } else {
-        match inner_axis.view {
-            AxisView::Below => Inner::Down {
-                lo: 0,
-                hi: inner_axis.n,
-            },
-            AxisView::Above => Inner::Up {
-                lo: 0,
-                hi: inner_axis.n,
-            },
-            AxisView::Split { kv } => {
-                let stride = grid.strides()[perm[2]];
-                offsets.clear();
-                offsets.extend(s2.iter().map(|&k| k * stride));
-                Inner::Merge {
-                    lo: 0,
-                    hi: inner_axis.n,
-                    kv,
-                    c: inner_axis.merge_threshold(),
-                    sequence: s2,
-                    offsets,
-                }
-            }
-        }
+        let stride = grid.strides()[perm[2]];
+        offsets.clear();
+        offsets.extend(s2.iter().map(|&k| k * stride));
+        Inner::far_to_near(
+            inner_axis,
+            (0, inner_axis.n),
+            inner_axis.merge_threshold(),
+            s2,
+            offsets,
+        )
     };
     Plan {
         perm,

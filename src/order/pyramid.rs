@@ -40,7 +40,7 @@
 use std::cmp::Ordering as Cmp;
 
 use super::traverse::{Inner, Sink, walk_row};
-use super::view::{AxisView, ViewCase};
+use super::view::ViewCase;
 use crate::grid::SparseGrid;
 
 /// The two other axes `(o, i)` of a slab of each axis.
@@ -197,21 +197,13 @@ impl Scratch {
     /// The walk of `axis` over the coordinates of its sequence from index `from` on (an
     /// interval around the eye's coordinate).
     fn inner(&self, view: &ViewCase, axis: usize, from: usize) -> Inner<'_> {
-        let lo = self.suffix_min[axis][from];
-        let hi = self.suffix_max[axis][from] + 1;
-        let case = &view.axes[axis];
-        match case.view {
-            AxisView::Below => Inner::Down { lo, hi },
-            AxisView::Above => Inner::Up { lo, hi },
-            AxisView::Split { kv } => Inner::Merge {
-                lo,
-                hi,
-                kv,
-                c: self.thresholds[axis],
-                sequence: &self.sequences[axis],
-                offsets: &self.offsets[axis],
-            },
-        }
+        Inner::far_to_near(
+            &view.axes[axis],
+            (self.suffix_min[axis][from], self.suffix_max[axis][from] + 1),
+            self.thresholds[axis],
+            &self.sequences[axis],
+            &self.offsets[axis],
+        )
     }
 
     /// Walks every face, farthest first, and inside each face every row, into `sink`.

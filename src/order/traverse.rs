@@ -1,7 +1,7 @@
 //! The one traversal engine behind every grid ordering: two outer axes walked through given
 //! coordinate sequences, the inner axis walked over run-length rows.
 
-use super::view::ViewCase;
+use super::view::{AxisCase, AxisView, ViewCase};
 use crate::grid::{Run, SparseGrid, other_axes};
 
 /// Receives voxels in traversal order.
@@ -88,6 +88,33 @@ pub(crate) enum Inner<'a> {
     /// Every position of the sequence in turn, each tested for significance (explicit
     /// interleaving, paper Algorithms 2 and 3).
     Explicit(&'a [u32]),
+}
+
+impl<'a> Inner<'a> {
+    /// The far-to-near walk of one axis over `lo..hi`: downwards or upwards when the eye is
+    /// beyond one end, merged with threshold `c` ([`AxisCase::merge_threshold`]) when the axis
+    /// is split. `sequence` is the axis' far-to-near order and `offsets` its coordinates times
+    /// the axis stride.
+    pub(crate) fn far_to_near(
+        case: &AxisCase,
+        (lo, hi): (u32, u32),
+        c: i64,
+        sequence: &'a [u32],
+        offsets: &'a [u32],
+    ) -> Self {
+        match case.view {
+            AxisView::Below => Self::Down { lo, hi },
+            AxisView::Above => Self::Up { lo, hi },
+            AxisView::Split { kv } => Self::Merge {
+                lo,
+                hi,
+                kv,
+                c,
+                sequence,
+                offsets,
+            },
+        }
+    }
 }
 
 /// A traversal: axis nesting (slowest first), the coordinate sequences of the two outer axes,
