@@ -12,7 +12,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use splatscene::classify::{Classified, TransferFunction, classify};
 use splatscene::grid::SparseGrid;
 use splatscene::order::{OrderOptions, Orderer, Ordering, ViewCase, VolumeGeometry};
-use splatscene::report::{self, ReportSettings};
+use splatscene::report::{self, Entry, ReportSettings};
 use splatscene::volume::CpuVolume;
 use splatscene::volume::phantom::shoulder_phantom_default;
 use splatscene::volume::raw::{RawSpec, ScalarFormat, load_raw, load_raw_slices, slice_stack};
@@ -80,6 +80,10 @@ struct OrderArgs {
     /// Leave out voxels on or behind the plane through the eye.
     #[arg(long)]
     cull_behind_eye: bool,
+    /// Bucket width of the bucketed order, in the units of --spacing; half the smallest
+    /// spacing by default.
+    #[arg(long)]
+    bucket_width: Option<f64>,
 }
 
 #[derive(clap::Args)]
@@ -114,6 +118,14 @@ struct OrderingsArgs {
     /// Folder for the plots (error against time, PNG and SVG).
     #[arg(long, default_value = "orderings-report")]
     out_dir: PathBuf,
+    /// Orderings to compare, comma-separated (the exact order is always computed as the
+    /// reference); all of them by default.
+    #[arg(long, value_delimiter = ',')]
+    orderings: Vec<Ordering>,
+    /// Bucket widths of the bucketed order to compare, comma-separated, in the volume's world
+    /// units: one row each, in place of the default width.
+    #[arg(long, value_delimiter = ',')]
+    bucket_widths: Vec<f64>,
 }
 
 fn main() -> Result<()> {
@@ -158,9 +170,15 @@ fn run_order(args: OrderArgs) -> Result<()> {
     let target = args.target.map_or(geometry.centre_world(), to_world);
     let view = ViewCase::new(&geometry, to_world(args.eye), target)?;
     let grid = SparseGrid::dense(args.dims)?;
+    if args.bucket_width.is_some() && args.ordering != Ordering::Bucketed {
+        bail!(
+            "--bucket-width applies to the bucketed order only, not {}",
+            args.ordering
+        );
+    }
     let options = OrderOptions {
         cull_behind_eye: args.cull_behind_eye,
-        ..OrderOptions::default()
+        bucket_width: args.bucket_width,
     };
     let mut ids = Vec::new();
     let start = Instant::now();
@@ -202,6 +220,7 @@ pub(crate) fn write_replacing(path: &Path, bytes: &[u8]) -> Result<()> {
 }
 
 fn run_orderings(args: OrderingsArgs) -> Result<()> {
+    let orderings = report_entries(&args.orderings, &args.bucket_widths)?;
     let (name, volume, classified) = load_for_report(&args)?;
     let geometry = volume.geometry()?;
     eprintln!(
@@ -214,6 +233,7 @@ fn run_orderings(args: OrderingsArgs) -> Result<()> {
         orbit_views: args.orbit_views,
         fly_in_views: args.fly_in_views,
         size: args.size,
+        orderings,
         ..ReportSettings::default()
     };
     let path = report::camera_path(&geometry, settings.orbit_views, settings.fly_in_views);
@@ -247,6 +267,32 @@ fn run_orderings(args: OrderingsArgs) -> Result<()> {
     report::plot_error_against_time(&summaries, &format!("Orderings on {name}"), &png, &svg)?;
     eprintln!("wrote {} and {}", png.display(), svg.display());
     Ok(())
+}
+
+/// The report's entries: the orderings asked for (all by default), with the bucketed order
+/// once per bucket width when widths are given. Widths are checked here, before any volume is
+/// loaded.
+fn report_entries(orderings: &[Ordering], widths: &[f64]) -> Result<Vec<Entry>> {
+    let orderings = if orderings.is_empty() {
+        &Ordering::ALL[..]
+    } else {
+        orderings
+    };
+    if let Some(w) = widths.iter().find(|w| !(w.is_finite() && **w > 0.0)) {
+        bail!("--bucket-widths: {w} is not a finite positive width");
+    }
+    if !widths.is_empty() && !orderings.contains(&Ordering::Bucketed) {
+        bail!("--bucket-widths needs the bucketed order among --orderings");
+    }
+    let mut entries = Vec::new();
+    for &ordering in orderings {
+        if ordering == Ordering::Bucketed && !widths.is_empty() {
+            entries.extend(widths.iter().map(|&w| Entry::bucketed(w)));
+        } else {
+            entries.push(Entry::from(ordering));
+        }
+    }
+    Ok(entries)
 }
 
 fn load_for_report(args: &OrderingsArgs) -> Result<(String, CpuVolume, Classified)> {

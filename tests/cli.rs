@@ -406,6 +406,10 @@ fn orderings_on_a_raw_volume_show_ordering_errors() {
         "48x48",
         "--out-dir",
         out.to_str().unwrap(),
+        "--orderings",
+        "btf,ip-pbtf,bucketed",
+        "--bucket-widths",
+        "0.25,6",
     ]);
     assert!(
         result.status.success(),
@@ -413,11 +417,53 @@ fn orderings_on_a_raw_volume_show_ordering_errors() {
         String::from_utf8_lossy(&result.stderr)
     );
     let table = String::from_utf8_lossy(&result.stdout);
-    let btf = table
-        .lines()
-        .find(|l| l.starts_with("| btf |"))
-        .expect("a btf row");
-    let rmse: f64 = btf.split('|').nth(3).unwrap().trim().parse().unwrap();
-    assert!(rmse > 0.0, "BTF differs from the exact order: {btf}");
+    let rmse = |name: &str| -> f64 {
+        let row = table
+            .lines()
+            .find(|l| l.starts_with(&format!("| {name} |")))
+            .unwrap_or_else(|| panic!("a {name} row in\n{table}"));
+        row.split('|').nth(3).unwrap().trim().parse().unwrap()
+    };
+    assert!(rmse("btf") > 0.0, "BTF differs from the exact order");
+    // Only the orderings asked for, the bucketed order once per width; wider buckets leave
+    // more pairs to the IP-PBTF order inside each bucket.
+    assert!(!table.contains("| pyramid |") && !table.contains("| bucketed |"));
+    assert!(
+        rmse("bucketed 0.25") < rmse("bucketed 6"),
+        "error grows with the bucket width:\n{table}"
+    );
+    assert!(out.join("error-vs-time.svg").exists());
     std::fs::remove_dir_all(&out).ok();
+}
+
+#[test]
+fn bucket_width_options_are_checked() {
+    let order = |extra: &[&str]| {
+        let mut args = vec!["order", "--dims", "6,5,4", "--eye", "-3,2,9"];
+        args.extend_from_slice(extra);
+        splatscene(&args)
+    };
+    let fine = order(&["--ordering", "bucketed", "--bucket-width", "0.25"]);
+    let coarse = order(&["--ordering", "bucketed", "--bucket-width", "4"]);
+    assert!(fine.status.success() && coarse.status.success());
+    assert_eq!(fine.stdout.len(), 120 * 4);
+    assert_ne!(fine.stdout, coarse.stdout, "the width changes the order");
+    let stderr = |o: std::process::Output| String::from_utf8_lossy(&o.stderr).into_owned();
+    let zero = order(&["--ordering", "bucketed", "--bucket-width", "0"]);
+    assert!(!zero.status.success());
+    assert!(stderr(zero).contains("bucket width"));
+    let other = order(&["--ordering", "pbtf", "--bucket-width", "1"]);
+    assert!(!other.status.success());
+    assert!(stderr(other).contains("bucketed order only"));
+    let report = |extra: &[&str]| {
+        let mut args = vec!["orderings", "--orbit-views", "1", "--fly-in-views", "0"];
+        args.extend_from_slice(extra);
+        splatscene(&args)
+    };
+    let negative = report(&["--bucket-widths", "1,-2"]);
+    assert!(!negative.status.success());
+    assert!(stderr(negative).contains("-2 is not a finite positive width"));
+    let without = report(&["--orderings", "btf,pbtf", "--bucket-widths", "1"]);
+    assert!(!without.status.success());
+    assert!(stderr(without).contains("needs the bucketed order"));
 }

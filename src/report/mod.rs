@@ -36,7 +36,56 @@ pub struct ReportSettings {
     /// image).
     pub near_voxels: f64,
     /// Orderings to compare (the exact order is always computed as the reference).
-    pub orderings: Vec<Ordering>,
+    pub orderings: Vec<Entry>,
+}
+
+/// One ordering as the report runs it: the ordering and, for the bucketed order, the bucket
+/// width (world units; `None` is the default width), so that a report can set several widths
+/// of the bucketed order side by side.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Entry {
+    /// The ordering.
+    pub ordering: Ordering,
+    /// Bucket width of [`Ordering::Bucketed`]; ignored by the other orderings.
+    pub bucket_width: Option<f64>,
+}
+
+impl Entry {
+    /// The bucketed order with buckets `width` wide (world units).
+    pub fn bucketed(width: f64) -> Self {
+        Self {
+            ordering: Ordering::Bucketed,
+            bucket_width: Some(width),
+        }
+    }
+
+    /// The order options of this entry, leaving out voxels behind the eye as every view of the
+    /// report does.
+    fn options(&self) -> OrderOptions {
+        OrderOptions {
+            cull_behind_eye: true,
+            bucket_width: self.bucket_width,
+        }
+    }
+}
+
+impl From<Ordering> for Entry {
+    fn from(ordering: Ordering) -> Self {
+        Self {
+            ordering,
+            bucket_width: None,
+        }
+    }
+}
+
+/// The ordering's name, followed by the bucket width where one is set (`bucketed 0.7`).
+impl std::fmt::Display for Entry {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match (self.ordering, self.bucket_width) {
+            (Ordering::Bucketed, Some(width)) => write!(f, "{} {width}", self.ordering),
+            (ordering, _) => write!(f, "{ordering}"),
+        }
+    }
 }
 
 impl Default for ReportSettings {
@@ -48,7 +97,7 @@ impl Default for ReportSettings {
             fov_y_degrees: 50.0,
             style: SplatStyle::default(),
             near_voxels: 2.0,
-            orderings: Ordering::ALL.to_vec(),
+            orderings: Ordering::ALL.map(Entry::from).to_vec(),
         }
     }
 }
@@ -73,7 +122,7 @@ pub struct ViewResult {
     /// The view case.
     pub kind: CaseKind,
     /// Per ordering, in the order of [`ReportSettings::orderings`].
-    pub per_ordering: Vec<(Ordering, f64, ImageDifference, FragmentStats)>,
+    pub per_ordering: Vec<(Entry, f64, ImageDifference, FragmentStats)>,
 }
 
 /// A named camera placement.
@@ -207,25 +256,22 @@ pub fn measure_views(
             near: settings.near_voxels * geometry.spacing().iter().copied().fold(0.0, f64::max),
             ..Camera::looking_at(view.eye, view.target, settings.size.0, settings.size.1)
         };
-        let options = OrderOptions {
-            cull_behind_eye: true,
-            ..OrderOptions::default()
-        };
         orderer.order(
             &classified.grid,
             &case,
             Ordering::Exact,
-            &options,
+            &Entry::from(Ordering::Exact).options(),
             &mut list,
         )?;
         let (reference, _) = composite(&camera, &volume, &list, &settings.style)?;
         let mut per_ordering = Vec::with_capacity(settings.orderings.len());
-        for &ordering in &settings.orderings {
+        for &entry in &settings.orderings {
+            let options = entry.options();
             let start = Instant::now();
-            orderer.order(&classified.grid, &case, ordering, &options, &mut list)?;
+            orderer.order(&classified.grid, &case, entry.ordering, &options, &mut list)?;
             let seconds = start.elapsed().as_secs_f64();
             let (frame, stats) = composite(&camera, &volume, &list, &settings.style)?;
-            per_ordering.push((ordering, seconds, compare(&frame, &reference)?, stats));
+            per_ordering.push((entry, seconds, compare(&frame, &reference)?, stats));
         }
         results.push(ViewResult {
             name: if view.index == 0 && view.name != "orbit" && view.name != "fly-in" {
@@ -245,7 +291,7 @@ pub fn measure_views(
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Summary {
     /// The ordering.
-    pub ordering: Ordering,
+    pub ordering: Entry,
     /// Order time in seconds: median, minimum, maximum over the views.
     pub time: [f64; 3],
     /// Mean image RMSE against the exact order.

@@ -110,7 +110,7 @@ where
             .draw_series(std::iter::once(Circle::new(point, 6, colour.filled())))
             .map_err(|e| fail(&e))?;
         let label = if s.rmse > 0.0 {
-            s.ordering.name().to_owned()
+            s.ordering.to_string()
         } else {
             format!("{} (reference)", s.ordering)
         };
