@@ -1,7 +1,11 @@
-//! The bucketed distance order: a counting sort on world distance quantised into buckets,
-//! farthest bucket first, IP-PBTF order inside each bucket. Two IP-PBTF walks over the
-//! significant voxels and no temporary the size of the volume: the first counts the voxels of
-//! each bucket, the second writes each id straight to its place.
+//! The bucketed distance order: world distance quantised into buckets, farthest bucket first,
+//! IP-PBTF order inside each bucket, with no temporary the size of the volume.
+//!
+//! Where the buckets are few against the voxels, one IP-PBTF walk appends each id to its
+//! bucket's chain of fixed-size blocks, and the chains are then copied out farthest first.
+//! Otherwise (a chain's last block would be mostly empty) a counting sort does it in two
+//! walks: the first counts the voxels of each bucket, the second writes each id straight to its
+//! place. Both give the same list.
 //!
 //! Distances come from per-axis tables of squared-distance terms in f32 (orthogonal grid axes)
 //! or from the full quadratic form (sheared grids), summed the same way in both walks so that
@@ -16,6 +20,16 @@ use crate::grid::SparseGrid;
 /// More buckets than this widen the buckets instead (bounds the scratch memory).
 const MAX_BUCKETS: usize = 1 << 20;
 
+/// Ids per block of the one-walk path. It runs only where `buckets * BLOCK` is at most the
+/// number of significant voxels, so the blocks hold at most twice the list.
+const BLOCK: u32 = 64;
+
+/// No block.
+const NONE: u32 = u32::MAX;
+
+/// Nearer buckets tried one by one before a voxel's bucket is searched for.
+const NEARER_TRIED: usize = 8;
+
 /// The bucket width: the caller's, or half the smallest voxel spacing.
 pub(crate) fn width(view: &ViewCase, requested: Option<f64>) -> Result<f64, OrderError> {
     match requested {
@@ -29,10 +43,11 @@ pub(crate) fn width(view: &ViewCase, requested: Option<f64>) -> Result<f64, Orde
     }
 }
 
-/// Bucket cursors and distance tables kept between frames.
+/// Bucket cursors, block chains and distance tables kept between frames.
 #[derive(Debug, Default)]
 pub(crate) struct Scratch {
     cursors: Vec<u32>,
+    chains: Chains,
     terms: [Vec<f32>; 3],
     /// `edges[b]` is the smallest squared distance of bucket `b` (`edges[0]` is minus
     /// infinity and a last entry of plus infinity closes the last bucket), so a voxel's bucket
@@ -76,8 +91,8 @@ impl Scratch {
         self.cursors.resize(buckets, 0);
     }
 
-    /// Orders the voxels: counts per bucket along `plan` (IP-PBTF), then walks it again and
-    /// places each voxel after all farther buckets.
+    /// Orders the voxels along `plan` (IP-PBTF) into `out`: in one walk into block chains
+    /// where the buckets are few enough, otherwise by counting.
     pub(crate) fn order(
         &mut self,
         grid: &SparseGrid,
@@ -88,6 +103,49 @@ impl Scratch {
         out: &mut Vec<u32>,
     ) {
         self.prepare(view, width);
+        if chains_fit(self.cursors.len(), grid.len()) {
+            self.order_chained(grid, plan, cull, out);
+        } else {
+            self.order_counted(grid, plan, cull, out);
+        }
+    }
+
+    /// One walk: each voxel appended to its bucket's chain of blocks; the chains then copied
+    /// to `out`, farthest bucket first.
+    fn order_chained(
+        &mut self,
+        grid: &SparseGrid,
+        plan: &Plan<'_>,
+        cull: Option<&ViewCase>,
+        out: &mut Vec<u32>,
+    ) {
+        let mut chains = std::mem::take(&mut self.chains);
+        let buckets = self.cursors.len();
+        // Every bucket's last block may be partly empty: at most one block per bucket beyond
+        // the full ones.
+        let blocks = pool_blocks(buckets, grid.len());
+        chains.reset(buckets, blocks);
+        let mut append = Append {
+            row: self.row(),
+            chains: &mut chains,
+            slot: 0,
+            end: 0,
+        };
+        walk(grid, plan, cull, &mut append);
+        append.flush();
+        chains.copy_out(out);
+        self.chains = chains;
+    }
+
+    /// Two walks: count the voxels of each bucket, then place each after all farther
+    /// buckets.
+    fn order_counted(
+        &mut self,
+        grid: &SparseGrid,
+        plan: &Plan<'_>,
+        cull: Option<&ViewCase>,
+        out: &mut Vec<u32>,
+    ) {
         let mut counts = std::mem::take(&mut self.cursors);
         let mut count = Count {
             row: self.row(),
@@ -147,20 +205,24 @@ impl Current {
         !(q >= self.lo && q < self.hi)
     }
 
-    /// Moves to the bucket of `q`. Along a run toward the eye that is mostly the next nearer
-    /// bucket, tried first.
+    /// Moves to the bucket of `q`. Along a run toward the eye that is mostly one of the next
+    /// few nearer buckets (a step along a thick axis crosses several), tried first.
     #[inline(always)]
     fn locate(&mut self, q: f32, scratch: &Scratch) {
         let b = self.bucket;
-        if b > 0 && q < self.lo {
-            let below = scratch.edges[b - 1];
-            if q >= below {
-                *self = Self {
-                    bucket: b - 1,
-                    lo: below,
-                    hi: self.lo,
-                };
-                return;
+        if q < self.lo {
+            let mut hi = self.lo;
+            for nearer in (b.saturating_sub(NEARER_TRIED)..b).rev() {
+                let lo = scratch.edges[nearer];
+                if q >= lo {
+                    *self = Self {
+                        bucket: nearer,
+                        lo,
+                        hi,
+                    };
+                    return;
+                }
+                hi = lo;
             }
         }
         self.search(q, scratch);
@@ -335,7 +397,125 @@ impl Pass for Scatter<'_> {
     }
 }
 
-/// One of the two walks: it takes the voxels of a row as `(id, inner coordinate)` pairs, in
+/// Blocks enough for `voxels` ids in `buckets` chains: the full ones and at most one partly
+/// empty block per bucket.
+fn pool_blocks(buckets: usize, voxels: usize) -> usize {
+    voxels / BLOCK as usize + buckets + 1
+}
+
+/// Whether the one-walk path is taken: the blocks hold at most twice the list, and every
+/// position in the pool is a u32.
+fn chains_fit(buckets: usize, voxels: usize) -> bool {
+    buckets.saturating_mul(BLOCK as usize) <= voxels
+        && pool_blocks(buckets, voxels).saturating_mul(BLOCK as usize) <= u32::MAX as usize
+}
+
+/// Per bucket, a chain of blocks in one pool: the write position in its last block and that
+/// block's end (both 0 before the bucket's first voxel) and its first block; per block, the
+/// next block of the same bucket.
+#[derive(Debug, Default)]
+struct Chains {
+    pool: Vec<u32>,
+    next: Vec<u32>,
+    used: u32,
+    first: Vec<u32>,
+    cursor: Vec<(u32, u32)>,
+}
+
+impl Chains {
+    fn reset(&mut self, buckets: usize, blocks: usize) {
+        self.pool.resize(blocks * BLOCK as usize, 0);
+        self.next.clear();
+        self.next.resize(blocks, NONE);
+        self.used = 0;
+        self.first.clear();
+        self.first.resize(buckets, NONE);
+        self.cursor.clear();
+        self.cursor.resize(buckets, (0, 0));
+    }
+
+    /// A new block at the end of `bucket`'s chain, whose last block ended at `end`; returns
+    /// the new block's start and end.
+    #[inline(never)]
+    fn grow(&mut self, bucket: usize, end: u32) -> (u32, u32) {
+        let block = self.used;
+        self.used += 1;
+        if end == 0 {
+            self.first[bucket] = block;
+        } else {
+            self.next[(end / BLOCK - 1) as usize] = block;
+        }
+        (block * BLOCK, (block + 1) * BLOCK)
+    }
+
+    /// Appends every chain to `out`, farthest bucket first.
+    fn copy_out(&self, out: &mut Vec<u32>) {
+        out.clear();
+        for (bucket, &(slot, end)) in self.cursor.iter().enumerate().rev() {
+            let mut block = self.first[bucket];
+            while block != NONE {
+                let start = block * BLOCK;
+                let stop = if start + BLOCK == end {
+                    slot
+                } else {
+                    start + BLOCK
+                };
+                out.extend_from_slice(&self.pool[start as usize..stop as usize]);
+                block = self.next[block as usize];
+            }
+        }
+    }
+}
+
+/// Appends each voxel to its bucket's chain, the current bucket's write position and block
+/// end held in registers.
+struct Append<'a> {
+    row: RowBuckets<'a>,
+    chains: &'a mut Chains,
+    slot: u32,
+    end: u32,
+}
+
+impl Append<'_> {
+    fn flush(&mut self) {
+        if self.row.current.lo < self.row.current.hi {
+            self.chains.cursor[self.row.current.bucket] = (self.slot, self.end);
+        }
+    }
+}
+
+impl Pass for Append<'_> {
+    #[inline]
+    fn start_row(&mut self, k: [u32; 3], axis: usize) {
+        self.row.start_row(k, axis);
+    }
+
+    #[inline(always)]
+    fn feed(&mut self, voxels: impl Iterator<Item = (u32, u32)>) {
+        let scratch = self.row.scratch;
+        let chains = &mut *self.chains;
+        let mut current = self.row.current;
+        let (mut slot, mut end) = (self.slot, self.end);
+        each_voxel!(self.row, voxels, |id, q| {
+            if current.leaves(q) {
+                if current.lo < current.hi {
+                    chains.cursor[current.bucket] = (slot, end);
+                }
+                current.locate(q, scratch);
+                (slot, end) = chains.cursor[current.bucket];
+            }
+            if slot == end {
+                (slot, end) = chains.grow(current.bucket, end);
+            }
+            chains.pool[slot as usize] = id;
+            slot += 1;
+        });
+        self.row.current = current;
+        (self.slot, self.end) = (slot, end);
+    }
+}
+
+/// One of the walks: it takes the voxels of a row as `(id, inner coordinate)` pairs, in
 /// walk order, whichever way the traversal hands them over.
 trait Pass {
     fn start_row(&mut self, k: [u32; 3], axis: usize);
@@ -409,7 +589,13 @@ mod tests {
     /// The bucketed order is, by definition, the IP-PBTF list stably sorted by bucket, farthest
     /// first. Checked with the bucket of each voxel found by scanning the edges, the squared
     /// distance summed as the walks sum it.
-    fn check(geometry: &VolumeGeometry, eye: DVec3, keep: impl Fn(u32) -> bool, cull: bool) {
+    /// Returns whether a bucket took more than one block.
+    fn check(
+        geometry: &VolumeGeometry,
+        eye: DVec3,
+        keep: impl Fn(u32) -> bool,
+        cull: bool,
+    ) -> bool {
         let dims = geometry.dims();
         let grid = SparseGrid::from_mask(dims, keep).unwrap();
         let view = ViewCase::new(geometry, eye, geometry.centre_world()).unwrap();
@@ -437,6 +623,27 @@ mod tests {
         expected.sort_by_key(|&id| std::cmp::Reverse(bucket(id)));
         let got = order(&grid, &view, Ordering::Bucketed, &options).unwrap();
         assert_eq!(got, expected, "eye {eye} on {:?}", view.kind);
+        let mut sizes = vec![0u32; scratch.edges.len() - 1];
+        for &id in &expected {
+            sizes[bucket(id)] += 1;
+        }
+        let blocks: u32 = sizes.iter().map(|n| n.div_ceil(BLOCK)).sum();
+        // Both paths, whichever the grid's size picks, and the block chains with more than
+        // one block in a chain wherever a bucket holds more than a block.
+        let (mut seqs, mut offsets) = (<[Vec<u32>; 3]>::default(), Vec::new());
+        let [s0, s1, s2] = &mut seqs;
+        let plan = crate::order::ip_pbtf_plan(&grid, &view, false, [s0, s1, s2], &mut offsets);
+        let cull = cull.then_some(&view);
+        let mut out = Vec::new();
+        scratch.order_counted(&grid, &plan, cull, &mut out);
+        assert_eq!(out, expected, "counted, eye {eye} on {:?}", view.kind);
+        scratch.order_chained(&grid, &plan, cull, &mut out);
+        assert_eq!(out, expected, "chained, eye {eye} on {:?}", view.kind);
+        assert_eq!(
+            scratch.chains.used, blocks,
+            "one block per {BLOCK} ids of a bucket"
+        );
+        sizes.iter().any(|&n| n > BLOCK)
     }
 
     #[test]
@@ -460,6 +667,7 @@ mod tests {
             ),
         )
         .unwrap();
+        let mut long_chains = false;
         for geometry in [&axis_aligned, &sheared] {
             let dims = geometry.dims().map(f64::from);
             for f in [
@@ -472,10 +680,11 @@ mod tests {
                 let at = DVec3::new(f[0] * dims[0], f[1] * dims[1], f[2] * dims[2]);
                 let eye = geometry.index_to_world_point(at);
                 for cull in [false, true] {
-                    check(geometry, eye, sparse, cull);
-                    check(geometry, eye, |_| true, cull);
+                    long_chains |= check(geometry, eye, sparse, cull);
+                    long_chains |= check(geometry, eye, |_| true, cull);
                 }
             }
         }
+        assert!(long_chains, "some bucket fills more than one block");
     }
 }

@@ -4,7 +4,7 @@
 //! first (back to front). The grid orderings (BTF, WBTF, PBTF, IP-PBTF) share one traversal
 //! engine whose inner loop walks run-length rows, so empty space costs nothing there; the exact
 //! order is a parallel radix sort by world distance; two orderings are ours, both O(N): the
-//! bucketed order, a counting sort on quantised distance with IP-PBTF order inside each bucket,
+//! bucketed order, a bucket sort on quantised distance with IP-PBTF order inside each bucket,
 //! and the pyramid order, which gives every voxel the slab axis its own ray runs along.
 //!
 //! # Definitions
