@@ -71,7 +71,8 @@ struct OrderArgs {
     /// Target in voxel index coordinates; the grid centre by default.
     #[arg(long, value_parser = parse_f64x3, allow_hyphen_values = true)]
     target: Option<[f64; 3]>,
-    /// btf, wbtf, pbtf, ip-pbtf, ip-pbtf-explicit, ip-pbtf-implicit, exact, bucketed or pyramid.
+    /// btf, wbtf, pbtf, ip-pbtf, ip-pbtf-explicit, ip-pbtf-implicit, exact, bucketed, pyramid or
+    /// rows.
     #[arg(long)]
     ordering: Ordering,
     /// Output file; standard output when absent.

@@ -2,7 +2,7 @@
 //! printed as a JSON line on standard output and marked); keys to switch the ordering and the
 //! transfer function; a screenshot key; frame and order time in the title.
 //!
-//! Keys: `1` BTF, `2` PBTF, `3` IP-PBTF, `4` exact, `5` bucketed, `6` pyramid; `T` next transfer function;
+//! Keys: `1` BTF, `2` PBTF, `3` IP-PBTF, `4` exact, `5` bucketed, `6` pyramid, `7` rows; `T` next transfer function;
 //! `S` screenshot (a new `splatscene-view-N.png` in the screenshot folder); `C` a clip plane
 //! facing the eye through the target (cutting the volume, not the meshes), or off again, and
 //! `[` / `]` move it away from or toward the eye; `R` reset the camera; `Q` or Escape quits. Mouse: left drag orbits, right drag pans, the wheel zooms, a
@@ -64,13 +64,14 @@ pub enum ViewerError {
 /// Transfer functions the `T` key cycles through: the presets, by name.
 const PRESETS: [&str; 4] = TransferFunction::PRESETS;
 
-const ORDERINGS: [(&str, Ordering); 6] = [
+const ORDERINGS: [(&str, Ordering); 7] = [
     ("1", Ordering::Btf),
     ("2", Ordering::Pbtf),
     ("3", Ordering::IpPbtfImplicit),
     ("4", Ordering::Exact),
     ("5", Ordering::Bucketed),
     ("6", Ordering::Pyramid),
+    ("7", Ordering::Rows),
 ];
 
 /// Opens a window on `scene` and runs until it is closed.

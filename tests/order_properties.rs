@@ -87,7 +87,7 @@ proptest! {
         let options = OrderOptions { cull_behind_eye: case.cull, ..Default::default() };
         let mut orderer = Orderer::new();
         let mut out = Vec::new();
-        for ordering in [Ordering::Btf, Ordering::Wbtf, Ordering::Pbtf, Ordering::IpPbtfExplicit, Ordering::IpPbtfImplicit, Ordering::Pyramid] {
+        for ordering in [Ordering::Btf, Ordering::Wbtf, Ordering::Pbtf, Ordering::IpPbtfExplicit, Ordering::IpPbtfImplicit, Ordering::Pyramid, Ordering::Rows] {
             orderer.order(&grid, &view, ordering, &options, &mut out).unwrap();
             let expected = reference::order(&grid, &view, ordering, case.cull);
             prop_assert_eq!(&out, &expected, "{} on {:?}", ordering, view.kind);

@@ -103,7 +103,7 @@ pub struct RenderArgs {
     /// Output PNG.
     #[arg(long)]
     out: PathBuf,
-    /// Splat ordering: btf, wbtf, pbtf, ip-pbtf, exact, bucketed, pyramid...
+    /// Splat ordering: btf, wbtf, pbtf, ip-pbtf, exact, bucketed, pyramid, rows...
     #[arg(long)]
     ordering: Option<Ordering>,
     /// Also write the mesh depth as a 16-bit PNG (near black, far white).
@@ -338,7 +338,7 @@ pub fn run_viewer(args: ViewerArgs) -> Result<()> {
         background: loaded.background.unwrap_or([0.06, 0.07, 0.09]),
     };
     eprintln!(
-        "keys: 1 BTF, 2 PBTF, 3 IP-PBTF, 4 exact, 5 bucketed, 6 pyramid, T transfer function, S screenshot, C clip plane ([ and ] move it), R reset, Q quit; drag to orbit (right: pan), wheel to zoom, click to pick"
+        "keys: 1 BTF, 2 PBTF, 3 IP-PBTF, 4 exact, 5 bucketed, 6 pyramid, 7 rows, T transfer function, S screenshot, C clip plane ([ and ] move it), R reset, Q quit; drag to orbit (right: pan), wheel to zoom, click to pick"
     );
     splatscene::viewer::run(loaded.scene, options)?;
     Ok(())

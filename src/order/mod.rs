@@ -3,9 +3,10 @@
 //! Every ordering is a permutation of the significant voxels of a [`SparseGrid`], first drawn
 //! first (back to front). The grid orderings (BTF, WBTF, PBTF, IP-PBTF) share one traversal
 //! engine whose inner loop walks run-length rows, so empty space costs nothing there; the exact
-//! order is a parallel radix sort by world distance; two orderings are ours, both O(N): the
-//! bucketed order, a bucket sort on quantised distance with IP-PBTF order inside each bucket,
-//! and the pyramid order, which gives every voxel the slab axis its own ray runs along.
+//! order is a parallel radix sort by world distance; three orderings are ours, all O(N) in the
+//! voxels: the bucketed order, a bucket sort on quantised distance with IP-PBTF order inside
+//! each bucket; the pyramid order, which gives every voxel the slab axis its own ray runs
+//! along; and the rows order, which sorts the rows of the grid rather than its voxels.
 //!
 //! # Definitions
 //! Voxel centres sit at integer index coordinates; the eye `e` is taken into index space in f64
@@ -35,12 +36,20 @@
 //!   `|k_a - e_a| * g_aa` are equal cut the grid into six pyramids; each is drawn slab by slab
 //!   along its own axis, all slabs interleaved far to near (see the `pyramid` module for the
 //!   exact rule and the tie order).
+//! - **Rows**: the grid cut into rows along the row axis (the axis `a` with the smallest
+//!   `g_aa * mean |k_a - e_a|` over the grid's coordinates, ties to the lower axis); rows
+//!   drawn by the world squared distance from the eye to the row's line, farthest first, ties
+//!   by lower row index `k_b + n_b * k_c` (`b < c` the other two axes); each row far to near
+//!   along its axis as IP-PBTF's inner axis (`|k_a - e_a|` descending, ties lower first). On
+//!   sheared grids the row's nearest point to the eye need not be at `e_a`; the walk along the
+//!   row stays IP-PBTF's.
 
 mod bucketed;
 mod distance;
 mod exact;
 mod pyramid;
 pub mod reference;
+mod rows;
 mod traverse;
 mod view;
 
@@ -107,17 +116,21 @@ pub enum Ordering {
     /// Six pyramids with their apex at the eye, each walked slab by slab along its own axis,
     /// the slabs of all six interleaved far to near.
     Pyramid,
+    /// Rows along one axis sorted by the distance from the eye to each row's line, each row
+    /// far to near.
+    Rows,
 }
 
 impl Ordering {
     /// Every ordering, in report order.
-    pub const ALL: [Ordering; 8] = [
+    pub const ALL: [Ordering; 9] = [
         Self::Btf,
         Self::Wbtf,
         Self::Pbtf,
         Self::IpPbtfExplicit,
         Self::IpPbtfImplicit,
         Self::Pyramid,
+        Self::Rows,
         Self::Bucketed,
         Self::Exact,
     ];
@@ -133,6 +146,7 @@ impl Ordering {
             Self::Exact => "exact",
             Self::Bucketed => "bucketed",
             Self::Pyramid => "pyramid",
+            Self::Rows => "rows",
         }
     }
 }
@@ -146,7 +160,7 @@ impl fmt::Display for Ordering {
 /// An ordering name that is not known.
 #[derive(Debug, Error, Clone, PartialEq, Eq)]
 #[error(
-    "unknown ordering {0:?}; expected one of btf, wbtf, pbtf, ip-pbtf, ip-pbtf-explicit, ip-pbtf-implicit, exact, bucketed, pyramid"
+    "unknown ordering {0:?}; expected one of btf, wbtf, pbtf, ip-pbtf, ip-pbtf-explicit, ip-pbtf-implicit, exact, bucketed, pyramid, rows"
 )]
 pub struct UnknownOrdering(pub String);
 
@@ -163,6 +177,7 @@ impl FromStr for Ordering {
             "exact" | "sort" => Ok(Self::Exact),
             "bucketed" | "bucket" => Ok(Self::Bucketed),
             "pyramid" => Ok(Self::Pyramid),
+            "rows" => Ok(Self::Rows),
             _ => Err(UnknownOrdering(s.to_owned())),
         }
     }
@@ -188,6 +203,7 @@ pub struct Orderer {
     exact: exact::Scratch,
     buckets: bucketed::Scratch,
     pyramid: pyramid::Scratch,
+    rows: rows::Scratch,
 }
 
 impl Orderer {
@@ -238,6 +254,7 @@ impl Orderer {
                 self.buckets.order(grid, view, width, &plan, cull, out);
             }
             Ordering::Pyramid => self.pyramid.order(grid, view, cull, &mut Collect(out)),
+            Ordering::Rows => self.rows.order(grid, view, cull, &mut Collect(out)),
         }
         Ok(())
     }

@@ -43,6 +43,7 @@ pub fn order(grid: &SparseGrid, view: &ViewCase, ordering: Ordering, cull: bool)
             db.total_cmp(&da).then(a.cmp(&b))
         }),
         Ordering::Pyramid => ids.sort_by(|&a, &b| super::pyramid::compare(view, key(a), key(b))),
+        Ordering::Rows => ids.sort_by(|&a, &b| super::rows::compare(view, key(a), key(b))),
         Ordering::Bucketed => {
             panic!("the bucketed order has no comparison-sort reference; test it against exact")
         }
