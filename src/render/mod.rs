@@ -65,6 +65,16 @@ pub enum RenderError {
     /// Reading the image back failed.
     #[error("reading the frame back failed: {0}")]
     Readback(String),
+    /// The adapter lacks something this needs (an OpenGL adapter cannot copy depth to memory).
+    #[error(
+        "the GPU adapter {adapter} cannot {what}; Mesa's software Vulkan driver can (apt-get install mesa-vulkan-drivers)"
+    )]
+    Unsupported {
+        /// The adapter, as [`GpuContext::describe`] gives it.
+        adapter: String,
+        /// What it cannot do.
+        what: &'static str,
+    },
     /// A volume node could not be classified or ordered.
     #[error("volume node {node:?}: {message}")]
     Volume {

@@ -94,6 +94,17 @@ pub fn read_texture(
     aspect: wgpu::TextureAspect,
     bytes_per_texel: u32,
 ) -> Result<Vec<u8>, RenderError> {
+    let depth_copies = ctx
+        .adapter
+        .get_downlevel_capabilities()
+        .flags
+        .contains(wgpu::DownlevelFlags::DEPTH_TEXTURE_AND_BUFFER_COPIES);
+    if aspect == wgpu::TextureAspect::DepthOnly && !depth_copies {
+        return Err(RenderError::Unsupported {
+            adapter: ctx.describe(),
+            what: "copy a depth texture to memory (screenshots read the depth back)",
+        });
+    }
     let (width, height) = (texture.width(), texture.height());
     let row = width * bytes_per_texel;
     let padded =
