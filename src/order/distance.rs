@@ -2,6 +2,7 @@
 //! the voxels are visited in (so that two passes over the grid agree bit for bit).
 
 use glam::DMat3;
+use rdst::RadixKey;
 
 use super::view::ViewCase;
 
@@ -53,6 +54,42 @@ impl DistanceTable {
                 + self.terms[2][k[2] as usize]
         } else {
             self.view.as_ref().map_or(0.0, |v| v.distance_squared(k))
+        }
+    }
+}
+
+/// A radix-sort key that puts the larger squared distance first and, among equal distances,
+/// the lower index first.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct FarthestFirst {
+    inverted_distance: u64,
+    /// The voxel id or row index the key belongs to.
+    pub index: u32,
+}
+
+impl FarthestFirst {
+    /// The key of `index` at squared distance `q` (negative values and -0 count as 0).
+    #[inline]
+    pub fn new(q: f64, index: u32) -> Self {
+        // Non-negative floats order like their bit patterns.
+        let q = if q > 0.0 { q } else { 0.0 };
+        Self {
+            inverted_distance: !q.to_bits(),
+            index,
+        }
+    }
+}
+
+impl RadixKey for FarthestFirst {
+    const LEVELS: usize = 12;
+
+    #[inline]
+    fn get_level(&self, level: usize) -> u8 {
+        // rdst reads levels from the least significant byte up.
+        if level < 4 {
+            (self.index >> (level * 8)) as u8
+        } else {
+            (self.inverted_distance >> ((level - 4) * 8)) as u8
         }
     }
 }

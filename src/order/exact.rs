@@ -1,43 +1,22 @@
 //! The exact order: voxel centres sorted by world distance from the eye, farthest first, with a
 //! parallel radix sort (rdst).
 
-use rdst::{RadixKey, RadixSort};
+use rdst::RadixSort;
 
-use super::distance::DistanceTable;
+use super::distance::{DistanceTable, FarthestFirst};
 use super::traverse::{Plan, Sink, walk};
 use super::view::ViewCase;
 use crate::grid::SparseGrid;
 
-/// Sort key: inverted squared distance (so that ascending order is farthest first), then id.
-#[derive(Debug, Clone, Copy)]
-struct Key {
-    inverted_distance: u64,
-    id: u32,
-}
-
-impl RadixKey for Key {
-    const LEVELS: usize = 12;
-
-    #[inline]
-    fn get_level(&self, level: usize) -> u8 {
-        // rdst reads levels from the least significant byte up.
-        if level < 4 {
-            (self.id >> (level * 8)) as u8
-        } else {
-            (self.inverted_distance >> ((level - 4) * 8)) as u8
-        }
-    }
-}
-
 /// Keys kept between frames.
 #[derive(Debug, Default)]
 pub(crate) struct Scratch {
-    keys: Vec<Key>,
+    keys: Vec<FarthestFirst>,
     table: DistanceTable,
 }
 
 struct KeySink<'a> {
-    keys: &'a mut Vec<Key>,
+    keys: &'a mut Vec<FarthestFirst>,
     table: &'a DistanceTable,
     k: [u32; 3],
     axis: usize,
@@ -53,12 +32,8 @@ impl Sink for KeySink<'_> {
     #[inline]
     fn voxel(&mut self, id: u32, k: u32) {
         self.k[self.axis] = k;
-        // Non-negative floats order like their bit patterns.
-        let q = self.table.distance_squared(self.k).max(0.0);
-        self.keys.push(Key {
-            inverted_distance: !q.to_bits(),
-            id,
-        });
+        let q = self.table.distance_squared(self.k);
+        self.keys.push(FarthestFirst::new(q, id));
     }
 }
 
@@ -82,6 +57,6 @@ impl Scratch {
         };
         walk(grid, id_order, cull, &mut sink);
         self.keys.radix_sort_unstable();
-        out.extend(self.keys.iter().map(|k| k.id));
+        out.extend(self.keys.iter().map(|k| k.index));
     }
 }

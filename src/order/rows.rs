@@ -14,8 +14,9 @@
 //! of thousands to millions of voxels) and the same row walks as IP-PBTF's inner loop.
 
 use glam::DVec3;
-use rdst::{RadixKey, RadixSort};
+use rdst::RadixSort;
 
+use super::distance::FarthestFirst;
 use super::traverse::{Inner, Sink, walk_row};
 use super::view::ViewCase;
 use crate::grid::{SparseGrid, other_axes};
@@ -64,32 +65,11 @@ pub(crate) fn row_distance_squared(view: &ViewCase, axis: usize, k: [u32; 3]) ->
     if q > 0.0 { q } else { 0.0 }
 }
 
-/// Sort key of a row: its inverted squared distance (so that ascending is farthest first), then
-/// its index `k_b + n_b * k_c`.
-#[derive(Debug, Clone, Copy)]
-struct Key {
-    inverted_distance: u64,
-    row: u32,
-}
-
-impl RadixKey for Key {
-    const LEVELS: usize = 12;
-
-    #[inline]
-    fn get_level(&self, level: usize) -> u8 {
-        // rdst reads levels from the least significant byte up.
-        if level < 4 {
-            (self.row >> (level * 8)) as u8
-        } else {
-            (self.inverted_distance >> ((level - 4) * 8)) as u8
-        }
-    }
-}
-
 /// Row keys and the row axis' far-to-near order, kept between frames.
 #[derive(Debug, Default)]
 pub(crate) struct Scratch {
-    keys: Vec<Key>,
+    /// Per row: its squared distance and its index `k_b + n_b * k_c`.
+    keys: Vec<FarthestFirst>,
     sequence: Vec<u32>,
     offsets: Vec<u32>,
 }
@@ -117,11 +97,8 @@ impl Scratch {
                 k[b] = kb;
                 k[c] = kc;
                 let q = row_distance_squared(view, axis, k);
-                self.keys.push(Key {
-                    inverted_distance: !q.to_bits(),
-                    // At most the number of voxels, which fits a u32.
-                    row: kb + dims[b] * kc,
-                });
+                // At most the number of voxels, which fits a u32.
+                self.keys.push(FarthestFirst::new(q, kb + dims[b] * kc));
             }
         }
         self.keys.radix_sort_unstable();
@@ -142,7 +119,7 @@ impl Scratch {
         );
         let strides = grid.strides();
         for key in &self.keys {
-            let (kb, kc) = (key.row % dims[b], key.row / dims[b]);
+            let (kb, kc) = (key.index % dims[b], key.index / dims[b]);
             let mut k = [0; 3];
             k[b] = kb;
             k[c] = kc;
