@@ -5,6 +5,10 @@
 //! afterwards a few frames with stage timing print the split (order, upload, mesh pass, splat
 //! pass, readback), medians over the frames.
 //!
+//! The group `frame-order` times the engine frame once per ordering (the same camera turn),
+//! so the cost of each ordering can be read against the whole frame on the adapter at hand:
+//! `cargo bench --bench frame -- frame-order`.
+//!
 //! `cargo bench --bench frame`; the data comes from `SPLATSCENE_DATA` (default
 //! `../shared/data`).
 
@@ -14,6 +18,7 @@ use std::time::Duration;
 use criterion::{Criterion, criterion_group, criterion_main};
 use glam::{DMat4, DVec3};
 use splatscene::classify::TransferFunction;
+use splatscene::order::Ordering;
 use splatscene::render::{FrameOptions, FrameTimings, GpuContext, Renderer};
 use splatscene::scene::shoulder::{add_model, prosthesis_model};
 use splatscene::scene::{NodeContent, Scene, SceneCamera, SplatSettings, VolumeNode};
@@ -137,5 +142,60 @@ fn frames(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, frames);
+/// The engine frame at 512x512 drawn in each ordering, and the stage split per ordering.
+fn frames_per_ordering(c: &mut Criterion) {
+    let ctx = GpuContext::headless().expect("a GPU adapter (install mesa-vulkan-drivers)");
+    let scene = scene(
+        common::engine(),
+        TransferFunction::ramp(100.0, 200.0, [0.85, 0.8, 0.75, 0.5]),
+    );
+    let base = scene.camera.unwrap();
+    let mut renderer = Renderer::new();
+    let mut group = c.benchmark_group("frame-order");
+    group
+        .sample_size(10)
+        .warm_up_time(Duration::from_secs(1))
+        .measurement_time(Duration::from_secs(5));
+    for ordering in Ordering::ALL {
+        let options = FrameOptions {
+            ordering: Some(ordering),
+            measure: false,
+            ..Default::default()
+        };
+        let mut turn = 0.0;
+        group.bench_function(ordering.name(), |b| {
+            b.iter(|| {
+                turn += 7.0;
+                renderer
+                    .screenshot(&ctx, &scene, &base.orbit(turn, 0.0), (512, 512), &options)
+                    .unwrap()
+            })
+        });
+        let measured = FrameOptions {
+            measure: true,
+            ..options
+        };
+        let runs: Vec<FrameTimings> = (0..7)
+            .map(|i| {
+                let camera = base.orbit(f64::from(i) * 11.0, 0.0);
+                renderer
+                    .screenshot(&ctx, &scene, &camera, (512, 512), &measured)
+                    .unwrap()
+                    .report
+                    .timings
+            })
+            .collect();
+        let stage = |f: fn(&FrameTimings) -> Duration| median(runs.iter().map(f).collect());
+        eprintln!(
+            "engine, {}: median ms over 7 frames: order {:.2}, upload {:.2}, splat pass {:.2}",
+            ordering.name(),
+            stage(|t| t.order),
+            stage(|t| t.upload),
+            stage(|t| t.splat_pass),
+        );
+    }
+    group.finish();
+}
+
+criterion_group!(benches, frames, frames_per_ordering);
 criterion_main!(benches);

@@ -105,6 +105,24 @@ fn gpu_against_cpu_of(
     (compare(&shot.frame, &reference).unwrap(), covered)
 }
 
+/// What a GPU frame may differ from the CPU reference compositor by.
+///
+/// The GPU blends in 16-bit float and evaluates the footprints in f32, the reference in f64;
+/// spread over the image this stays far below one grey level. A pixel centre within rounding of
+/// a footprint's cut-off ellipse can fall inside it on one and outside on the other: a jump of
+/// up to the splat's alpha times `exp(-cutoff^2 / (2 sigma^2))`, 0.017 with the default style.
+/// Measured, as (RMSE, largest difference): lavapipe (llvmpipe, LLVM 15) 0.0006-0.0013 and
+/// 0.0040 at most; an NVIDIA H100 (Vulkan, driver 580) 0.0003-0.0004 and 0.0127-0.0133. On
+/// the H100 the four largest differences of the perspective frame are such edge pixels: moving
+/// the reference's cut-off by 0.1% changes each of them by the same amount.
+fn assert_matches_reference(d: &splatscene::composite::ImageDifference) {
+    let style = SplatStyle::default();
+    let edge_jump = (-0.5 * (style.cutoff / style.sigma).powi(2)).exp();
+    assert!(d.rmse < 0.002, "{d:?}");
+    assert!(d.max_abs < edge_jump + 3.0 / 255.0, "{d:?}");
+    assert!(d.bad_pixel_share <= 0.002, "{d:?}");
+}
+
 #[test]
 fn gpu_frame_matches_the_cpu_reference_compositor() {
     let centre = shells(20, [1.0, 1.0, 1.5])
@@ -115,10 +133,7 @@ fn gpu_frame_matches_the_cpu_reference_compositor() {
     let (d, covered) = gpu_against_cpu(camera, (97, 81));
     eprintln!("GPU vs CPU, perspective: {d:?}, {covered} covered pixels");
     assert!(covered > 2000, "the volume fills much of the image");
-    // Measured on lavapipe (llvmpipe, LLVM 15): max 0.0038, no pixel off by more than 4/255.
-    // The GPU blends in 16-bit float and evaluates the footprints in f32.
-    assert!(d.max_abs < 3.0 / 255.0, "{d:?}");
-    assert!(d.bad_pixel_share <= 0.002, "{d:?}");
+    assert_matches_reference(&d);
 }
 
 #[test]
@@ -134,8 +149,7 @@ fn orthographic_gpu_frame_matches_a_distant_cpu_pinhole() {
     let (d, covered) = gpu_against_cpu(camera, (80, 64));
     eprintln!("GPU vs CPU, orthographic: {d:?}, {covered} covered pixels");
     assert!(covered > 1000, "the volume fills much of the image");
-    assert!(d.max_abs < 3.0 / 255.0, "{d:?}");
-    assert!(d.bad_pixel_share <= 0.002, "{d:?}");
+    assert_matches_reference(&d);
 }
 
 /// A square in the plane y = `y`, spanning `lo..hi` in x and z, facing -y.
@@ -481,8 +495,7 @@ fn a_rotated_anisotropic_volume_renders_as_the_cpu_reference() {
         covered > 1500,
         "the volume fills much of the image: {covered}"
     );
-    assert!(d.max_abs < 3.0 / 255.0, "{d:?}");
-    assert!(d.bad_pixel_share <= 0.002, "{d:?}");
+    assert_matches_reference(&d);
 }
 
 /// Centre alpha of a uniform slab 8 mm thick seen face-on through its thickness, orthographic,
