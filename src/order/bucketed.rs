@@ -581,9 +581,10 @@ fn distance_bounds(view: &ViewCase) -> (f64, f64) {
 
 #[cfg(test)]
 mod tests {
-    use glam::{DAffine3, DMat3, DVec3};
+    use glam::DVec3;
 
     use super::*;
+    use crate::order::fixtures::{anisotropic_and_sheared, eye_at, sparse};
     use crate::order::{OrderOptions, Ordering, VolumeGeometry, order};
 
     /// The bucketed order is, by definition, the IP-PBTF list stably sorted by bucket, farthest
@@ -648,28 +649,8 @@ mod tests {
 
     #[test]
     fn bucketed_is_ip_pbtf_stably_sorted_by_bucket() {
-        let sparse = |id: u32| {
-            !id.wrapping_mul(0x9E37_79B9)
-                .rotate_left(11)
-                .is_multiple_of(3)
-        };
-        let axis_aligned =
-            VolumeGeometry::axis_aligned([23, 17, 11], [0.7, 0.7, 2.5], [3.0, -2.0, 1.0]).unwrap();
-        let sheared = VolumeGeometry::new(
-            [13, 9, 15],
-            DAffine3::from_mat3_translation(
-                DMat3::from_cols(
-                    DVec3::new(1.0, 0.2, 0.0),
-                    DVec3::new(0.0, 0.8, 0.3),
-                    DVec3::new(0.1, 0.0, 2.0),
-                ),
-                DVec3::new(-4.0, 5.0, 0.5),
-            ),
-        )
-        .unwrap();
         let mut long_chains = false;
-        for geometry in [&axis_aligned, &sheared] {
-            let dims = geometry.dims().map(f64::from);
+        for geometry in &anisotropic_and_sheared() {
             for f in [
                 [0.43, 0.56, -0.35],
                 [0.41, 0.37, 0.45],
@@ -677,8 +658,7 @@ mod tests {
                 [-0.6, -0.5, 1.45],
                 [0.5, 0.5, 0.5],
             ] {
-                let at = DVec3::new(f[0] * dims[0], f[1] * dims[1], f[2] * dims[2]);
-                let eye = geometry.index_to_world_point(at);
+                let eye = eye_at(geometry, f);
                 for cull in [false, true] {
                     long_chains |= check(geometry, eye, sparse, cull);
                     long_chains |= check(geometry, eye, |_| true, cull);

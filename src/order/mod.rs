@@ -47,6 +47,8 @@
 mod bucketed;
 mod distance;
 mod exact;
+#[cfg(test)]
+mod fixtures;
 mod pyramid;
 pub mod reference;
 mod rows;

@@ -154,19 +154,11 @@ pub(crate) fn compare(view: &ViewCase, a: [u32; 3], b: [u32; 3]) -> std::cmp::Or
 
 #[cfg(test)]
 mod tests {
-    use glam::{DAffine3, DMat3};
-
     use super::*;
+    use crate::order::fixtures::{anisotropic_and_sheared, eye_at, sparse};
     use crate::order::{OrderOptions, Ordering, VolumeGeometry, order, reference};
 
-    fn sparse(id: u32) -> bool {
-        !id.wrapping_mul(0x9E37_79B9)
-            .rotate_left(11)
-            .is_multiple_of(3)
-    }
-
     fn eyes(geometry: &VolumeGeometry) -> impl Iterator<Item = DVec3> + '_ {
-        let dims = geometry.dims().map(f64::from);
         [
             [0.43, 0.56, -0.35],
             [0.41, 0.37, 0.45],
@@ -175,34 +167,14 @@ mod tests {
             [1.8, 0.5, 0.52],
         ]
         .into_iter()
-        .map(move |f| {
-            geometry.index_to_world_point(DVec3::new(
-                f[0] * dims[0],
-                f[1] * dims[1],
-                f[2] * dims[2],
-            ))
-        })
+        .map(move |f| eye_at(geometry, f))
     }
 
     /// The walk gives the comparison-sort definition, on an anisotropic and on a sheared grid,
     /// dense and sparse, with and without culling.
     #[test]
     fn rows_order_is_its_definition() {
-        let axis_aligned =
-            VolumeGeometry::axis_aligned([23, 17, 11], [0.7, 0.7, 2.5], [3.0, -2.0, 1.0]).unwrap();
-        let sheared = VolumeGeometry::new(
-            [13, 9, 15],
-            DAffine3::from_mat3_translation(
-                DMat3::from_cols(
-                    DVec3::new(1.0, 0.2, 0.0),
-                    DVec3::new(0.0, 0.8, 0.3),
-                    DVec3::new(0.1, 0.0, 2.0),
-                ),
-                DVec3::new(-4.0, 5.0, 0.5),
-            ),
-        )
-        .unwrap();
-        for geometry in [&axis_aligned, &sheared] {
+        for geometry in &anisotropic_and_sheared() {
             for keep in [sparse as fn(u32) -> bool, |_| true] {
                 let grid = SparseGrid::from_mask(geometry.dims(), keep).unwrap();
                 for eye in eyes(geometry) {
