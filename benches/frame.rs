@@ -15,7 +15,8 @@
 use std::sync::Arc;
 use std::time::Duration;
 
-use criterion::{Criterion, criterion_group, criterion_main};
+use criterion::measurement::WallTime;
+use criterion::{BenchmarkGroup, Criterion, criterion_group, criterion_main};
 use glam::{DMat4, DVec3};
 use splatscene::classify::TransferFunction;
 use splatscene::order::Ordering;
@@ -77,6 +78,50 @@ fn median(mut v: Vec<Duration>) -> f64 {
     v[v.len() / 2].as_secs_f64() * 1e3
 }
 
+/// Times whole frames of `scene` turning 7 degrees a frame under `name`, then returns the
+/// stage timings of 7 measured frames 11 degrees apart; `None` when criterion's filter left
+/// the benchmark out.
+fn bench_and_split(
+    group: &mut BenchmarkGroup<'_, WallTime>,
+    name: &str,
+    renderer: &mut Renderer,
+    ctx: &GpuContext,
+    scene: &Scene,
+    size: (u32, u32),
+    options: FrameOptions,
+) -> Option<Vec<FrameTimings>> {
+    let base = scene.camera.unwrap();
+    let mut turn = 0.0;
+    let mut ran = false;
+    group.bench_function(name, |b| {
+        ran = true;
+        b.iter(|| {
+            turn += 7.0;
+            renderer
+                .screenshot(ctx, scene, &base.orbit(turn, 0.0), size, &options)
+                .unwrap()
+        })
+    });
+    if !ran {
+        return None;
+    }
+    let measured = FrameOptions {
+        measure: true,
+        ..options
+    };
+    let runs = (0..7)
+        .map(|i| {
+            let camera = base.orbit(f64::from(i) * 11.0, 0.0);
+            renderer
+                .screenshot(ctx, scene, &camera, size, &measured)
+                .unwrap()
+                .report
+                .timings
+        })
+        .collect();
+    Some(runs)
+}
+
 fn frames(c: &mut Criterion) {
     let ctx = GpuContext::headless().expect("a GPU adapter (install mesa-vulkan-drivers)");
     eprintln!("adapter: {}", ctx.describe());
@@ -100,31 +145,13 @@ fn frames(c: &mut Criterion) {
             measure: false,
             ..Default::default()
         };
-        let mut turn = 0.0;
-        group.bench_function(name, |b| {
-            b.iter(|| {
-                turn += 7.0;
-                renderer
-                    .screenshot(&ctx, &scene, &base.orbit(turn, 0.0), size, &options)
-                    .unwrap()
-            })
-        });
-        let measured = FrameOptions {
-            measure: true,
-            ..options
+        let Some(runs) =
+            bench_and_split(&mut group, name, &mut renderer, &ctx, &scene, size, options)
+        else {
+            continue;
         };
-        let runs: Vec<FrameTimings> = (0..7)
-            .map(|i| {
-                let camera = base.orbit(f64::from(i) * 11.0, 0.0);
-                renderer
-                    .screenshot(&ctx, &scene, &camera, size, &measured)
-                    .unwrap()
-                    .report
-                    .timings
-            })
-            .collect();
         let report = renderer
-            .screenshot(&ctx, &scene, &base, size, &measured)
+            .screenshot(&ctx, &scene, &base, size, &options)
             .unwrap()
             .report;
         let stage = |f: fn(&FrameTimings) -> Duration| median(runs.iter().map(f).collect());
@@ -149,7 +176,6 @@ fn frames_per_ordering(c: &mut Criterion) {
         common::engine(),
         TransferFunction::ramp(100.0, 200.0, [0.85, 0.8, 0.75, 0.5]),
     );
-    let base = scene.camera.unwrap();
     let mut renderer = Renderer::new();
     let mut group = c.benchmark_group("frame-order");
     group
@@ -162,29 +188,17 @@ fn frames_per_ordering(c: &mut Criterion) {
             measure: false,
             ..Default::default()
         };
-        let mut turn = 0.0;
-        group.bench_function(ordering.name(), |b| {
-            b.iter(|| {
-                turn += 7.0;
-                renderer
-                    .screenshot(&ctx, &scene, &base.orbit(turn, 0.0), (512, 512), &options)
-                    .unwrap()
-            })
-        });
-        let measured = FrameOptions {
-            measure: true,
-            ..options
+        let Some(runs) = bench_and_split(
+            &mut group,
+            ordering.name(),
+            &mut renderer,
+            &ctx,
+            &scene,
+            (512, 512),
+            options,
+        ) else {
+            continue;
         };
-        let runs: Vec<FrameTimings> = (0..7)
-            .map(|i| {
-                let camera = base.orbit(f64::from(i) * 11.0, 0.0);
-                renderer
-                    .screenshot(&ctx, &scene, &camera, (512, 512), &measured)
-                    .unwrap()
-                    .report
-                    .timings
-            })
-            .collect();
         let stage = |f: fn(&FrameTimings) -> Duration| median(runs.iter().map(f).collect());
         eprintln!(
             "engine, {}: median ms over 7 frames: order {:.2}, upload {:.2}, splat pass {:.2}",
