@@ -2,17 +2,20 @@
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
 use clap::{Parser, Subcommand};
-use glam::DVec3;
+use glam::{DMat4, DVec3};
 use indicatif::{ProgressBar, ProgressStyle};
 
 use splatscene::classify::{Classified, TransferFunction, classify};
 use splatscene::grid::SparseGrid;
 use splatscene::order::{OrderOptions, Orderer, Ordering, ViewCase, VolumeGeometry};
-use splatscene::report::{self, Entry, ReportSettings};
+use splatscene::render::{GpuContext, Renderer};
+use splatscene::report::{self, Compositor, Entry, ReportSettings};
+use splatscene::scene::{NodeContent, Scene, SplatSettings, VolumeNode};
 use splatscene::volume::CpuVolume;
 use splatscene::volume::phantom::shoulder_phantom_default;
 use splatscene::volume::raw::{RawSpec, ScalarFormat, load_raw, load_raw_slices, slice_stack};
@@ -127,6 +130,12 @@ struct OrderingsArgs {
     /// units: one row each, in place of the default width.
     #[arg(long, value_delimiter = ',')]
     bucket_widths: Vec<f64>,
+    /// Composite on the GPU with the renderer (flat colours, the report's splat shape and
+    /// near plane, transparent background) instead of the CPU reference compositor, so that
+    /// the error is measured on GPU images; adjacent inversions are then not counted. Order
+    /// times are the CPU's either way.
+    #[arg(long)]
+    gpu: bool,
 }
 
 fn main() -> Result<()> {
@@ -222,7 +231,12 @@ pub(crate) fn write_replacing(path: &Path, bytes: &[u8]) -> Result<()> {
 
 fn run_orderings(args: OrderingsArgs) -> Result<()> {
     let orderings = report_entries(&args.orderings, &args.bucket_widths)?;
-    let (name, volume, classified) = load_for_report(&args)?;
+    if args.gpu && !args.bucket_widths.is_empty() {
+        bail!(
+            "--bucket-widths: the GPU compositor draws the bucketed order at its default width only"
+        );
+    }
+    let (name, volume, tf, classified) = load_for_report(&args)?;
     let geometry = volume.geometry()?;
     eprintln!(
         "{name}: {:?} voxels, spacing {:?}, {} significant",
@@ -239,14 +253,45 @@ fn run_orderings(args: OrderingsArgs) -> Result<()> {
     };
     let path = report::camera_path(&geometry, settings.orbit_views, settings.fly_in_views);
     let cases = report::case_views(&geometry);
+    let gpu = if args.gpu {
+        let ctx = GpuContext::headless()?;
+        eprintln!("compositing on {}", ctx.describe());
+        Some((ctx, report_scene(volume, tf, &settings)?))
+    } else {
+        None
+    };
+    let mut renderer = Renderer::new();
+    let mut compositor = match &gpu {
+        Some((ctx, scene)) => Compositor::Gpu {
+            ctx,
+            renderer: &mut renderer,
+            scene,
+        },
+        None => Compositor::Cpu,
+    };
     let bar = progress(path.len() + cases.len());
-    let path_results =
-        report::measure_views(&geometry, &classified, &path, &settings, || bar.inc(1))?;
-    let case_results =
-        report::measure_views(&geometry, &classified, &cases, &settings, || bar.inc(1))?;
+    let path_results = report::measure_views_with(
+        &geometry,
+        &classified,
+        &path,
+        &settings,
+        &mut compositor,
+        || bar.inc(1),
+    )?;
+    let case_results = report::measure_views_with(
+        &geometry,
+        &classified,
+        &cases,
+        &settings,
+        &mut compositor,
+        || bar.inc(1),
+    )?;
     bar.finish_and_clear();
     let summaries = report::summarise(&path_results);
     println!("# Orderings on {name}\n");
+    if let Some((ctx, ..)) = &gpu {
+        println!("Composited on the GPU: {}.\n", ctx.describe());
+    }
     println!(
         "{} views ({} orbit, {} fly-in ending inside the volume), {}x{} pixels, splat sigma {} voxel cut at {} voxels; error against the exact order.\n",
         path.len(),
@@ -296,11 +341,41 @@ fn report_entries(orderings: &[Ordering], widths: &[f64]) -> Result<Vec<Entry>> 
     Ok(entries)
 }
 
-fn load_for_report(args: &OrderingsArgs) -> Result<(String, CpuVolume, Classified)> {
+/// The scene the GPU compositor draws: the volume alone, at the identity, with flat colours
+/// (as the CPU reference compositor draws them) and the report's splat shape.
+fn report_scene(
+    volume: CpuVolume,
+    tf: TransferFunction,
+    settings: &ReportSettings,
+) -> Result<Scene> {
+    let mut scene = Scene::new();
+    let node = VolumeNode {
+        volume: Arc::new(volume),
+        transfer: Arc::new(tf),
+        splats: SplatSettings {
+            style: settings.style,
+            shading: 0.0,
+            ..SplatSettings::default()
+        },
+    };
+    scene.add("volume", DMat4::IDENTITY, None, NodeContent::Volume(node))?;
+    Ok(scene)
+}
+
+/// The volume of the report, its transfer function and its classification.
+fn load_for_report(
+    args: &OrderingsArgs,
+) -> Result<(String, CpuVolume, TransferFunction, Classified)> {
     let Some(path) = &args.volume else {
         let volume = shoulder_phantom_default();
-        let classified = classify(&volume, &TransferFunction::ct_bone(), 1.0 / 255.0)?;
-        return Ok(("the built-in shoulder phantom".into(), volume, classified));
+        let tf = TransferFunction::ct_bone();
+        let classified = classify(&volume, &tf, 1.0 / 255.0)?;
+        return Ok((
+            "the built-in shoulder phantom".into(),
+            volume,
+            tf,
+            classified,
+        ));
     };
     let (Some(dims), Some(format)) = (args.raw_dims, args.raw_type) else {
         bail!(
@@ -333,7 +408,7 @@ fn load_for_report(args: &OrderingsArgs) -> Result<(String, CpuVolume, Classifie
     ]);
     let classified = classify(&volume, &tf, 1.0 / 255.0)?;
     eprintln!("values {lo} to {hi}; splats from {threshold}, fully opaque-ish from {ramp_top}");
-    Ok((path.display().to_string(), volume, classified))
+    Ok((path.display().to_string(), volume, tf, classified))
 }
 
 fn value_range(values: &[f32]) -> (f32, f32) {

@@ -466,4 +466,42 @@ fn bucket_width_options_are_checked() {
     let without = report(&["--orderings", "btf,pbtf", "--bucket-widths", "1"]);
     assert!(!without.status.success());
     assert!(stderr(without).contains("needs the bucketed order"));
+    let on_gpu = report(&["--gpu", "--bucket-widths", "1"]);
+    assert!(!on_gpu.status.success());
+    assert!(stderr(on_gpu).contains("default width only"));
+}
+
+#[test]
+fn orderings_composite_on_the_gpu_when_asked() {
+    let out = std::env::temp_dir().join(format!("splatscene-gpu-report-{}", std::process::id()));
+    let result = splatscene(&[
+        "orderings",
+        "--orbit-views",
+        "1",
+        "--fly-in-views",
+        "1",
+        "--size",
+        "48x48",
+        "--orderings",
+        "pbtf,ip-pbtf",
+        "--gpu",
+        "--out-dir",
+        out.to_str().unwrap(),
+    ]);
+    assert!(
+        result.status.success(),
+        "{}",
+        String::from_utf8_lossy(&result.stderr)
+    );
+    let table = String::from_utf8_lossy(&result.stdout);
+    assert!(table.contains("Composited on the GPU: "), "{table}");
+    let row = table
+        .lines()
+        .find(|l| l.starts_with("| pbtf |"))
+        .unwrap_or_else(|| panic!("a pbtf row in\n{table}"));
+    let rmse: f64 = row.split('|').nth(3).unwrap().trim().parse().unwrap();
+    assert!(rmse > 0.0, "PBTF differs from the exact order on GPU images too");
+    assert!(row.ends_with("| n/a |"), "no inversion count on the GPU: {row}");
+    assert!(out.join("error-vs-time.png").exists());
+    std::fs::remove_dir_all(&out).ok();
 }

@@ -11,12 +11,15 @@ use glam::DVec3;
 
 use crate::camera::Camera;
 use crate::classify::Classified;
+use crate::composite::Frame;
 use crate::composite::{
     CompositeError, FragmentStats, ImageDifference, SplatStyle, SplatVolume, compare, composite,
 };
 use crate::order::{
     CaseKind, OrderError, OrderOptions, Orderer, Ordering, ViewCase, VolumeGeometry,
 };
+use crate::render::{FrameOptions, GpuContext, RenderError, Renderer};
+use crate::scene::{Projection, Scene, SceneCamera};
 
 /// Settings of a report run.
 #[derive(Debug, Clone, PartialEq)]
@@ -111,6 +114,33 @@ pub enum ReportError {
     /// Compositing failed.
     #[error(transparent)]
     Composite(#[from] CompositeError),
+    /// Rendering on the GPU failed.
+    #[error(transparent)]
+    Render(#[from] RenderError),
+    /// The GPU compositor draws each ordering as the renderer does, with the default bucket
+    /// width.
+    #[error(
+        "the GPU compositor draws the bucketed order at its default width only; leave out the bucket width ({0})"
+    )]
+    BucketWidthOnGpu(f64),
+}
+
+/// Where the report composites its frames.
+pub enum Compositor<'a> {
+    /// The CPU reference compositor ([`crate::composite`]): no GPU needed, and it also counts
+    /// adjacent inversions.
+    Cpu,
+    /// The renderer on a GPU adapter: `scene` holds the volume (placed at the identity, with
+    /// its splat settings) and is drawn once per ordering with a transparent background, so
+    /// that the error is measured on GPU images. Inversions are not counted.
+    Gpu {
+        /// The adapter and device.
+        ctx: &'a GpuContext,
+        /// The renderer, kept across views.
+        renderer: &'a mut Renderer,
+        /// The scene to draw.
+        scene: &'a Scene,
+    },
 }
 
 /// One view of the path: where the eye was, which case it made, and per ordering the order
@@ -121,8 +151,9 @@ pub struct ViewResult {
     pub name: String,
     /// The view case.
     pub kind: CaseKind,
-    /// Per ordering, in the order of [`ReportSettings::orderings`].
-    pub per_ordering: Vec<(Entry, f64, ImageDifference, FragmentStats)>,
+    /// Per ordering, in the order of [`ReportSettings::orderings`]; the fragment statistics
+    /// only from the CPU compositor.
+    pub per_ordering: Vec<(Entry, f64, ImageDifference, Option<FragmentStats>)>,
 }
 
 /// A named camera placement.
@@ -232,19 +263,46 @@ pub fn bounding_radius(geometry: &VolumeGeometry) -> f64 {
         .fold(0.0, f64::max)
 }
 
-/// Orders and composites every ordering at each view; `progress` is called after each view.
+/// Orders and composites every ordering at each view on the CPU; `progress` is called after
+/// each view.
 pub fn measure_views(
     geometry: &VolumeGeometry,
     classified: &Classified,
     views: &[View],
     settings: &ReportSettings,
+    progress: impl FnMut(),
+) -> Result<Vec<ViewResult>, ReportError> {
+    measure_views_with(
+        geometry,
+        classified,
+        views,
+        settings,
+        &mut Compositor::Cpu,
+        progress,
+    )
+}
+
+/// Orders every ordering at each view (timed on the CPU) and composites it with
+/// `compositor`; `progress` is called after each view.
+pub fn measure_views_with(
+    geometry: &VolumeGeometry,
+    classified: &Classified,
+    views: &[View],
+    settings: &ReportSettings,
+    compositor: &mut Compositor<'_>,
     mut progress: impl FnMut(),
 ) -> Result<Vec<ViewResult>, ReportError> {
+    if let Compositor::Gpu { .. } = compositor
+        && let Some(width) = settings.orderings.iter().find_map(|e| e.bucket_width)
+    {
+        return Err(ReportError::BucketWidthOnGpu(width));
+    }
     let volume = SplatVolume {
         geometry,
         grid: &classified.grid,
         colors: &classified.colors,
     };
+    let near = settings.near_voxels * geometry.spacing().iter().copied().fold(0.0, f64::max);
     let mut orderer = Orderer::new();
     let mut list = Vec::new();
     let mut results = Vec::with_capacity(views.len());
@@ -253,8 +311,42 @@ pub fn measure_views(
         let camera = Camera {
             up: Camera::safe_up(view.eye, view.target),
             fov_y_degrees: settings.fov_y_degrees,
-            near: settings.near_voxels * geometry.spacing().iter().copied().fold(0.0, f64::max),
+            near,
             ..Camera::looking_at(view.eye, view.target, settings.size.0, settings.size.1)
+        };
+        let scene_camera = SceneCamera {
+            eye: view.eye,
+            target: view.target,
+            up: camera.up,
+            projection: Projection::Perspective {
+                fov_y_degrees: settings.fov_y_degrees,
+            },
+            near: Some(near),
+        };
+        // The frame of the order in `list` (CPU), or of `ordering` as the renderer draws it.
+        let mut draw = |ordering: Ordering,
+                        list: &[u32]|
+         -> Result<(Frame, Option<FragmentStats>), ReportError> {
+            match compositor {
+                Compositor::Cpu => {
+                    let (frame, stats) = composite(&camera, &volume, list, &settings.style)?;
+                    Ok((frame, Some(stats)))
+                }
+                Compositor::Gpu {
+                    ctx,
+                    renderer,
+                    scene,
+                } => {
+                    let options = FrameOptions {
+                        ordering: Some(ordering),
+                        background: None,
+                        measure: false,
+                    };
+                    let shot =
+                        renderer.screenshot(ctx, scene, &scene_camera, settings.size, &options)?;
+                    Ok((shot.frame, None))
+                }
+            }
         };
         orderer.order(
             &classified.grid,
@@ -263,14 +355,14 @@ pub fn measure_views(
             &Entry::from(Ordering::Exact).options(),
             &mut list,
         )?;
-        let (reference, _) = composite(&camera, &volume, &list, &settings.style)?;
+        let (reference, _) = draw(Ordering::Exact, &list)?;
         let mut per_ordering = Vec::with_capacity(settings.orderings.len());
         for &entry in &settings.orderings {
             let options = entry.options();
             let start = Instant::now();
             orderer.order(&classified.grid, &case, entry.ordering, &options, &mut list)?;
             let seconds = start.elapsed().as_secs_f64();
-            let (frame, stats) = composite(&camera, &volume, &list, &settings.style)?;
+            let (frame, stats) = draw(entry.ordering, &list)?;
             per_ordering.push((entry, seconds, compare(&frame, &reference)?, stats));
         }
         results.push(ViewResult {
@@ -300,8 +392,9 @@ pub struct Summary {
     pub max_abs: f64,
     /// Mean share of pixels off by more than 4/255.
     pub bad_pixel_share: f64,
-    /// Share of consecutive fragment pairs drawn nearer-before-farther, over all views.
-    pub inversion_share: f64,
+    /// Share of consecutive fragment pairs drawn nearer-before-farther, over all views
+    /// (counted by the CPU compositor only).
+    pub inversion_share: Option<f64>,
 }
 
 /// Summarises each ordering over `results`.
@@ -315,15 +408,18 @@ pub fn summarise(results: &[ViewResult]) -> Vec<Summary> {
             let ordering = first.per_ordering[i].0;
             let mut times: Vec<f64> = results.iter().map(|r| r.per_ordering[i].1).collect();
             times.sort_by(f64::total_cmp);
-            let (mut rmse, mut max_abs, mut bad, mut pairs, mut inversions) =
-                (0.0, 0.0f64, 0.0, 0u64, 0u64);
+            let (mut rmse, mut max_abs, mut bad) = (0.0, 0.0f64, 0.0);
+            let mut counts = Some(FragmentStats::default());
             for r in results {
                 let (_, _, d, s) = r.per_ordering[i];
                 rmse += d.rmse / n;
                 max_abs = max_abs.max(d.max_abs);
                 bad += d.bad_pixel_share / n;
-                pairs += s.pairs;
-                inversions += s.inversions;
+                counts = counts.zip(s).map(|(sum, s)| FragmentStats {
+                    fragments: sum.fragments + s.fragments,
+                    pairs: sum.pairs + s.pairs,
+                    inversions: sum.inversions + s.inversions,
+                });
             }
             Summary {
                 ordering,
@@ -331,11 +427,7 @@ pub fn summarise(results: &[ViewResult]) -> Vec<Summary> {
                 rmse,
                 max_abs,
                 bad_pixel_share: bad,
-                inversion_share: if pairs == 0 {
-                    0.0
-                } else {
-                    inversions as f64 / pairs as f64
-                },
+                inversion_share: counts.map(|c| c.inversion_share()),
             }
         })
         .collect()
@@ -348,7 +440,7 @@ pub fn summary_table(summaries: &[Summary]) -> String {
     );
     for m in summaries {
         s += &format!(
-            "| {} | {:.2} ({:.2}, {:.2}) | {:.4} | {:.3} | {:.2}% | {:.3}% |\n",
+            "| {} | {:.2} ({:.2}, {:.2}) | {:.4} | {:.3} | {:.2}% | {} |\n",
             m.ordering,
             m.time[0] * 1e3,
             m.time[1] * 1e3,
@@ -356,7 +448,8 @@ pub fn summary_table(summaries: &[Summary]) -> String {
             m.rmse,
             m.max_abs,
             100.0 * m.bad_pixel_share,
-            100.0 * m.inversion_share
+            m.inversion_share
+                .map_or("n/a".to_owned(), |x| format!("{:.3}%", 100.0 * x))
         );
     }
     s
