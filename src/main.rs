@@ -236,6 +236,10 @@ fn run_orderings(args: OrderingsArgs) -> Result<()> {
             "--bucket-widths: the GPU compositor draws the bucketed order at its default width only"
         );
     }
+    // The font and the folder of the plot, checked before minutes of measuring.
+    report::register_font()?;
+    std::fs::create_dir_all(&args.out_dir)
+        .with_context(|| format!("creating {}", args.out_dir.display()))?;
     let (name, volume, tf, classified) = load_for_report(&args)?;
     let geometry = volume.geometry()?;
     eprintln!(
@@ -306,8 +310,6 @@ fn run_orderings(args: OrderingsArgs) -> Result<()> {
     println!("## Per view: image RMSE (share of pixels off by more than 4/255)\n");
     println!("{}", report::per_view_table(&case_results));
     println!("{}", report::per_view_table(&path_results));
-    std::fs::create_dir_all(&args.out_dir)
-        .with_context(|| format!("creating {}", args.out_dir.display()))?;
     let png = args.out_dir.join("error-vs-time.png");
     let svg = args.out_dir.join("error-vs-time.svg");
     report::plot_error_against_time(&summaries, &format!("Orderings on {name}"), &png, &svg)?;

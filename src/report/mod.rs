@@ -3,7 +3,7 @@
 
 mod plot;
 
-pub use plot::{PlotError, plot_error_against_time};
+pub use plot::{PlotError, plot_error_against_time, register_font};
 
 use std::time::Instant;
 

@@ -30,7 +30,9 @@ pub enum PlotError {
     },
 }
 
-fn register_font() -> Result<(), PlotError> {
+/// Finds and registers the font of the plot's labels. The plot does this itself; a caller
+/// that measures for minutes before plotting calls it first, to fail before the work.
+pub fn register_font() -> Result<(), PlotError> {
     static FONT: OnceLock<Option<&'static [u8]>> = OnceLock::new();
     let bytes = FONT.get_or_init(|| {
         FONT_PATHS
