@@ -500,8 +500,14 @@ fn orderings_composite_on_the_gpu_when_asked() {
         .find(|l| l.starts_with("| pbtf |"))
         .unwrap_or_else(|| panic!("a pbtf row in\n{table}"));
     let rmse: f64 = row.split('|').nth(3).unwrap().trim().parse().unwrap();
-    assert!(rmse > 0.0, "PBTF differs from the exact order on GPU images too");
-    assert!(row.ends_with("| n/a |"), "no inversion count on the GPU: {row}");
+    assert!(
+        rmse > 0.0,
+        "PBTF differs from the exact order on GPU images too"
+    );
+    assert!(
+        row.ends_with("| n/a |"),
+        "no inversion count on the GPU: {row}"
+    );
     assert!(out.join("error-vs-time.png").exists());
     std::fs::remove_dir_all(&out).ok();
 }

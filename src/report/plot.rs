@@ -105,22 +105,101 @@ where
         .y_desc("image RMSE against the exact order (mean)")
         .draw()
         .map_err(|e| fail(&e))?;
-    for (i, s) in summaries.iter().enumerate() {
+    let mut placed: Vec<LabelBox> = Vec::new();
+    for (i, point) in times.iter().zip(&errors).enumerate() {
         let colour = Palette99::pick(i).to_rgba();
-        let point = (times[i], errors[i]);
+        let point = (*point.0, *point.1);
         chart
             .draw_series(std::iter::once(Circle::new(point, 6, colour.filled())))
             .map_err(|e| fail(&e))?;
+        // Points are drawn before any label so that the labels can avoid them all.
+        placed.push(LabelBox::around(chart.backend_coord(&point), 7));
+    }
+    for (i, s) in summaries.iter().enumerate() {
         let label = if s.rmse > 0.0 {
             s.ordering.to_string()
         } else {
             format!("{} (reference)", s.ordering)
         };
-        chart
-            .draw_series(std::iter::once(Text::new(label, point, ("sans-serif", 16))))
-            .map_err(|e| fail(&e))?;
+        let at = chart.backend_coord(&(times[i], errors[i]));
+        let spot = place_label(at, &label, &placed, area.dim_in_pixel());
+        placed.push(spot);
+        area.draw(&Text::new(
+            label,
+            (spot.x0, spot.y0),
+            ("sans-serif", LABEL_PX),
+        ))
+        .map_err(|e| fail(&e))?;
     }
     area.present().map_err(|e| fail(&e))
+}
+
+/// Height of a label in pixels; its width is estimated from the character count.
+const LABEL_PX: u32 = 16;
+
+/// A rectangle in pixels taken by a point or a label.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct LabelBox {
+    x0: i32,
+    y0: i32,
+    x1: i32,
+    y1: i32,
+}
+
+impl LabelBox {
+    /// The square of half-width `r` around `(x, y)`.
+    fn around((x, y): (i32, i32), r: i32) -> Self {
+        Self {
+            x0: x - r,
+            y0: y - r,
+            x1: x + r,
+            y1: y + r,
+        }
+    }
+
+    fn overlaps(&self, other: &Self) -> bool {
+        self.x0 < other.x1 && other.x0 < self.x1 && self.y0 < other.y1 && other.y0 < self.y1
+    }
+}
+
+/// Where the label of the point at `at` goes: the first of several spots around the point
+/// (right, above and below right, left, above, below, then farther out) that overlaps no box
+/// already taken and stays inside the image, else the first spot.
+fn place_label(at: (i32, i32), label: &str, taken: &[LabelBox], size: (u32, u32)) -> LabelBox {
+    let h = LABEL_PX as i32;
+    // About 0.55 em a character in DejaVu Sans.
+    let w = (label.chars().count() as f64 * 0.55 * f64::from(LABEL_PX)).ceil() as i32;
+    let (x, y) = at;
+    let candidates = [
+        (x + 9, y - h / 2),
+        (x + 9, y - h - 4),
+        (x + 9, y + 4),
+        (x - 9 - w, y - h / 2),
+        (x - w / 2, y - h - 9),
+        (x - w / 2, y + 9),
+        (x + 9, y - 2 * h - 4),
+        (x + 9, y + h + 4),
+        (x - 9 - w, y - h - 4),
+        (x - 9 - w, y + 4),
+    ];
+    let boxes = candidates.map(|(x0, y0)| LabelBox {
+        x0,
+        y0,
+        x1: x0 + w,
+        y1: y0 + h,
+    });
+    let (width, height) = (size.0 as i32, size.1 as i32);
+    boxes
+        .iter()
+        .find(|b| {
+            b.x0 >= 0
+                && b.y0 >= 0
+                && b.x1 <= width
+                && b.y1 <= height
+                && !taken.iter().any(|t| t.overlaps(b))
+        })
+        .copied()
+        .unwrap_or(boxes[0])
 }
 
 /// Log-axis bounds with some room around the values.
@@ -131,4 +210,37 @@ fn bounds(values: &[f64]) -> (f64, f64) {
         return (1e-3, 1.0);
     }
     (lo / 2.0, hi * 3.0)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Four points a few pixels apart, as IP-PBTF, WBTF and the pyramid order often fall:
+    /// every label finds a spot clear of every point and of the other labels.
+    #[test]
+    fn labels_of_close_points_do_not_overlap() {
+        let points = [(300, 200), (312, 204), (306, 214), (318, 196)];
+        let mut taken: Vec<LabelBox> = points.iter().map(|&p| LabelBox::around(p, 7)).collect();
+        let mut labels = Vec::new();
+        for (&p, name) in points
+            .iter()
+            .zip(["ip-pbtf-implicit", "wbtf", "pyramid", "rows"])
+        {
+            let spot = place_label(p, name, &taken, (900, 600));
+            taken.push(spot);
+            labels.push(spot);
+        }
+        for (i, a) in labels.iter().enumerate() {
+            for p in &points {
+                assert!(
+                    !a.overlaps(&LabelBox::around(*p, 7)),
+                    "label {i} on a point"
+                );
+            }
+            for b in &labels[i + 1..] {
+                assert!(!a.overlaps(b), "{a:?} and {b:?}");
+            }
+        }
+    }
 }
