@@ -38,6 +38,9 @@ pub struct ViewerOptions {
     pub screenshot_dir: PathBuf,
     /// Background colour.
     pub background: [f32; 3],
+    /// While the camera is dragged, draw the volumes at half resolution
+    /// ([`FrameOptions::preview`]); the full frame follows when the button is released.
+    pub preview_while_moving: bool,
 }
 
 impl Default for ViewerOptions {
@@ -46,6 +49,7 @@ impl Default for ViewerOptions {
             size: (960, 720),
             screenshot_dir: PathBuf::from("."),
             background: [0.06, 0.07, 0.09],
+            preview_while_moving: true,
         }
     }
 }
@@ -218,10 +222,16 @@ impl App {
         ))
     }
 
+    /// Whether this frame is a preview: the camera is being dragged.
+    fn previewing(&self) -> bool {
+        self.options.preview_while_moving && self.drag.as_ref().is_some_and(|d| d.moved)
+    }
+
     fn redraw(&mut self) -> Result<(), ViewerError> {
         let Some(view) = self.view().transpose()? else {
             return Ok(());
         };
+        let preview = self.previewing();
         let Some(gpu) = &mut self.gpu else {
             return Ok(());
         };
@@ -229,6 +239,7 @@ impl App {
             ordering: Some(self.ordering),
             background: Some(self.options.background),
             measure: false,
+            preview,
         };
         let started = std::time::Instant::now();
         let target = &gpu.target;
@@ -257,11 +268,12 @@ impl App {
         gpu.ctx.queue.present(frame);
         let preset = PRESETS[self.preset];
         gpu.window.set_title(&format!(
-            "splatscene: {} | {preset} | frame {:.0} ms, order {:.1} ms | {} splats",
+            "splatscene: {} | {preset} | frame {:.0} ms, order {:.1} ms | {} splats{}",
             self.ordering,
             started.elapsed().as_secs_f64() * 1e3,
             self.last.timings.order.as_secs_f64() * 1e3,
-            self.last.splats
+            self.last.splats,
+            if options.preview { " (preview)" } else { "" }
         ));
         Ok(())
     }

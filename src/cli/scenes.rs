@@ -164,6 +164,7 @@ pub fn run_render(args: RenderArgs) -> Result<()> {
             loaded.background
         },
         measure: true,
+        preview: false,
     };
     let ctx = GpuContext::headless()?;
     let shot = Renderer::new().screenshot(&ctx, &loaded.scene, &camera, size, &options)?;
@@ -323,6 +324,10 @@ pub struct ViewerArgs {
     /// Folder for screenshots taken with the S key.
     #[arg(long, default_value = ".")]
     screenshots: PathBuf,
+    /// Draw every frame in full, also while the camera is dragged (by default a drag draws
+    /// the volumes at half resolution, about an eighth of the splats).
+    #[arg(long)]
+    no_preview: bool,
 }
 
 pub fn run_viewer(args: ViewerArgs) -> Result<()> {
@@ -336,6 +341,7 @@ pub fn run_viewer(args: ViewerArgs) -> Result<()> {
         size,
         screenshot_dir: args.screenshots,
         background: loaded.background.unwrap_or([0.06, 0.07, 0.09]),
+        preview_while_moving: !args.no_preview,
     };
     eprintln!(
         "keys: 1 BTF, 2 PBTF, 3 IP-PBTF, 4 exact, 5 bucketed, 6 pyramid, 7 rows, T transfer function, S screenshot, C clip plane ([ and ] move it), R reset, Q quit; drag to orbit (right: pan), wheel to zoom, click to pick"

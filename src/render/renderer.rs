@@ -16,6 +16,7 @@ use crate::classify::{Classified, classify_corrected, classify_shell, opacity_le
 use crate::composite::Frame;
 use crate::order::{OrderOptions, Orderer, Ordering, ViewCase, VolumeGeometry};
 use crate::scene::{NodeId, Scene, SceneCamera, VolumeNode, placed_geometry};
+use crate::volume::CpuVolume;
 
 /// Per-frame choices that are not part of the scene.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -27,6 +28,11 @@ pub struct FrameOptions {
     /// Wait for the GPU after each stage so that [`FrameTimings`] splits the frame (costs a
     /// little throughput; screenshots and benchmarks want it, a window does not).
     pub measure: bool,
+    /// Draw every volume from a copy at half its resolution ([`CpuVolume::halved`]): about an
+    /// eighth of the splats, each twice as large, with opacities corrected for the longer
+    /// voxels. For frames while the camera moves; the copy is made and classified once and
+    /// kept beside the full volume.
+    pub preview: bool,
 }
 
 impl Default for FrameOptions {
@@ -35,6 +41,7 @@ impl Default for FrameOptions {
             ordering: None,
             background: Some([0.06, 0.07, 0.09]),
             measure: true,
+            preview: false,
         }
     }
 }
@@ -98,6 +105,8 @@ type ClassKey = (usize, usize, u32, Option<u64>, Option<u32>);
 
 struct VolumeState {
     key: ClassKey,
+    /// The volume drawn: the node's own, or its halved copy for previews.
+    volume: Arc<CpuVolume>,
     classified: Classified,
     gpu: GpuVolume,
     orderer: Orderer,
@@ -112,6 +121,8 @@ pub struct Renderer {
     splat_pass: Option<SplatPass>,
     meshes: HashMap<NodeId, GpuMesh>,
     volumes: HashMap<NodeId, VolumeState>,
+    /// The halved copies drawn by preview frames.
+    previews: HashMap<NodeId, VolumeState>,
 }
 
 impl std::fmt::Debug for Renderer {
@@ -121,6 +132,7 @@ impl std::fmt::Debug for Renderer {
             .field("splat_pipeline", &self.splat_pass.is_some())
             .field("meshes", &self.meshes.len())
             .field("volumes", &self.volumes.len())
+            .field("previews", &self.previews.len())
             .finish()
     }
 }
@@ -145,11 +157,11 @@ impl Renderer {
         let mut report = FrameReport::default();
         self.sync_meshes(ctx, scene);
         let started = Instant::now();
-        report.classified = self.sync_volumes(ctx, scene)?;
+        report.classified = self.sync_volumes(ctx, scene, options.preview)?;
         report.timings.classify = started.elapsed();
         let ordered = self.order_volumes(scene, view, options, &mut report)?;
         let started = Instant::now();
-        self.upload(ctx, scene, view, &ordered, &mut report)?;
+        self.upload(ctx, scene, view, &ordered, options.preview, &mut report)?;
         if options.measure {
             // Queue writes are staged until the next submission: submit nothing to flush them.
             ctx.queue.submit([]);
@@ -163,7 +175,7 @@ impl Renderer {
         }
         report.timings.mesh_pass = started.elapsed();
         let started = Instant::now();
-        self.splat_stage(ctx, &ordered, color, depth);
+        self.splat_stage(ctx, &ordered, options.preview, color, depth);
         if options.measure {
             finish_drawing(ctx, color)?;
         }
@@ -232,24 +244,46 @@ impl Renderer {
         self.meshes.retain(|id, _| live.contains(id));
     }
 
-    /// Classifies volumes whose data, transfer function or threshold changed; returns how many.
-    fn sync_volumes(&mut self, ctx: &GpuContext, scene: &Scene) -> Result<usize, RenderError> {
+    /// Classifies volumes whose data, transfer function or threshold changed, or their halved
+    /// copies for a preview frame; returns how many.
+    fn sync_volumes(
+        &mut self,
+        ctx: &GpuContext,
+        scene: &Scene,
+        preview: bool,
+    ) -> Result<usize, RenderError> {
+        let Self {
+            splat_pass,
+            volumes,
+            previews,
+            ..
+        } = self;
+        let states = if preview { previews } else { volumes };
         let mut live = Vec::new();
         let mut classified = 0;
         for (id, node, _) in scene.volumes() {
             live.push(id);
             let key = class_key(node);
-            if self.volumes.get(&id).is_some_and(|v| v.key == key) {
+            if states.get(&id).is_some_and(|v| v.key == key) {
                 continue;
             }
             let name = &scene.nodes()[id.0].name;
-            let ratio = node.splats.opacity_reference_mm.map_or(1.0, |r| {
-                opacity_length_ratio(node.volume.spacing, node.splats.style.sigma, r)
-            });
+            let volume = if preview {
+                Arc::new(node.volume.halved())
+            } else {
+                Arc::clone(&node.volume)
+            };
+            // Opacities as given hold for the node's own voxels; a halved copy's voxels are
+            // longer, by the cube root of the ratio of voxel volumes.
+            let voxel_size = |v: &CpuVolume| v.spacing.iter().product::<f64>().cbrt();
+            let ratio = match node.splats.opacity_reference_mm {
+                Some(r) => opacity_length_ratio(volume.spacing, node.splats.style.sigma, r),
+                None => voxel_size(&volume) / voxel_size(&node.volume),
+            };
             let min = node.splats.min_opacity;
             let result = match node.splats.shell {
-                Some(high) => classify_shell(&node.volume, &node.transfer, min, high, ratio),
-                None => classify_corrected(&node.volume, &node.transfer, min, ratio),
+                Some(high) => classify_shell(&volume, &node.transfer, min, high, ratio),
+                None => classify_corrected(&volume, &node.transfer, min, ratio),
             };
             let result = result.map_err(|e| RenderError::Volume {
                 node: name.clone(),
@@ -257,17 +291,18 @@ impl Renderer {
             })?;
             classified += 1;
             if result.grid.is_empty() {
-                self.volumes.remove(&id);
+                states.remove(&id);
                 continue;
             }
-            let pass = self.splat_pass.get_or_insert_with(|| SplatPass::new(ctx));
-            let gpu = pass.upload(ctx, &node.volume, &result)?;
-            let old = self.volumes.remove(&id);
+            let pass = splat_pass.get_or_insert_with(|| SplatPass::new(ctx));
+            let gpu = pass.upload(ctx, &volume, &result)?;
+            let old = states.remove(&id);
             let (orderer, ids) = old.map(|o| (o.orderer, o.ids)).unwrap_or_default();
-            self.volumes.insert(
+            states.insert(
                 id,
                 VolumeState {
                     key,
+                    volume,
                     classified: result,
                     gpu,
                     orderer,
@@ -275,7 +310,7 @@ impl Renderer {
                 },
             );
         }
-        self.volumes.retain(|id, _| live.contains(id));
+        states.retain(|id, _| live.contains(id));
         Ok(classified)
     }
 
@@ -290,8 +325,13 @@ impl Renderer {
         let started = Instant::now();
         let pinhole = view.pinhole()?;
         let mut ordered = Vec::new();
+        let states = if options.preview {
+            &mut self.previews
+        } else {
+            &mut self.volumes
+        };
         for (id, node, world) in scene.volumes() {
-            let Some(state) = self.volumes.get_mut(&id) else {
+            let Some(state) = states.get_mut(&id) else {
                 continue;
             };
             let name = &scene.nodes()[id.0].name;
@@ -299,7 +339,8 @@ impl Renderer {
                 node: name.clone(),
                 message,
             };
-            let geometry = placed_geometry(&node.volume, world).map_err(|e| fail(e.to_string()))?;
+            let geometry =
+                placed_geometry(&state.volume, world).map_err(|e| fail(e.to_string()))?;
             let case = ViewCase::new(&geometry, pinhole.eye, pinhole.target)
                 .map_err(|e| fail(e.to_string()))?;
             let ordering = options.ordering.unwrap_or(node.splats.ordering);
@@ -335,10 +376,16 @@ impl Renderer {
         scene: &Scene,
         view: &ViewSetup,
         ordered: &[(NodeId, VolumeGeometry)],
+        preview: bool,
         report: &mut FrameReport,
     ) -> Result<(), RenderError> {
+        let states = if preview {
+            &mut self.previews
+        } else {
+            &mut self.volumes
+        };
         for (id, geometry) in ordered {
-            let Some(state) = self.volumes.get_mut(id) else {
+            let Some(state) = states.get_mut(id) else {
                 continue;
             };
             let settings = scene
@@ -406,17 +453,23 @@ impl Renderer {
         &self,
         ctx: &GpuContext,
         ordered: &[(NodeId, VolumeGeometry)],
+        preview: bool,
         color: &wgpu::TextureView,
         depth: &wgpu::TextureView,
     ) {
         let Some(splat_pass) = &self.splat_pass else {
             return;
         };
+        let states = if preview {
+            &self.previews
+        } else {
+            &self.volumes
+        };
         let mut encoder = ctx.device.create_command_encoder(&Default::default());
         {
             let mut pass = begin(&mut encoder, color, depth, None, "splat pass");
             for (id, _) in ordered {
-                if let Some(state) = self.volumes.get(id) {
+                if let Some(state) = states.get(id) {
                     splat_pass.draw(&mut pass, &state.gpu);
                 }
             }

@@ -341,6 +341,7 @@ pub fn measure_views_with(
                         ordering: Some(ordering),
                         background: None,
                         measure: false,
+                        preview: false,
                     };
                     let shot =
                         renderer.screenshot(ctx, scene, &scene_camera, settings.size, &options)?;
