@@ -112,12 +112,26 @@ fn line(lines: &Receiver<String>, prefix: &str) -> String {
 }
 
 /// Waits for the window title to contain `text` (the title changes after each frame).
-fn title(display: &str, window: &str, text: &str) {
-    wait_for(&format!("a title with {text:?}"), 60, || {
-        xdo(display, &["getwindowname", window]).filter(|t| t.contains(text))
+fn title(display: &str, window: &str, text: &str) -> String {
+    title_where(display, window, &format!("a title with {text:?}"), |t| {
+        t.contains(text)
+    })
+}
+
+/// Waits for a window title that passes `check`, and returns it.
+fn title_where(display: &str, window: &str, what: &str, check: impl Fn(&str) -> bool) -> String {
+    let title = wait_for(what, 60, || {
+        xdo(display, &["getwindowname", window]).filter(|t| check(t))
     });
     // The title is set after the frame is presented; give the X server a moment to show it.
     std::thread::sleep(Duration::from_millis(300));
+    title
+}
+
+/// The splat count in a window title ("... | 54080 splats").
+fn splats_in(title: &str) -> usize {
+    let before = title.split(" splats").next().unwrap();
+    before.rsplit(' ').next().unwrap().parse().unwrap()
 }
 
 #[test]
@@ -214,6 +228,34 @@ fn viewer_picks_switches_orderings_and_takes_screenshots_under_xvfb() {
     let shot = PathBuf::from(line(&lines, "screenshot"));
     let image = image::open(&shot).unwrap();
     assert_eq!((image.width(), image.height()), (640, 480));
+
+    // A drag orbits with preview frames (an eighth of the splats); the release draws the full
+    // frame again.
+    let full = splats_in(&title(&display, &window, "splats"));
+    xdo(
+        &display,
+        &[
+            "mousemove",
+            "--window",
+            &window,
+            "200",
+            "300",
+            "mousedown",
+            "1",
+        ],
+    )
+    .expect("press");
+    xdo(&display, &["mousemove", "--window", &window, "260", "320"]).expect("drag");
+    let preview = title(&display, &window, "(preview)");
+    assert!(
+        splats_in(&preview) * 4 < full,
+        "{preview} against {full} splats"
+    );
+    xdo(&display, &["mouseup", "1"]).expect("release");
+    let after = title_where(&display, &window, "a full frame's title", |t| {
+        t.ends_with(" splats")
+    });
+    assert!(splats_in(&after) > splats_in(&preview) * 4, "{after}");
 
     xdo(&display, &["key", "q"]).expect("key q");
     let mut viewer = viewer;
