@@ -5,6 +5,10 @@
 //! afterwards a few frames with stage timing print the split (order, upload, mesh pass, splat
 //! pass, readback), medians over the frames.
 //!
+//! The group `viewer-frame` draws the shoulder scene as the viewer does, into a window-sized
+//! target that is kept, with no readback, the camera turning 7 degrees a frame as in a drag:
+//! in full and as a preview frame (volumes at half resolution).
+//!
 //! The group `frame-order` times the engine frame once per ordering (the same camera turn),
 //! so the cost of each ordering can be read against the whole frame on the adapter at hand:
 //! `cargo bench --bench frame -- frame-order`.
@@ -20,7 +24,9 @@ use criterion::{BenchmarkGroup, Criterion, criterion_group, criterion_main};
 use glam::{DMat4, DVec3};
 use splatscene::classify::TransferFunction;
 use splatscene::order::Ordering;
-use splatscene::render::{FrameOptions, FrameTimings, GpuContext, Renderer};
+use splatscene::render::{
+    FrameOptions, FrameTimings, GpuContext, RenderTarget, Renderer, ViewSetup,
+};
 use splatscene::scene::shoulder::{add_model, prosthesis_model};
 use splatscene::scene::{NodeContent, Scene, SceneCamera, SplatSettings, VolumeNode};
 use splatscene::volume::CpuVolume;
@@ -211,5 +217,47 @@ fn frames_per_ordering(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, frames, frames_per_ordering);
+/// The viewer's frame of the shoulder scene at 960x720, in full and as a preview.
+fn viewer_frames(c: &mut Criterion) {
+    let ctx = GpuContext::headless().expect("a GPU adapter (install mesa-vulkan-drivers)");
+    let scene = splatscene::scene::shoulder::shoulder_scene().unwrap();
+    let base = scene.camera.unwrap();
+    let size = (960, 720);
+    let target = RenderTarget::new(&ctx, size.0, size.1).unwrap();
+    let mut renderer = Renderer::new();
+    let mut group = c.benchmark_group("viewer-frame");
+    group
+        .sample_size(10)
+        .warm_up_time(Duration::from_secs(1))
+        .measurement_time(Duration::from_secs(10));
+    for (name, preview) in [("shoulder", false), ("shoulder-preview", true)] {
+        let options = FrameOptions {
+            measure: false,
+            preview,
+            ..Default::default()
+        };
+        let mut turn = 0.0;
+        group.bench_function(name, |b| {
+            b.iter(|| {
+                turn += 7.0;
+                let view = ViewSetup::new(&base.orbit(turn, 0.0), size, scene.bounds()).unwrap();
+                let report = renderer
+                    .render(
+                        &ctx,
+                        &scene,
+                        &view,
+                        &target.color_view,
+                        &target.depth_view,
+                        &options,
+                    )
+                    .unwrap();
+                ctx.wait().unwrap();
+                report.splats
+            })
+        });
+    }
+    group.finish();
+}
+
+criterion_group!(benches, frames, frames_per_ordering, viewer_frames);
 criterion_main!(benches);
