@@ -128,6 +128,16 @@ fn bench_and_split(
     Some(runs)
 }
 
+/// A group of whole frames: ten samples, one second of warm-up, `seconds` of measuring.
+fn frame_group<'a>(c: &'a mut Criterion, name: &str, seconds: u64) -> BenchmarkGroup<'a, WallTime> {
+    let mut group = c.benchmark_group(name);
+    group
+        .sample_size(10)
+        .warm_up_time(Duration::from_secs(1))
+        .measurement_time(Duration::from_secs(seconds));
+    group
+}
+
 fn frames(c: &mut Criterion) {
     let ctx = GpuContext::headless().expect("a GPU adapter (install mesa-vulkan-drivers)");
     eprintln!("adapter: {}", ctx.describe());
@@ -138,11 +148,7 @@ fn frames(c: &mut Criterion) {
             (512, 512)
         }
     };
-    let mut group = c.benchmark_group("frame");
-    group
-        .sample_size(10)
-        .warm_up_time(Duration::from_secs(1))
-        .measurement_time(Duration::from_secs(10));
+    let mut group = frame_group(c, "frame", 10);
     for (name, scene) in scenes() {
         let size = size_of(name);
         let mut renderer = Renderer::new();
@@ -183,11 +189,7 @@ fn frames_per_ordering(c: &mut Criterion) {
         TransferFunction::ramp(100.0, 200.0, [0.85, 0.8, 0.75, 0.5]),
     );
     let mut renderer = Renderer::new();
-    let mut group = c.benchmark_group("frame-order");
-    group
-        .sample_size(10)
-        .warm_up_time(Duration::from_secs(1))
-        .measurement_time(Duration::from_secs(5));
+    let mut group = frame_group(c, "frame-order", 5);
     for ordering in Ordering::ALL {
         let options = FrameOptions {
             ordering: Some(ordering),
@@ -225,11 +227,7 @@ fn viewer_frames(c: &mut Criterion) {
     let size = (960, 720);
     let target = RenderTarget::new(&ctx, size.0, size.1).unwrap();
     let mut renderer = Renderer::new();
-    let mut group = c.benchmark_group("viewer-frame");
-    group
-        .sample_size(10)
-        .warm_up_time(Duration::from_secs(1))
-        .measurement_time(Duration::from_secs(10));
+    let mut group = frame_group(c, "viewer-frame", 10);
     for (name, preview) in [("shoulder", false), ("shoulder-preview", true)] {
         let options = FrameOptions {
             measure: false,
