@@ -10,6 +10,7 @@
 
 use std::path::PathBuf;
 use std::sync::Arc;
+use std::time::Duration;
 
 use glam::DVec3;
 use winit::application::ApplicationHandler;
@@ -38,8 +39,9 @@ pub struct ViewerOptions {
     pub screenshot_dir: PathBuf,
     /// Background colour.
     pub background: [f32; 3],
-    /// While the camera is dragged, draw the volumes at half resolution
-    /// ([`FrameOptions::preview`]); the full frame follows when the button is released.
+    /// While the camera is dragged and a full frame takes longer than 50 ms (20 frames a
+    /// second), draw the volumes at half resolution ([`FrameOptions::preview`]); the full
+    /// frame follows when the button is released.
     pub preview_while_moving: bool,
 }
 
@@ -67,6 +69,9 @@ pub enum ViewerError {
 
 /// Transfer functions the `T` key cycles through: the presets, by name.
 const PRESETS: [&str; 4] = TransferFunction::PRESETS;
+
+/// A drag draws preview frames when a full frame took longer than this.
+const PREVIEW_ABOVE: Duration = Duration::from_millis(50);
 
 const ORDERINGS: [(&str, Ordering); 7] = [
     ("1", Ordering::Btf),
@@ -103,6 +108,7 @@ pub fn run(scene: Scene, options: ViewerOptions) -> Result<(), ViewerError> {
         drag: None,
         marker: None,
         last: FrameReport::default(),
+        full_frame: Duration::ZERO,
         error: None,
     };
     event_loop
@@ -141,6 +147,8 @@ struct App {
     drag: Option<Drag>,
     marker: Option<NodeId>,
     last: FrameReport,
+    /// How long the last full frame took to draw and present.
+    full_frame: Duration,
     error: Option<ViewerError>,
 }
 
@@ -222,9 +230,11 @@ impl App {
         ))
     }
 
-    /// Whether this frame is a preview: the camera is being dragged.
+    /// Whether this frame is a preview: the camera is being dragged and full frames are slow.
     fn previewing(&self) -> bool {
-        self.options.preview_while_moving && self.drag.as_ref().is_some_and(|d| d.moved)
+        self.options.preview_while_moving
+            && self.full_frame > PREVIEW_ABOVE
+            && self.drag.as_ref().is_some_and(|d| d.moved)
     }
 
     fn redraw(&mut self) -> Result<(), ViewerError> {
@@ -266,11 +276,15 @@ impl App {
         gpu.blit.copy(&gpu.ctx, &target.color_view, &surface_view);
         gpu.window.pre_present_notify();
         gpu.ctx.queue.present(frame);
+        let elapsed = started.elapsed();
+        if !preview {
+            self.full_frame = elapsed;
+        }
         let preset = PRESETS[self.preset];
         gpu.window.set_title(&format!(
             "splatscene: {} | {preset} | frame {:.0} ms, order {:.1} ms | {} splats{}",
             self.ordering,
-            started.elapsed().as_secs_f64() * 1e3,
+            elapsed.as_secs_f64() * 1e3,
             self.last.timings.order.as_secs_f64() * 1e3,
             self.last.splats,
             if options.preview { " (preview)" } else { "" }
