@@ -10,13 +10,13 @@
 
 use std::path::PathBuf;
 use std::sync::Arc;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use glam::DVec3;
 use winit::application::ApplicationHandler;
 use winit::dpi::{PhysicalPosition, PhysicalSize};
 use winit::event::{ElementState, MouseButton, MouseScrollDelta, WindowEvent};
-use winit::event_loop::{ActiveEventLoop, EventLoop};
+use winit::event_loop::{ActiveEventLoop, ControlFlow, EventLoop};
 use winit::keyboard::{Key, NamedKey};
 use winit::window::{Window, WindowId};
 
@@ -39,9 +39,10 @@ pub struct ViewerOptions {
     pub screenshot_dir: PathBuf,
     /// Background colour.
     pub background: [f32; 3],
-    /// While the camera is dragged and a full frame takes longer than 50 ms (20 frames a
-    /// second), draw the volumes at half resolution ([`FrameOptions::preview`]); the full
-    /// frame follows when the button is released.
+    /// While the camera is dragged or zoomed and a full frame takes longer than 50 ms (20
+    /// frames a second), draw the volumes at half resolution ([`FrameOptions::preview`]); the
+    /// full frame follows when the button is released, or a quarter second after the last
+    /// wheel step.
     pub preview_while_moving: bool,
 }
 
@@ -72,6 +73,9 @@ const PRESETS: [&str; 4] = TransferFunction::PRESETS;
 
 /// A drag draws preview frames when a full frame took longer than this.
 const PREVIEW_ABOVE: Duration = Duration::from_millis(50);
+
+/// After the last wheel step of a zoom drawn as a preview, the full frame follows this late.
+const SETTLE: Duration = Duration::from_millis(250);
 
 const ORDERINGS: [(&str, Ordering); 7] = [
     ("1", Ordering::Btf),
@@ -109,6 +113,7 @@ pub fn run(scene: Scene, options: ViewerOptions) -> Result<(), ViewerError> {
         marker: None,
         last: FrameReport::default(),
         full_frame: Duration::ZERO,
+        settle: None,
         error: None,
     };
     event_loop
@@ -149,6 +154,8 @@ struct App {
     last: FrameReport,
     /// How long the last full frame took to draw and present.
     full_frame: Duration,
+    /// When a zoom drawn as previews gets its full frame.
+    settle: Option<Instant>,
     error: Option<ViewerError>,
 }
 
@@ -230,11 +237,16 @@ impl App {
         ))
     }
 
-    /// Whether this frame is a preview: the camera is being dragged and full frames are slow.
+    /// Whether moving the camera draws previews: asked for, and full frames are slow.
+    fn previews_when_moving(&self) -> bool {
+        self.options.preview_while_moving && self.full_frame > PREVIEW_ABOVE
+    }
+
+    /// Whether this frame is a preview: the camera is being dragged or zoomed, and full frames
+    /// are slow.
     fn previewing(&self) -> bool {
-        self.options.preview_while_moving
-            && self.full_frame > PREVIEW_ABOVE
-            && self.drag.as_ref().is_some_and(|d| d.moved)
+        self.previews_when_moving()
+            && (self.settle.is_some() || self.drag.as_ref().is_some_and(|d| d.moved))
     }
 
     fn redraw(&mut self) -> Result<(), ViewerError> {
@@ -451,6 +463,9 @@ impl App {
     fn zoom(&mut self, steps: f64) {
         let offset = self.camera.eye - self.camera.target;
         self.camera.eye = self.camera.target + offset * 0.9f64.powf(steps);
+        if self.previews_when_moving() {
+            self.settle = Some(Instant::now() + SETTLE);
+        }
     }
 
     fn handle(
@@ -512,6 +527,21 @@ impl ApplicationHandler for App {
         if let Err(e) = self.handle(event_loop, event) {
             self.error = Some(e);
             event_loop.exit();
+        }
+    }
+
+    /// Draws the full frame once a zoom has settled.
+    fn about_to_wait(&mut self, event_loop: &ActiveEventLoop) {
+        match self.settle {
+            Some(due) if Instant::now() >= due => {
+                self.settle = None;
+                event_loop.set_control_flow(ControlFlow::Wait);
+                if let Some(gpu) = &self.gpu {
+                    gpu.window.request_redraw();
+                }
+            }
+            Some(due) => event_loop.set_control_flow(ControlFlow::WaitUntil(due)),
+            None => event_loop.set_control_flow(ControlFlow::Wait),
         }
     }
 }

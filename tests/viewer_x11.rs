@@ -257,6 +257,17 @@ fn viewer_picks_switches_orderings_and_takes_screenshots_under_xvfb() {
         t.ends_with(" splats")
     });
     assert!(splats_in(&after) > splats_in(&preview) * 4, "{after}");
+    // A wheel step zooms with a preview, and the full frame follows once the wheel rests.
+    xdo(
+        &display,
+        &["mousemove", "--window", &window, "320", "240", "click", "4"],
+    )
+    .expect("wheel");
+    title(&display, &window, "(preview)");
+    let settled = title_where(&display, &window, "the settled zoom's full frame", |t| {
+        t.ends_with(" splats")
+    });
+    assert!(splats_in(&settled) > splats_in(&preview) * 4, "{settled}");
 
     xdo(&display, &["key", "q"]).expect("key q");
     let mut viewer = viewer;

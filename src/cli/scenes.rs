@@ -324,9 +324,9 @@ pub struct ViewerArgs {
     /// Folder for screenshots taken with the S key.
     #[arg(long, default_value = ".")]
     screenshots: PathBuf,
-    /// Draw every frame in full, also while the camera is dragged (by default, where a full
-    /// frame takes over 50 ms, a drag draws the volumes at half resolution, about an eighth of
-    /// the splats).
+    /// Draw every frame in full, also while the camera moves (by default, where a full frame
+    /// takes over 50 ms, a drag or a zoom draws the volumes at half resolution, about an eighth
+    /// of the splats).
     #[arg(long)]
     no_preview: bool,
 }
