@@ -132,8 +132,8 @@ struct OrderingsArgs {
     bucket_widths: Vec<f64>,
     /// Composite on the GPU with the renderer (flat colours, the report's splat shape and
     /// near plane, transparent background) instead of the CPU reference compositor, so that
-    /// the error is measured on GPU images; adjacent inversions are then not counted. Order
-    /// times are the CPU's either way.
+    /// the error is measured on GPU images; adjacent inversions are then not counted, and a
+    /// column gives the GPU's splat pass per ordering. Order times are the CPU's either way.
     #[arg(long)]
     gpu: bool,
 }

@@ -504,10 +504,11 @@ fn orderings_composite_on_the_gpu_when_asked() {
         rmse > 0.0,
         "PBTF differs from the exact order on GPU images too"
     );
-    assert!(
-        row.ends_with("| n/a |"),
-        "no inversion count on the GPU: {row}"
-    );
+    // No inversion count on the GPU; the splat pass time instead.
+    let cells: Vec<&str> = row.split('|').map(str::trim).collect();
+    assert_eq!(cells[6], "n/a", "{row}");
+    let draw: f64 = cells[7].parse().unwrap();
+    assert!(draw > 0.0, "{row}");
     assert!(out.join("error-vs-time.png").exists());
     std::fs::remove_dir_all(&out).ok();
 }

@@ -151,9 +151,24 @@ pub struct ViewResult {
     pub name: String,
     /// The view case.
     pub kind: CaseKind,
-    /// Per ordering, in the order of [`ReportSettings::orderings`]; the fragment statistics
-    /// only from the CPU compositor.
-    pub per_ordering: Vec<(Entry, f64, ImageDifference, Option<FragmentStats>)>,
+    /// Per ordering, in the order of [`ReportSettings::orderings`].
+    pub per_ordering: Vec<OrderingResult>,
+}
+
+/// One ordering at one view.
+#[derive(Debug, Clone, Copy)]
+pub struct OrderingResult {
+    /// The ordering.
+    pub entry: Entry,
+    /// Order time in seconds (on the CPU, with either compositor).
+    pub order_seconds: f64,
+    /// The image against the exact order's.
+    pub difference: ImageDifference,
+    /// Adjacent inversions, counted by the CPU compositor only.
+    pub fragments: Option<FragmentStats>,
+    /// The GPU's splat pass for this order in seconds (the GPU compositor only): orders that
+    /// scatter consecutive splats across the volume draw slower.
+    pub draw_seconds: Option<f64>,
 }
 
 /// A named camera placement.
@@ -323,14 +338,13 @@ pub fn measure_views_with(
             },
             near: Some(near),
         };
-        // The frame of the order in `list` (CPU), or of `ordering` as the renderer draws it.
-        let mut draw = |ordering: Ordering,
-                        list: &[u32]|
-         -> Result<(Frame, Option<FragmentStats>), ReportError> {
+        // The frame of the order in `list` (CPU), or of `ordering` as the renderer draws it
+        // (with its splat pass timed).
+        let mut draw = |ordering: Ordering, list: &[u32]| -> Result<Drawn, ReportError> {
             match compositor {
                 Compositor::Cpu => {
                     let (frame, stats) = composite(&camera, &volume, list, &settings.style)?;
-                    Ok((frame, Some(stats)))
+                    Ok((frame, Some(stats), None))
                 }
                 Compositor::Gpu {
                     ctx,
@@ -340,12 +354,13 @@ pub fn measure_views_with(
                     let options = FrameOptions {
                         ordering: Some(ordering),
                         background: None,
-                        measure: false,
+                        measure: true,
                         preview: false,
                     };
                     let shot =
                         renderer.screenshot(ctx, scene, &scene_camera, settings.size, &options)?;
-                    Ok((shot.frame, None))
+                    let draw = shot.report.timings.splat_pass.as_secs_f64();
+                    Ok((shot.frame, None, Some(draw)))
                 }
             }
         };
@@ -356,15 +371,21 @@ pub fn measure_views_with(
             &Entry::from(Ordering::Exact).options(),
             &mut list,
         )?;
-        let (reference, _) = draw(Ordering::Exact, &list)?;
+        let (reference, ..) = draw(Ordering::Exact, &list)?;
         let mut per_ordering = Vec::with_capacity(settings.orderings.len());
         for &entry in &settings.orderings {
             let options = entry.options();
             let start = Instant::now();
             orderer.order(&classified.grid, &case, entry.ordering, &options, &mut list)?;
             let seconds = start.elapsed().as_secs_f64();
-            let (frame, stats) = draw(entry.ordering, &list)?;
-            per_ordering.push((entry, seconds, compare(&frame, &reference)?, stats));
+            let (frame, fragments, draw_seconds) = draw(entry.ordering, &list)?;
+            per_ordering.push(OrderingResult {
+                entry,
+                order_seconds: seconds,
+                difference: compare(&frame, &reference)?,
+                fragments,
+                draw_seconds,
+            });
         }
         results.push(ViewResult {
             name: if view.index == 0 && view.name != "orbit" && view.name != "fly-in" {
@@ -379,6 +400,9 @@ pub fn measure_views_with(
     }
     Ok(results)
 }
+
+/// A composited frame, its fragment statistics (CPU) and its splat pass time (GPU).
+type Drawn = (Frame, Option<FragmentStats>, Option<f64>);
 
 /// Per-ordering summary over a set of views.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -396,6 +420,8 @@ pub struct Summary {
     /// Share of consecutive fragment pairs drawn nearer-before-farther, over all views
     /// (counted by the CPU compositor only).
     pub inversion_share: Option<f64>,
+    /// The GPU's splat pass in seconds, median over the views (the GPU compositor only).
+    pub draw_time: Option<f64>,
 }
 
 /// Summarises each ordering over `results`.
@@ -406,13 +432,29 @@ pub fn summarise(results: &[ViewResult]) -> Vec<Summary> {
     let n = results.len() as f64;
     (0..first.per_ordering.len())
         .map(|i| {
-            let ordering = first.per_ordering[i].0;
-            let mut times: Vec<f64> = results.iter().map(|r| r.per_ordering[i].1).collect();
-            times.sort_by(f64::total_cmp);
+            let ordering = first.per_ordering[i].entry;
+            let median = |mut v: Vec<f64>| {
+                v.sort_by(f64::total_cmp);
+                [v[v.len() / 2], v[0], v[v.len() - 1]]
+            };
+            let time = median(
+                results
+                    .iter()
+                    .map(|r| r.per_ordering[i].order_seconds)
+                    .collect(),
+            );
+            let draws: Option<Vec<f64>> = results
+                .iter()
+                .map(|r| r.per_ordering[i].draw_seconds)
+                .collect();
             let (mut rmse, mut max_abs, mut bad) = (0.0, 0.0f64, 0.0);
             let mut counts = Some(FragmentStats::default());
             for r in results {
-                let (_, _, d, s) = r.per_ordering[i];
+                let OrderingResult {
+                    difference: d,
+                    fragments: s,
+                    ..
+                } = r.per_ordering[i];
                 rmse += d.rmse / n;
                 max_abs = max_abs.max(d.max_abs);
                 bad += d.bad_pixel_share / n;
@@ -424,24 +466,32 @@ pub fn summarise(results: &[ViewResult]) -> Vec<Summary> {
             }
             Summary {
                 ordering,
-                time: [times[times.len() / 2], times[0], times[times.len() - 1]],
+                time,
                 rmse,
                 max_abs,
                 bad_pixel_share: bad,
                 inversion_share: counts.map(|c| c.inversion_share()),
+                draw_time: draws.map(|d| median(d)[0]),
             }
         })
         .collect()
 }
 
-/// The summary as a Markdown table.
+/// The summary as a Markdown table, with a column for the GPU's splat pass where the frames
+/// were drawn on a GPU.
 pub fn summary_table(summaries: &[Summary]) -> String {
+    let gpu = summaries.iter().any(|m| m.draw_time.is_some());
     let mut s = String::from(
-        "| ordering | order time ms (median, min, max) | image RMSE | largest difference | bad pixels | adjacent inversions |\n|---|---|---|---|---|---|\n",
+        "| ordering | order time ms (median, min, max) | image RMSE | largest difference | bad pixels | adjacent inversions |",
     );
+    s += if gpu {
+        " GPU splat pass ms (median) |\n|---|---|---|---|---|---|---|\n"
+    } else {
+        "\n|---|---|---|---|---|---|\n"
+    };
     for m in summaries {
         s += &format!(
-            "| {} | {:.2} ({:.2}, {:.2}) | {:.4} | {:.3} | {:.2}% | {} |\n",
+            "| {} | {:.2} ({:.2}, {:.2}) | {:.4} | {:.3} | {:.2}% | {} |",
             m.ordering,
             m.time[0] * 1e3,
             m.time[1] * 1e3,
@@ -452,6 +502,12 @@ pub fn summary_table(summaries: &[Summary]) -> String {
             m.inversion_share
                 .map_or("n/a".to_owned(), |x| format!("{:.3}%", 100.0 * x))
         );
+        if gpu {
+            s += &m
+                .draw_time
+                .map_or(" n/a |".to_owned(), |t| format!(" {:.2} |", t * 1e3));
+        }
+        s += "\n";
     }
     s
 }
@@ -463,15 +519,16 @@ pub fn per_view_table(results: &[ViewResult]) -> String {
         return String::new();
     };
     let mut s = String::from("| view | case |");
-    for (o, ..) in &first.per_ordering {
-        s += &format!(" {o} |");
+    for o in &first.per_ordering {
+        s += &format!(" {} |", o.entry);
     }
     s += "\n|---|---|";
     s += &"---|".repeat(first.per_ordering.len());
     s += "\n";
     for r in results {
         s += &format!("| {} | {} |", r.name, r.kind.name());
-        for (_, _, d, _) in &r.per_ordering {
+        for o in &r.per_ordering {
+            let d = o.difference;
             s += &format!(" {:.4} ({:.1}%) |", d.rmse, 100.0 * d.bad_pixel_share);
         }
         s += "\n";
