@@ -202,19 +202,31 @@ fn place_label(at: (i32, i32), label: &str, taken: &[LabelBox], size: (u32, u32)
         .unwrap_or(boxes[0])
 }
 
-/// Log-axis bounds with some room around the values.
+/// Log-axis bounds with some room around the values, widened to whole decades so that the
+/// axis always shows at least two labelled powers of ten.
 fn bounds(values: &[f64]) -> (f64, f64) {
     let lo = values.iter().copied().fold(f64::INFINITY, f64::min);
     let hi = values.iter().copied().fold(0.0, f64::max);
-    if !(lo.is_finite() && hi > 0.0) {
+    if !(lo.is_finite() && lo > 0.0 && hi > 0.0) {
         return (1e-3, 1.0);
     }
-    (lo / 2.0, hi * 3.0)
+    let lo = 10f64.powf((lo / 1.5).log10().floor());
+    let hi = 10f64.powf((hi * 1.5).log10().ceil());
+    (lo, hi.max(lo * 10.0))
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn axes_span_whole_decades() {
+        assert_eq!(bounds(&[2.2, 63.0]), (1.0, 100.0));
+        assert_eq!(bounds(&[0.0022, 0.0316]), (0.001, 0.1));
+        // One value: still a decade.
+        assert_eq!(bounds(&[5.0]), (1.0, 10.0));
+        assert_eq!(bounds(&[]), (1e-3, 1.0));
+    }
 
     /// Four points a few pixels apart, as IP-PBTF, WBTF and the pyramid order often fall:
     /// every label finds a spot clear of every point and of the other labels.
