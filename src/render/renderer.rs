@@ -244,6 +244,15 @@ impl Renderer {
         self.meshes.retain(|id, _| live.contains(id));
     }
 
+    /// The volumes of full frames, or the halved copies of preview frames.
+    fn states_mut(&mut self, preview: bool) -> &mut HashMap<NodeId, VolumeState> {
+        if preview {
+            &mut self.previews
+        } else {
+            &mut self.volumes
+        }
+    }
+
     /// Classifies volumes whose data, transfer function or threshold changed, or their halved
     /// copies for a preview frame; returns how many.
     fn sync_volumes(
@@ -325,11 +334,7 @@ impl Renderer {
         let started = Instant::now();
         let pinhole = view.pinhole()?;
         let mut ordered = Vec::new();
-        let states = if options.preview {
-            &mut self.previews
-        } else {
-            &mut self.volumes
-        };
+        let states = self.states_mut(options.preview);
         for (id, node, world) in scene.volumes() {
             let Some(state) = states.get_mut(&id) else {
                 continue;
@@ -379,11 +384,7 @@ impl Renderer {
         preview: bool,
         report: &mut FrameReport,
     ) -> Result<(), RenderError> {
-        let states = if preview {
-            &mut self.previews
-        } else {
-            &mut self.volumes
-        };
+        let states = self.states_mut(preview);
         for (id, geometry) in ordered {
             let Some(state) = states.get_mut(id) else {
                 continue;
