@@ -11,9 +11,9 @@ use glam::DVec3;
 
 use crate::camera::Camera;
 use crate::classify::Classified;
-use crate::composite::Frame;
 use crate::composite::{
-    CompositeError, FragmentStats, ImageDifference, SplatStyle, SplatVolume, compare, composite,
+    CompositeError, FragmentStats, Frame, ImageDifference, SplatStyle, SplatVolume, compare,
+    composite,
 };
 use crate::order::{
     CaseKind, OrderError, OrderOptions, Orderer, Ordering, ViewCase, VolumeGeometry,
