@@ -52,6 +52,27 @@ pub enum CompositeError {
     /// Images of different sizes cannot be compared.
     #[error("cannot compare a {0}x{1} image with a {2}x{3} image")]
     SizeMismatch(u32, u32, u32, u32),
+    /// The image would take more memory than a CPU frame is allowed.
+    #[error(
+        "a {width}x{height} image is larger than the CPU compositor draws ({MAX_PIXELS} pixels at most, 8192x8192)"
+    )]
+    TooLarge {
+        /// Width asked for.
+        width: u32,
+        /// Height asked for.
+        height: u32,
+    },
+}
+
+/// The most pixels the CPU compositor draws in one frame (8192 x 8192: 1 GiB of f32 RGBA).
+pub const MAX_PIXELS: u64 = 1 << 26;
+
+/// Checks that a `width` x `height` frame is within [`MAX_PIXELS`].
+pub fn check_frame_size(width: u32, height: u32) -> Result<(), CompositeError> {
+    if u64::from(width) * u64::from(height) > MAX_PIXELS {
+        return Err(CompositeError::TooLarge { width, height });
+    }
+    Ok(())
 }
 
 /// Splat shape, in voxel units along each grid axis.
@@ -153,6 +174,7 @@ pub fn composite(
     order: &[u32],
     style: &SplatStyle,
 ) -> Result<(Frame, FragmentStats), CompositeError> {
+    check_frame_size(camera.width, camera.height)?;
     let footprints = project(camera, volume, order, style)?;
     let (width, height) = (camera.width as usize, camera.height as usize);
     let limit = (style.cutoff / style.sigma).powi(2);
@@ -344,6 +366,19 @@ pub fn compare(a: &Frame, b: &Frame) -> Result<ImageDifference, CompositeError> 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn frames_beyond_the_pixel_limit_are_refused() {
+        assert!(check_frame_size(8192, 8192).is_ok());
+        assert_eq!(
+            check_frame_size(8192, 8193),
+            Err(CompositeError::TooLarge {
+                width: 8192,
+                height: 8193
+            })
+        );
+        assert!(check_frame_size(u32::MAX, u32::MAX).is_err());
+    }
     use crate::order::{OrderOptions, Ordering, ViewCase, order};
 
     fn two_voxels() -> (VolumeGeometry, SparseGrid, Vec<[f32; 4]>) {

@@ -229,6 +229,9 @@ pub(crate) fn write_replacing(path: &Path, bytes: &[u8]) -> Result<()> {
     Ok(())
 }
 
+/// Views on each of the report's paths at most (each costs every ordering and a composite).
+const MAX_VIEWS: usize = 10_000;
+
 fn run_orderings(args: OrderingsArgs) -> Result<()> {
     let orderings = report_entries(&args.orderings, &args.bucket_widths)?;
     if args.gpu && !args.bucket_widths.is_empty() {
@@ -236,7 +239,16 @@ fn run_orderings(args: OrderingsArgs) -> Result<()> {
             "--bucket-widths: the GPU compositor draws the bucketed order at its default width only"
         );
     }
-    // The font and the folder of the plot, checked before minutes of measuring.
+    // Sizes, the font and the folder of the plot, checked before minutes of measuring.
+    splatscene::composite::check_frame_size(args.size.0, args.size.1).context("--size")?;
+    for (flag, views) in [
+        ("--orbit-views", args.orbit_views),
+        ("--fly-in-views", args.fly_in_views),
+    ] {
+        if views > MAX_VIEWS {
+            bail!("{flag}: {views} views; the report takes at most {MAX_VIEWS} of each");
+        }
+    }
     report::register_font()?;
     std::fs::create_dir_all(&args.out_dir)
         .with_context(|| format!("creating {}", args.out_dir.display()))?;

@@ -472,6 +472,27 @@ fn bucket_width_options_are_checked() {
 }
 
 #[test]
+fn report_sizes_are_checked_before_any_work() {
+    let report = |extra: &[&str]| {
+        let mut args = vec!["orderings"];
+        args.extend_from_slice(extra);
+        let out = splatscene(&args);
+        assert!(!out.status.success());
+        String::from_utf8_lossy(&out.stderr).into_owned()
+    };
+    // 160 GB of pixels: refused, not attempted.
+    let huge = report(&["--size", "100000x100000"]);
+    assert!(
+        huge.contains("larger than the CPU compositor draws"),
+        "{huge}"
+    );
+    let views = report(&["--orbit-views", "100000000"]);
+    assert!(views.contains("at most 10000"), "{views}");
+    // Neither loaded the phantom first.
+    assert!(!huge.contains("significant") && !views.contains("significant"));
+}
+
+#[test]
 fn orderings_composite_on_the_gpu_when_asked() {
     let out = std::env::temp_dir().join(format!("splatscene-gpu-report-{}", std::process::id()));
     let result = splatscene(&[

@@ -12,8 +12,8 @@ use glam::DVec3;
 use crate::camera::Camera;
 use crate::classify::Classified;
 use crate::composite::{
-    CompositeError, FragmentStats, Frame, ImageDifference, SplatStyle, SplatVolume, compare,
-    composite,
+    CompositeError, FragmentStats, Frame, ImageDifference, SplatStyle, SplatVolume,
+    check_frame_size, compare, composite,
 };
 use crate::order::{
     CaseKind, OrderError, OrderOptions, Orderer, Ordering, ViewCase, VolumeGeometry,
@@ -307,6 +307,7 @@ pub fn measure_views_with(
     compositor: &mut Compositor<'_>,
     mut progress: impl FnMut(),
 ) -> Result<Vec<ViewResult>, ReportError> {
+    check_frame_size(settings.size.0, settings.size.1)?;
     if let Compositor::Gpu { .. } = compositor
         && let Some(width) = settings.orderings.iter().find_map(|e| e.bucket_width)
     {
