@@ -62,6 +62,20 @@ pub(crate) struct Scratch {
 
 impl Scratch {
     fn prepare(&mut self, view: &ViewCase, width: f64) {
+        // Distances are bucketed in f32. Measured in a power-of-two unit near the farthest
+        // distance they stay in f32's range for any spacing (1e-20 or 1e30 mm), and since the
+        // scaling is exact, every voxel lands in the same bucket as in the view's own unit.
+        let (_, farthest) = distance_bounds(view);
+        let unit = if farthest.is_finite() && farthest > 0.0 {
+            2f64.powi(farthest.log2().round().clamp(-1000.0, 1000.0) as i32)
+        } else {
+            1.0
+        };
+        let view = &ViewCase {
+            gram: view.gram * (1.0 / (unit * unit)),
+            ..*view
+        };
+        let width = width / unit;
         self.orthogonal = is_orthogonal(&view.gram);
         self.view = Some(*view);
         for (a, terms) in self.terms.iter_mut().enumerate() {
@@ -72,12 +86,14 @@ impl Scratch {
         }
         let (nearest, farthest) = distance_bounds(view);
         let span = farthest - nearest;
-        let mut buckets = (span / width).floor() as usize + 1;
-        let mut width = width;
-        if buckets > MAX_BUCKETS {
-            buckets = MAX_BUCKETS;
-            width = span / (MAX_BUCKETS - 1) as f64;
-        }
+        // In f64 before any cast: a width far below the span asks for more buckets than a
+        // usize holds.
+        let count = (span / width).floor();
+        let (buckets, width) = if count < (MAX_BUCKETS - 1) as f64 {
+            (count as usize + 1, width)
+        } else {
+            (MAX_BUCKETS, span / (MAX_BUCKETS - 1) as f64)
+        };
         self.nearest = nearest as f32;
         self.inverse_width = (1.0 / width) as f32;
         self.edges.clear();
@@ -236,10 +252,10 @@ impl Current {
         // Saturating float-to-int cast: anything below the nearest bound is bucket 0.
         let mut b =
             (((q.max(0.0).sqrt() - scratch.nearest) * scratch.inverse_width) as usize).min(last);
-        while q < edges[b] {
+        while b > 0 && q < edges[b] {
             b -= 1;
         }
-        while q >= edges[b + 1] {
+        while b < last && q >= edges[b + 1] {
             b += 1;
         }
         *self = Self {
@@ -588,7 +604,7 @@ mod tests {
     use crate::order::{OrderOptions, Ordering, VolumeGeometry, order};
 
     /// The bucketed order is, by definition, the IP-PBTF list stably sorted by bucket, farthest
-    /// first. Checked with the bucket of each voxel found by scanning the edges, the squared
+    /// first. Checked with the bucket of each voxel found by searching the edges, the squared
     /// distance summed as the walks sum it.
     /// Returns whether a bucket took more than one block.
     fn check(
@@ -614,11 +630,13 @@ mod tests {
                 let t = &scratch.terms;
                 (t[b][k[b] as usize] + t[c][k[c] as usize]) + t[inner][k[inner] as usize]
             } else {
-                view.distance_squared(k) as f32
+                scratch.view.unwrap().distance_squared(k) as f32
             };
-            (0..scratch.edges.len() - 1)
-                .find(|&i| scratch.edges[i] <= q && q < scratch.edges[i + 1])
-                .unwrap()
+            // The last edge at or below `q` (the edges never decrease): the bucket with
+            // `edges[b] <= q < edges[b + 1]`.
+            let b = scratch.edges.partition_point(|&e| e <= q) - 1;
+            assert!(scratch.edges[b] <= q && q < scratch.edges[b + 1]);
+            b
         };
         let mut expected = order(&grid, &view, Ordering::IpPbtfImplicit, &options).unwrap();
         expected.sort_by_key(|&id| std::cmp::Reverse(bucket(id)));
@@ -666,5 +684,38 @@ mod tests {
             }
         }
         assert!(long_chains, "some bucket fills more than one block");
+    }
+
+    /// Spacings from 1e-20 to 1e30 mm and eyes 1e15 mm away keep every squared distance
+    /// within f32 and every voxel in its bucket; a width far below the span asks for more
+    /// buckets than exist and gets the most there are.
+    #[test]
+    fn extreme_spacings_and_widths_stay_in_range() {
+        let cases = [
+            ([4, 4, 4], [1.0, 1.0, 1e-20], [-0.75, -0.75, -0.75]),
+            ([4, 3, 5], [1e15, 1.0, 1.0], [2.5e14, 1e15, 1e15]),
+            ([4, 4, 4], [1e30, 1.0, 1e-30], [-0.75, -0.75, -0.75]),
+            ([5, 4, 3], [1e-20, 1e-20, 1e-20], [0.4, 0.6, 1.5]),
+        ];
+        for (dims, spacing, f) in cases {
+            let geometry = VolumeGeometry::axis_aligned(dims, spacing, [0.0; 3]).unwrap();
+            let eye = eye_at(&geometry, f);
+            for cull in [false, true] {
+                check(&geometry, eye, sparse, cull);
+                check(&geometry, eye, |_| true, cull);
+            }
+        }
+        let geometry = VolumeGeometry::axis_aligned([4, 4, 4], [1.0; 3], [0.0; 3]).unwrap();
+        let view = ViewCase::new(&geometry, DVec3::ZERO, geometry.centre_world()).unwrap();
+        let grid = SparseGrid::dense([4, 4, 4]).unwrap();
+        for w in [1e-20, 1e-300, f64::MIN_POSITIVE] {
+            let options = OrderOptions {
+                bucket_width: Some(w),
+                ..OrderOptions::default()
+            };
+            let mut got = order(&grid, &view, Ordering::Bucketed, &options).unwrap();
+            got.sort_unstable();
+            assert_eq!(got, (0..64).collect::<Vec<u32>>(), "width {w}");
+        }
     }
 }
