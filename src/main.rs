@@ -213,8 +213,17 @@ fn run_order(args: OrderArgs) -> Result<()> {
 }
 
 /// Writes `bytes` to `path` through a temporary file and a rename, so that a failed write
-/// leaves any earlier file whole; says so when an existing file is replaced.
+/// leaves any earlier file whole; says so when an existing file is replaced. A symbolic link
+/// is followed and the file it names written; a device, pipe or socket (`/dev/null`, a FIFO)
+/// is written into as it is, never replaced by a plain file.
 pub(crate) fn write_replacing(path: &Path, bytes: &[u8]) -> Result<()> {
+    let path = &follow_links(path)?;
+    if let Ok(meta) = std::fs::metadata(path)
+        && !meta.is_file()
+        && !meta.is_dir()
+    {
+        return std::fs::write(path, bytes).with_context(|| format!("writing {}", path.display()));
+    }
     let existed = path.exists();
     let name = path
         .file_name()
@@ -227,6 +236,25 @@ pub(crate) fn write_replacing(path: &Path, bytes: &[u8]) -> Result<()> {
         eprintln!("replaced the existing {}", path.display());
     }
     Ok(())
+}
+
+/// `path`, or the file its chain of symbolic links names (which need not exist yet).
+fn follow_links(path: &Path) -> Result<PathBuf> {
+    let mut path = path.to_path_buf();
+    for _ in 0..40 {
+        match std::fs::symlink_metadata(&path) {
+            Ok(meta) if meta.file_type().is_symlink() => {
+                let target = std::fs::read_link(&path)
+                    .with_context(|| format!("reading the link {}", path.display()))?;
+                path = match path.parent() {
+                    Some(dir) if target.is_relative() => dir.join(target),
+                    _ => target,
+                };
+            }
+            _ => return Ok(path),
+        }
+    }
+    bail!("{}: too many levels of symbolic links", path.display())
 }
 
 /// Views on each of the report's paths at most (each costs every ordering and a composite).

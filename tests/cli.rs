@@ -472,6 +472,60 @@ fn bucket_width_options_are_checked() {
 }
 
 #[test]
+fn out_follows_links_and_writes_into_pipes_without_replacing_them() {
+    let dir = std::env::temp_dir().join(format!("splatscene-out-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let order = |out: &std::path::Path| {
+        let result = splatscene(&[
+            "order",
+            "--dims",
+            "2,2,2",
+            "--eye",
+            "0,0,0",
+            "--ordering",
+            "btf",
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        assert!(
+            result.status.success(),
+            "{}",
+            String::from_utf8_lossy(&result.stderr)
+        );
+        String::from_utf8_lossy(&result.stderr).into_owned()
+    };
+    // A link: the file it names gets the order, and the link stays a link.
+    std::fs::write(dir.join("target.bin"), b"old").unwrap();
+    std::os::unix::fs::symlink("target.bin", dir.join("link.bin")).unwrap();
+    let said = order(&dir.join("link.bin"));
+    assert!(
+        said.contains("replaced the existing") && said.contains("target.bin"),
+        "{said}"
+    );
+    assert!(
+        std::fs::symlink_metadata(dir.join("link.bin"))
+            .unwrap()
+            .file_type()
+            .is_symlink()
+    );
+    assert_eq!(std::fs::read(dir.join("target.bin")).unwrap().len(), 32);
+    // A named pipe: written into, and still a pipe afterwards.
+    let fifo = dir.join("pipe");
+    let made = Command::new("mkfifo").arg(&fifo).status();
+    if made.is_ok_and(|s| s.success()) {
+        let reader = {
+            let fifo = fifo.clone();
+            std::thread::spawn(move || std::fs::read(fifo).unwrap())
+        };
+        order(&fifo);
+        assert_eq!(reader.join().unwrap().len(), 32);
+        use std::os::unix::fs::FileTypeExt;
+        assert!(std::fs::metadata(&fifo).unwrap().file_type().is_fifo());
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
 fn report_sizes_are_checked_before_any_work() {
     let report = |extra: &[&str]| {
         let mut args = vec!["orderings"];
