@@ -526,6 +526,28 @@ fn out_follows_links_and_writes_into_pipes_without_replacing_them() {
 }
 
 #[test]
+fn render_refuses_one_file_for_colour_and_depth() {
+    let dir = std::env::temp_dir().join(format!("splatscene-same-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let out = dir.join("shot.png");
+    let again = dir.join(".").join("shot.png");
+    let result = splatscene(&[
+        "render",
+        "--size",
+        "32x24",
+        "--out",
+        out.to_str().unwrap(),
+        "--depth",
+        again.to_str().unwrap(),
+    ]);
+    assert!(!result.status.success());
+    let said = String::from_utf8_lossy(&result.stderr);
+    assert!(said.contains("the same file as --out"), "{said}");
+    assert!(!out.exists(), "refused before rendering");
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
 fn report_sizes_are_checked_before_any_work() {
     let report = |extra: &[&str]| {
         let mut args = vec!["orderings"];

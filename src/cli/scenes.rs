@@ -1,6 +1,6 @@
 //! The commands that look at a scene: `render`, `pick` and `measure`.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
 use glam::DVec3;
@@ -151,6 +151,12 @@ pub struct MeasureArgs {
 }
 
 pub fn run_render(args: RenderArgs) -> Result<()> {
+    if args.depth.as_ref().is_some_and(|d| same_file(d, &args.out)) {
+        bail!(
+            "--depth {}: the same file as --out; the depth image would replace the colour one",
+            args.out.display()
+        );
+    }
     let View {
         loaded,
         camera,
@@ -314,6 +320,21 @@ pub fn run_measure(args: MeasureArgs) -> Result<()> {
         eprintln!("wrote {}", path.display());
     }
     Ok(())
+}
+
+/// Whether two output paths name one file, also when reached two ways (`./`, `..`, links).
+fn same_file(a: &Path, b: &Path) -> bool {
+    // The file itself where it exists, else its folder's real path and its name.
+    let resolve = |p: &Path| {
+        std::fs::canonicalize(p).ok().or_else(|| {
+            let dir = match p.parent() {
+                Some(d) if !d.as_os_str().is_empty() => d,
+                _ => Path::new("."),
+            };
+            Some(std::fs::canonicalize(dir).ok()?.join(p.file_name()?))
+        })
+    };
+    a == b || matches!((resolve(a), resolve(b)), (Some(x), Some(y)) if x == y)
 }
 
 /// `splatscene view`.
