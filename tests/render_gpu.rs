@@ -717,3 +717,25 @@ fn a_preview_frame_draws_an_eighth_of_the_splats_and_keeps_the_look() {
     // The meshes are drawn as before: the depth buffer is the same.
     assert_eq!(a.depth, b.depth);
 }
+
+#[test]
+fn a_target_too_large_to_read_back_is_refused_before_anything_is_made() {
+    let ctx = context();
+    let limits = ctx.device.limits();
+    let side = limits.max_texture_dimension_2d;
+    // Rows of 8-byte texels, padded to 256 bytes.
+    let bytes = u64::from((side * 8).div_ceil(256) * 256) * u64::from(side);
+    if bytes <= limits.max_buffer_size {
+        eprintln!(
+            "skipped: {} reads back {side}x{side} in one buffer",
+            ctx.describe()
+        );
+        return;
+    }
+    match splatscene::render::RenderTarget::new(&ctx, side, side) {
+        Err(splatscene::render::RenderError::TooLargeToRead { bytes: b, max, .. }) => {
+            assert_eq!((b, max), (bytes, limits.max_buffer_size));
+        }
+        other => panic!("{side}x{side}: {:?}", other.map(|t| t.size)),
+    }
+}

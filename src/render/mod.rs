@@ -43,6 +43,20 @@ pub enum RenderError {
         /// The adapter's largest 2D texture side.
         max: u32,
     },
+    /// The image is larger than the adapter can copy back to memory in one buffer.
+    #[error(
+        "image size {width}x{height} needs a {bytes}-byte readback buffer; the adapter allows {max} bytes"
+    )]
+    TooLargeToRead {
+        /// Requested width.
+        width: u32,
+        /// Requested height.
+        height: u32,
+        /// Bytes of the colour readback (rows padded to 256 bytes).
+        bytes: u64,
+        /// The adapter's largest buffer.
+        max: u64,
+    },
     /// The camera is unusable.
     #[error("camera: {0}")]
     BadCamera(String),

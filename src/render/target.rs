@@ -32,6 +32,17 @@ impl RenderTarget {
         if width == 0 || height == 0 || width > max || height > max {
             return Err(RenderError::BadSize { width, height, max });
         }
+        // The colour readback is the larger one: 8 bytes a texel.
+        let bytes = readback_bytes(width, height, 8);
+        let max_buffer = ctx.device.limits().max_buffer_size;
+        if bytes > max_buffer {
+            return Err(RenderError::TooLargeToRead {
+                width,
+                height,
+                bytes,
+                max: max_buffer,
+            });
+        }
         let make = |format, label| {
             ctx.device.create_texture(&wgpu::TextureDescriptor {
                 label: Some(label),
@@ -102,6 +113,17 @@ fn f16_to_f32(h: u16) -> f32 {
     f32::from_bits(magnitude.to_bits() | special | (h & 0x8000) << 16)
 }
 
+/// Bytes of one row in a readback buffer: the texels, padded to wgpu's row alignment.
+fn padded_row(width: u32, bytes_per_texel: u32) -> u32 {
+    let row = width * bytes_per_texel;
+    row.div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT) * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT
+}
+
+/// Bytes of a readback buffer for a `width` x `height` texture.
+fn readback_bytes(width: u32, height: u32, bytes_per_texel: u32) -> u64 {
+    u64::from(padded_row(width, bytes_per_texel)) * u64::from(height)
+}
+
 /// Copies a 2D texture to the CPU with rows packed tightly (`bytes_per_texel` each).
 pub fn read_texture(
     ctx: &GpuContext,
@@ -122,11 +144,10 @@ pub fn read_texture(
     }
     let (width, height) = (texture.width(), texture.height());
     let row = width * bytes_per_texel;
-    let padded =
-        row.div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT) * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT;
+    let padded = padded_row(width, bytes_per_texel);
     let buffer = ctx.device.create_buffer(&wgpu::BufferDescriptor {
         label: Some("readback"),
-        size: u64::from(padded) * u64::from(height),
+        size: readback_bytes(width, height, bytes_per_texel),
         usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
         mapped_at_creation: false,
     });
