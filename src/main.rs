@@ -352,7 +352,11 @@ fn run_orderings(args: OrderingsArgs) -> Result<()> {
     println!("{}", report::per_view_table(&path_results));
     let png = args.out_dir.join("error-vs-time.png");
     let svg = args.out_dir.join("error-vs-time.svg");
+    let existed: Vec<&PathBuf> = [&png, &svg].into_iter().filter(|p| p.exists()).collect();
     report::plot_error_against_time(&summaries, &format!("Orderings on {name}"), &png, &svg)?;
+    for path in existed {
+        eprintln!("replaced the existing {}", path.display());
+    }
     eprintln!("wrote {} and {}", png.display(), svg.display());
     Ok(())
 }

@@ -571,6 +571,9 @@ fn report_sizes_are_checked_before_any_work() {
 #[test]
 fn orderings_composite_on_the_gpu_when_asked() {
     let out = std::env::temp_dir().join(format!("splatscene-gpu-report-{}", std::process::id()));
+    // A plot already there is replaced, and the run says so.
+    std::fs::create_dir_all(&out).unwrap();
+    std::fs::write(out.join("error-vs-time.svg"), "mine").unwrap();
     let result = splatscene(&[
         "orderings",
         "--orbit-views",
@@ -607,5 +610,11 @@ fn orderings_composite_on_the_gpu_when_asked() {
     let draw: f64 = cells[7].parse().unwrap();
     assert!(draw > 0.0, "{row}");
     assert!(out.join("error-vs-time.png").exists());
+    let said = String::from_utf8_lossy(&result.stderr);
+    assert!(
+        said.contains("replaced the existing") && said.contains("error-vs-time.svg"),
+        "{said}"
+    );
+    assert_eq!(said.matches("replaced the existing").count(), 1, "{said}");
     std::fs::remove_dir_all(&out).ok();
 }
