@@ -548,6 +548,24 @@ fn render_refuses_one_file_for_colour_and_depth() {
 }
 
 #[test]
+fn a_dense_grid_larger_than_memory_is_refused_before_allocating() {
+    // 2^32 - 1 voxels in a line: ids fit a u32, but the run tables, the order and the exact
+    // sort's keys take about 256 GiB, more than any machine this runs on.
+    let result = splatscene(&[
+        "order",
+        "--dims",
+        "4294967295,1,1",
+        "--eye",
+        "0,0,0",
+        "--ordering",
+        "exact",
+    ]);
+    let said = String::from_utf8_lossy(&result.stderr);
+    assert!(!result.status.success());
+    assert!(said.contains("needs about 256.5 GiB"), "{said}");
+}
+
+#[test]
 fn report_sizes_are_checked_before_any_work() {
     let report = |extra: &[&str]| {
         let mut args = vec!["orderings"];
