@@ -108,7 +108,7 @@ struct OrderingsArgs {
     #[arg(long, value_parser = parse_f64x3, default_value = "1,1,1")]
     spacing: [f64; 3],
     /// Scalar value where splats start to show (raw volumes; the phantom uses the CT bone preset).
-    #[arg(long)]
+    #[arg(long, value_parser = parse_finite_f32)]
     threshold: Option<f32>,
     /// Views on the orbit.
     #[arg(long, default_value_t = 16)]
@@ -538,7 +538,37 @@ pub(crate) fn parse_f64x2(s: &str) -> Result<[f64; 2], String> {
         v.parse::<f64>()
             .map_err(|_| format!("{v:?} is not a valid number"))
     };
-    Ok([parse(a)?, parse(b)?])
+    let pair = [parse(a)?, parse(b)?];
+    finite(s, &pair)?;
+    Ok(pair)
+}
+
+/// Refuses NaN and infinite numbers in the argument `s`.
+fn finite(s: &str, values: &[f64]) -> Result<(), String> {
+    match values.iter().find(|v| !v.is_finite()) {
+        Some(v) => Err(format!("{v} in {s:?} is not finite")),
+        None => Ok(()),
+    }
+}
+
+/// A finite number.
+pub(crate) fn parse_finite_f32(s: &str) -> Result<f32, String> {
+    let v: f32 = s
+        .trim()
+        .parse()
+        .map_err(|_| format!("{s:?} is not a valid number"))?;
+    finite(s, &[f64::from(v)])?;
+    Ok(v)
+}
+
+/// An opacity, from 0 to 1.
+pub(crate) fn parse_opacity(s: &str) -> Result<f32, String> {
+    let v = parse_finite_f32(s)?;
+    if (0.0..=1.0).contains(&v) {
+        Ok(v)
+    } else {
+        Err(format!("{v} is not an opacity from 0 to 1"))
+    }
 }
 
 pub(crate) fn parse_u32x2(s: &str) -> Result<[u32; 2], String> {
@@ -556,7 +586,9 @@ fn parse_u32x3(s: &str) -> Result<[u32; 3], String> {
 }
 
 pub(crate) fn parse_f64x3(s: &str) -> Result<[f64; 3], String> {
-    parse_triple(s)
+    let triple = parse_triple(s)?;
+    finite(s, &triple)?;
+    Ok(triple)
 }
 
 pub(crate) fn parse_size(s: &str) -> Result<(u32, u32), String> {

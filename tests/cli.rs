@@ -566,6 +566,26 @@ fn a_dense_grid_larger_than_memory_is_refused_before_allocating() {
 }
 
 #[test]
+fn numbers_that_are_not_finite_or_out_of_range_are_refused() {
+    for args in [
+        &["orderings", "--threshold", "NaN"][..],
+        &["pick", "--pixel", "1,1", "--opacity", "2"],
+        &["pick", "--pixel", "1,1", "--opacity", "nan"],
+        &["measure", "--point", "NaN,0,0", "--point", "1,0,0"],
+        &["measure", "--point", "1e400,0,0", "--point", "1,0,0"],
+        &["render", "--orbit", "inf,0", "--out", "never.png"],
+    ] {
+        let result = splatscene(args);
+        assert!(!result.status.success(), "{args:?}");
+        let said = String::from_utf8_lossy(&result.stderr);
+        assert!(
+            said.contains("is not finite") || said.contains("is not an opacity"),
+            "{args:?}: {said}"
+        );
+    }
+}
+
+#[test]
 fn report_sizes_are_checked_before_any_work() {
     let report = |extra: &[&str]| {
         let mut args = vec!["orderings"];

@@ -18,7 +18,7 @@ use splatscene::scene::file::{LoadedScene, load_scene_file};
 use splatscene::scene::shoulder::shoulder_scene;
 use splatscene::scene::{Projection, Scene, SceneCamera};
 
-use crate::{parse_f64x2, parse_f64x3, parse_size, parse_u32x2, write_replacing};
+use crate::{parse_f64x2, parse_f64x3, parse_opacity, parse_size, parse_u32x2, write_replacing};
 
 /// The scene and the camera, shared by every scene command.
 #[derive(clap::Args)]
@@ -122,8 +122,8 @@ pub struct PickArgs {
     /// The pixel X,Y (0,0 is the top-left pixel).
     #[arg(long, value_parser = parse_u32x2)]
     pixel: [u32; 2],
-    /// Opacity a voxel must exceed to be hit.
-    #[arg(long, default_value_t = 0.1)]
+    /// Opacity a voxel must exceed to be hit (0 to 1).
+    #[arg(long, default_value_t = 0.1, value_parser = parse_opacity)]
     opacity: f32,
     /// Pick meshes only.
     #[arg(long)]
@@ -142,8 +142,8 @@ pub struct MeasureArgs {
     /// World points X,Y,Z to measure instead of picking pixels.
     #[arg(long = "point", value_parser = parse_f64x3, allow_hyphen_values = true, conflicts_with = "pixels")]
     points: Vec<[f64; 3]>,
-    /// Opacity a voxel must exceed to be hit.
-    #[arg(long, default_value_t = 0.1)]
+    /// Opacity a voxel must exceed to be hit (0 to 1).
+    #[arg(long, default_value_t = 0.1, value_parser = parse_opacity)]
     opacity: f32,
     /// Also render the scene with the measurement drawn in, to this PNG.
     #[arg(long)]
