@@ -366,6 +366,7 @@ pub fn compare(a: &Frame, b: &Frame) -> Result<ImageDifference, CompositeError> 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::order::{OrderOptions, Ordering, ViewCase, order};
 
     #[test]
     fn frames_beyond_the_pixel_limit_are_refused() {
@@ -379,7 +380,6 @@ mod tests {
         );
         assert!(check_frame_size(u32::MAX, u32::MAX).is_err());
     }
-    use crate::order::{OrderOptions, Ordering, ViewCase, order};
 
     fn two_voxels() -> (VolumeGeometry, SparseGrid, Vec<[f32; 4]>) {
         // Voxels 0 and 1 along x; the camera looks along +x so voxel 1 is behind voxel 0.

@@ -71,7 +71,7 @@ pub enum ViewerError {
 /// Transfer functions the `T` key cycles through: the presets, by name.
 const PRESETS: [&str; 4] = TransferFunction::PRESETS;
 
-/// A drag draws preview frames when a full frame took longer than this.
+/// A drag or a zoom draws preview frames when a full frame took longer than this.
 const PREVIEW_ABOVE: Duration = Duration::from_millis(50);
 
 /// After the last wheel step of a zoom drawn as a preview, the full frame follows this late.

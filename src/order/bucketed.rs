@@ -65,7 +65,7 @@ impl Scratch {
         // Distances are bucketed in f32. Measured in a power-of-two unit near the farthest
         // distance they stay in f32's range for any spacing (1e-20 or 1e30 mm), and since the
         // scaling is exact, every voxel lands in the same bucket as in the view's own unit.
-        let (_, farthest) = distance_bounds(view);
+        let (nearest, farthest) = distance_bounds(view);
         let unit = if farthest.is_finite() && farthest > 0.0 {
             2f64.powi(farthest.log2().round().clamp(-1000.0, 1000.0) as i32)
         } else {
@@ -75,7 +75,7 @@ impl Scratch {
             gram: view.gram * (1.0 / (unit * unit)),
             ..*view
         };
-        let width = width / unit;
+        let (nearest, farthest, width) = (nearest / unit, farthest / unit, width / unit);
         self.orthogonal = is_orthogonal(&view.gram);
         self.view = Some(*view);
         for (a, terms) in self.terms.iter_mut().enumerate() {
@@ -84,7 +84,6 @@ impl Scratch {
                 terms.extend(axis_terms(view, a).map(|t| t as f32));
             }
         }
-        let (nearest, farthest) = distance_bounds(view);
         let span = farthest - nearest;
         // In f64 before any cast: a width far below the span asks for more buckets than a
         // usize holds.
