@@ -137,6 +137,117 @@ impl TransferFunction {
     }
 }
 
+/// A transfer function chosen from what a volume's values are, and why.
+#[derive(Debug, Clone, PartialEq)]
+pub struct AutoTransfer {
+    /// The function.
+    pub transfer: TransferFunction,
+    /// What was chosen and from what, for the user (`ct-bone: values reach -1000 (HU)`).
+    pub reason: String,
+    /// Whether the values are taken for Hounsfield units.
+    pub hounsfield: bool,
+}
+
+/// Values at or below this are taken for air in Hounsfield units (-1000), with room for
+/// noise and for the -1024 padding of many scanners.
+const HU_AIR: f32 = -900.0;
+/// Bins of the histogram the automatic ramp reads its percentiles from.
+const HISTOGRAM_BINS: usize = 4096;
+
+/// Chooses a transfer function for values of unknown meaning: Hounsfield units (values
+/// reaching air, -1000) get [`TransferFunction::ct_bone`]; anything else (8-bit data, MR,
+/// unknown scalars) a ramp from the 90th to the 99.5th percentile of the values above the
+/// smallest one (the background, usually air or padding, is left out of the histogram), so that
+/// the densest tenth of the object shows. Percentiles come from a histogram of
+/// [`HISTOGRAM_BINS`] bins, one pass over the values.
+pub fn auto_transfer(values: &[f32]) -> AutoTransfer {
+    let (lo, hi) = finite_range(values);
+    if lo <= HU_AIR && hi > 0.0 {
+        return AutoTransfer {
+            transfer: TransferFunction::ct_bone(),
+            reason: format!(
+                "ct-bone: values run from {lo} to {hi}, reaching air at -1000, so they are taken for Hounsfield units"
+            ),
+            hounsfield: true,
+        };
+    }
+    let (from, to) = percentiles_above_min(values, lo, hi, 0.90, 0.995);
+    let color = [1.0, 0.93, 0.85, 0.7];
+    AutoTransfer {
+        transfer: TransferFunction::ramp(from, to.max(from), color),
+        reason: format!(
+            "ramp from {from} to {to}: values run from {lo} to {hi}, not Hounsfield units; the ramp spans the 90th to 99.5th percentile of the values above {lo}"
+        ),
+        hounsfield: false,
+    }
+}
+
+/// Whether values are taken for Hounsfield units: they reach air (-1000) and rise above 0,
+/// the rule [`auto_transfer`] chooses `ct-bone` by.
+pub fn is_hounsfield(values: &[f32]) -> bool {
+    let (lo, hi) = finite_range(values);
+    lo <= HU_AIR && hi > 0.0
+}
+
+fn finite_range(values: &[f32]) -> (f32, f32) {
+    values
+        .par_chunks(1 << 16)
+        .map(|chunk| {
+            chunk
+                .iter()
+                .filter(|v| v.is_finite())
+                .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &v| {
+                    (lo.min(v), hi.max(v))
+                })
+        })
+        .reduce(
+            || (f32::INFINITY, f32::NEG_INFINITY),
+            |a, b| (a.0.min(b.0), a.1.max(b.1)),
+        )
+}
+
+/// Two quantiles of the finite values above `lo` (`lo` and `hi` their range), from a histogram.
+fn percentiles_above_min(values: &[f32], lo: f32, hi: f32, a: f64, b: f64) -> (f32, f32) {
+    if !(hi > lo) {
+        return (lo.min(0.0), hi.max(1.0));
+    }
+    let width = f64::from(hi) - f64::from(lo);
+    let bin = |v: f32| {
+        let t = (f64::from(v) - f64::from(lo)) / width;
+        ((t * HISTOGRAM_BINS as f64) as usize).min(HISTOGRAM_BINS - 1)
+    };
+    let histogram = values
+        .par_chunks(1 << 16)
+        .map(|chunk| {
+            let mut h = vec![0u64; HISTOGRAM_BINS];
+            for &v in chunk.iter().filter(|v| v.is_finite() && **v > lo) {
+                h[bin(v)] += 1;
+            }
+            h
+        })
+        .reduce(
+            || vec![0u64; HISTOGRAM_BINS],
+            |mut x, y| {
+                x.iter_mut().zip(&y).for_each(|(x, y)| *x += y);
+                x
+            },
+        );
+    let total: u64 = histogram.iter().sum();
+    let at = |q: f64| {
+        let wanted = (q * total as f64).ceil() as u64;
+        let mut seen = 0;
+        let i = histogram
+            .iter()
+            .position(|&n| {
+                seen += n;
+                seen >= wanted.max(1)
+            })
+            .unwrap_or(HISTOGRAM_BINS - 1);
+        (f64::from(lo) + width * (i as f64 + 0.5) / HISTOGRAM_BINS as f64) as f32
+    };
+    (at(a), at(b))
+}
+
 /// The significant voxels of a volume with their premultiplied colours (index = rank).
 #[derive(Debug, Clone)]
 pub struct Classified {

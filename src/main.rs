@@ -571,6 +571,13 @@ pub(crate) fn parse_opacity(s: &str) -> Result<f32, String> {
     }
 }
 
+pub(crate) fn parse_f32x2(s: &str) -> Result<[f32; 2], String> {
+    let [a, b] = parse_f64x2(s)?;
+    let pair = [a as f32, b as f32];
+    finite(s, &[f64::from(pair[0]), f64::from(pair[1])])?;
+    Ok(pair)
+}
+
 pub(crate) fn parse_u32x2(s: &str) -> Result<[u32; 2], String> {
     let [a, b] = parse_f64x2(s)?;
     let whole =
@@ -581,7 +588,7 @@ pub(crate) fn parse_u32x2(s: &str) -> Result<[u32; 2], String> {
     }
 }
 
-fn parse_u32x3(s: &str) -> Result<[u32; 3], String> {
+pub(crate) fn parse_u32x3(s: &str) -> Result<[u32; 3], String> {
     parse_triple(s)
 }
 

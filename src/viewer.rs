@@ -316,14 +316,8 @@ impl App {
         let hit = self
             .picker
             .pick_pixel(&self.scene, &view, px, py, &PickOptions::default());
-        let name = hit.and_then(|h| {
-            let node = match h {
-                crate::pick::Hit::Mesh(m) => m.node,
-                crate::pick::Hit::Volume(v) => v.node,
-            };
-            self.scene.node(node).ok().map(|n| n.name.clone())
-        });
-        let line = serde_json::json!({ "pixel": [px, py], "hit": hit, "node_name": name });
+        let hit_json = hit.map(|h| h.to_json(&self.scene));
+        let line = serde_json::json!({ "pixel": [px, py], "hit": hit_json });
         println!("pick {line}");
         if let Some(old) = self.marker.take() {
             // Hide the previous marker: an empty group in its place.

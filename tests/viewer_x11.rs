@@ -185,7 +185,8 @@ fn viewer_picks_switches_orderings_and_takes_screenshots_under_xvfb() {
     )
     .expect("click");
     let pick: serde_json::Value = serde_json::from_str(&line(&lines, "pick")).unwrap();
-    assert_eq!(pick["node_name"], "head", "{pick}");
+    assert_eq!(pick["hit"]["node_name"], "head", "{pick}");
+    assert_eq!(pick["hit"]["frame"], "RAS", "{pick}");
     assert_eq!(pick["pixel"], serde_json::json!([320, 160]));
     let point = glam::DVec3::from_array(std::array::from_fn(|i| {
         pick["hit"]["point"][i].as_f64().unwrap()

@@ -6,112 +6,103 @@ use anyhow::{Context, Result, bail};
 use glam::DVec3;
 use serde_json::{Value, json};
 
-use splatscene::camera::Camera;
+use splatscene::annotate::{Annotations, Label, annotate_image};
 use splatscene::order::Ordering;
-use splatscene::pick::measure::{MarkerStyle, Measurement, annotate};
-use splatscene::pick::{Hit, PickOptions, Picker};
+use splatscene::pick::measure::{MarkerStyle, MeasureKind, Measurement, annotate};
+use splatscene::pick::{PickOptions, Picker, surface_distances};
 use splatscene::render::{
-    FrameOptions, FrameReport, GpuContext, Renderer, ViewSetup, depth_range, depth_to_luma16,
-    encode_png, frame_to_rgba8,
+    DepthImage, DepthMode, FrameOptions, FrameReport, GpuContext, Renderer, ViewSetup, encode_png,
+    frame_to_rgba8,
 };
-use splatscene::scene::file::{LoadedScene, load_scene_file};
-use splatscene::scene::shoulder::shoulder_scene;
-use splatscene::scene::{Projection, Scene, SceneCamera};
+use splatscene::scene::{Scene, SceneCamera};
 
-use crate::{parse_f64x2, parse_f64x3, parse_opacity, parse_size, parse_u32x2, write_replacing};
-
-/// The scene and the camera, shared by every scene command.
-#[derive(clap::Args)]
-pub struct ViewArgs {
-    /// A TOML scene file; the built-in shoulder scene when absent.
-    scene: Option<PathBuf>,
-    /// Image size WxH (default: the scene file's, else 800x600).
-    #[arg(long, value_parser = parse_size)]
-    size: Option<(u32, u32)>,
-    /// Eye position X,Y,Z in world millimetres.
-    #[arg(long, value_parser = parse_f64x3, allow_hyphen_values = true)]
-    eye: Option<[f64; 3]>,
-    /// Look-at point X,Y,Z (default: the scene's camera target).
-    #[arg(long, value_parser = parse_f64x3, allow_hyphen_values = true)]
-    target: Option<[f64; 3]>,
-    /// Turn the camera about its target: YAW,PITCH in degrees.
-    #[arg(long, value_parser = parse_f64x2, allow_hyphen_values = true)]
-    orbit: Option<[f64; 2]>,
-    /// Vertical field of view in degrees.
-    #[arg(long)]
-    fov: Option<f64>,
-    /// Orthographic projection showing this height in world units.
-    #[arg(long)]
-    orthographic: Option<f64>,
-}
-
-/// A loaded scene with the camera and size the arguments ask for.
-struct View {
-    loaded: LoadedScene,
-    camera: SceneCamera,
-    size: (u32, u32),
-}
-
-impl ViewArgs {
-    fn load(&self) -> Result<View> {
-        let loaded = match &self.scene {
-            Some(path) => load_scene_file(path)?,
-            None => LoadedScene {
-                scene: shoulder_scene()?,
-                size: None,
-                background: Some([0.06, 0.07, 0.09]),
-                ordering: None,
-            },
-        };
-        let mut camera = loaded.scene.camera.context("the scene has no camera")?;
-        if let Some(eye) = self.eye {
-            camera.eye = DVec3::from(eye);
-        }
-        if let Some(target) = self.target {
-            camera.target = DVec3::from(target);
-        }
-        if self.eye.is_some() || self.target.is_some() {
-            // Keep the scene's up vector unless the new view runs along it.
-            let forward = (camera.target - camera.eye).normalize_or_zero();
-            if forward.cross(camera.up.normalize_or_zero()).length() < 1e-6 {
-                camera.up = Camera::safe_up(camera.eye, camera.target);
-            }
-        }
-        if let Some([yaw, pitch]) = self.orbit {
-            camera = camera.orbit(yaw, pitch);
-        }
-        if let Some(fov) = self.fov {
-            camera.projection = Projection::Perspective { fov_y_degrees: fov };
-        }
-        if let Some(height) = self.orthographic {
-            camera.projection = Projection::Orthographic { height };
-        }
-        let size = self.size.or(loaded.size).unwrap_or((800, 600));
-        Ok(View {
-            loaded,
-            camera,
-            size,
-        })
-    }
-}
+use super::input::{View, ViewArgs};
+use crate::{parse_f64x3, parse_opacity, parse_u32x2, write_replacing};
 
 /// `splatscene render`.
 #[derive(clap::Args)]
 pub struct RenderArgs {
     #[command(flatten)]
     view: ViewArgs,
-    /// Output PNG.
+    /// Output PNG; with several --view, a name holding {view} (shoulder-{view}.png), which
+    /// each view's name replaces.
     #[arg(long)]
     out: PathBuf,
     /// Splat ordering: btf, wbtf, pbtf, ip-pbtf, exact, bucketed, pyramid, rows...
     #[arg(long)]
     ordering: Option<Ordering>,
-    /// Also write the mesh depth as a 16-bit PNG (near black, far white).
+    /// Also write the depth as a 16-bit PNG (near black, far white, 65535 where nothing was
+    /// hit), its near and far distances in millimetres in the PNG's text chunks and in a JSON
+    /// file beside it (the PNG's name with .json).
     #[arg(long)]
     depth: Option<PathBuf>,
+    /// What the depth image holds: `mesh` (meshes only; the default when the scene has
+    /// meshes) or `surface` (also each volume's first surface, where the opacity accumulated
+    /// along the pixel's ray reaches --surface-opacity; the default for a scene of volumes
+    /// only).
+    #[arg(long, value_parser = ["mesh", "surface"])]
+    depth_mode: Option<String>,
+    /// The accumulated opacity that makes a volume's surface in the depth image (0 to 1).
+    #[arg(long, default_value_t = 0.3, value_parser = parse_opacity)]
+    surface_opacity: f32,
     /// Transparent background (the PNG's alpha is the coverage).
     #[arg(long)]
     transparent: bool,
+    #[command(flatten)]
+    annotate: AnnotateArgs,
+}
+
+/// Annotations drawn onto the image for report figures.
+#[derive(clap::Args)]
+pub struct AnnotateArgs {
+    /// Annotate the figure: an orientation marker, patient-direction letters at the edges, a
+    /// scale bar (at the target's depth in perspective views) and measurement values; or only
+    /// the parts listed (marker, letters, scale, measurements).
+    #[arg(long, num_args = 0..=1, default_missing_value = "all", value_name = "PARTS")]
+    annotate: Option<String>,
+    /// A caption along the top of the image (implies --annotate for the caption alone when
+    /// --annotate is not given).
+    #[arg(long)]
+    caption: Option<String>,
+}
+
+impl AnnotateArgs {
+    /// The annotations asked for, or `None` for a plain image.
+    fn parts(&self) -> Result<Option<Annotations>> {
+        let mut parts = match &self.annotate {
+            Some(list) => {
+                Annotations::parse_parts(list).map_err(|e| anyhow::anyhow!("--annotate: {e}"))?
+            }
+            None if self.caption.is_some() => {
+                Annotations::parse_parts("none").map_err(anyhow::Error::msg)?
+            }
+            None => return Ok(None),
+        };
+        parts.caption = self.caption.clone();
+        if parts
+            .caption
+            .as_deref()
+            .is_some_and(|c| c.trim().is_empty())
+        {
+            bail!("--caption is empty");
+        }
+        Ok(Some(parts))
+    }
+}
+
+/// The image of a screenshot, annotated when asked.
+fn figure(
+    shot: &splatscene::render::Screenshot,
+    scene: &Scene,
+    camera: &SceneCamera,
+    parts: Option<&Annotations>,
+    labels: &[Label],
+) -> Result<image::RgbaImage> {
+    let mut image = frame_to_rgba8(&shot.frame);
+    if let Some(parts) = parts {
+        annotate_image(&mut image, camera, &scene.patient_frame(), labels, parts)?;
+    }
+    Ok(image)
 }
 
 /// `splatscene pick`.
@@ -145,23 +136,29 @@ pub struct MeasureArgs {
     /// Opacity a voxel must exceed to be hit (0 to 1).
     #[arg(long, default_value_t = 0.1, value_parser = parse_opacity)]
     opacity: f32,
-    /// Also render the scene with the measurement drawn in, to this PNG.
+    /// Also render the scene with the measurement drawn in and its value written beside it,
+    /// to this PNG.
     #[arg(long)]
     out: Option<PathBuf>,
+    #[command(flatten)]
+    annotate: AnnotateArgs,
 }
 
 pub fn run_render(args: RenderArgs) -> Result<()> {
-    if args.depth.as_ref().is_some_and(|d| same_file(d, &args.out)) {
-        bail!(
-            "--depth {}: the same file as --out; the depth image would replace the colour one",
-            args.out.display()
-        );
-    }
     let View {
         loaded,
-        camera,
+        cameras,
         size,
     } = args.view.load()?;
+    let outputs = output_names(&args.out, &cameras)?;
+    let depths = match &args.depth {
+        Some(depth) => output_names(depth, &cameras)?
+            .into_iter()
+            .map(Some)
+            .collect(),
+        None => vec![None; cameras.len()],
+    };
+    check_distinct(&outputs, &depths)?;
     let options = FrameOptions {
         ordering: args.ordering.or(loaded.ordering),
         background: if args.transparent {
@@ -172,26 +169,143 @@ pub fn run_render(args: RenderArgs) -> Result<()> {
         measure: true,
         preview: false,
     };
-    let ctx = GpuContext::headless()?;
-    let shot = Renderer::new().screenshot(&ctx, &loaded.scene, &camera, size, &options)?;
-    write_replacing(&args.out, &encode_png(&frame_to_rgba8(&shot.frame))?)?;
-    if let Some(path) = &args.depth {
-        let bounds = loaded.scene.bounds().unwrap_or((DVec3::ZERO, DVec3::ONE));
-        let range = depth_range(&shot.view, bounds);
-        write_replacing(
-            path,
-            &encode_png(&depth_to_luma16(&shot.depth, &shot.view, range))?,
-        )?;
+    let parts = args.annotate.parts()?;
+    let has_meshes = loaded.scene.meshes().next().is_some();
+    let depth_mode = match args.depth_mode.as_deref() {
+        Some("surface") => DepthMode::Surface,
+        Some(_) => DepthMode::Mesh,
+        None if has_meshes => DepthMode::Mesh,
+        None => DepthMode::Surface,
+    };
+    if args.depth.is_some() && depth_mode == DepthMode::Mesh && !has_meshes {
+        bail!(
+            "--depth-mode mesh: the scene has no meshes, so the depth image would be empty; use --depth-mode surface for the volumes' surface"
+        );
     }
-    eprintln!(
-        "{}x{} on {}: {}",
-        size.0,
-        size.1,
-        ctx.describe(),
-        describe(&shot.report)
-    );
-    eprintln!("wrote {}", args.out.display());
+    let ctx = GpuContext::headless()?;
+    // One renderer for every view: the volumes are classified once.
+    let mut renderer = Renderer::new();
+    for ((name, camera), (out, depth)) in cameras.iter().zip(outputs.iter().zip(&depths)) {
+        let shot = renderer.screenshot(&ctx, &loaded.scene, camera, size, &options)?;
+        let image = figure(&shot, &loaded.scene, camera, parts.as_ref(), &[])?;
+        write_replacing(out, &encode_png(&image)?)?;
+        if let Some(path) = depth {
+            write_depth(path, &shot, &loaded.scene, depth_mode, args.surface_opacity)?;
+        }
+        let view = name
+            .as_deref()
+            .map_or(String::new(), |n| format!(" {n} view"));
+        eprintln!(
+            "{}x{}{view} on {}: {}",
+            size.0,
+            size.1,
+            ctx.describe(),
+            describe(&shot.report)
+        );
+        eprintln!("wrote {}", out.display());
+    }
     Ok(())
+}
+
+/// Writes the depth image of `shot` and its calibration beside it.
+fn write_depth(
+    path: &Path,
+    shot: &splatscene::render::Screenshot,
+    scene: &Scene,
+    mode: DepthMode,
+    surface_opacity: f32,
+) -> Result<()> {
+    let view = &shot.view;
+    let mut distances: Vec<Option<f64>> = shot.depth.iter().map(|&d| view.distance_of(d)).collect();
+    if mode == DepthMode::Surface {
+        let surface = surface_distances(scene, view, surface_opacity, Some(&distances));
+        for (d, s) in distances.iter_mut().zip(surface) {
+            if s.is_some() {
+                *d = s;
+            }
+        }
+    }
+    let image = DepthImage {
+        size: view.size,
+        distances,
+        mode,
+        surface_opacity: (mode == DepthMode::Surface).then_some(surface_opacity),
+    };
+    let (png, calibration) = image.encode_png(view)?;
+    if calibration["near_mm"].is_null() {
+        eprintln!(
+            "warning: {}: nothing was hit, every pixel is 65535 (no depth)",
+            path.display()
+        );
+    }
+    write_replacing(path, &png)?;
+    let sidecar = path.with_extension("json");
+    write_replacing(
+        &sidecar,
+        serde_json::to_string_pretty(&calibration)?.as_bytes(),
+    )?;
+    eprintln!(
+        "wrote {} ({} depth, {} to {} mm) and {}",
+        path.display(),
+        mode.name(),
+        calibration["near_mm"],
+        calibration["far_mm"],
+        sidecar.display()
+    );
+    Ok(())
+}
+
+/// Refuses outputs that name one file, so that no image replaces another.
+fn check_distinct(outputs: &[PathBuf], depths: &[Option<PathBuf>]) -> Result<()> {
+    for (d, out) in depths
+        .iter()
+        .flatten()
+        .flat_map(|d| outputs.iter().map(move |o| (d, o)))
+    {
+        if same_file(d, out) {
+            bail!(
+                "--depth {}: the same file as --out {}; the depth image would replace the colour one",
+                d.display(),
+                out.display()
+            );
+        }
+    }
+    for list in [
+        outputs.iter().collect::<Vec<_>>(),
+        depths.iter().flatten().collect(),
+    ] {
+        for (i, a) in list.iter().enumerate() {
+            if let Some(b) = list[i + 1..].iter().find(|b| same_file(a, b)) {
+                bail!(
+                    "{} and {}: two views would write one file (is a view named twice?)",
+                    a.display(),
+                    b.display()
+                );
+            }
+        }
+    }
+    Ok(())
+}
+
+/// The output file of each camera: `pattern` with `{view}` replaced by the view's name. Several
+/// views need `{view}` in the name, so that no view's image replaces another's.
+fn output_names(pattern: &Path, cameras: &[(Option<String>, SceneCamera)]) -> Result<Vec<PathBuf>> {
+    let text = pattern.to_string_lossy();
+    let has_view = text.contains("{view}");
+    if cameras.len() > 1 && !has_view {
+        bail!(
+            "{}: several views need {{view}} in the output name (for example shoulder-{{view}}.png)",
+            pattern.display()
+        );
+    }
+    Ok(cameras
+        .iter()
+        .map(|(name, _)| match (has_view, name) {
+            (true, Some(name)) => PathBuf::from(text.replace("{view}", name)),
+            (true, None) => PathBuf::from(text.replace("{view}", "custom")),
+            (false, _) => pattern.to_path_buf(),
+        })
+        .collect())
 }
 
 fn describe(r: &FrameReport) -> String {
@@ -210,19 +324,6 @@ fn describe(r: &FrameReport) -> String {
     )
 }
 
-/// A hit as JSON, with the name of the node it landed on.
-fn hit_json(scene: &Scene, hit: &Hit) -> Result<Value> {
-    let mut value = serde_json::to_value(hit)?;
-    let node = match hit {
-        Hit::Mesh(h) => h.node,
-        Hit::Volume(h) => h.node,
-    };
-    if let (Some(object), Ok(n)) = (value.as_object_mut(), scene.node(node)) {
-        object.insert("node_name".into(), json!(n.name));
-    }
-    Ok(value)
-}
-
 fn check_pixel(pixel: [u32; 2], size: (u32, u32)) -> Result<()> {
     if pixel[0] >= size.0 || pixel[1] >= size.1 {
         bail!(
@@ -237,11 +338,9 @@ fn check_pixel(pixel: [u32; 2], size: (u32, u32)) -> Result<()> {
 }
 
 pub fn run_pick(args: PickArgs) -> Result<()> {
-    let View {
-        loaded,
-        camera,
-        size,
-    } = args.view.load()?;
+    let view = args.view.load()?;
+    let camera = view.single_camera()?;
+    let View { loaded, size, .. } = view;
     check_pixel(args.pixel, size)?;
     let scene = &loaded.scene;
     let view = ViewSetup::new(&camera, size, scene.bounds())?;
@@ -250,18 +349,18 @@ pub fn run_pick(args: PickArgs) -> Result<()> {
         volumes: !args.meshes_only,
     };
     let hit = Picker::new(scene).pick_pixel(scene, &view, args.pixel[0], args.pixel[1], &options);
-    let hit = hit.map(|h| hit_json(scene, &h)).transpose()?;
+    let hit = hit.map(|h| h.to_json(scene));
     let out = json!({ "pixel": args.pixel, "size": [size.0, size.1], "hit": hit });
     println!("{}", serde_json::to_string_pretty(&out)?);
     Ok(())
 }
 
 pub fn run_measure(args: MeasureArgs) -> Result<()> {
+    let view = args.view.load()?;
+    let camera = view.single_camera()?;
     let View {
-        mut loaded,
-        camera,
-        size,
-    } = args.view.load()?;
+        mut loaded, size, ..
+    } = view;
     let scene = &loaded.scene;
     let view = ViewSetup::new(&camera, size, scene.bounds())?;
     let options = PickOptions {
@@ -280,7 +379,7 @@ pub fn run_measure(args: MeasureArgs) -> Result<()> {
                     format!("nothing to measure at pixel {},{}", pixel[0], pixel[1])
                 })?;
             points.push(hit.point());
-            hits.push(hit_json(scene, &hit)?);
+            hits.push(hit.to_json(scene));
         }
     } else {
         points.extend(args.points.iter().map(|p| DVec3::from(*p)));
@@ -296,6 +395,7 @@ pub fn run_measure(args: MeasureArgs) -> Result<()> {
     };
     let mut out = serde_json::to_value(&measurement)?;
     if let Some(object) = out.as_object_mut() {
+        object.insert("frame".into(), "RAS".into());
         object.insert("hits".into(), Value::Array(hits));
     }
     println!("{}", serde_json::to_string_pretty(&out)?);
@@ -316,10 +416,31 @@ pub fn run_measure(args: MeasureArgs) -> Result<()> {
         };
         let ctx = GpuContext::headless()?;
         let shot = Renderer::new().screenshot(&ctx, &loaded.scene, &camera, size, &options)?;
-        write_replacing(path, &encode_png(&frame_to_rgba8(&shot.frame))?)?;
+        // The value is always written beside the measurement; the other parts as asked.
+        let mut parts = args
+            .annotate
+            .parts()?
+            .unwrap_or_else(|| Annotations::parse_parts("measurements").unwrap_or_default());
+        parts.measurements = true;
+        let labels = [measurement_label(&measurement)];
+        let image = figure(&shot, &loaded.scene, &camera, Some(&parts), &labels)?;
+        write_replacing(path, &encode_png(&image)?)?;
         eprintln!("wrote {}", path.display());
     }
     Ok(())
+}
+
+/// The text of a measurement and where it goes: the middle of a distance, the vertex of an
+/// angle, the middle of the first line of a line angle.
+fn measurement_label(m: &Measurement) -> Label {
+    let p: Vec<DVec3> = m.points.iter().map(|p| DVec3::from(*p)).collect();
+    let (at, text) = match (m.kind, p.as_slice()) {
+        (MeasureKind::Distance, [a, b]) => (0.5 * (*a + *b), format!("{:.1} mm", m.value)),
+        (MeasureKind::Angle, [_, v, _]) => (*v, format!("{:.1}\u{b0}", m.value)),
+        (_, [a, b, ..]) => (0.5 * (*a + *b), format!("{:.1}\u{b0}", m.value)),
+        _ => (DVec3::ZERO, String::new()),
+    };
+    Label { at, text }
 }
 
 /// Whether two output paths name one file, also when reached two ways (`./`, `..`, links).
@@ -353,11 +474,11 @@ pub struct ViewerArgs {
 }
 
 pub fn run_viewer(args: ViewerArgs) -> Result<()> {
+    let view = args.view.load()?;
+    let camera = view.single_camera()?;
     let View {
-        mut loaded,
-        camera,
-        size,
-    } = args.view.load()?;
+        mut loaded, size, ..
+    } = view;
     loaded.scene.camera = Some(camera);
     let options = splatscene::viewer::ViewerOptions {
         size,

@@ -18,6 +18,60 @@ pub fn march_volume(
     (threshold, max_distance): (f32, f64),
     clipping: &Clipping,
 ) -> Option<VolumeHit> {
+    walk_kept(
+        node,
+        geometry,
+        ray,
+        max_distance,
+        clipping,
+        |k, t, value, opacity| {
+            (opacity > threshold).then(|| VolumeHit {
+                node: id,
+                voxel: k.map(|v| v as u32),
+                point: ray.at(t).to_array(),
+                value,
+                opacity,
+                distance: t,
+            })
+        },
+    )
+}
+
+/// The distance along `ray` at which the opacity of `node`'s voxels, accumulated front to back
+/// over the voxels the ray crosses (`A += (1 - A) a`, each voxel's transfer-function opacity
+/// once, clipped voxels left out), first reaches `threshold`: the volume's first surface.
+pub fn first_surface(
+    node: &VolumeNode,
+    geometry: &VolumeGeometry,
+    ray: &Ray,
+    (threshold, max_distance): (f32, f64),
+    clipping: &Clipping,
+) -> Option<f64> {
+    let mut accumulated = 0.0f32;
+    walk_kept(
+        node,
+        geometry,
+        ray,
+        max_distance,
+        clipping,
+        |_, t, _, opacity| {
+            accumulated += (1.0 - accumulated) * opacity.clamp(0.0, 1.0);
+            (accumulated >= threshold).then_some(t)
+        },
+    )
+}
+
+/// Walks the voxels `ray` crosses, nearest first, and returns the first answer `visit` gives
+/// for a voxel that `clipping` keeps; `visit` sees the voxel, the distance where the ray enters
+/// it, its value and its opacity.
+fn walk_kept<T>(
+    node: &VolumeNode,
+    geometry: &VolumeGeometry,
+    ray: &Ray,
+    max_distance: f64,
+    clipping: &Clipping,
+    mut visit: impl FnMut([i64; 3], f64, f32, f32) -> Option<T>,
+) -> Option<T> {
     let dims = geometry.dims();
     let o = geometry.world_to_index(ray.origin);
     let d = geometry.world_dir_to_index(ray.direction);
@@ -61,15 +115,11 @@ pub fn march_volume(
             let p = geometry.index_to_world_point(centre);
             planes.iter().all(|c| c.keeps(p))
         };
-        if opacity > threshold && kept() {
-            return Some(VolumeHit {
-                node: id,
-                voxel: k.map(|v| v as u32),
-                point: ray.at(t).to_array(),
-                value,
-                opacity,
-                distance: t,
-            });
+        if opacity > 0.0
+            && kept()
+            && let Some(answer) = visit(k, t, value, opacity)
+        {
+            return Some(answer);
         }
         let a = (0..3).min_by(|&i, &j| t_next[i].total_cmp(&t_next[j]))?;
         t = t_next[a];

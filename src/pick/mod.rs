@@ -21,7 +21,7 @@ use crate::scene::{ClipPlane, Clipping, NodeId, Scene, placed_geometry};
 mod march;
 pub mod measure;
 
-pub use march::march_volume;
+pub use march::{first_surface, march_volume};
 
 /// A ray in world space; `direction` is a unit vector, distances are world units along it.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -133,6 +133,79 @@ impl Hit {
             Self::Volume(h) => h.point,
         })
     }
+}
+
+impl Hit {
+    /// The node hit.
+    pub fn node(&self) -> NodeId {
+        match self {
+            Self::Mesh(h) => h.node,
+            Self::Volume(h) => h.node,
+        }
+    }
+
+    /// The hit as JSON, with the node's name, the frame and unit of its coordinates (`"frame":
+    /// "RAS", "unit": "mm"`) and, for a voxel, the unit of its value (`"value_unit": "HU"` for
+    /// CT in Hounsfield units, else `"file"`: whatever the file's values mean).
+    pub fn to_json(&self, scene: &Scene) -> serde_json::Value {
+        let mut value = serde_json::to_value(self).unwrap_or_default();
+        let node = scene.node(self.node()).ok();
+        if let Some(object) = value.as_object_mut() {
+            object.insert("node_name".into(), serde_json::json!(node.map(|n| &n.name)));
+            object.insert("frame".into(), "RAS".into());
+            object.insert("unit".into(), "mm".into());
+            if let Some(crate::scene::NodeContent::Volume(v)) = node.map(|n| &n.content) {
+                let unit = if crate::classify::is_hounsfield(&v.volume.values) {
+                    "HU"
+                } else {
+                    "file"
+                };
+                object.insert("value_unit".into(), unit.into());
+            }
+        }
+        value
+    }
+}
+
+/// The view distance (along the view axis) of every pixel's nearest volume surface: where the
+/// opacity accumulated along the pixel's ray first reaches `threshold` (see [`first_surface`]),
+/// nearer than `limits[pixel]` when given (the mesh depth, so that hidden voxels are not
+/// walked). Row by row from the top; `None` where no volume reaches the threshold.
+pub fn surface_distances(
+    scene: &Scene,
+    view: &ViewSetup,
+    threshold: f32,
+    limits: Option<&[Option<f64>]>,
+) -> Vec<Option<f64>> {
+    use rayon::prelude::*;
+    let (w, h) = view.size;
+    let forward = view.axes.z_axis;
+    let volumes: Vec<_> = scene
+        .volumes()
+        .filter_map(|(_, node, world)| Some((node, placed_geometry(&node.volume, world).ok()?)))
+        .collect();
+    (0..w as usize * h as usize)
+        .into_par_iter()
+        .map(|i| {
+            let (x, y) = ((i % w as usize) as f64 + 0.5, (i / w as usize) as f64 + 0.5);
+            let ray = Ray::through_pixel(view, x, y);
+            // Distances along this ray per unit of view distance.
+            let along = ray.direction.dot(forward);
+            let mut limit = limits
+                .and_then(|l| l.get(i).copied().flatten())
+                .map_or(f64::INFINITY, |d| d / along);
+            let mut best = None;
+            for (node, geometry) in &volumes {
+                if let Some(t) =
+                    first_surface(node, geometry, &ray, (threshold, limit), &scene.clipping)
+                {
+                    limit = t;
+                    best = Some((ray.at(t) - view.camera.eye).dot(forward));
+                }
+            }
+            best
+        })
+        .collect()
 }
 
 /// Picking options.

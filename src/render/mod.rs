@@ -7,6 +7,7 @@ use thiserror::Error;
 
 mod blit;
 mod context;
+mod depth_image;
 mod mesh_pass;
 mod output;
 mod renderer;
@@ -16,6 +17,7 @@ mod view;
 
 pub use blit::Blit;
 pub use context::GpuContext;
+pub use depth_image::{DepthImage, DepthMode};
 pub use output::{depth_range, depth_to_luma16, encode_png, frame_to_rgba8};
 pub use renderer::{FrameOptions, FrameReport, FrameTimings, Renderer, Screenshot};
 pub use splat_pass::gpu_colors;

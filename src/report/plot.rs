@@ -1,25 +1,18 @@
 //! Error against run time as a scatter plot (plotters), as PNG and SVG.
 
 use std::path::{Path, PathBuf};
-use std::sync::OnceLock;
 
 use plotters::prelude::*;
 use plotters::style::FontStyle;
 
 use super::Summary;
 
-/// Where the plot's font is looked for (Debian's fonts-dejavu-core).
-const FONT_PATHS: [&str; 2] = [
-    "/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf",
-    "/usr/share/fonts/dejavu/DejaVuSans.ttf",
-];
-
 /// Why the plot could not be drawn.
 #[derive(Debug, thiserror::Error)]
 pub enum PlotError {
     /// No font to draw labels with.
-    #[error("no font for the plot labels: install Debian's fonts-dejavu-core (looked for {0:?})")]
-    NoFont(Vec<&'static str>),
+    #[error("the plot labels: {0}")]
+    NoFont(#[from] crate::annotate::NoFont),
     /// Drawing or writing the file failed.
     #[error("drawing {path}: {message}")]
     Draw {
@@ -33,16 +26,9 @@ pub enum PlotError {
 /// Finds and registers the font of the plot's labels. The plot does this itself; a caller
 /// that measures for minutes before plotting calls it first, to fail before the work.
 pub fn register_font() -> Result<(), PlotError> {
-    static FONT: OnceLock<Option<&'static [u8]>> = OnceLock::new();
-    let bytes = FONT.get_or_init(|| {
-        FONT_PATHS
-            .iter()
-            .find_map(|p| std::fs::read(p).ok())
-            .map(|b| &*Box::leak(b.into_boxed_slice()))
-    });
-    let bytes = bytes.ok_or_else(|| PlotError::NoFont(FONT_PATHS.to_vec()))?;
+    let bytes = crate::annotate::font_bytes()?;
     plotters::style::register_font("sans-serif", FontStyle::Normal, bytes)
-        .map_err(|_| PlotError::NoFont(FONT_PATHS.to_vec()))
+        .map_err(|_| PlotError::NoFont(crate::annotate::NoFont))
 }
 
 /// Draws mean image RMSE against median order time (log-log), one labelled point per

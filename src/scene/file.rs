@@ -45,16 +45,17 @@ use std::path::{Component, Path, PathBuf};
 use std::sync::Arc;
 
 use glam::{DMat4, DQuat, DVec3, EulerRot};
-use serde::Deserialize;
+use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
+use super::patient::{NamedView, OrientationCode};
 use super::shoulder::{
     add_model, cut_away_anterior_humerus, prosthesis_model, resect_humeral_head,
 };
 use super::{
-    Light, Lights, NodeContent, Projection, Scene, SceneCamera, SplatSettings, VolumeNode,
+    Light, Lights, NodeContent, NodeId, Projection, Scene, SceneCamera, SplatSettings, VolumeNode,
 };
-use crate::classify::TransferFunction;
+use crate::classify::{TransferFunction, auto_transfer};
 use crate::mesh::prosthesis::seat_in_phantom;
 use crate::mesh::{MeshError, load_mesh};
 use crate::order::Ordering;
@@ -145,7 +146,7 @@ fn describe_data_dir(var: Option<&OsStr>) -> String {
 }
 
 /// Output settings.
-#[derive(Debug, Clone, Default, Deserialize)]
+#[derive(Debug, Clone, Default, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct OutputSpec {
     /// Image width and height in pixels.
@@ -160,15 +161,19 @@ pub struct OutputSpec {
 }
 
 /// The camera; without `eye` the scene is fitted, seen along `view_from`.
-#[derive(Debug, Clone, Default, Deserialize)]
+#[derive(Debug, Clone, Default, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct CameraSpec {
     /// Eye position (world).
     pub eye: Option<[f64; 3]>,
     /// Look-at point; the scene centre by default.
     pub target: Option<[f64; 3]>,
-    /// Up vector; +z unless the view is vertical.
+    /// Up vector on screen, and the scene's up that orbits turn about; the patient's superior
+    /// axis by default (anterior for a view along it).
     pub up: Option<[f64; 3]>,
+    /// A named view of the patient (`anterior`, `superior`, `anterolateral-right`...; see
+    /// [`super::patient::NamedView`]), fitted to the scene; instead of `eye` and `view_from`.
+    pub view: Option<String>,
     /// Viewing direction used to fit the scene when no eye is given.
     pub view_from: Option<[f64; 3]>,
     /// Vertical field of view in degrees (perspective).
@@ -180,7 +185,7 @@ pub struct CameraSpec {
 }
 
 /// A directional light.
-#[derive(Debug, Clone, Deserialize)]
+#[derive(Debug, Clone, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct LightSpec {
     /// Direction the light travels.
@@ -190,7 +195,7 @@ pub struct LightSpec {
 }
 
 /// Lights; absent fields keep the defaults.
-#[derive(Debug, Clone, Default, Deserialize)]
+#[derive(Debug, Clone, Default, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct LightsSpec {
     /// Headlight intensity.
@@ -203,7 +208,7 @@ pub struct LightsSpec {
 
 /// A node transform: scale, then rotation (degrees about x, y, z in that order), then
 /// translation; or a full column-major matrix.
-#[derive(Debug, Clone, Default, Deserialize)]
+#[derive(Debug, Clone, Default, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct TransformSpec {
     /// Translation.
@@ -217,7 +222,7 @@ pub struct TransformSpec {
 }
 
 /// A volume.
-#[derive(Debug, Clone, Deserialize)]
+#[derive(Debug, Clone, Default, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct VolumeSpec {
     /// Node name.
@@ -234,6 +239,10 @@ pub struct VolumeSpec {
     pub spacing: Option<[f64; 3]>,
     /// Raw: world position of the first voxel.
     pub origin: Option<[f64; 3]>,
+    /// Raw: where the index axes run in the patient frame, one letter per axis naming the
+    /// side it increases toward (`RAS`, the default, puts the grid along world +x, +y, +z;
+    /// `LPS`, `LPI`...; see [`super::patient`]).
+    pub orientation: Option<String>,
     /// Transfer function: a preset (`ct-bone`, the default, `ct-soft-tissue`, `ct-metal`,
     /// `mr-default`) or `ramp` (with `window` and `color`).
     pub transfer: Option<String>,
@@ -266,7 +275,7 @@ pub struct VolumeSpec {
 }
 
 /// A mesh file.
-#[derive(Debug, Clone, Deserialize)]
+#[derive(Debug, Clone, Default, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct MeshSpec {
     /// Node name.
@@ -281,13 +290,19 @@ pub struct MeshSpec {
     pub metallic: Option<f32>,
     /// `phantom`: seat the prosthesis in the built-in phantom's humerus (before `transform`).
     pub seat: Option<String>,
+    /// Length unit of the file's coordinates: `mm` (the default), `cm` or `m` (OpenSim and
+    /// many STL exports are in metres); scaled to millimetres before `transform`.
+    pub units: Option<String>,
+    /// Patient frame of the file's coordinates: `RAS` (the default, the scene's) or `LPS`
+    /// (DICOM's, and 3D Slicer's model export); turned to RAS before `transform`.
+    pub frame: Option<String>,
     /// Node transform.
     #[serde(default)]
     pub transform: TransformSpec,
 }
 
 /// A whole scene file.
-#[derive(Debug, Clone, Default, Deserialize)]
+#[derive(Debug, Clone, Default, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct SceneFile {
     /// Output settings.
@@ -378,10 +393,23 @@ impl SceneFile {
                 .add(name, local, None, NodeContent::Volume(node))
                 .map_err(|e| invalid(e.to_string()))?;
         }
+        let mut meshes = Vec::with_capacity(self.meshes.len());
         for (i, spec) in self.meshes.iter().enumerate() {
-            load_mesh_spec(&mut scene, spec, i, path, base, &data, &invalid)?;
+            let id = load_mesh_spec(&mut scene, spec, i, path, base, &data, &invalid)?;
+            meshes.push((
+                scene
+                    .node(id)
+                    .map_err(|e| invalid(e.to_string()))?
+                    .name
+                    .clone(),
+                id,
+            ));
+        }
+        for warning in scale_warnings(&scene, &meshes) {
+            eprintln!("warning: {}: {warning}", path.display());
         }
         scene.lights = lights(&self.lights);
+        scene.up = self.camera.as_ref().and_then(|c| c.up).map(DVec3::from);
         let aspect = size.map_or(4.0 / 3.0, |(w, h)| f64::from(w) / f64::from(h));
         scene.camera = Some(camera(self.camera.as_ref(), &scene, aspect).map_err(&invalid)?);
         let background = if self.output.transparent {
@@ -488,6 +516,12 @@ fn load_volume(
     invalid: &dyn Fn(String) -> SceneFileError,
 ) -> Result<VolumeNode, SceneFileError> {
     let volume = if spec.path == "builtin:shoulder-phantom" {
+        if spec.dims.is_some() || spec.scalar.is_some() || spec.orientation.is_some() {
+            return Err(invalid(
+                "builtin:shoulder-phantom is made in code: dims, scalar and orientation do not apply"
+                    .into(),
+            ));
+        }
         let mut volume = shoulder_phantom_default();
         let marks = shoulder_landmarks(DEFAULT_DIMS, DEFAULT_SPACING);
         if spec.resect_humeral_head {
@@ -513,19 +547,42 @@ fn load_volume(
         let file = resolve_spec_path(&spec.path, scene_file, base, data, invalid)?;
         load_raw_volume(spec, &file, invalid)?
     };
-    let mut transfer = match spec.transfer.as_deref().unwrap_or("ct-bone") {
+    let mut transfer = match spec.transfer.as_deref().unwrap_or("auto") {
         "ramp" => {
             let [lo, hi] = spec.window.ok_or_else(|| {
                 invalid("the ramp transfer function needs window = [lo, hi]".into())
             })?;
+            if !(lo.is_finite() && hi.is_finite() && lo < hi) {
+                return Err(invalid(format!(
+                    "window [{lo}, {hi}] must be two finite values, low below high"
+                )));
+            }
             TransferFunction::ramp(lo, hi, spec.color.unwrap_or([1.0, 0.93, 0.85, 0.6]))
         }
-        other => TransferFunction::preset(other).ok_or_else(|| {
-            invalid(format!(
-                "unknown transfer function {other:?} ({} or ramp)",
-                TransferFunction::PRESETS.join(", ")
-            ))
-        })?,
+        other => {
+            for (key, given) in [
+                ("window", spec.window.is_some()),
+                ("color", spec.color.is_some()),
+            ] {
+                if given {
+                    return Err(invalid(format!(
+                        "{key} applies to transfer = \"ramp\" only, not {other:?} (a preset is stretched with level_width and moved with shift)"
+                    )));
+                }
+            }
+            if other == "auto" {
+                let auto = auto_transfer(&volume.values);
+                eprintln!("{}: transfer function {}", spec.path, auto.reason);
+                auto.transfer
+            } else {
+                TransferFunction::preset(other).ok_or_else(|| {
+                    invalid(format!(
+                        "unknown transfer function {other:?} (auto, ramp, {})",
+                        TransferFunction::PRESETS.join(", ")
+                    ))
+                })?
+            }
+        }
     };
     if let Some([level, width]) = spec.level_width {
         transfer = transfer.windowed(level, width);
@@ -565,16 +622,34 @@ fn load_raw_volume(
     path: &Path,
     invalid: &dyn Fn(String) -> SceneFileError,
 ) -> Result<CpuVolume, SceneFileError> {
+    let raw_keys = [
+        ("dims", spec.dims.is_some()),
+        ("scalar", spec.scalar.is_some()),
+        ("header_bytes", spec.header_bytes.is_some()),
+        ("spacing", spec.spacing.is_some()),
+        ("origin", spec.origin.is_some()),
+        ("orientation", spec.orientation.is_some()),
+    ];
     if spec.dims.is_none() && spec.scalar.is_none() {
         // Not described as raw: a format with its own header (NRRD, NIfTI, VTK, Voreen .dat)
         // or a DICOM series folder, found from the first bytes and the name.
-        return match crate::volume::detect::load_volume(path) {
-            Err(VolumeError::NoHeader { .. }) => Err(invalid(format!(
-                "volume {}: a raw volume needs dims and scalar",
-                path.display()
-            ))),
-            other => Ok(other?),
+        let volume = match crate::volume::detect::load_volume(path) {
+            Err(VolumeError::NoHeader { .. }) => {
+                return Err(invalid(format!(
+                    "volume {}: a raw volume needs dims and scalar",
+                    path.display()
+                )));
+            }
+            other => other?,
         };
+        // The file's header places the grid; a raw key here would silently do nothing.
+        if let Some((key, _)) = raw_keys.iter().find(|(_, given)| *given) {
+            return Err(invalid(format!(
+                "volume {}: {key} applies to raw volumes only; this file's header places its grid",
+                path.display()
+            )));
+        }
+        return Ok(volume);
     }
     let (Some(dims), Some(scalar)) = (spec.dims, &spec.scalar) else {
         return Err(invalid(format!(
@@ -585,6 +660,12 @@ fn load_raw_volume(
     let format: ScalarFormat = scalar
         .parse()
         .map_err(|e| invalid(format!("volume {}: {e}", path.display())))?;
+    let orientation = match &spec.orientation {
+        Some(code) => code
+            .parse::<OrientationCode>()
+            .map_err(|e| invalid(format!("volume {}: {e}", path.display())))?,
+        None => OrientationCode::RAS,
+    };
     let raw = RawSpec {
         header_bytes: spec.header_bytes.unwrap_or(0),
         spacing: spec.spacing.unwrap_or([1.0; 3]),
@@ -592,11 +673,13 @@ fn load_raw_volume(
         ..RawSpec::new(dims, format.scalar, format.order)
     };
     let is_stack = path.extension().is_some_and(|e| e == "1");
-    Ok(if is_stack {
+    let mut volume = if is_stack {
         load_raw_slices(&slice_stack(path)?, &raw)?
     } else {
         load_raw(path, &raw)?
-    })
+    };
+    volume.direction = orientation.direction();
+    Ok(volume)
 }
 
 fn load_mesh_spec(
@@ -607,7 +690,7 @@ fn load_mesh_spec(
     base: &Path,
     data: &DataRoot,
     invalid: &dyn Fn(String) -> SceneFileError,
-) -> Result<(), SceneFileError> {
+) -> Result<NodeId, SceneFileError> {
     let mut model = if spec.path == "builtin:prosthesis" {
         prosthesis_model()?
     } else {
@@ -643,14 +726,80 @@ fn load_mesh_spec(
         Some("phantom") => seat_in_phantom(&shoulder_landmarks(DEFAULT_DIMS, DEFAULT_SPACING)),
         Some(other) => return Err(invalid(format!("unknown seat {other:?} (phantom)"))),
     };
-    let local = seat * transform(&spec.transform).map_err(invalid)?;
+    let local = seat * transform(&spec.transform).map_err(invalid)? * file_frame(spec, invalid)?;
     let name = spec
         .name
         .clone()
         .unwrap_or_else(|| format!("mesh {}", index + 1));
     add_model(scene, &name, local, &model)
-        .ok_or_else(|| invalid(format!("mesh {name}: transform is singular")))?;
-    Ok(())
+        .ok_or_else(|| invalid(format!("mesh {name}: transform is singular")))
+}
+
+/// Warnings for meshes whose size is under 1/100 or over 100 times the largest volume's: most
+/// likely a file in other units than the scene (an STL in metres in a millimetre CT).
+pub fn scale_warnings(scene: &Scene, meshes: &[(String, NodeId)]) -> Vec<String> {
+    let size = |(lo, hi): (DVec3, DVec3)| (hi - lo).length();
+    let volume = scene
+        .volumes()
+        .filter_map(|(id, ..)| scene.subtree_bounds(id).map(size))
+        .fold(0.0, f64::max);
+    if volume <= 0.0 {
+        return Vec::new();
+    }
+    meshes
+        .iter()
+        .filter_map(|(name, id)| {
+            let mesh = size(scene.subtree_bounds(*id)?);
+            let ratio = mesh / volume;
+            let hint = if ratio < 0.01 {
+                "units = \"m\" or \"cm\" if the file is in metres or centimetres"
+            } else if ratio > 100.0 {
+                "units = \"mm\" with a scale, or check the file's units"
+            } else {
+                return None;
+            };
+            Some(format!(
+                "mesh {name:?} is {mesh:.3} mm across, {ratio:.2e} times the volume ({volume:.1} mm); set {hint}"
+            ))
+        })
+        .collect()
+}
+
+/// The mesh file's coordinates to scene millimetres in RAS: its `units` scaled, its `frame`
+/// turned.
+fn file_frame(
+    spec: &MeshSpec,
+    invalid: &dyn Fn(String) -> SceneFileError,
+) -> Result<DMat4, SceneFileError> {
+    let scale = match spec.units.as_deref() {
+        None | Some("mm") => 1.0,
+        Some("cm") => 10.0,
+        Some("m") => 1000.0,
+        Some(other) => {
+            return Err(invalid(format!(
+                "mesh {}: units {other:?} is not mm, cm or m",
+                spec.path
+            )));
+        }
+    };
+    let turn = match spec
+        .frame
+        .as_deref()
+        .map(str::to_ascii_uppercase)
+        .as_deref()
+    {
+        None | Some("RAS") => DVec3::ONE,
+        // LPS to RAS: x and y change sign.
+        Some("LPS") => DVec3::new(-1.0, -1.0, 1.0),
+        Some(_) => {
+            return Err(invalid(format!(
+                "mesh {}: frame {:?} is not RAS or LPS",
+                spec.path,
+                spec.frame.as_deref().unwrap_or_default()
+            )));
+        }
+    };
+    Ok(DMat4::from_scale(turn * scale))
 }
 
 fn transform(spec: &TransformSpec) -> Result<DMat4, String> {
@@ -706,29 +855,87 @@ fn camera(spec: Option<&CameraSpec>, scene: &Scene, aspect: f64) -> Result<Scene
         (None, Some(fov)) => return Err(format!("fov {fov} is not between 0 and 180 degrees")),
         (None, None) => Projection::default(),
     };
-    let mut camera = match spec.eye {
-        Some(eye) => {
-            let target = spec.target.map_or(0.5 * (bounds.0 + bounds.1), DVec3::from);
-            SceneCamera {
-                projection,
-                ..SceneCamera::look_at(DVec3::from(eye), target)
-            }
+    let given = |v: Option<[f64; 3]>, key: &str| -> Result<Option<DVec3>, String> {
+        match v.map(DVec3::from) {
+            Some(p) if !p.is_finite() => Err(format!("camera.{key} {p} is not finite")),
+            other => Ok(other),
         }
-        None => {
-            let direction = DVec3::from(spec.view_from.unwrap_or([-0.55, 1.0, -0.35]));
-            let mut fitted = SceneCamera::fit(bounds, direction, projection, aspect);
-            if let Some(t) = spec.target {
-                fitted.target = DVec3::from(t);
+    };
+    let (eye, target, up) = (
+        given(spec.eye, "eye")?,
+        given(spec.target, "target")?,
+        given(spec.up, "up")?,
+    );
+    if up.is_some_and(|u| u.length() == 0.0) {
+        return Err("camera.up [0, 0, 0] has no direction".into());
+    }
+    let mut camera = match (&spec.view, eye, spec.view_from) {
+        (Some(_), Some(_), _) | (Some(_), _, Some(_)) => {
+            return Err("camera.view names a view: give it without eye or view_from".into());
+        }
+        (Some(name), None, None) => {
+            let view = NamedView::parse(name).map_err(|e| format!("camera.view: {e}"))?;
+            named_view_camera(scene, &view, projection, aspect)
+        }
+        (None, Some(eye), _) => {
+            let target = target.unwrap_or(0.5 * (bounds.0 + bounds.1));
+            let mut camera = SceneCamera {
+                projection,
+                ..SceneCamera::look_at(eye, target)
+            };
+            camera.up = upright(camera.target - camera.eye, scene);
+            camera
+        }
+        (None, None, from) => {
+            let direction = DVec3::from(from.unwrap_or([-0.55, 1.0, -0.35]));
+            if !direction.is_finite() || direction.length() == 0.0 {
+                return Err(format!("camera.view_from {direction} has no direction"));
             }
+            let mut fitted = SceneCamera::fit(bounds, direction, projection, aspect);
+            if let Some(t) = target {
+                fitted.target = t;
+            }
+            fitted.up = upright(fitted.target - fitted.eye, scene);
             fitted
         }
     };
-    if let Some(up) = spec.up {
-        camera.up = DVec3::from(up);
+    if let Some(up) = up {
+        camera.up = up;
     }
     camera.near = spec.near;
     camera.pinhole(16, 16, 0.0).map_err(|e| e.to_string())?;
     Ok(camera)
+}
+
+/// Screen up for a camera looking along `forward`: the scene's up axis, or where the view runs
+/// along it, the patient's anterior (so a view from above has the face at the top).
+pub fn upright(forward: DVec3, scene: &Scene) -> DVec3 {
+    let axis = scene.up_axis();
+    let forward = forward.normalize_or_zero();
+    if forward.cross(axis).length() > 1e-3 {
+        axis
+    } else {
+        let anterior = scene.patient_frame().world(DVec3::Y);
+        if forward.cross(anterior).length() > 1e-3 {
+            anterior
+        } else {
+            forward.any_orthonormal_vector()
+        }
+    }
+}
+
+/// A camera for a named view of the scene's patient, fitted to the scene.
+pub fn named_view_camera(
+    scene: &Scene,
+    view: &NamedView,
+    projection: Projection,
+    aspect: f64,
+) -> SceneCamera {
+    let bounds = scene.bounds().unwrap_or((DVec3::splat(-1.0), DVec3::ONE));
+    let frame = scene.patient_frame();
+    let mut camera = SceneCamera::fit(bounds, -frame.world(view.from), projection, aspect);
+    camera.up = frame.world(view.up);
+    camera
 }
 
 #[cfg(test)]
@@ -1011,7 +1218,8 @@ mod tests {
             .scene
             .world(group)
             .transform_point3(DVec3::new(-7.0004, 0.0, 7.0004));
-        let expected = DVec3::new(25.71 * 1.40625, 116.19 * 1.40625, 7.82 * 2.5);
+        // Orientation LAI: index x runs to the patient's left (-x), z inferior (-z).
+        let expected = DVec3::new(-25.71 * 1.40625, 116.19 * 1.40625, -7.82 * 2.5);
         assert!(head.distance(expected) < 0.05, "{head} vs {expected}");
     }
 }

@@ -15,6 +15,7 @@ use crate::volume::CpuVolume;
 
 mod clip;
 pub mod file;
+pub mod patient;
 pub mod shoulder;
 mod view;
 
@@ -154,6 +155,9 @@ pub struct Scene {
     pub lights: Lights,
     /// Clip planes and crop box (world space); changing them needs no new classification.
     pub clipping: Clipping,
+    /// The scene's up, the axis orbits turn about; `None` takes the patient's superior axis
+    /// (see [`Scene::up_axis`]).
+    pub up: Option<DVec3>,
 }
 
 impl Scene {
@@ -275,6 +279,46 @@ impl Scene {
             NodeContent::Volume(v) => Some(v),
             _ => None,
         })
+    }
+
+    /// World bounds of a node's content and everything below it, or `None` when none of it
+    /// has anything to draw.
+    pub fn subtree_bounds(&self, id: NodeId) -> Option<(DVec3, DVec3)> {
+        let own = self
+            .local_bounds
+            .get(id.0)
+            .copied()
+            .flatten()
+            .map(|(lo, hi)| {
+                let corners = box_corners(lo, hi).map(|c| self.world[id.0].transform_point3(c));
+                corners
+                    .iter()
+                    .fold((corners[0], corners[0]), |(a, b), c| (a.min(*c), b.max(*c)))
+            });
+        let children = self.nodes.get(id.0)?.children.iter();
+        children
+            .filter_map(|&c| self.subtree_bounds(c))
+            .chain(own)
+            .reduce(|(a, b), (c, d)| (a.min(c), b.max(d)))
+    }
+
+    /// How the patient lies in the world: the frame of the first volume's node (volumes are
+    /// placed in patient RAS, so this is the identity unless that node turns the volume), or
+    /// RAS itself in a scene without volumes.
+    pub fn patient_frame(&self) -> patient::PatientFrame {
+        self.volumes()
+            .next()
+            .map_or_else(patient::PatientFrame::default, |(_, _, world)| {
+                patient::PatientFrame::from_linear(glam::DMat3::from_mat4(world))
+            })
+    }
+
+    /// The axis orbits turn about: [`Scene::up`] when set and non-zero, else the patient's
+    /// superior axis.
+    pub fn up_axis(&self) -> DVec3 {
+        self.up
+            .and_then(DVec3::try_normalize)
+            .unwrap_or_else(|| self.patient_frame().superior())
     }
 
     /// World-space bounds `(min, max)` of every mesh and volume, or `None` for a scene with

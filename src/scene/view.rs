@@ -1,6 +1,6 @@
 //! The scene camera (perspective or orthographic, look-at, fit to the scene) and the lights.
 
-use glam::DVec3;
+use glam::{DQuat, DVec3};
 
 use crate::camera::{Camera, CameraError};
 
@@ -91,23 +91,44 @@ impl SceneCamera {
         }
     }
 
-    /// The same camera orbited about its target: `yaw` about world +z, then `pitch` up, both in
-    /// degrees; the distance stays the same.
+    /// The same camera orbited about its target and its own up vector: see
+    /// [`SceneCamera::orbit_about`].
     pub fn orbit(&self, yaw_degrees: f64, pitch_degrees: f64) -> Self {
-        let offset = self.eye - self.target;
-        let r = offset.length();
-        let yaw = offset.y.atan2(offset.x) + yaw_degrees.to_radians();
-        let flat = (offset.x * offset.x + offset.y * offset.y).sqrt();
-        let pitch = (offset.z.atan2(flat) + pitch_degrees.to_radians()).clamp(-1.55, 1.55);
-        let eye = self.target
-            + r * DVec3::new(
-                pitch.cos() * yaw.cos(),
-                pitch.cos() * yaw.sin(),
-                pitch.sin(),
-            );
+        self.orbit_about(self.up, yaw_degrees, pitch_degrees)
+    }
+
+    /// The same camera orbited about its target like a turntable whose axis is `up` (the
+    /// scene's up, such as the patient's superior axis): `yaw` turns the eye about `up`, then
+    /// `pitch` raises it toward `up`, both in degrees; the distance stays the same. The
+    /// camera's own frame turns with the eye, so the picture keeps its roll: a camera upright
+    /// about `up` stays upright, and one looking straight along `up` (where `up` cannot be
+    /// screen up) keeps its screen up instead of jumping. The pitch stops at the poles, so an
+    /// orbit never turns the picture upside down. A zero or non-finite `up` orbits about the
+    /// camera's own up.
+    pub fn orbit_about(&self, up: DVec3, yaw_degrees: f64, pitch_degrees: f64) -> Self {
+        let axis = up
+            .try_normalize()
+            .or_else(|| self.up.try_normalize())
+            .unwrap_or(DVec3::Z);
+        let yaw = DQuat::from_axis_angle(axis, yaw_degrees.to_radians());
+        let (offset, screen_up) = (yaw * (self.eye - self.target), yaw * self.up);
+        let Some(back) = offset.try_normalize() else {
+            return *self;
+        };
+        // Elevation of the eye above the plane normal to the axis, kept within the poles.
+        let elevation = back.dot(axis).clamp(-1.0, 1.0).asin();
+        let limit = std::f64::consts::FRAC_PI_2;
+        let turn = (elevation + pitch_degrees.to_radians()).clamp(-limit, limit) - elevation;
+        let right = (-back).cross(screen_up);
+        let right = right.try_normalize().unwrap_or_else(|| {
+            // Looking along the camera's own up: any axis across the view will do.
+            back.any_orthonormal_vector()
+        });
+        // Turning by -turn about screen right raises the eye toward screen up.
+        let pitch = DQuat::from_axis_angle(right, -turn);
         Self {
-            eye,
-            up: Camera::safe_up(eye, self.target),
+            eye: self.target + pitch * offset,
+            up: pitch * screen_up,
             ..*self
         }
     }

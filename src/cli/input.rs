@@ -1,0 +1,410 @@
+//! What a scene command looks at, shared by `render`, `pick`, `measure` and `view`: a scene
+//! file, or a volume file or DICOM folder given straight on the command line (the format found
+//! from the content), with meshes, a transfer function, raw-volume placement, the camera and
+//! named views.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result, bail};
+use glam::DVec3;
+use serde::Deserialize;
+
+use splatscene::camera::Camera;
+use splatscene::scene::file::{
+    CameraSpec, LoadedScene, MeshSpec, SceneFile, TransformSpec, VolumeSpec, named_view_camera,
+};
+use splatscene::scene::patient::NamedView;
+use splatscene::scene::shoulder::shoulder_scene;
+use splatscene::scene::{Projection, SceneCamera};
+use splatscene::volume::VolumeError;
+use splatscene::volume::detect::detect_format;
+
+use crate::{parse_f32x2, parse_f64x2, parse_f64x3, parse_finite_f32, parse_size, parse_u32x3};
+
+/// The input: a scene file or a volume, meshes added to it, and its transfer function.
+#[derive(clap::Args)]
+pub struct InputArgs {
+    /// A scene file (TOML), a volume file (NRRD, NIfTI, DICOM, VTK, Voreen .dat; a raw file
+    /// with --dims and --scalar) or a DICOM series folder, told apart by their content; the
+    /// built-in shoulder scene when absent.
+    pub input: Option<PathBuf>,
+    /// A mesh to add (glTF, GLB, OBJ or STL); repeat for several.
+    #[arg(long = "mesh")]
+    meshes: Vec<PathBuf>,
+    /// The transform of the meshes, in the syntax of scene files, for example
+    /// '{ rotate_degrees = [0, -28, 180], translate = [26.7, 163.4, 16.7] }': given once it
+    /// applies to every --mesh, else once per --mesh in their order.
+    #[arg(long = "mesh-transform", allow_hyphen_values = true)]
+    mesh_transforms: Vec<String>,
+    /// Length unit of the mesh files: mm (default), cm or m; once, or once per --mesh.
+    #[arg(long = "mesh-units")]
+    mesh_units: Vec<String>,
+    /// Patient frame of the mesh files: RAS (default) or LPS (3D Slicer's export); once, or
+    /// once per --mesh.
+    #[arg(long = "mesh-frame")]
+    mesh_frames: Vec<String>,
+    /// Transfer function preset for every volume: ct-bone, ct-soft-tissue, ct-metal,
+    /// mr-default (default: chosen from the data, and said on stderr).
+    #[arg(long)]
+    preset: Option<String>,
+    /// Value window LO,HI: with --preset the preset is stretched over it; alone, a ramp from
+    /// transparent at LO to opaque at HI.
+    #[arg(long, value_parser = parse_f32x2, allow_hyphen_values = true)]
+    window: Option<[f32; 2]>,
+    /// Move the transfer function along the value axis (in the volume's units, HU for CT).
+    #[arg(long, value_parser = parse_finite_f32, allow_hyphen_values = true)]
+    shift: Option<f32>,
+    /// Raw volume: size NX,NY,NZ.
+    #[arg(long, value_parser = parse_u32x3)]
+    dims: Option<[u32; 3]>,
+    /// Raw volume: scalar type (u8, i16le, u16be, f32...).
+    #[arg(long)]
+    scalar: Option<String>,
+    /// Raw volume: bytes to skip at the start of the file.
+    #[arg(long)]
+    header_bytes: Option<u64>,
+    /// Raw volume: voxel spacing SX,SY,SZ in millimetres (default 1,1,1).
+    #[arg(long, value_parser = parse_f64x3)]
+    spacing: Option<[f64; 3]>,
+    /// Raw volume: world position of the first voxel, in millimetres (default 0,0,0).
+    #[arg(long, value_parser = parse_f64x3, allow_hyphen_values = true)]
+    origin: Option<[f64; 3]>,
+    /// Raw volume: where its index axes run in the patient, one letter per axis naming the side
+    /// it increases toward: RAS (default), LPS, LPI...
+    #[arg(long)]
+    orientation: Option<String>,
+}
+
+/// What the input turned out to be.
+enum Input<'a> {
+    Builtin,
+    Scene(&'a Path),
+    Volume(&'a Path),
+}
+
+impl InputArgs {
+    fn input(&self) -> Result<Input<'_>> {
+        let Some(path) = &self.input else {
+            return Ok(Input::Builtin);
+        };
+        if self.dims.is_some() || self.scalar.is_some() {
+            return Ok(Input::Volume(path));
+        }
+        match detect_format(path) {
+            Ok(_) => Ok(Input::Volume(path)),
+            Err(VolumeError::NoHeader { .. }) => Ok(Input::Scene(path)),
+            Err(VolumeError::Io { source, .. }) => {
+                Err(source).with_context(|| format!("{}: cannot read", path.display()))
+            }
+            Err(e) => Err(e.into()),
+        }
+    }
+
+    /// Loads the scene the arguments describe.
+    pub fn load(&self) -> Result<LoadedScene> {
+        if let Some([lo, hi]) = self.window
+            && lo >= hi
+        {
+            bail!("--window {lo},{hi}: the low value must lie below the high one");
+        }
+        let input = self.input()?;
+        let raw_given = [
+            ("--dims", self.dims.is_some()),
+            ("--scalar", self.scalar.is_some()),
+            ("--header-bytes", self.header_bytes.is_some()),
+            ("--spacing", self.spacing.is_some()),
+            ("--origin", self.origin.is_some()),
+            ("--orientation", self.orientation.is_some()),
+        ];
+        let (mut file, path, base) = match input {
+            Input::Builtin | Input::Scene(_) => {
+                if let Some((flag, _)) = raw_given.iter().find(|(_, g)| *g) {
+                    bail!(
+                        "{flag} describes a raw volume given as the input; {} is not one",
+                        self.input
+                            .as_deref()
+                            .map_or("the built-in scene".into(), |p| p.display().to_string())
+                    );
+                }
+                let Input::Scene(path) = input else {
+                    return self.builtin();
+                };
+                let file = SceneFile::read(path).map_err(|e| scene_or_volume(e, path))?;
+                let base = path.parent().unwrap_or(Path::new(".")).to_path_buf();
+                (file, path.to_path_buf(), base)
+            }
+            Input::Volume(path) => (self.volume_scene(path)?, path.to_path_buf(), ".".into()),
+        };
+        for spec in &mut file.volumes {
+            self.apply_transfer(spec);
+        }
+        file.meshes.extend(self.mesh_specs()?);
+        Ok(file.load(&path, &base)?)
+    }
+
+    fn builtin(&self) -> Result<LoadedScene> {
+        if !self.meshes.is_empty() || self.preset.is_some() || self.window.is_some() {
+            bail!(
+                "--mesh, --preset and --window apply to a scene file or volume given as the input, not the built-in scene"
+            );
+        }
+        Ok(LoadedScene {
+            scene: shoulder_scene()?,
+            size: None,
+            background: Some([0.06, 0.07, 0.09]),
+            ordering: None,
+        })
+    }
+
+    /// A scene file holding the volume at `path`, seen from the front.
+    fn volume_scene(&self, path: &Path) -> Result<SceneFile> {
+        let absolute = std::path::absolute(path)
+            .with_context(|| format!("{}: cannot resolve", path.display()))?;
+        let volume = VolumeSpec {
+            name: path.file_name().map(|n| n.to_string_lossy().into_owned()),
+            path: absolute.to_string_lossy().into_owned(),
+            dims: self.dims,
+            scalar: self.scalar.clone(),
+            header_bytes: self.header_bytes,
+            spacing: self.spacing,
+            origin: self.origin,
+            orientation: self.orientation.clone(),
+            ..VolumeSpec::default()
+        };
+        Ok(SceneFile {
+            camera: Some(CameraSpec {
+                view: Some("anterior".into()),
+                ..CameraSpec::default()
+            }),
+            volumes: vec![volume],
+            ..SceneFile::default()
+        })
+    }
+
+    /// `--preset`, `--window` and `--shift` on a volume.
+    fn apply_transfer(&self, spec: &mut VolumeSpec) {
+        match (&self.preset, self.window) {
+            (Some(preset), window) => {
+                spec.transfer = Some(preset.clone());
+                spec.window = None;
+                spec.color = None;
+                spec.level_width = window.map(|[lo, hi]| [0.5 * (lo + hi), hi - lo]);
+            }
+            (None, Some(window)) => {
+                if spec.transfer.as_deref() != Some("ramp") {
+                    spec.color = None;
+                }
+                spec.transfer = Some("ramp".into());
+                spec.window = Some(window);
+                spec.level_width = None;
+            }
+            (None, None) => {}
+        }
+        if let Some(shift) = self.shift {
+            spec.shift = Some(shift);
+        }
+    }
+
+    fn mesh_specs(&self) -> Result<Vec<MeshSpec>> {
+        let n = self.meshes.len();
+        let per_mesh = |flag: &str, values: &[String]| -> Result<Vec<Option<String>>> {
+            match values.len() {
+                0 => Ok(vec![None; n]),
+                _ if n == 0 => bail!("{flag} needs --mesh"),
+                1 => Ok(vec![Some(values[0].clone()); n]),
+                k if k == n => Ok(values.iter().cloned().map(Some).collect()),
+                k => bail!(
+                    "{flag} is given {k} times for {n} meshes: give it once, or once per --mesh"
+                ),
+            }
+        };
+        let transforms = per_mesh("--mesh-transform", &self.mesh_transforms)?;
+        let units = per_mesh("--mesh-units", &self.mesh_units)?;
+        let frames = per_mesh("--mesh-frame", &self.mesh_frames)?;
+        let mut specs = Vec::with_capacity(n);
+        for (i, path) in self.meshes.iter().enumerate() {
+            let transform = match &transforms[i] {
+                Some(text) => parse_transform(text)?,
+                None => TransformSpec::default(),
+            };
+            let absolute = std::path::absolute(path)
+                .with_context(|| format!("{}: cannot resolve", path.display()))?;
+            specs.push(MeshSpec {
+                name: path.file_name().map(|n| n.to_string_lossy().into_owned()),
+                path: absolute.to_string_lossy().into_owned(),
+                units: units[i].clone(),
+                frame: frames[i].clone(),
+                transform,
+                ..MeshSpec::default()
+            });
+        }
+        Ok(specs)
+    }
+}
+
+/// A scene file that does not parse may be a volume the sniffer could not recognise (a
+/// headerless raw file): say both.
+fn scene_or_volume(e: splatscene::scene::file::SceneFileError, path: &Path) -> anyhow::Error {
+    use splatscene::scene::file::SceneFileError;
+    match e {
+        SceneFileError::Parse { .. } | SceneFileError::Invalid { .. } => anyhow::anyhow!(
+            "{e}\n{} is neither a volume format splatscene recognises (NRRD, NIfTI, DICOM, VTK, Voreen .dat) nor a valid scene file; a headerless raw volume needs --dims and --scalar",
+            path.display()
+        ),
+        other => other.into(),
+    }
+}
+
+/// `--mesh-transform`: a TOML inline table, as `transform` in scene files.
+fn parse_transform(text: &str) -> Result<TransformSpec> {
+    #[derive(Deserialize)]
+    #[serde(deny_unknown_fields)]
+    struct Wrapper {
+        transform: TransformSpec,
+    }
+    let wrapped: Wrapper = toml::from_str(&format!("transform = {text}")).map_err(|e| {
+        anyhow::anyhow!(
+            "--mesh-transform {text:?}: {}; expected a table such as '{{ rotate_degrees = [0, 0, 90], translate = [10, 0, 0] }}' (keys translate, rotate_degrees, scale, matrix)",
+            e.message()
+        )
+    })?;
+    Ok(wrapped.transform)
+}
+
+/// The input, the camera and the image size, shared by every scene command.
+#[derive(clap::Args)]
+pub struct ViewArgs {
+    #[command(flatten)]
+    pub input: InputArgs,
+    /// Image size WxH (default: the scene file's, else 800x600).
+    #[arg(long, value_parser = parse_size)]
+    size: Option<(u32, u32)>,
+    /// Named views of the patient, comma-separated: anterior, posterior, left, right,
+    /// superior, inferior, or several joined by '-' (anterolateral-right); fitted to the scene.
+    #[arg(long, value_delimiter = ',')]
+    view: Vec<String>,
+    /// Eye position X,Y,Z in world millimetres.
+    #[arg(long, value_parser = parse_f64x3, allow_hyphen_values = true)]
+    eye: Option<[f64; 3]>,
+    /// Look-at point X,Y,Z (default: the scene's camera target).
+    #[arg(long, value_parser = parse_f64x3, allow_hyphen_values = true)]
+    target: Option<[f64; 3]>,
+    /// Turn the camera about its target and the scene's up (the patient's superior axis unless
+    /// the scene sets one): YAW,PITCH in degrees.
+    #[arg(long, value_parser = parse_f64x2, allow_hyphen_values = true)]
+    orbit: Option<[f64; 2]>,
+    /// Vertical field of view in degrees.
+    #[arg(long, value_parser = parse_finite_f32)]
+    fov: Option<f32>,
+    /// Orthographic projection showing this height in world millimetres.
+    #[arg(long, value_parser = parse_finite_f32)]
+    orthographic: Option<f32>,
+}
+
+/// A loaded scene with the cameras and size the arguments ask for.
+pub struct View {
+    /// The scene and its output settings.
+    pub loaded: LoadedScene,
+    /// One camera per named view (named), or the one camera (no name).
+    pub cameras: Vec<(Option<String>, SceneCamera)>,
+    /// Image size.
+    pub size: (u32, u32),
+}
+
+impl ViewArgs {
+    /// Loads the scene and makes its cameras.
+    pub fn load(&self) -> Result<View> {
+        let views = self
+            .view
+            .iter()
+            .map(|name| NamedView::parse(name).map_err(|e| anyhow::anyhow!("--view: {e}")))
+            .collect::<Result<Vec<_>>>()?;
+        if !views.is_empty() && self.eye.is_some() {
+            bail!("--view and --eye both place the camera: give one");
+        }
+        if let Some(fov) = self.fov
+            && !(fov > 0.0 && fov < 180.0)
+        {
+            bail!("--fov {fov} is not between 0 and 180 degrees");
+        }
+        if let Some(h) = self.orthographic
+            && h <= 0.0
+        {
+            bail!("--orthographic {h}: the visible height must be positive");
+        }
+        let loaded = self.input.load()?;
+        let size = self.size.or(loaded.size).unwrap_or((800, 600));
+        let aspect = f64::from(size.0) / f64::from(size.1);
+        let base = loaded.scene.camera.context("the scene has no camera")?;
+        let projection = match (self.orthographic, self.fov) {
+            (Some(height), _) => Projection::Orthographic {
+                height: f64::from(height),
+            },
+            (None, Some(fov)) => Projection::Perspective {
+                fov_y_degrees: f64::from(fov),
+            },
+            (None, None) => base.projection,
+        };
+        let cameras = if views.is_empty() {
+            vec![(None, self.adjust(&loaded, base, projection))]
+        } else {
+            views
+                .iter()
+                .map(|v| {
+                    let mut camera = named_view_camera(&loaded.scene, v, projection, aspect);
+                    if let Some(target) = self.target {
+                        camera.target = DVec3::from(target);
+                    }
+                    camera.near = base.near;
+                    (Some(v.name.clone()), self.turn(&loaded, camera))
+                })
+                .collect()
+        };
+        Ok(View {
+            loaded,
+            cameras,
+            size,
+        })
+    }
+
+    /// `--eye`, `--target`, the projection and `--orbit` applied to the scene's camera.
+    fn adjust(
+        &self,
+        loaded: &LoadedScene,
+        mut camera: SceneCamera,
+        projection: Projection,
+    ) -> SceneCamera {
+        if let Some(eye) = self.eye {
+            camera.eye = DVec3::from(eye);
+        }
+        if let Some(target) = self.target {
+            camera.target = DVec3::from(target);
+        }
+        if self.eye.is_some() || self.target.is_some() {
+            // Keep the scene's up vector unless the new view runs along it.
+            let forward = (camera.target - camera.eye).normalize_or_zero();
+            if forward.cross(camera.up.normalize_or_zero()).length() < 1e-6 {
+                camera.up = Camera::safe_up(camera.eye, camera.target);
+            }
+        }
+        camera.projection = projection;
+        self.turn(loaded, camera)
+    }
+
+    fn turn(&self, loaded: &LoadedScene, camera: SceneCamera) -> SceneCamera {
+        match self.orbit {
+            Some([yaw, pitch]) => camera.orbit_about(loaded.scene.up_axis(), yaw, pitch),
+            None => camera,
+        }
+    }
+}
+
+impl View {
+    /// The one camera of a command that takes a single view.
+    pub fn single_camera(&self) -> Result<SceneCamera> {
+        match self.cameras.as_slice() {
+            [(_, camera)] => Ok(*camera),
+            _ => bail!("this command takes one --view"),
+        }
+    }
+}

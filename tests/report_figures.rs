@@ -1,0 +1,516 @@
+//! From a patient's volume to a report figure through the command line, as a planning engineer
+//! works: volumes and meshes straight from the command line, the patient frame, upright orbits,
+//! named views, annotations and calibrated depth. Real data come from `SPLATSCENE_DATA`; under
+//! CI (`CI` set) a missing file fails the test instead of skipping it.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use image::RgbaImage;
+
+fn splatscene(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_splatscene"))
+        .args(args)
+        .env("NODEVICE_SELECT", "1")
+        .output()
+        .expect("run splatscene")
+}
+
+fn ok(args: &[&str]) -> Output {
+    let out = splatscene(args);
+    assert!(
+        out.status.success(),
+        "splatscene {}: {}",
+        args.join(" "),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out
+}
+
+fn fails(args: &[&str]) -> String {
+    let out = splatscene(args);
+    assert!(
+        !out.status.success(),
+        "splatscene {} succeeded",
+        args.join(" ")
+    );
+    String::from_utf8_lossy(&out.stderr).into_owned()
+}
+
+/// A fresh folder for one test's files.
+fn scratch(name: &str) -> PathBuf {
+    let dir =
+        std::env::temp_dir().join(format!("splatscene-figures-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// A file of the shared data, or `None` (with a note) when it is missing outside CI.
+fn data(rel: &str) -> Option<PathBuf> {
+    let dir = std::env::var_os("SPLATSCENE_DATA")
+        .filter(|v| !v.is_empty())
+        .map_or_else(|| PathBuf::from("../shared/data"), PathBuf::from);
+    let path = dir.join(rel);
+    if path.exists() {
+        return Some(path);
+    }
+    assert!(
+        std::env::var_os("CI").is_none(),
+        "{} is missing: set SPLATSCENE_DATA",
+        path.display()
+    );
+    eprintln!(
+        "skipped: {} is missing (set SPLATSCENE_DATA)",
+        path.display()
+    );
+    None
+}
+
+fn s(path: &Path) -> &str {
+    path.to_str().unwrap()
+}
+
+fn read(path: &Path) -> RgbaImage {
+    image::open(path)
+        .unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+        .to_rgba8()
+}
+
+/// Pixels brighter than the background (bone, splats, meshes) in a region.
+fn bright(image: &RgbaImage, x: std::ops::Range<u32>, y: std::ops::Range<u32>) -> usize {
+    y.flat_map(|j| x.clone().map(move |i| (i, j)))
+        .filter(|&(i, j)| {
+            let p = image.get_pixel(i, j);
+            u32::from(p[0]) + u32::from(p[1]) + u32::from(p[2]) > 240
+        })
+        .count()
+}
+
+/// The centroid of the bright pixels, as fractions of width and height.
+fn centroid(image: &RgbaImage) -> Option<(f64, f64)> {
+    let (mut sx, mut sy, mut n) = (0.0, 0.0, 0.0);
+    for (x, y, p) in image.enumerate_pixels() {
+        if u32::from(p[0]) + u32::from(p[1]) + u32::from(p[2]) > 240 {
+            sx += f64::from(x);
+            sy += f64::from(y);
+            n += 1.0;
+        }
+    }
+    (n > 0.0).then(|| {
+        (
+            sx / n / f64::from(image.width()),
+            sy / n / f64::from(image.height()),
+        )
+    })
+}
+
+/// Pearson correlation of two images' grey values.
+fn correlation(a: &RgbaImage, b: &RgbaImage) -> f64 {
+    let grey = |p: &image::Rgba<u8>| f64::from(p[0]) + f64::from(p[1]) + f64::from(p[2]);
+    let (xa, xb): (Vec<f64>, Vec<f64>) = a
+        .pixels()
+        .zip(b.pixels())
+        .map(|(p, q)| (grey(p), grey(q)))
+        .unzip();
+    let n = xa.len() as f64;
+    let (ma, mb) = (xa.iter().sum::<f64>() / n, xb.iter().sum::<f64>() / n);
+    let cov: f64 = xa.iter().zip(&xb).map(|(a, b)| (a - ma) * (b - mb)).sum();
+    let va: f64 = xa.iter().map(|a| (a - ma).powi(2)).sum();
+    let vb: f64 = xb.iter().map(|b| (b - mb).powi(2)).sum();
+    cov / (va * vb).sqrt()
+}
+
+/// A raw u8 volume of 24^3 voxels, empty but for two bright blocks: a large one at high index
+/// z (the far end of the third axis) and a small one at high index x, low z.
+fn marker_volume(dir: &Path) -> PathBuf {
+    let n = 24usize;
+    let mut bytes = vec![0u8; n * n * n];
+    for z in 0..n {
+        for y in 0..n {
+            for x in 0..n {
+                let top = z >= 18 && (6..18).contains(&x) && (6..18).contains(&y);
+                let side = x >= 20 && z < 6 && (9..15).contains(&y);
+                if top || side {
+                    bytes[x + n * (y + n * z)] = 220;
+                }
+            }
+        }
+    }
+    let path = dir.join("markers.raw");
+    std::fs::write(&path, bytes).unwrap();
+    path
+}
+
+#[test]
+fn a_raw_volume_is_placed_by_its_orientation_and_seen_upright_from_named_views() {
+    let dir = scratch("orientation");
+    let raw = marker_volume(&dir);
+    let raw_args = |orientation: &'static str| {
+        vec![
+            "--dims",
+            "24,24,24",
+            "--scalar",
+            "u8",
+            "--spacing",
+            "2,2,2",
+            "--orientation",
+            orientation,
+            "--window",
+            "100,200",
+        ]
+    };
+    // RAS: index z runs superior, index x to the patient's right. Seen from the front the big
+    // block is at the top and the small one on the left of the picture (the patient's right).
+    let ras = dir.join("ras-{view}.png");
+    let mut args = vec![
+        "render",
+        s(&raw),
+        "--out",
+        s(&ras),
+        "--size",
+        "160x160",
+        "--view",
+        "anterior,posterior,superior",
+    ];
+    args.extend(raw_args("RAS"));
+    let out = ok(&args);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains("anterior view") && stderr.contains("superior view"),
+        "{stderr}"
+    );
+    let anterior = read(&dir.join("ras-anterior.png"));
+    let (top, bottom) = (
+        bright(&anterior, 0..160, 0..80),
+        bright(&anterior, 0..160, 80..160),
+    );
+    assert!(
+        top > 3 * bottom,
+        "superior block at the top: {top} above, {bottom} below"
+    );
+    let (left, right) = (
+        bright(&anterior, 0..80, 90..160),
+        bright(&anterior, 80..160, 90..160),
+    );
+    assert!(
+        left > 3 * right.max(1),
+        "the patient's right on the left: {left} against {right}"
+    );
+    // From behind the right side shows on the right.
+    let posterior = read(&dir.join("ras-posterior.png"));
+    let (left, right) = (
+        bright(&posterior, 0..80, 90..160),
+        bright(&posterior, 80..160, 90..160),
+    );
+    assert!(
+        right > 3 * left.max(1),
+        "posterior view: {left} against {right}"
+    );
+    // LPI: the same file turned over; the big block is now inferior.
+    let lpi = dir.join("lpi.png");
+    let mut args = vec![
+        "render",
+        s(&raw),
+        "--out",
+        s(&lpi),
+        "--size",
+        "160x160",
+        "--view",
+        "anterior",
+    ];
+    args.extend(raw_args("LPI"));
+    ok(&args);
+    let flipped = read(&lpi);
+    let (top, bottom) = (
+        bright(&flipped, 0..160, 0..80),
+        bright(&flipped, 0..160, 80..160),
+    );
+    assert!(
+        bottom > 3 * top,
+        "inferior block at the bottom: {top} above, {bottom} below"
+    );
+    // A bad code names the accepted letters.
+    let mut args = vec!["render", s(&raw), "--out", s(&lpi)];
+    args.extend(raw_args("XYZ"));
+    let message = fails(&args);
+    assert!(
+        message.contains("XYZ") && message.contains("LPS"),
+        "{message}"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn orbits_turn_about_the_scene_up_and_keep_the_picture_upright() {
+    let Some(ct) = data("volumes/lidc2/lidc2_256x256x133_uint8.raw") else {
+        return;
+    };
+    let dir = scratch("orbit");
+    // LIDC2 as index times spacing: +z is inferior, so the scene says its up is -z.
+    let scene = dir.join("lidc2-up-minus-z.toml");
+    std::fs::write(
+        &scene,
+        format!(
+            "[camera]\nview_from = [0.0, -1.0, 0.0]\nup = [0.0, 0.0, -1.0]\n\n[[volume]]\npath = {:?}\n\
+             dims = [256, 256, 133]\nscalar = \"u8\"\nspacing = [1.40625, 1.40625, 2.5]\n\
+             transfer = \"ramp\"\nwindow = [130.0, 235.0]\n",
+            s(&std::path::absolute(&ct).unwrap())
+        ),
+    )
+    .unwrap();
+    let render = |name: &str, orbit: &str| {
+        let out = dir.join(name);
+        ok(&[
+            "render",
+            s(&scene),
+            "--out",
+            s(&out),
+            "--size",
+            "128x128",
+            "--orbit",
+            orbit,
+        ]);
+        read(&out)
+    };
+    let still = render("still.png", "0,0");
+    let turned = render("turned.png", "5,0");
+    let pitched = render("pitched.png", "0,5");
+    for (name, image) in [("yaw", &turned), ("pitch", &pitched)] {
+        let r = correlation(&still, image);
+        assert!(
+            r > 0.8,
+            "a 5 degree {name} keeps the picture: correlation {r}"
+        );
+        let (a, b) = (centroid(&still).unwrap(), centroid(image).unwrap());
+        assert!(
+            (a.1 - b.1).abs() < 0.05,
+            "{name}: the top stays on top: {a:?} against {b:?}"
+        );
+    }
+    // Straight along the up axis and on over the pole, the picture does not jump or flip.
+    let over = render("over.png", "0,95");
+    let pole = render("pole.png", "0,90");
+    assert!(
+        correlation(&over, &pole) > 0.99,
+        "the pitch stops at the pole"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn a_ct_goes_straight_to_a_picture_with_a_transfer_function_chosen_from_its_values() {
+    let Some(nifti) = data("volumes/totalseg_ct/example_ct.nii.gz") else {
+        return;
+    };
+    let Some(dicom) = data("volumes/totalseg_ct/example_ct_dicom") else {
+        return;
+    };
+    let Some(lidc) = data("volumes/lidc2/lidc2_256x256x133_uint8.raw") else {
+        return;
+    };
+    let dir = scratch("straight");
+    for (name, input) in [("nifti", &nifti), ("dicom", &dicom)] {
+        let out = dir.join(format!("{name}.png"));
+        let result = ok(&["render", s(input), "--out", s(&out), "--size", "160x120"]);
+        let stderr = String::from_utf8_lossy(&result.stderr);
+        assert!(
+            stderr.contains("ct-bone") && stderr.contains("Hounsfield"),
+            "{name}: {stderr}"
+        );
+        let image = read(&out);
+        assert!(bright(&image, 0..160, 0..120) > 500, "{name}: bone shows");
+    }
+    // 8-bit data get a ramp over its histogram's upper percentiles, said on stderr.
+    let out = dir.join("lidc.png");
+    let result = ok(&[
+        "render",
+        s(&lidc),
+        "--dims",
+        "256,256,133",
+        "--scalar",
+        "u8",
+        "--spacing",
+        "1.40625,1.40625,2.5",
+        "--orientation",
+        "LAI",
+        "--out",
+        s(&out),
+        "--size",
+        "160x120",
+    ]);
+    let stderr = String::from_utf8_lossy(&result.stderr);
+    assert!(
+        stderr.contains("ramp from") && stderr.contains("percentile"),
+        "{stderr}"
+    );
+    assert!(bright(&read(&out), 0..160, 0..120) > 500);
+    // A preset and a window by hand; a window with its ends swapped is refused.
+    let out = dir.join("soft.png");
+    ok(&[
+        "render",
+        s(&nifti),
+        "--preset",
+        "ct-soft-tissue",
+        "--window",
+        "-200,800",
+        "--shift",
+        "50",
+        "--out",
+        s(&out),
+        "--size",
+        "96x72",
+    ]);
+    let message = fails(&[
+        "render",
+        s(&nifti),
+        "--window",
+        "800,-200",
+        "--out",
+        s(&out),
+    ]);
+    assert!(message.contains("--window"), "{message}");
+    let message = fails(&[
+        "render",
+        s(&nifti),
+        "--preset",
+        "ct-bones",
+        "--out",
+        s(&out),
+    ]);
+    assert!(
+        message.contains("ct-bone") && message.contains("ct-metal"),
+        "{message}"
+    );
+    // Raw placement on a file whose header places it is refused, naming the option.
+    let message = fails(&[
+        "render",
+        s(&nifti),
+        "--orientation",
+        "LPS",
+        "--dims",
+        "1,1,1",
+        "--out",
+        s(&out),
+    ]);
+    assert!(!message.is_empty());
+    let message = fails(&["render", s(&nifti), "--origin", "1,2,3", "--out", s(&out)]);
+    assert!(
+        message.contains("origin") && message.contains("raw"),
+        "{message}"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn meshes_from_the_command_line_take_units_and_frames_and_a_wrong_scale_is_named() {
+    let Some(nifti) = data("volumes/totalseg_ct/example_ct.nii.gz") else {
+        return;
+    };
+    let Some(humerus) = data("meshes/myosim_shoulder/humerus.stl") else {
+        return;
+    };
+    let dir = scratch("meshes");
+    let out = dir.join("humerus.png");
+    // In metres, read as millimetres: a third of a millimetre long in a 400 mm CT.
+    let result = ok(&[
+        "render",
+        s(&nifti),
+        "--mesh",
+        s(&humerus),
+        "--out",
+        s(&out),
+        "--size",
+        "96x72",
+    ]);
+    let stderr = String::from_utf8_lossy(&result.stderr);
+    assert!(
+        stderr.contains("humerus.stl") && stderr.contains("units = \"m\""),
+        "{stderr}"
+    );
+    // With units = m the warning is gone and the bone is drawn at its size, turned from LPS.
+    let pick = |frame: &str| {
+        let result = ok(&[
+            "pick",
+            s(&nifti),
+            "--mesh",
+            s(&humerus),
+            "--mesh-units",
+            "m",
+            "--mesh-frame",
+            frame,
+            "--mesh-transform",
+            "{ translate = [0, 0, 0] }",
+            "--size",
+            "96x72",
+            "--pixel",
+            "48,36",
+            "--meshes-only",
+        ]);
+        let stderr = String::from_utf8_lossy(&result.stderr).into_owned();
+        assert!(!stderr.contains("warning"), "{stderr}");
+        serde_json::from_slice::<serde_json::Value>(&result.stdout).unwrap()
+    };
+    let json = pick("RAS");
+    assert_eq!(json["size"], serde_json::json!([96, 72]));
+    let message = fails(&[
+        "render",
+        s(&nifti),
+        "--mesh",
+        s(&humerus),
+        "--mesh-units",
+        "furlong",
+        "--out",
+        s(&out),
+    ]);
+    assert!(
+        message.contains("furlong") && message.contains("mm, cm or m"),
+        "{message}"
+    );
+    let message = fails(&[
+        "render",
+        s(&nifti),
+        "--mesh",
+        s(&humerus),
+        "--mesh-frame",
+        "XYZ",
+        "--out",
+        s(&out),
+    ]);
+    assert!(message.contains("RAS or LPS"), "{message}");
+    let message = fails(&["render", s(&nifti), "--mesh-units", "m", "--out", s(&out)]);
+    assert!(message.contains("--mesh"), "{message}");
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn picks_name_their_frame_and_units() {
+    let Some(nifti) = data("volumes/totalseg_ct/example_ct.nii.gz") else {
+        return;
+    };
+    let result = ok(&["pick", s(&nifti), "--size", "160x120", "--pixel", "80,60"]);
+    let json: serde_json::Value = serde_json::from_slice(&result.stdout).unwrap();
+    let hit = &json["hit"];
+    assert_eq!(hit["kind"], "volume", "{json}");
+    assert_eq!(hit["frame"], "RAS");
+    assert_eq!(hit["unit"], "mm");
+    assert_eq!(hit["value_unit"], "HU");
+}
+
+#[test]
+fn several_views_need_a_view_pattern_and_names_are_checked() {
+    let dir = scratch("views");
+    let out = dir.join("one.png");
+    let message = fails(&["render", "--view", "anterior,superior", "--out", s(&out)]);
+    assert!(message.contains("{view}"), "{message}");
+    let message = fails(&["render", "--view", "front", "--out", s(&out)]);
+    assert!(
+        message.contains("front") && message.contains("anterior") && message.contains("inferior"),
+        "{message}"
+    );
+    let message = fails(&["render", "--view", "anterior-posterior", "--out", s(&out)]);
+    assert!(message.contains("cancel"), "{message}");
+    let message = fails(&["pick", "--view", "anterior,left", "--pixel", "1,1"]);
+    assert!(message.contains("one --view"), "{message}");
+    std::fs::remove_dir_all(&dir).ok();
+}
