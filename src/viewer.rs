@@ -28,6 +28,7 @@ use crate::render::{
     Blit, FrameOptions, FrameReport, GpuContext, RenderError, RenderTarget, Renderer, ViewSetup,
     encode_png, frame_to_rgba8,
 };
+use crate::scene::file::{CameraSpec, SceneFile};
 use crate::scene::{ClipPlane, NodeContent, NodeId, Scene, SceneCamera};
 
 /// Viewer settings.
@@ -44,6 +45,12 @@ pub struct ViewerOptions {
     /// full frame follows when the button is released, or a quarter second after the last
     /// wheel step.
     pub preview_while_moving: bool,
+    /// The scene file the scene was loaded from, with absolute paths: the screenshot key
+    /// saves it beside each screenshot with the camera of the moment, so that `render` of
+    /// that file gives the same picture. `None` saves pixels only.
+    pub scene_file: Option<SceneFile>,
+    /// The first ordering (IP-PBTF when `None`).
+    pub ordering: Option<Ordering>,
 }
 
 impl Default for ViewerOptions {
@@ -53,6 +60,8 @@ impl Default for ViewerOptions {
             screenshot_dir: PathBuf::from("."),
             background: [0.06, 0.07, 0.09],
             preview_while_moving: true,
+            scene_file: None,
+            ordering: None,
         }
     }
 }
@@ -99,14 +108,15 @@ pub fn run(scene: Scene, options: ViewerOptions) -> Result<(), ViewerError> {
             4.0 / 3.0,
         )
     });
+    let ordering = options.ordering.unwrap_or(Ordering::IpPbtfImplicit);
     let mut app = App {
         picker: Picker::new(&scene),
         scene,
         options,
         home,
         camera: home,
-        ordering: Ordering::IpPbtfImplicit,
-        preset: 0,
+        ordering,
+        preset: None,
         gpu: None,
         cursor: (0.0, 0.0),
         drag: None,
@@ -146,7 +156,8 @@ struct App {
     home: SceneCamera,
     camera: SceneCamera,
     ordering: Ordering,
-    preset: usize,
+    /// The preset the `T` key chose last; `None` while the scene's own functions hold.
+    preset: Option<usize>,
     gpu: Option<Gpu>,
     cursor: (f64, f64),
     drag: Option<Drag>,
@@ -292,7 +303,9 @@ impl App {
         if !preview {
             self.full_frame = elapsed;
         }
-        let preset = PRESETS[self.preset];
+        let preset = self
+            .preset
+            .map_or("scene transfer function", |p| PRESETS[p]);
         gpu.window.set_title(&format!(
             "splatscene: {} | {preset} | frame {:.0} ms, order {:.1} ms | {} splats{}",
             self.ordering,
@@ -347,8 +360,20 @@ impl App {
     }
 
     fn next_preset(&mut self) {
-        self.preset = (self.preset + 1) % PRESETS.len();
-        let Some(transfer) = TransferFunction::preset(PRESETS[self.preset]).map(Arc::new) else {
+        // The first press moves to the first preset that differs from what the scene shows.
+        let current = self
+            .scene
+            .volumes()
+            .next()
+            .map(|(_, v, _)| Arc::clone(&v.transfer));
+        let next = match self.preset {
+            Some(p) => (p + 1) % PRESETS.len(),
+            None => (0..PRESETS.len())
+                .find(|&i| TransferFunction::preset(PRESETS[i]).as_ref() != current.as_deref())
+                .unwrap_or(0),
+        };
+        self.preset = Some(next);
+        let Some(transfer) = TransferFunction::preset(PRESETS[next]).map(Arc::new) else {
             return;
         };
         let ids: Vec<NodeId> = self.scene.volumes().map(|(id, _, _)| id).collect();
@@ -361,7 +386,7 @@ impl App {
                 let _ = self.scene.set_content(id, NodeContent::Volume(v));
             }
         }
-        println!("transfer function {}", PRESETS[self.preset]);
+        println!("transfer function {}", PRESETS[next]);
     }
 
     fn toggle_clip(&mut self) {
@@ -392,18 +417,60 @@ impl App {
             return Ok(());
         };
         let frame = gpu.target.read_color(&gpu.ctx)?;
+        let size = (frame.width, frame.height);
         let png =
             encode_png(&frame_to_rgba8(&frame)).map_err(|e| ViewerError::Window(e.to_string()))?;
         let dir = &self.options.screenshot_dir;
+        // The first number whose picture and scene file are both free: nothing is replaced.
         let path = (1..)
             .map(|n| dir.join(format!("splatscene-view-{n}.png")))
-            .find(|p| !p.exists())
+            .find(|p| !p.exists() && !p.with_extension("toml").exists())
             .unwrap_or_else(|| dir.join("splatscene-view.png"));
         match std::fs::write(&path, png) {
             Ok(()) => println!("screenshot {}", path.display()),
-            Err(e) => eprintln!("screenshot {}: {e}", path.display()),
+            Err(e) => {
+                eprintln!("screenshot {}: {e}", path.display());
+                return Ok(());
+            }
+        }
+        if let Some(text) = self.view_file(size) {
+            let toml = path.with_extension("toml");
+            match std::fs::write(&toml, text) {
+                Ok(()) => println!("view {}", toml.display()),
+                Err(e) => eprintln!("view {}: {e}", toml.display()),
+            }
         }
         Ok(())
+    }
+
+    /// The scene file of what the window shows: the scene's own file with the camera, the
+    /// ordering, the image size and the transfer function chosen with `T`.
+    fn view_file(&self, size: (u32, u32)) -> Option<String> {
+        let mut file = self.options.scene_file.clone()?;
+        file.camera = Some(CameraSpec::from_camera(&self.camera, self.scene.up_axis()));
+        file.output.size = Some([size.0, size.1]);
+        file.output.ordering = Some(self.ordering.to_string());
+        if let Some(p) = self.preset {
+            for volume in &mut file.volumes {
+                volume.transfer = Some(PRESETS[p].to_owned());
+                volume.window = None;
+                volume.color = None;
+                volume.level_width = None;
+                volume.shift = None;
+            }
+        }
+        if !self.scene.clipping.planes.is_empty() {
+            eprintln!("note: the clip plane is not saved in the view's scene file");
+        }
+        match file.to_toml() {
+            Ok(text) => Some(format!(
+                "# The view saved by splatscene's viewer: `splatscene render THIS.toml --out view.png`\n# draws the same picture.\n\n{text}"
+            )),
+            Err(e) => {
+                eprintln!("view: cannot write the scene file: {e}");
+                None
+            }
+        }
     }
 
     fn key(&mut self, event_loop: &ActiveEventLoop, key: &Key) -> Result<(), ViewerError> {
@@ -440,7 +507,10 @@ impl App {
             drag.moved = true;
         }
         match drag.button {
-            MouseButton::Left => self.camera = self.camera.orbit(-0.4 * dx, 0.4 * dy),
+            MouseButton::Left => {
+                let up = self.scene.up_axis();
+                self.camera = self.camera.orbit_about(up, -0.4 * dx, 0.4 * dy);
+            }
             MouseButton::Right => {
                 let distance = (self.camera.target - self.camera.eye).length();
                 let forward = (self.camera.target - self.camera.eye).normalize_or(DVec3::Y);

@@ -12,6 +12,10 @@ use std::process::{Child, Command, Stdio};
 use std::sync::mpsc::{Receiver, channel};
 use std::time::{Duration, Instant};
 
+/// The tests start X servers and windows: one at a time, so that two never pick the same free
+/// display number.
+static ONE_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
 fn have(tool: &str) -> bool {
     Command::new("sh")
         .args(["-c", &format!("command -v {tool}")])
@@ -136,6 +140,7 @@ fn splats_in(title: &str) -> usize {
 
 #[test]
 fn viewer_picks_switches_orderings_and_takes_screenshots_under_xvfb() {
+    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     if !(have("Xvfb") && have("xdotool") && have("xwd")) {
         assert!(
             std::env::var_os("CI").is_none(),
@@ -276,5 +281,181 @@ fn viewer_picks_switches_orderings_and_takes_screenshots_under_xvfb() {
         viewer.0.try_wait().ok().flatten()
     });
     assert!(status.success(), "{status:?}");
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// Grey values of a PNG, row by row.
+fn grey(path: &Path) -> (u32, u32, Vec<f64>) {
+    let image = image::open(path)
+        .unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+        .to_rgb8();
+    let values = image
+        .pixels()
+        .map(|p| p.0.iter().map(|&c| f64::from(c)).sum())
+        .collect();
+    (image.width(), image.height(), values)
+}
+
+fn correlation(a: &[f64], b: &[f64]) -> f64 {
+    let n = a.len() as f64;
+    let (ma, mb) = (a.iter().sum::<f64>() / n, b.iter().sum::<f64>() / n);
+    let cov: f64 = a.iter().zip(b).map(|(x, y)| (x - ma) * (y - mb)).sum();
+    let va: f64 = a.iter().map(|x| (x - ma).powi(2)).sum();
+    let vb: f64 = b.iter().map(|y| (y - mb).powi(2)).sum();
+    cov / (va * vb).sqrt()
+}
+
+/// The brightness of each row: a picture turned upside down reverses it.
+fn row_profile(width: u32, values: &[f64]) -> Vec<f64> {
+    values
+        .chunks(width as usize)
+        .map(|row| row.iter().sum())
+        .collect()
+}
+
+/// LIDC2 placed as index times spacing, where +z is inferior: the scene says its up is -z. A
+/// drag of 2 px and one of 200 px orbit about that up, so the picture stays upright; the
+/// screenshot key saves the view as a scene file, and `render` of it draws the same picture.
+#[test]
+fn viewer_orbits_upright_and_saves_views_that_render_reproduces() {
+    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    if !(have("Xvfb") && have("xdotool") && have("xwd")) {
+        assert!(
+            std::env::var_os("CI").is_none(),
+            "CI must install xvfb, xdotool and x11-apps"
+        );
+        eprintln!("skipped: needs Xvfb, xdotool and xwd (apt-get install xvfb xdotool x11-apps)");
+        return;
+    }
+    let data = std::env::var_os("SPLATSCENE_DATA")
+        .filter(|v| !v.is_empty())
+        .map_or_else(|| PathBuf::from("../shared/data"), PathBuf::from);
+    let ct = data.join("volumes/lidc2/lidc2_256x256x133_uint8.raw");
+    if !ct.exists() {
+        assert!(
+            std::env::var_os("CI").is_none(),
+            "{} is missing",
+            ct.display()
+        );
+        eprintln!("skipped: {} is missing (set SPLATSCENE_DATA)", ct.display());
+        return;
+    }
+    let dir: PathBuf =
+        std::env::temp_dir().join(format!("splatscene-viewer-views-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let scene = dir.join("lidc2-up-minus-z.toml");
+    std::fs::write(
+        &scene,
+        format!(
+            "[camera]\nview_from = [0.0, -1.0, 0.3]\nup = [0.0, 0.0, -1.0]\n\n[[volume]]\n\
+             path = {:?}\ndims = [256, 256, 133]\nscalar = \"u8\"\n\
+             spacing = [1.40625, 1.40625, 2.5]\ntransfer = \"ramp\"\nwindow = [130.0, 235.0]\n",
+            std::path::absolute(&ct).unwrap().to_str().unwrap()
+        ),
+    )
+    .unwrap();
+    let (_xvfb, display) = start_xvfb();
+    let mut viewer = Command::new(env!("CARGO_BIN_EXE_splatscene"))
+        .args([
+            "view",
+            scene.to_str().unwrap(),
+            "--size",
+            "256x256",
+            "--screenshots",
+        ])
+        .arg(&dir)
+        .env("DISPLAY", &display)
+        .env("NODEVICE_SELECT", "1")
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("start the viewer");
+    let stdout = viewer.stdout.take().unwrap();
+    let viewer = Guard(viewer);
+    let (send, lines) = channel();
+    std::thread::spawn(move || {
+        for l in BufReader::new(stdout).lines().map_while(Result::ok) {
+            let _ = send.send(l);
+        }
+    });
+    let window = wait_for("the viewer window", 60, || {
+        xdo(&display, &["search", "--name", "^splatscene"])
+            .and_then(|s| s.lines().next().map(str::to_owned))
+    });
+    title(&display, &window, "splats");
+    xdo(&display, &["windowfocus", "--sync", &window]);
+    let shoot = || {
+        xdo(&display, &["key", "s"]).expect("key s");
+        let png = PathBuf::from(line(&lines, "screenshot"));
+        let toml = PathBuf::from(line(&lines, "view"));
+        (png, toml)
+    };
+    let drag = |dx: u32| {
+        let end = (40 + dx).to_string();
+        xdo(
+            &display,
+            &[
+                "mousemove",
+                "--window",
+                &window,
+                "40",
+                "128",
+                "mousedown",
+                "1",
+            ],
+        )
+        .expect("press");
+        xdo(&display, &["mousemove", "--window", &window, &end, "128"]).expect("drag");
+        xdo(&display, &["mouseup", "1"]).expect("release");
+        title_where(&display, &window, "a full frame's title", |t| {
+            t.ends_with(" splats")
+        });
+        // A drag without a frame in between may end before the viewer saw the motion.
+        std::thread::sleep(Duration::from_millis(500));
+    };
+    let (home, _) = shoot();
+    drag(2);
+    let (nudged, _) = shoot();
+    drag(200);
+    let (turned, turned_scene) = shoot();
+    let (w, _, a) = grey(&home);
+    let (_, _, b) = grey(&nudged);
+    let (_, _, c) = grey(&turned);
+    let r = correlation(&a, &b);
+    assert!(r > 0.9, "a 2 px drag keeps the picture: correlation {r}");
+    let rows = correlation(&row_profile(w, &a), &row_profile(w, &c));
+    assert!(
+        rows > 0.5,
+        "after a 200 px drag the top stays on top: row profiles correlate {rows}"
+    );
+    assert_ne!(a, c, "the 200 px drag turned the view");
+    // The saved view, rendered from the command line, is the same picture.
+    let again = dir.join("again.png");
+    let out = Command::new(env!("CARGO_BIN_EXE_splatscene"))
+        .args(["render", turned_scene.to_str().unwrap(), "--out"])
+        .arg(&again)
+        .env("NODEVICE_SELECT", "1")
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let (_, _, d) = grey(&again);
+    assert_eq!(c.len(), d.len(), "the saved view keeps the window's size");
+    let rmse = (c
+        .iter()
+        .zip(&d)
+        .map(|(x, y)| ((x - y) / 765.0).powi(2))
+        .sum::<f64>()
+        / c.len() as f64)
+        .sqrt();
+    assert!(rmse < 0.01, "render of the saved view: RMSE {rmse}");
+    xdo(&display, &["key", "q"]).expect("key q");
+    let mut viewer = viewer;
+    wait_for("the viewer to quit", 30, || {
+        viewer.0.try_wait().ok().flatten()
+    });
     std::fs::remove_dir_all(&dir).ok();
 }

@@ -100,8 +100,9 @@ impl InputArgs {
         }
     }
 
-    /// Loads the scene the arguments describe.
-    pub fn load(&self) -> Result<LoadedScene> {
+    /// Loads the scene the arguments describe, with the scene file that describes it (relative
+    /// paths made absolute, so that it can be saved anywhere: the viewer's screenshots do).
+    pub fn load(&self) -> Result<(LoadedScene, SceneFile)> {
         if let Some([lo, hi]) = self.window
             && lo >= hi
         {
@@ -127,7 +128,7 @@ impl InputArgs {
                     );
                 }
                 let Input::Scene(path) = input else {
-                    return self.builtin();
+                    return Ok((self.builtin()?, builtin_file()?));
                 };
                 let file = SceneFile::read(path).map_err(|e| scene_or_volume(e, path))?;
                 let base = path.parent().unwrap_or(Path::new(".")).to_path_buf();
@@ -139,7 +140,8 @@ impl InputArgs {
             self.apply_transfer(spec);
         }
         file.meshes.extend(self.mesh_specs()?);
-        Ok(file.load(&path, &base)?)
+        let loaded = file.load(&path, &base)?;
+        Ok((loaded, file.with_paths_from(&base)))
     }
 
     fn builtin(&self) -> Result<LoadedScene> {
@@ -242,6 +244,13 @@ impl InputArgs {
     }
 }
 
+/// The scene file of the built-in scene (`examples/scenes/shoulder.toml`, which a test keeps
+/// equal to the scene the code builds).
+fn builtin_file() -> Result<SceneFile> {
+    let text = include_str!("../../examples/scenes/shoulder.toml");
+    Ok(SceneFile::parse(text, Path::new("the built-in scene"))?)
+}
+
 /// A scene file that does not parse may be a volume the sniffer could not recognise (a
 /// headerless raw file): say both.
 fn scene_or_volume(e: splatscene::scene::file::SceneFileError, path: &Path) -> anyhow::Error {
@@ -305,6 +314,8 @@ pub struct ViewArgs {
 pub struct View {
     /// The scene and its output settings.
     pub loaded: LoadedScene,
+    /// The scene file that describes it, with absolute paths.
+    pub file: SceneFile,
     /// One camera per named view (named), or the one camera (no name).
     pub cameras: Vec<(Option<String>, SceneCamera)>,
     /// Image size.
@@ -332,7 +343,7 @@ impl ViewArgs {
         {
             bail!("--orthographic {h}: the visible height must be positive");
         }
-        let loaded = self.input.load()?;
+        let (loaded, file) = self.input.load()?;
         let size = self.size.or(loaded.size).unwrap_or((800, 600));
         let aspect = f64::from(size.0) / f64::from(size.1);
         let base = loaded.scene.camera.context("the scene has no camera")?;
@@ -362,6 +373,7 @@ impl ViewArgs {
         };
         Ok(View {
             loaded,
+            file,
             cameras,
             size,
         })

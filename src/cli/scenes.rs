@@ -100,7 +100,21 @@ fn figure(
 ) -> Result<image::RgbaImage> {
     let mut image = frame_to_rgba8(&shot.frame);
     if let Some(parts) = parts {
-        annotate_image(&mut image, camera, &scene.patient_frame(), labels, parts)?;
+        let drawn = annotate_image(&mut image, camera, &scene.patient_frame(), labels, parts)?;
+        let mut said = Vec::new();
+        if drawn.edge_letters.iter().any(|l| !l.is_empty()) {
+            let [l, r, t, b] = &drawn.edge_letters;
+            said.push(format!("left {l}, right {r}, top {t}, bottom {b}"));
+        }
+        if let Some(scale) = drawn.scale {
+            said.push(format!("scale bar {scale}"));
+        }
+        if drawn.marker {
+            said.push("orientation marker".into());
+        }
+        if !said.is_empty() {
+            eprintln!("annotated: {}", said.join("; "));
+        }
     }
     Ok(image)
 }
@@ -149,6 +163,7 @@ pub fn run_render(args: RenderArgs) -> Result<()> {
         loaded,
         cameras,
         size,
+        ..
     } = args.view.load()?;
     let outputs = output_names(&args.out, &cameras)?;
     let depths = match &args.depth {
@@ -477,7 +492,10 @@ pub fn run_viewer(args: ViewerArgs) -> Result<()> {
     let view = args.view.load()?;
     let camera = view.single_camera()?;
     let View {
-        mut loaded, size, ..
+        mut loaded,
+        size,
+        file,
+        ..
     } = view;
     loaded.scene.camera = Some(camera);
     let options = splatscene::viewer::ViewerOptions {
@@ -485,6 +503,8 @@ pub fn run_viewer(args: ViewerArgs) -> Result<()> {
         screenshot_dir: args.screenshots,
         background: loaded.background.unwrap_or([0.06, 0.07, 0.09]),
         preview_while_moving: !args.no_preview,
+        scene_file: Some(file),
+        ordering: loaded.ordering,
     };
     eprintln!(
         "keys: 1 BTF, 2 PBTF, 3 IP-PBTF, 4 exact, 5 bucketed, 6 pyramid, 7 rows, T transfer function, S screenshot, C clip plane ([ and ] move it), R reset, Q quit; drag to orbit (right: pan), wheel to zoom, click to pick"

@@ -154,7 +154,7 @@ pub struct OutputSpec {
     /// Opaque background colour, linear RGB.
     pub background: Option<[f32; 3]>,
     /// A transparent background instead.
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub transparent: bool,
     /// Ordering for every volume (btf, wbtf, pbtf, ip-pbtf, exact, bucketed...).
     pub ordering: Option<String>,
@@ -264,7 +264,7 @@ pub struct VolumeSpec {
     /// Voxels at or below this opacity are left out.
     pub min_opacity: Option<f32>,
     /// The phantom only: remove the humeral head above the resection plane.
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub resect_humeral_head: bool,
     /// The phantom only: cut away the bone in front of the humeral shaft within this many
     /// millimetres of its axis (the built-in scene uses 30), so that a stem shows in its canal.
@@ -423,6 +423,69 @@ impl SceneFile {
             background,
             ordering,
         })
+    }
+}
+
+impl SceneFile {
+    /// The same file with every relative volume and mesh path made absolute against `base`
+    /// (the scene file's folder), so that it can be saved anywhere; `builtin:` and `data:`
+    /// paths are kept as they are.
+    pub fn with_paths_from(&self, base: &Path) -> Self {
+        let fix = |path: &str| {
+            let p = Path::new(path);
+            if path.starts_with("builtin:") || path.starts_with("data:") || p.is_absolute() {
+                path.to_owned()
+            } else {
+                std::path::absolute(base.join(p))
+                    .unwrap_or_else(|_| base.join(p))
+                    .to_string_lossy()
+                    .into_owned()
+            }
+        };
+        let mut file = self.clone();
+        for v in &mut file.volumes {
+            v.path = fix(&v.path);
+        }
+        for m in &mut file.meshes {
+            m.path = fix(&m.path);
+        }
+        file
+    }
+
+    /// The file as TOML text, as [`SceneFile::parse`] reads it back.
+    pub fn to_toml(&self) -> Result<String, String> {
+        toml::to_string(self).map_err(|e| e.to_string())
+    }
+}
+
+impl CameraSpec {
+    /// The spec that gives `camera` back: its eye, target and projection, and as `up` the
+    /// scene's up axis `scene_up` where the camera is upright about it (so that the saved
+    /// scene orbits as this one does), else the camera's own up.
+    pub fn from_camera(camera: &SceneCamera, scene_up: DVec3) -> Self {
+        let forward = (camera.target - camera.eye).normalize_or_zero();
+        let screen_up = camera.up.normalize_or_zero();
+        let right = forward.cross(screen_up);
+        let upright = scene_up.try_normalize().is_some_and(|u| {
+            u.dot(right).abs() < 1e-9 * (1.0 + right.length())
+                && forward.cross(u).length() > 1e-6
+                && u.dot(screen_up) > 0.0
+        });
+        let up = if upright { scene_up } else { camera.up };
+        let (fov, orthographic_height) = match camera.projection {
+            Projection::Perspective { fov_y_degrees } => (Some(fov_y_degrees), None),
+            Projection::Orthographic { height } => (None, Some(height)),
+        };
+        Self {
+            eye: Some(camera.eye.to_array()),
+            target: Some(camera.target.to_array()),
+            up: Some(up.to_array()),
+            view: None,
+            view_from: None,
+            fov,
+            orthographic_height,
+            near: camera.near,
+        }
     }
 }
 
