@@ -148,14 +148,16 @@ pub struct AutoTransfer {
     pub hounsfield: bool,
 }
 
-/// Values at or below this are taken for air in Hounsfield units (-1000), with room for
-/// noise and for the -1024 padding of many scanners.
-const HU_AIR: f32 = -900.0;
+/// Values reaching this are taken for Hounsfield units: air is -1000 HU and lung -500 to -900,
+/// while scalars without a calibration (8-bit data, MR intensities) are rarely negative at
+/// all. A scan cropped inside the body (no air in the field) still reaches it through lung or
+/// the scanner's padding value (-1024, -2000).
+const HU_AIR: f32 = -500.0;
 /// Bins of the histogram the automatic ramp reads its percentiles from.
 const HISTOGRAM_BINS: usize = 4096;
 
 /// Chooses a transfer function for values of unknown meaning: Hounsfield units (values
-/// reaching air, -1000) get [`TransferFunction::ct_bone`]; anything else (8-bit data, MR,
+/// reaching -500 or below, air and lung) get [`TransferFunction::ct_bone`]; anything else (8-bit data, MR,
 /// unknown scalars) a ramp from the 90th to the 99.5th percentile of the values above the
 /// smallest one (the background, usually air or padding, is left out of the histogram), so that
 /// the densest tenth of the object shows. Percentiles come from a histogram of
@@ -166,7 +168,7 @@ pub fn auto_transfer(values: &[f32]) -> AutoTransfer {
         return AutoTransfer {
             transfer: TransferFunction::ct_bone(),
             reason: format!(
-                "ct-bone: values run from {lo} to {hi}, reaching air at -1000, so they are taken for Hounsfield units"
+                "ct-bone: values run from {lo} to {hi}, reaching air or lung (-500 or below), so they are taken for Hounsfield units"
             ),
             hounsfield: true,
         };
@@ -182,7 +184,7 @@ pub fn auto_transfer(values: &[f32]) -> AutoTransfer {
     }
 }
 
-/// Whether values are taken for Hounsfield units: they reach air (-1000) and rise above 0,
+/// Whether values are taken for Hounsfield units: they reach -500 (air, lung) and rise above 0,
 /// the rule [`auto_transfer`] chooses `ct-bone` by.
 pub fn is_hounsfield(values: &[f32]) -> bool {
     let (lo, hi) = finite_range(values);
@@ -396,6 +398,40 @@ pub fn classify_shell(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_automatic_transfer_function_follows_the_values() {
+        let ct: Vec<f32> = (0..1000).map(|i| -1024.0 + 3.0 * i as f32).collect();
+        let auto = auto_transfer(&ct);
+        assert!(
+            auto.hounsfield && auto.reason.starts_with("ct-bone"),
+            "{}",
+            auto.reason
+        );
+        assert_eq!(auto.transfer, TransferFunction::ct_bone());
+        // 8-bit data: most voxels background (0), the object spread over 1 to 200: the ramp
+        // spans the 90th to 99.5th percentile of the object's values.
+        let mut bytes = vec![0.0f32; 10_000];
+        bytes.extend((1..=200).flat_map(|v| std::iter::repeat_n(v as f32, 10)));
+        let auto = auto_transfer(&bytes);
+        assert!(!auto.hounsfield);
+        let points = auto.transfer.points();
+        let (from, to) = (points[0].0, points[points.len() - 1].0);
+        assert!(
+            (from - 180.0).abs() < 1.0 && (to - 199.0).abs() < 1.0,
+            "{from} to {to}"
+        );
+        assert!(auto.reason.contains("percentile"), "{}", auto.reason);
+        // Constant or empty data still give a usable function.
+        for values in [vec![7.0; 10], Vec::new(), vec![f32::NAN; 3]] {
+            let auto = auto_transfer(&values);
+            assert!(
+                auto.transfer.points().iter().all(|(v, _)| v.is_finite()),
+                "{values:?}"
+            );
+        }
+        assert!(is_hounsfield(&[-600.0, 40.0]) && !is_hounsfield(&[0.0, 4000.0]));
+    }
     use glam::DMat3;
 
     #[test]

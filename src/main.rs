@@ -164,7 +164,7 @@ fn quiet_device_select() {
 fn run_info(args: InfoArgs) -> Result<()> {
     let mut infos = Vec::with_capacity(args.files.len());
     for file in &args.files {
-        infos.push(splatscene::volume::detect::volume_info(file)?);
+        infos.push(info_of(file)?);
     }
     let out = match infos.len() {
         1 => infos.remove(0),
@@ -172,6 +172,54 @@ fn run_info(args: InfoArgs) -> Result<()> {
     };
     println!("{}", serde_json::to_string_pretty(&out)?);
     Ok(())
+}
+
+/// Folders below a folder that `info` looks into for DICOM series, at most.
+const MAX_INFO_FOLDERS: usize = 10_000;
+
+/// A volume's description; for a folder tree holding anything but one series in the folder
+/// itself, the list of every DICOM series found below it.
+fn info_of(path: &Path) -> Result<serde_json::Value> {
+    if !path.is_dir() {
+        return Ok(splatscene::volume::detect::volume_info(path)?);
+    }
+    let mut series = Vec::new();
+    let mut folders = vec![path.to_path_buf()];
+    let mut seen = 0;
+    while let Some(dir) = folders.pop() {
+        seen += 1;
+        if seen > MAX_INFO_FOLDERS {
+            bail!(
+                "{}: more than {MAX_INFO_FOLDERS} folders below it",
+                path.display()
+            );
+        }
+        series.extend(splatscene::volume::dicom::list_series(&dir)?);
+        let mut subfolders: Vec<PathBuf> = std::fs::read_dir(&dir)
+            .with_context(|| format!("{}: cannot list", dir.display()))?
+            .filter_map(|e| e.ok())
+            // Links to folders are not followed, so a link loop cannot walk forever.
+            .filter(|e| e.file_type().is_ok_and(|t| t.is_dir()))
+            .map(|e| e.path())
+            .collect();
+        subfolders.sort_unstable_by(|a, b| b.cmp(a));
+        folders.extend(subfolders);
+    }
+    if let [only] = series.as_slice()
+        && only.folder == path
+    {
+        return Ok(splatscene::volume::detect::volume_info(path)?);
+    }
+    if series.is_empty() {
+        bail!(
+            "{}: no DICOM series in this folder or below it",
+            path.display()
+        );
+    }
+    Ok(serde_json::json!({
+        "folder": path.display().to_string(),
+        "series": series,
+    }))
 }
 
 fn run_order(args: OrderArgs) -> Result<()> {

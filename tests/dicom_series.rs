@@ -274,7 +274,7 @@ fn copy_series(from: &Path, test: &str, skip: impl Fn(&Path) -> bool) -> PathBuf
 }
 
 #[test]
-fn extra_files_and_a_smaller_series_are_skipped() {
+fn a_folder_of_two_series_lists_them_and_loads_the_one_chosen() {
     let Some(shared) = series_dir() else { return };
     let dir = copy_series(&shared, "extras", |_| false);
     write_no_pixel_file(&dir.join("DICOMDIR"), "2.25.3003");
@@ -286,6 +286,8 @@ fn extra_files_and_a_smaller_series_are_skipped() {
     for (i, file) in series_files(&shared).iter().take(3).enumerate() {
         let mut obj = open_file(file).expect("open slice");
         obj.put_str(tags::SERIES_INSTANCE_UID, vr("UI"), "2.25.4004");
+        obj.put_str(tags::SERIES_NUMBER, vr("IS"), "7");
+        obj.put_str(tags::SERIES_DESCRIPTION, vr("LO"), "scout copy");
         obj.put_str(tags::SOP_INSTANCE_UID, vr("UI"), format!("2.25.400{i}"));
         if i == 0 {
             obj.remove_element(tags::IMAGE_POSITION_PATIENT);
@@ -293,9 +295,44 @@ fn extra_files_and_a_smaller_series_are_skipped() {
         obj.write_to_file(dir.join(format!("other_series_{i}.dcm")))
             .expect("write slice");
     }
-    let copied = load_dicom_series(&dir).expect("load the series among extra files");
+    // Two series: the folder lists them and asks which.
+    let listed = load_dicom_series(&dir).expect_err("two series need a choice");
+    let message = listed.to_string();
+    assert!(matches!(listed, VolumeError::DicomSeries { ref series, .. } if series.len() == 2));
+    assert!(
+        message.contains("--series") && message.contains("\"scout copy\""),
+        "{message}"
+    );
+    assert!(
+        message.contains("20 images") && message.contains("3 images"),
+        "{message}"
+    );
+    let listing = splatscene::volume::dicom::list_series(&dir).unwrap();
+    let main = listing
+        .iter()
+        .find(|s| s.images == 20)
+        .expect("the shared series");
+    assert_eq!(main.size, Some([512, 512]));
+    // Chosen by UID, the main series loads as it does alone; by number, the other series
+    // fails on its own slice without a position.
+    let choose = |c: &str| {
+        splatscene::volume::dicom::load_dicom_series_choosing(
+            &dir,
+            Some(&splatscene::volume::dicom::SeriesChoice(c.into())),
+        )
+    };
+    let (copied, _) = choose(&main.uid).expect("load the chosen series");
     let original = load_dicom_series(&shared).expect("load the shared series");
     assert_eq!(copied, original);
+    let other = choose("7").expect_err("the other series lacks a position");
+    assert!(other.to_string().contains("other_series_0.dcm"), "{other}");
+    let none = choose("12").expect_err("no series 12");
+    assert!(none.to_string().contains("no series is \"12\""), "{none}");
+    // A file given alone loads its own series.
+    let file = series_files(&shared)[0].file_name().unwrap().to_owned();
+    let own =
+        splatscene::volume::detect::load_volume(&dir.join(file)).expect("a file's own series");
+    assert_eq!(own, original);
     fs::remove_dir_all(&dir).expect("clean up");
 }
 

@@ -680,3 +680,62 @@ fn depth_images_carry_their_calibration_and_show_a_volume_surface() {
     );
     std::fs::remove_dir_all(&dir).ok();
 }
+
+#[test]
+fn a_folder_of_several_dicom_series_lists_them_and_renders_the_one_chosen() {
+    // pydicom's test files (MIT): one folder holding CT, MR, RT dose, NM and segmentation
+    // series, and a truncated file.
+    let Some(folder) = data("reader_tests/pydicom_test_files") else {
+        return;
+    };
+    let dir = scratch("series");
+    let out = dir.join("ct.png");
+    let message = fails(&["render", s(&folder), "--out", s(&out)]);
+    assert!(
+        message.contains("DICOM series in this folder") && message.contains("--series"),
+        "{message}"
+    );
+    assert!(
+        message.contains("CT 128x128, 1 images") && message.contains("MR 64x64"),
+        "{message}"
+    );
+    // The listing as JSON, for the whole tree below a folder.
+    let tree = folder.parent().unwrap();
+    let listing: serde_json::Value =
+        serde_json::from_slice(&ok(&["info", s(tree)]).stdout).unwrap();
+    let series = listing["series"].as_array().unwrap();
+    let ct = series
+        .iter()
+        .find(|s| s["modality"] == "CT")
+        .expect("the CT series");
+    assert_eq!(ct["size"], serde_json::json!([128, 128]));
+    let uid = ct["uid"].as_str().unwrap();
+    let result = ok(&[
+        "render",
+        s(&folder),
+        "--series",
+        uid,
+        "--out",
+        s(&out),
+        "--size",
+        "96x96",
+    ]);
+    let stderr = String::from_utf8_lossy(&result.stderr);
+    assert!(
+        stderr.contains("MR_truncated.dcm"),
+        "the unreadable file is named: {stderr}"
+    );
+    assert!(stderr.contains("Hounsfield"), "{stderr}");
+    assert!(bright(&read(&out), 0..96, 0..96) > 100);
+    // A file alone picks its own series, whatever else its folder holds.
+    let info: serde_json::Value =
+        serde_json::from_slice(&ok(&["info", s(&folder.join("CT_small.dcm"))]).stdout).unwrap();
+    assert_eq!(info["size"], serde_json::json!([128, 128, 1]));
+    let message = fails(&["render", s(&folder), "--series", "99", "--out", s(&out)]);
+    assert!(message.contains("no series is \"99\""), "{message}");
+    let empty = scratch("no-series");
+    let message = fails(&["info", s(&empty)]);
+    assert!(message.contains("no DICOM series"), "{message}");
+    std::fs::remove_dir_all(&dir).ok();
+    std::fs::remove_dir_all(&empty).ok();
+}

@@ -54,6 +54,10 @@ pub struct InputArgs {
     /// Move the transfer function along the value axis (in the volume's units, HU for CT).
     #[arg(long, value_parser = parse_finite_f32, allow_hyphen_values = true)]
     shift: Option<f32>,
+    /// DICOM: the series to load from a folder holding several, by its number or its UID
+    /// (without it, such a folder lists its series).
+    #[arg(long)]
+    series: Option<String>,
     /// Raw volume: size NX,NY,NZ.
     #[arg(long, value_parser = parse_u32x3)]
     dims: Option<[u32; 3]>,
@@ -116,12 +120,13 @@ impl InputArgs {
             ("--spacing", self.spacing.is_some()),
             ("--origin", self.origin.is_some()),
             ("--orientation", self.orientation.is_some()),
+            ("--series", self.series.is_some()),
         ];
         let (mut file, path, base) = match input {
             Input::Builtin | Input::Scene(_) => {
                 if let Some((flag, _)) = raw_given.iter().find(|(_, g)| *g) {
                     bail!(
-                        "{flag} describes a raw volume given as the input; {} is not one",
+                        "{flag} describes a volume given as the input; {} is not a volume",
                         self.input
                             .as_deref()
                             .map_or("the built-in scene".into(), |p| p.display().to_string())
@@ -171,6 +176,7 @@ impl InputArgs {
             spacing: self.spacing,
             origin: self.origin,
             orientation: self.orientation.clone(),
+            series: self.series.clone(),
             ..VolumeSpec::default()
         };
         Ok(SceneFile {

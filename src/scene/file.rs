@@ -59,6 +59,7 @@ use crate::classify::{TransferFunction, auto_transfer};
 use crate::mesh::prosthesis::seat_in_phantom;
 use crate::mesh::{MeshError, load_mesh};
 use crate::order::Ordering;
+use crate::volume::dicom::SeriesChoice;
 use crate::volume::phantom::{DEFAULT_DIMS, DEFAULT_SPACING};
 use crate::volume::{
     CpuVolume, RawSpec, ScalarFormat, VolumeError, load_raw, load_raw_slices, shoulder_landmarks,
@@ -239,6 +240,9 @@ pub struct VolumeSpec {
     pub spacing: Option<[f64; 3]>,
     /// Raw: world position of the first voxel.
     pub origin: Option<[f64; 3]>,
+    /// DICOM: the series to load from a folder holding several, by SeriesNumber or
+    /// SeriesInstanceUID.
+    pub series: Option<String>,
     /// Raw: where the index axes run in the patient frame, one letter per axis naming the
     /// side it increases toward (`RAS`, the default, puts the grid along world +x, +y, +z;
     /// `LPS`, `LPI`...; see [`super::patient`]).
@@ -693,18 +697,33 @@ fn load_raw_volume(
         ("origin", spec.origin.is_some()),
         ("orientation", spec.orientation.is_some()),
     ];
+    if spec.series.is_some() && (spec.dims.is_some() || spec.scalar.is_some()) {
+        return Err(invalid(format!(
+            "volume {}: series applies to DICOM only, not to a raw volume",
+            path.display()
+        )));
+    }
     if spec.dims.is_none() && spec.scalar.is_none() {
         // Not described as raw: a format with its own header (NRRD, NIfTI, VTK, Voreen .dat)
         // or a DICOM series folder, found from the first bytes and the name.
-        let volume = match crate::volume::detect::load_volume(path) {
+        let choice = spec.series.clone().map(SeriesChoice);
+        let loaded = match crate::volume::detect::load_volume_choosing(path, choice.as_ref()) {
             Err(VolumeError::NoHeader { .. }) => {
                 return Err(invalid(format!(
-                    "volume {}: a raw volume needs dims and scalar",
+                    "volume {}: neither a volume format splatscene recognises nor a DICOM folder; a raw volume needs dims and scalar",
                     path.display()
                 )));
             }
             other => other?,
         };
+        if spec.series.is_some() && loaded.format != crate::volume::detect::VolumeFormat::Dicom {
+            return Err(invalid(format!(
+                "volume {}: series applies to DICOM only; this is a {} file",
+                path.display(),
+                loaded.format.name()
+            )));
+        }
+        let volume = loaded.volume;
         // The file's header places the grid; a raw key here would silently do nothing.
         if let Some((key, _)) = raw_keys.iter().find(|(_, given)| *given) {
             return Err(invalid(format!(

@@ -132,16 +132,29 @@ pub fn load_volume(path: &Path) -> Result<CpuVolume, VolumeError> {
 
 /// Loads the volume at `path` with its format and stored value type.
 pub fn load_volume_with_info(path: &Path) -> Result<LoadedVolume, VolumeError> {
+    load_volume_choosing(path, None)
+}
+
+/// [`load_volume_with_info`], with the DICOM series to load from a folder that holds several
+/// (a DICOM file given alone loads its own series).
+pub fn load_volume_choosing(
+    path: &Path,
+    series: Option<&dicom::SeriesChoice>,
+) -> Result<LoadedVolume, VolumeError> {
     let format = detect_format(path)?;
     match format {
         VolumeFormat::Dicom => {
             // The DICOM loader reads a whole folder; a single slice stands for its series.
-            let dir = match path.parent() {
-                _ if path.is_dir() => path,
-                Some(parent) if !parent.as_os_str().is_empty() => parent,
-                _ => Path::new("."),
+            let (dir, own) = match path.parent() {
+                _ if path.is_dir() => (path, None),
+                Some(parent) if !parent.as_os_str().is_empty() => {
+                    (parent, Some(dicom::series_of(path)?))
+                }
+                _ => (Path::new("."), Some(dicom::series_of(path)?)),
             };
-            let (volume, scalar_type) = dicom::load_dicom_series_with_type(dir)?;
+            let own = own.map(dicom::SeriesChoice);
+            let (volume, scalar_type) =
+                dicom::load_dicom_series_choosing(dir, series.or(own.as_ref()))?;
             Ok(LoadedVolume {
                 volume,
                 format,

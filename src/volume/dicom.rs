@@ -6,12 +6,13 @@
 //! `DICOMDIR` index is not used to find files. A DICOM file that cannot be parsed or decoded
 //! fails the whole load rather than leaving a hole in the volume.
 //!
-//! **Which series.** Images are grouped by SeriesInstanceUID. When the folder holds several
-//! series, the one with the most usable slices is loaded; ties go to the series whose UID sorts
-//! first, so the choice never depends on the order the file system lists files in. Images of
-//! the other series are ignored even when they could not be slices (a dose report saved as a
-//! secondary capture without a position, a multi-frame image), but every image of the loaded
-//! series must be a usable slice.
+//! **Which series.** Images are grouped by SeriesInstanceUID. A folder holding one series
+//! loads it; a folder holding several is [`VolumeError::DicomSeries`], which lists them
+//! (number, description, modality, size, image count, UID) until one is chosen by
+//! SeriesNumber or UID ([`SeriesChoice`]); a single file given instead of its folder chooses its
+//! own series. Images of the other series are ignored even when they could not be slices (a
+//! dose report saved as a secondary capture without a position, a multi-frame image), but every
+//! image of the loaded series must be a usable slice.
 //!
 //! **Geometry.** Slices are ordered by their ImagePositionPatient projected on the slice normal,
 //! the cross product of the ImageOrientationPatient row and column directions. The grid's x axis
@@ -83,7 +84,64 @@ pub fn is_dicom(bytes: &[u8]) -> bool {
 /// A DICOM file with pixel data: its series, and its slice header or why it cannot be a slice.
 struct Image {
     series: String,
+    tags: SeriesTags,
     slice: Result<SliceHeader, VolumeError>,
+}
+
+/// What a file says about its series, for listing.
+#[derive(Debug, Clone, Default, PartialEq)]
+struct SeriesTags {
+    number: Option<String>,
+    description: Option<String>,
+    modality: Option<String>,
+}
+
+/// One series of a folder, as [`list_series`] finds it.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct SeriesSummary {
+    /// The folder holding it.
+    pub folder: PathBuf,
+    /// SeriesInstanceUID (empty when the files have none).
+    pub uid: String,
+    /// SeriesNumber.
+    pub number: Option<String>,
+    /// SeriesDescription.
+    pub description: Option<String>,
+    /// Modality (CT, MR...).
+    pub modality: Option<String>,
+    /// Columns and rows of its first usable slice.
+    pub size: Option<[u16; 2]>,
+    /// Image files in it.
+    pub images: usize,
+}
+
+/// Which series of a folder to load: `NUMBER` (SeriesNumber) or a SeriesInstanceUID.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct SeriesChoice(pub String);
+
+impl SeriesChoice {
+    fn matches(&self, uid: &str, tags: &SeriesTags) -> bool {
+        self.0 == uid || tags.number.as_deref() == Some(self.0.trim())
+    }
+}
+
+/// The series as lines for a message: number, description, modality, size and image count.
+pub fn describe_series(series: &[SeriesSummary]) -> String {
+    series
+        .iter()
+        .map(|s| {
+            let size = s.size.map_or("?".into(), |[c, r]| format!("{c}x{r}"));
+            format!(
+                "  series {} {:?} {} {size}, {} images, UID {}",
+                s.number.as_deref().unwrap_or("-"),
+                s.description.as_deref().unwrap_or(""),
+                s.modality.as_deref().unwrap_or("?"),
+                s.images,
+                s.uid
+            )
+        })
+        .collect::<Vec<_>>()
+        .join("\n")
 }
 
 /// What one image file says about its slice, read before any pixel is decoded.
@@ -129,9 +187,32 @@ pub fn load_dicom_series(dir: &Path) -> Result<CpuVolume, VolumeError> {
 pub fn load_dicom_series_with_type(
     dir: &Path,
 ) -> Result<(CpuVolume, Option<ScalarType>), VolumeError> {
+    load_dicom_series_choosing(dir, None)
+}
+
+/// [`load_dicom_series_with_type`], loading the series `choice` names when the folder holds
+/// several ([`VolumeError::DicomSeries`] lists them when none is chosen).
+pub fn load_dicom_series_choosing(
+    dir: &Path,
+    choice: Option<&SeriesChoice>,
+) -> Result<(CpuVolume, Option<ScalarType>), VolumeError> {
     let paths = dicom_files(dir)?;
-    let images = first_error(paths.par_iter().map(|p| read_image(p)).collect())?;
-    let mut slices = select_series(dir, images.into_iter().flatten().collect())?;
+    let read: Vec<_> = paths.par_iter().map(|p| read_image(p)).collect();
+    let (images, unreadable): (Vec<_>, Vec<_>) = read.into_iter().partition(Result::is_ok);
+    let images: Vec<Image> = images
+        .into_iter()
+        .filter_map(Result::ok)
+        .flatten()
+        .collect();
+    // A file that cannot be parsed belongs to no known series: it fails the load only when
+    // nothing else in the folder is an image.
+    if let Some(Err(first)) = unreadable.into_iter().next() {
+        if images.is_empty() {
+            return Err(first);
+        }
+        eprintln!("note: ignored a file that is not readable DICOM: {first}");
+    }
+    let mut slices = select_series(dir, images, choice)?;
     check_consistent(&slices)?;
     let placement = place_slices(dir, &mut slices)?;
     let first = &slices[0];
@@ -243,8 +324,17 @@ fn read_image(path: &Path) -> Result<Option<Image>, VolumeError> {
             return Ok(None);
         }
         let series = optional_text(&obj, tags::SERIES_INSTANCE_UID).unwrap_or_default();
+        let tags = SeriesTags {
+            number: optional_text(&obj, tags::SERIES_NUMBER).filter(|t| !t.is_empty()),
+            description: optional_text(&obj, tags::SERIES_DESCRIPTION).filter(|t| !t.is_empty()),
+            modality: optional_text(&obj, tags::MODALITY).filter(|t| !t.is_empty()),
+        };
         let slice = slice_header(&obj, path, file_len).map_err(|m| dicom_error(path, m));
-        Ok(Some(Image { series, slice }))
+        Ok(Some(Image {
+            series,
+            tags,
+            slice,
+        }))
     })
 }
 
@@ -350,18 +440,104 @@ fn unit_axes(orientation: [f64; 6]) -> Result<(DVec3, DVec3), String> {
 
 /// The slices of the series with the most usable slices (ties: the UID that sorts first), all
 /// of whose images must be usable slices.
-fn select_series(dir: &Path, images: Vec<Image>) -> Result<Vec<SliceHeader>, VolumeError> {
-    let mut by_series = BTreeMap::<String, Vec<_>>::new();
-    for image in images {
-        by_series.entry(image.series).or_default().push(image.slice);
+fn select_series(
+    dir: &Path,
+    images: Vec<Image>,
+    choice: Option<&SeriesChoice>,
+) -> Result<Vec<SliceHeader>, VolumeError> {
+    let groups = group_series(images);
+    if groups.is_empty() {
+        return Err(dicom_error(dir, "no DICOM image slices in this folder"));
     }
-    // `max_by_key` keeps the last maximum, so walk the UIDs in reverse to prefer the first.
-    let chosen = by_series
-        .into_values()
-        .rev()
-        .max_by_key(|slices| slices.iter().filter(|s| s.is_ok()).count())
-        .ok_or_else(|| dicom_error(dir, "no DICOM image slices in this folder"))?;
-    chosen.into_iter().collect()
+    let listing = |groups: &[(String, Vec<Image>)]| {
+        groups.iter().map(|(uid, g)| summary(dir, uid, g)).collect()
+    };
+    let index = match choice {
+        Some(c) => {
+            let matching: Vec<usize> = (0..groups.len())
+                .filter(|&i| c.matches(&groups[i].0, &groups[i].1[0].tags))
+                .collect();
+            match matching.as_slice() {
+                [i] => *i,
+                found => {
+                    let problem = if found.is_empty() {
+                        format!("no series is {:?}", c.0)
+                    } else {
+                        format!("several series are numbered {:?}; give the UID", c.0)
+                    };
+                    return Err(VolumeError::DicomSeries {
+                        path: dir.into(),
+                        problem,
+                        series: listing(&groups),
+                    });
+                }
+            }
+        }
+        None if groups.len() == 1 => 0,
+        None => {
+            return Err(VolumeError::DicomSeries {
+                path: dir.into(),
+                problem: format!("{} DICOM series in this folder", groups.len()),
+                series: listing(&groups),
+            });
+        }
+    };
+    let mut groups = groups;
+    groups
+        .swap_remove(index)
+        .1
+        .into_iter()
+        .map(|image| image.slice)
+        .collect()
+}
+
+/// Images grouped by SeriesInstanceUID, in UID order.
+fn group_series(images: Vec<Image>) -> Vec<(String, Vec<Image>)> {
+    let mut by_series = BTreeMap::<String, Vec<Image>>::new();
+    for image in images {
+        by_series
+            .entry(image.series.clone())
+            .or_default()
+            .push(image);
+    }
+    by_series.into_iter().collect()
+}
+
+fn summary(folder: &Path, uid: &str, images: &[Image]) -> SeriesSummary {
+    let tags = &images[0].tags;
+    SeriesSummary {
+        folder: folder.into(),
+        uid: uid.to_owned(),
+        number: tags.number.clone(),
+        description: tags.description.clone(),
+        modality: tags.modality.clone(),
+        size: images
+            .iter()
+            .find_map(|i| i.slice.as_ref().ok().map(|s| [s.columns, s.rows])),
+        images: images.len(),
+    }
+}
+
+/// The series of DICOM images in `dir` (not its subfolders), without decoding any pixel data.
+/// Files that cannot be read as DICOM are left out here; loading the folder reports them.
+pub fn list_series(dir: &Path) -> Result<Vec<SeriesSummary>, VolumeError> {
+    let paths = dicom_files(dir)?;
+    let images: Vec<Image> = paths
+        .par_iter()
+        .filter_map(|p| read_image(p).ok().flatten())
+        .collect();
+    Ok(group_series(images)
+        .iter()
+        .map(|(uid, g)| summary(dir, uid, g))
+        .collect())
+}
+
+/// The SeriesInstanceUID of one DICOM file, so that a file given alone loads its own series.
+pub fn series_of(path: &Path) -> Result<String, VolumeError> {
+    guarded(path, || {
+        let obj = open(path)?;
+        Ok(optional_text(&obj, tags::SERIES_INSTANCE_UID).unwrap_or_default())
+    })
 }
 
 /// Every slice must share the first slice's size, orientation and pixel spacing.

@@ -29,6 +29,21 @@ pub enum VolumeError {
         /// What is wrong.
         message: String,
     },
+    /// A DICOM folder holds several series and none was chosen, or the chosen one is not
+    /// there.
+    #[error(
+        "{}: {problem}; choose one with --series NUMBER or --series UID (series = \"...\" in a scene file):\n{}",
+        path.display(),
+        super::dicom::describe_series(series)
+    )]
+    DicomSeries {
+        /// The folder.
+        path: PathBuf,
+        /// What is wrong: several series, or no series matches the choice.
+        problem: String,
+        /// The series found.
+        series: Vec<super::dicom::SeriesSummary>,
+    },
     /// The file could not be opened or read.
     #[error("{}: cannot read: {source}", path.display())]
     Io {
