@@ -3,9 +3,12 @@
 //! transfer function; a screenshot key; frame and order time in the title.
 //!
 //! Keys: `1` BTF, `2` PBTF, `3` IP-PBTF, `4` exact, `5` bucketed, `6` pyramid, `7` rows; `T` next transfer function;
-//! `S` screenshot (a new `splatscene-view-N.png` in the screenshot folder); `C` a clip plane
+//! `A` annotations (orientation marker, patient-direction letters, scale bar) off and on;
+//! `S` screenshot (a new `splatscene-view-N.png` in the screenshot folder, without the
+//! annotations, and beside it `splatscene-view-N.toml`, the scene file that `render` turns into
+//! the same picture); `C` a clip plane
 //! facing the eye through the target (cutting the volume, not the meshes), or off again, and
-//! `[` / `]` move it away from or toward the eye; `R` reset the camera; `Q` or Escape quits. Mouse: left drag orbits, right drag pans, the wheel zooms, a
+//! `[` / `]` move it away from or toward the eye; `R` reset the camera; `Q` or Escape quits. Mouse: left drag orbits about the scene's up, right drag pans, the wheel zooms, a
 //! left click without dragging picks.
 
 use std::path::PathBuf;
@@ -20,13 +23,14 @@ use winit::event_loop::{ActiveEventLoop, ControlFlow, EventLoop};
 use winit::keyboard::{Key, NamedKey};
 use winit::window::{Window, WindowId};
 
+use crate::annotate::{Annotations, annotate_image};
 use crate::classify::TransferFunction;
 use crate::order::Ordering;
 use crate::pick::measure::{MarkerStyle, Measurement, annotate};
 use crate::pick::{PickOptions, Picker};
 use crate::render::{
     Blit, FrameOptions, FrameReport, GpuContext, RenderError, RenderTarget, Renderer, ViewSetup,
-    encode_png, frame_to_rgba8,
+    encode_png, frame_to_rgba8, overlay_texture, write_overlay,
 };
 use crate::scene::file::{CameraSpec, SceneFile};
 use crate::scene::{ClipPlane, NodeContent, NodeId, Scene, SceneCamera};
@@ -51,6 +55,9 @@ pub struct ViewerOptions {
     pub scene_file: Option<SceneFile>,
     /// The first ordering (IP-PBTF when `None`).
     pub ordering: Option<Ordering>,
+    /// Annotations drawn over the picture (orientation marker, edge letters, scale bar);
+    /// `A` turns them off and on. `None` draws none until `A` is pressed.
+    pub annotations: Option<Annotations>,
 }
 
 impl Default for ViewerOptions {
@@ -62,6 +69,7 @@ impl Default for ViewerOptions {
             preview_while_moving: true,
             scene_file: None,
             ordering: None,
+            annotations: Some(Annotations::default()),
         }
     }
 }
@@ -124,6 +132,7 @@ pub fn run(scene: Scene, options: ViewerOptions) -> Result<(), ViewerError> {
         last: FrameReport::default(),
         full_frame: Duration::ZERO,
         settle: None,
+        annotations_on: true,
         error: None,
     };
     event_loop
@@ -140,6 +149,8 @@ struct Gpu {
     target: RenderTarget,
     renderer: Renderer,
     blit: Blit,
+    /// Annotations over the frame, the window's size.
+    overlay: wgpu::Texture,
 }
 
 struct Drag {
@@ -167,6 +178,8 @@ struct App {
     full_frame: Duration,
     /// When a zoom drawn as previews gets its full frame.
     settle: Option<Instant>,
+    /// Whether the annotations show (the `A` key).
+    annotations_on: bool,
     error: Option<ViewerError>,
 }
 
@@ -215,6 +228,7 @@ impl App {
         surface.configure(&ctx.device, &config);
         let target = RenderTarget::new(&ctx, config.width, config.height)?;
         let blit = Blit::new(&ctx, format);
+        let overlay = overlay_texture(&ctx, config.width, config.height);
         self.gpu = Some(Gpu {
             window,
             ctx,
@@ -223,6 +237,7 @@ impl App {
             target,
             renderer: Renderer::new(),
             blit,
+            overlay,
         });
         Ok(())
     }
@@ -235,6 +250,7 @@ impl App {
         gpu.config.height = size.height.max(1);
         gpu.surface.configure(&gpu.ctx.device, &gpu.config);
         gpu.target = RenderTarget::new(&gpu.ctx, gpu.config.width, gpu.config.height)?;
+        gpu.overlay = overlay_texture(&gpu.ctx, gpu.config.width, gpu.config.height);
         gpu.window.request_redraw();
         Ok(())
     }
@@ -296,7 +312,36 @@ impl App {
             }
         };
         let surface_view = frame.texture.create_view(&Default::default());
-        gpu.blit.copy(&gpu.ctx, &target.color_view, &surface_view);
+        let overlay = match (&self.options.annotations, self.annotations_on) {
+            (Some(parts), true) => {
+                let (w, h) = target.size;
+                let mut image = image::RgbaImage::new(w, h);
+                match annotate_image(
+                    &mut image,
+                    &self.camera,
+                    &self.scene.patient_frame(),
+                    &[],
+                    parts,
+                ) {
+                    Ok(_) => {
+                        write_overlay(&gpu.ctx, &gpu.overlay, image.as_raw(), w, h);
+                        Some(gpu.overlay.create_view(&Default::default()))
+                    }
+                    Err(e) => {
+                        eprintln!("annotations off: {e}");
+                        self.annotations_on = false;
+                        None
+                    }
+                }
+            }
+            _ => None,
+        };
+        gpu.blit.copy(
+            &gpu.ctx,
+            &target.color_view,
+            overlay.as_ref(),
+            &surface_view,
+        );
         gpu.window.pre_present_notify();
         gpu.ctx.queue.present(frame);
         let elapsed = started.elapsed();
@@ -480,6 +525,17 @@ impl App {
                 "q" => event_loop.exit(),
                 "s" => self.screenshot()?,
                 "t" => self.next_preset(),
+                "a" => {
+                    if self.options.annotations.is_none() {
+                        self.options.annotations = Some(Annotations::default());
+                        self.annotations_on = false;
+                    }
+                    self.annotations_on = !self.annotations_on;
+                    println!(
+                        "annotations {}",
+                        if self.annotations_on { "on" } else { "off" }
+                    );
+                }
                 "r" => self.camera = self.home,
                 "c" => self.toggle_clip(),
                 "[" => self.move_clip(-1.0),

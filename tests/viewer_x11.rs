@@ -452,6 +452,15 @@ fn viewer_orbits_upright_and_saves_views_that_render_reproduces() {
         / c.len() as f64)
         .sqrt();
     assert!(rmse < 0.01, "render of the saved view: RMSE {rmse}");
+    // The annotations (on by default) go off with A; the screen changes, the screenshots
+    // never carried them.
+    let annotated = screen(&display, &dir, "annotated");
+    xdo(&display, &["key", "a"]).expect("key a");
+    assert_eq!(line(&lines, "annotations"), "off");
+    title(&display, &window, "splats");
+    std::thread::sleep(Duration::from_millis(500));
+    let plain = screen(&display, &dir, "plain");
+    assert_ne!(annotated, plain, "the annotations showed on screen");
     xdo(&display, &["key", "q"]).expect("key q");
     let mut viewer = viewer;
     wait_for("the viewer to quit", 30, || {

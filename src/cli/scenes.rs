@@ -486,9 +486,24 @@ pub struct ViewerArgs {
     /// of the splats).
     #[arg(long)]
     no_preview: bool,
+    /// The annotations drawn over the picture: marker, letters, scale, or all (the default);
+    /// the A key turns them off and on.
+    #[arg(long, default_value = "all", value_name = "PARTS")]
+    annotate: String,
+    /// No annotations until the A key is pressed.
+    #[arg(long, conflicts_with = "annotate")]
+    no_annotate: bool,
 }
 
 pub fn run_viewer(args: ViewerArgs) -> Result<()> {
+    let annotations = if args.no_annotate {
+        None
+    } else {
+        Some(
+            Annotations::parse_parts(&args.annotate)
+                .map_err(|e| anyhow::anyhow!("--annotate: {e}"))?,
+        )
+    };
     let view = args.view.load()?;
     let camera = view.single_camera()?;
     let View {
@@ -505,9 +520,10 @@ pub fn run_viewer(args: ViewerArgs) -> Result<()> {
         preview_while_moving: !args.no_preview,
         scene_file: Some(file),
         ordering: loaded.ordering,
+        annotations,
     };
     eprintln!(
-        "keys: 1 BTF, 2 PBTF, 3 IP-PBTF, 4 exact, 5 bucketed, 6 pyramid, 7 rows, T transfer function, S screenshot, C clip plane ([ and ] move it), R reset, Q quit; drag to orbit (right: pan), wheel to zoom, click to pick"
+        "keys: 1 BTF, 2 PBTF, 3 IP-PBTF, 4 exact, 5 bucketed, 6 pyramid, 7 rows, T transfer function, A annotations, S screenshot and its scene file, C clip plane ([ and ] move it), R reset, Q quit; drag to orbit about the scene's up (right: pan), wheel to zoom, click to pick"
     );
     splatscene::viewer::run(loaded.scene, options)?;
     Ok(())

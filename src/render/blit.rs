@@ -1,4 +1,5 @@
-//! Presenting: copies an offscreen colour target to a window surface of the same size.
+//! Presenting: copies an offscreen colour target to a window surface of the same size, with an
+//! optional overlay (annotations drawn on the CPU) blended over it.
 
 use super::GpuContext;
 
@@ -7,6 +8,59 @@ use super::GpuContext;
 pub struct Blit {
     pipeline: wgpu::RenderPipeline,
     layout: wgpu::BindGroupLayout,
+    /// A transparent 1x1 overlay for copies without one.
+    clear: wgpu::TextureView,
+}
+
+/// The format of overlays: 8-bit RGBA with straight alpha, in the frame's display values.
+pub const OVERLAY_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
+
+/// A texture for [`Blit::copy`]'s overlay, `width` x `height`, written with [`write_overlay`].
+pub fn overlay_texture(ctx: &GpuContext, width: u32, height: u32) -> wgpu::Texture {
+    ctx.device.create_texture(&wgpu::TextureDescriptor {
+        label: Some("overlay"),
+        size: wgpu::Extent3d {
+            width: width.max(1),
+            height: height.max(1),
+            depth_or_array_layers: 1,
+        },
+        mip_level_count: 1,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D2,
+        format: OVERLAY_FORMAT,
+        usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+        view_formats: &[],
+    })
+}
+
+/// Uploads straight-alpha RGBA8 pixels (`width` x `height`, rows without padding) to an
+/// overlay texture of that size.
+pub fn write_overlay(
+    ctx: &GpuContext,
+    texture: &wgpu::Texture,
+    pixels: &[u8],
+    width: u32,
+    height: u32,
+) {
+    ctx.queue.write_texture(
+        wgpu::TexelCopyTextureInfo {
+            texture,
+            mip_level: 0,
+            origin: wgpu::Origin3d::ZERO,
+            aspect: wgpu::TextureAspect::All,
+        },
+        pixels,
+        wgpu::TexelCopyBufferLayout {
+            offset: 0,
+            bytes_per_row: Some(4 * width),
+            rows_per_image: Some(height),
+        },
+        wgpu::Extent3d {
+            width,
+            height,
+            depth_or_array_layers: 1,
+        },
+    );
 }
 
 impl Blit {
@@ -16,8 +70,8 @@ impl Blit {
         let module = device.create_shader_module(wgpu::include_wgsl!("../../shaders/blit.wgsl"));
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("blit"),
-            entries: &[wgpu::BindGroupLayoutEntry {
-                binding: 0,
+            entries: &[0, 1].map(|binding| wgpu::BindGroupLayoutEntry {
+                binding,
                 visibility: wgpu::ShaderStages::FRAGMENT,
                 ty: wgpu::BindingType::Texture {
                     sample_type: wgpu::TextureSampleType::Float { filterable: false },
@@ -25,7 +79,7 @@ impl Blit {
                     multisampled: false,
                 },
                 count: None,
-            }],
+            }),
         });
         let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("blit"),
@@ -53,18 +107,39 @@ impl Blit {
             multiview_mask: None,
             cache: None,
         });
-        Self { pipeline, layout }
+        let clear_texture = overlay_texture(ctx, 1, 1);
+        write_overlay(ctx, &clear_texture, &[0; 4], 1, 1);
+        let clear = clear_texture.create_view(&Default::default());
+        Self {
+            pipeline,
+            layout,
+            clear,
+        }
     }
 
-    /// Copies `source` to `target` and submits.
-    pub fn copy(&self, ctx: &GpuContext, source: &wgpu::TextureView, target: &wgpu::TextureView) {
+    /// Copies `source` to `target` with `overlay` (a view of an [`overlay_texture`]) blended
+    /// over it, and submits.
+    pub fn copy(
+        &self,
+        ctx: &GpuContext,
+        source: &wgpu::TextureView,
+        overlay: Option<&wgpu::TextureView>,
+        target: &wgpu::TextureView,
+    ) {
+        let overlay = overlay.unwrap_or(&self.clear);
         let group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("blit"),
             layout: &self.layout,
-            entries: &[wgpu::BindGroupEntry {
-                binding: 0,
-                resource: wgpu::BindingResource::TextureView(source),
-            }],
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: wgpu::BindingResource::TextureView(source),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: wgpu::BindingResource::TextureView(overlay),
+                },
+            ],
         });
         let mut encoder = ctx.device.create_command_encoder(&Default::default());
         {

@@ -15,7 +15,7 @@ mod splat_pass;
 mod target;
 mod view;
 
-pub use blit::Blit;
+pub use blit::{Blit, OVERLAY_FORMAT, overlay_texture, write_overlay};
 pub use context::GpuContext;
 pub use depth_image::{DepthImage, DepthMode};
 pub use output::{depth_range, depth_to_luma16, encode_png, frame_to_rgba8};
