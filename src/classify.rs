@@ -210,7 +210,7 @@ fn finite_range(values: &[f32]) -> (f32, f32) {
 
 /// Two quantiles of the finite values above `lo` (`lo` and `hi` their range), from a histogram.
 fn percentiles_above_min(values: &[f32], lo: f32, hi: f32, a: f64, b: f64) -> (f32, f32) {
-    if !(hi > lo) {
+    if hi.partial_cmp(&lo) != Some(std::cmp::Ordering::Greater) {
         return (lo.min(0.0), hi.max(1.0));
     }
     let width = f64::from(hi) - f64::from(lo);

@@ -180,6 +180,8 @@ fn a_raw_volume_is_placed_by_its_orientation_and_seen_upright_from_named_views()
         stderr.contains("anterior view") && stderr.contains("superior view"),
         "{stderr}"
     );
+    // One classification for all three views.
+    assert_eq!(stderr.matches("classify 0 ms").count(), 2, "{stderr}");
     let anterior = read(&dir.join("ras-anterior.png"));
     let (top, bottom) = (
         bright(&anterior, 0..160, 0..80),

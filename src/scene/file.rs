@@ -708,6 +708,12 @@ fn load_raw_volume(
         // or a DICOM series folder, found from the first bytes and the name.
         let choice = spec.series.clone().map(SeriesChoice);
         let loaded = match crate::volume::detect::load_volume_choosing(path, choice.as_ref()) {
+            Err(VolumeError::NoHeader { .. }) if looks_like_scene_file(path) => {
+                return Err(invalid(format!(
+                    "volume {}: this is a scene file, not a volume; give it to render or view as the scene, or name the volume file it holds",
+                    path.display()
+                )));
+            }
             Err(VolumeError::NoHeader { .. }) => {
                 return Err(invalid(format!(
                     "volume {}: neither a volume format splatscene recognises nor a DICOM folder; a raw volume needs dims and scalar",
@@ -845,6 +851,29 @@ pub fn scale_warnings(scene: &Scene, meshes: &[(String, NodeId)]) -> Vec<String>
             ))
         })
         .collect()
+}
+
+/// Whether a file that is no volume is a scene file: named `.toml`, or text whose first line
+/// that is neither blank nor a comment opens a TOML table.
+fn looks_like_scene_file(path: &Path) -> bool {
+    if path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("toml"))
+    {
+        return true;
+    }
+    let mut head = Vec::new();
+    let read = std::fs::File::open(path).and_then(|f| {
+        use std::io::Read;
+        f.take(4096).read_to_end(&mut head)
+    });
+    read.is_ok()
+        && std::str::from_utf8(&head).is_ok_and(|text| {
+            text.lines()
+                .map(str::trim)
+                .find(|l| !l.is_empty() && !l.starts_with('#'))
+                .is_some_and(|l| l.starts_with('['))
+        })
 }
 
 /// The mesh file's coordinates to scene millimetres in RAS: its `units` scaled, its `frame`
@@ -1278,6 +1307,173 @@ mod tests {
         assert_eq!(ca.up, cb.up);
         assert_eq!(ca.projection, cb.projection);
         assert_eq!(file.lights, code.lights);
+    }
+
+    #[test]
+    fn rotate_degrees_turn_about_x_then_y_then_z_and_matrices_are_column_major() {
+        let spec = TransformSpec {
+            rotate_degrees: Some([90.0, 90.0, 0.0]),
+            ..TransformSpec::default()
+        };
+        // +y turned 90 degrees about x is +z; +z turned 90 degrees about y is +x.
+        let m = transform(&spec).unwrap();
+        assert!(m.transform_vector3(DVec3::Y).abs_diff_eq(DVec3::X, 1e-12));
+        let mut cols = [0.0; 16];
+        cols[0] = 1.0;
+        cols[6] = 1.0; // y goes to z
+        cols[9] = -1.0; // z goes to -y
+        cols[12..16].copy_from_slice(&[5.0, 6.0, 7.0, 1.0]);
+        let spec = TransformSpec {
+            matrix: Some(cols),
+            ..TransformSpec::default()
+        };
+        let m = transform(&spec).unwrap();
+        assert_eq!(m.transform_point3(DVec3::Y), DVec3::new(5.0, 6.0, 8.0));
+    }
+
+    #[test]
+    fn mesh_units_and_frames_apply_before_the_transform() {
+        let dir = TempDir::new("mesh-units");
+        let plain = dir.write("plain.toml", "[[mesh]]\npath = \"builtin:prosthesis\"\n");
+        let turned = dir.write(
+            "turned.toml",
+            "[[mesh]]\npath = \"builtin:prosthesis\"\nunits = \"cm\"\nframe = \"LPS\"\n\
+             transform = { translate = [1, 2, 3] }\n",
+        );
+        let (lo, hi) = load_scene_file(&plain).unwrap().scene.bounds().unwrap();
+        let (tlo, thi) = load_scene_file(&turned).unwrap().scene.bounds().unwrap();
+        // Ten times larger, x and y mirrored through the origin (LPS to RAS), then moved.
+        let expected_lo =
+            DVec3::new(-10.0 * hi.x, -10.0 * hi.y, 10.0 * lo.z) + DVec3::new(1.0, 2.0, 3.0);
+        let expected_hi =
+            DVec3::new(-10.0 * lo.x, -10.0 * lo.y, 10.0 * hi.z) + DVec3::new(1.0, 2.0, 3.0);
+        assert!(tlo.abs_diff_eq(expected_lo, 1e-3), "{tlo} vs {expected_lo}");
+        assert!(thi.abs_diff_eq(expected_hi, 1e-3), "{thi} vs {expected_hi}");
+        let bad = dir.write(
+            "bad.toml",
+            "[[mesh]]\npath = \"builtin:prosthesis\"\nunits = \"in\"\n",
+        );
+        let message = load_scene_file(&bad).unwrap_err().to_string();
+        assert!(
+            message.contains("\"in\"") && message.contains("mm, cm or m"),
+            "{message}"
+        );
+    }
+
+    #[test]
+    fn raw_volumes_take_an_orientation_and_header_files_refuse_raw_keys() {
+        let dir = TempDir::new("orientation");
+        std::fs::write(dir.0.join("v.raw"), [0u8; 24]).unwrap();
+        let scene = |extra: &str| {
+            dir.write(
+                "v.toml",
+                &format!(
+                    "[[volume]]\npath = \"v.raw\"\ndims = [2, 3, 4]\nscalar = \"u8\"\n\
+                     transfer = \"ramp\"\nwindow = [1, 2]\n{extra}"
+                ),
+            )
+        };
+        let loaded = load_scene_file(&scene("orientation = \"LPI\"\n")).unwrap();
+        let (_, node, _) = loaded.scene.volumes().next().unwrap();
+        assert_eq!(
+            node.volume.direction,
+            glam::DMat3::from_diagonal(DVec3::splat(-1.0))
+        );
+        // The patient's superior is still world +z: the scene's up does not follow the grid.
+        assert_eq!(loaded.scene.up_axis(), DVec3::Z);
+        let message = load_scene_file(&scene("orientation = \"LPP\"\n"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            message.contains("LPP") && message.contains("R/L"),
+            "{message}"
+        );
+        let message = load_scene_file(&scene("color = [1, 1, 1, 1]\ntransfer = \"ct-bone\"\n"));
+        assert!(message.is_err(), "a key given twice");
+        let phantom = dir.write(
+            "p.toml",
+            "[[volume]]\npath = \"builtin:shoulder-phantom\"\norientation = \"LPS\"\n",
+        );
+        let message = load_scene_file(&phantom).unwrap_err().to_string();
+        assert!(message.contains("orientation"), "{message}");
+        let preset = dir.write(
+            "w.toml",
+            "[[volume]]\npath = \"builtin:shoulder-phantom\"\ntransfer = \"ct-bone\"\nwindow = [1, 2]\n",
+        );
+        let message = load_scene_file(&preset).unwrap_err().to_string();
+        assert!(
+            message.contains("window applies to transfer = \"ramp\""),
+            "{message}"
+        );
+    }
+
+    #[test]
+    fn a_scene_file_given_as_a_volume_is_named_as_one() {
+        let dir = TempDir::new("scene-as-volume");
+        dir.write("inner.txt", "# a plan\n\n[camera]\nfov = 30\n");
+        let path = dir.write("outer.toml", "[[volume]]\npath = \"inner.txt\"\n");
+        let message = load_scene_file(&path).unwrap_err().to_string();
+        assert!(
+            message.contains("inner.txt") && message.contains("scene file, not a volume"),
+            "{message}"
+        );
+    }
+
+    #[test]
+    fn a_named_view_in_a_scene_file_looks_from_that_side() {
+        let dir = TempDir::new("named-view");
+        let path = dir.write(
+            "v.toml",
+            "[camera]\nview = \"superior\"\n\n[[volume]]\npath = \"builtin:shoulder-phantom\"\n",
+        );
+        let camera = load_scene_file(&path).unwrap().scene.camera.unwrap();
+        let forward = (camera.target - camera.eye).normalize();
+        assert!(forward.abs_diff_eq(DVec3::NEG_Z, 1e-9), "{forward}");
+        assert!(
+            camera.up.abs_diff_eq(DVec3::Y, 1e-9),
+            "anterior at the top: {}",
+            camera.up
+        );
+        let both = dir.write(
+            "both.toml",
+            "[camera]\nview = \"left\"\neye = [0, 0, 100]\n\n[[volume]]\npath = \"builtin:shoulder-phantom\"\n",
+        );
+        let message = load_scene_file(&both).unwrap_err().to_string();
+        assert!(message.contains("camera.view"), "{message}");
+        let unknown = dir.write("u.toml", "[camera]\nview = \"sideways\"\n");
+        let message = load_scene_file(&unknown).unwrap_err().to_string();
+        assert!(
+            message.contains("sideways") && message.contains("anterior"),
+            "{message}"
+        );
+    }
+
+    #[test]
+    fn a_saved_view_loads_back_to_the_same_camera() {
+        let dir = TempDir::new("saved-view");
+        let path = dir.write(
+            "s.toml",
+            "[camera]\nview_from = [0.2, -1.0, -0.3]\n\n[[volume]]\npath = \"builtin:shoulder-phantom\"\n",
+        );
+        let loaded = load_scene_file(&path).unwrap();
+        let camera = loaded
+            .scene
+            .camera
+            .unwrap()
+            .orbit_about(loaded.scene.up_axis(), 40.0, 20.0);
+        let mut file = SceneFile::read(&path).unwrap().with_paths_from(&dir.0);
+        file.camera = Some(CameraSpec::from_camera(&camera, loaded.scene.up_axis()));
+        let saved = dir.write("saved.toml", &file.to_toml().unwrap());
+        let again = load_scene_file(&saved).unwrap().scene.camera.unwrap();
+        assert!(
+            again.eye.abs_diff_eq(camera.eye, 1e-9)
+                && again.target.abs_diff_eq(camera.target, 1e-9)
+        );
+        let (a, b) = (
+            camera.pinhole(64, 64, 0.0).unwrap().frame().unwrap(),
+            again.pinhole(64, 64, 0.0).unwrap().frame().unwrap(),
+        );
+        assert!(a.up.abs_diff_eq(b.up, 1e-9) && a.right.abs_diff_eq(b.right, 1e-9));
     }
 
     #[test]

@@ -195,3 +195,68 @@ impl Default for Lights {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn frame(camera: &SceneCamera) -> crate::camera::CameraFrame {
+        camera.pinhole(64, 64, 0.0).unwrap().frame().unwrap()
+    }
+
+    #[test]
+    fn orbits_turn_about_the_given_up_and_stay_upright() {
+        // A scene whose up is -z (a slice stack with +z inferior), seen from the front.
+        let camera = SceneCamera {
+            up: DVec3::NEG_Z,
+            ..SceneCamera::look_at(DVec3::new(0.0, 300.0, 0.0), DVec3::ZERO)
+        };
+        for (yaw, pitch) in [(5.0, 0.0), (0.0, 5.0), (120.0, -40.0), (-30.0, 60.0)] {
+            let turned = camera.orbit_about(DVec3::NEG_Z, yaw, pitch);
+            assert!(
+                (turned.eye.length() - 300.0).abs() < 1e-9,
+                "the distance is kept"
+            );
+            let f = frame(&turned);
+            // Upright: screen right stays level (normal to the up axis), screen up leans toward it.
+            assert!(
+                f.right.dot(DVec3::NEG_Z).abs() < 1e-9,
+                "{yaw},{pitch}: {f:?}"
+            );
+            assert!(f.up.dot(DVec3::NEG_Z) > 0.0, "{yaw},{pitch}: {f:?}");
+        }
+        // Yaw turns about the axis: the eye keeps its height along it.
+        let yawed = camera.orbit_about(DVec3::NEG_Z, 90.0, 0.0);
+        assert!(
+            yawed.eye.z.abs() < 1e-9 && yawed.eye.x.abs() > 299.0,
+            "{}",
+            yawed.eye
+        );
+        // Positive pitch raises the eye toward the up axis (-z here).
+        assert!(camera.orbit_about(DVec3::NEG_Z, 0.0, 10.0).eye.z < -50.0);
+    }
+
+    #[test]
+    fn the_pitch_stops_at_the_pole_and_the_view_along_up_does_not_jump() {
+        let camera = SceneCamera::look_at(DVec3::new(0.0, -200.0, 0.0), DVec3::ZERO);
+        let pole = camera.orbit_about(DVec3::Z, 0.0, 200.0);
+        assert!(
+            pole.eye.abs_diff_eq(DVec3::new(0.0, 0.0, 200.0), 1e-9),
+            "{}",
+            pole.eye
+        );
+        let f = frame(&pole);
+        // Looking straight down: screen up is what it was turned to (+y), not a new guess.
+        assert!(f.up.abs_diff_eq(DVec3::Y, 1e-9), "{f:?}");
+        // A small yaw at the pole turns the picture a little, a small pitch leaves the pole.
+        let spun = frame(&pole.orbit_about(DVec3::Z, 2.0, 0.0));
+        assert!(spun.up.angle_between(f.up).to_degrees() < 2.0 + 1e-9);
+        let back = pole.orbit_about(DVec3::Z, 0.0, -3.0);
+        assert!(back.eye.y < 0.0 && (back.eye.length() - 200.0).abs() < 1e-9);
+        // A degenerate axis falls back to the camera's own up.
+        assert_eq!(
+            camera.orbit_about(DVec3::ZERO, 10.0, 0.0),
+            camera.orbit(10.0, 0.0)
+        );
+    }
+}
