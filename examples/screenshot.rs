@@ -12,7 +12,7 @@ mod common;
 
 use std::path::PathBuf;
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Result, bail};
 use splatscene::scene::file::load_scene_file;
 
 const USAGE: &str = "usage: screenshot SCENE.toml OUT.png [DEPTH.png]";
@@ -31,11 +31,16 @@ fn main() -> Result<()> {
     common::write_color_png(&shot, out)?;
     println!("{}: {}", out.display(), common::describe(&shot.report));
     if let Some(depth) = depth {
-        let bounds = scene
-            .bounds()
-            .context("the scene has nothing to draw, so no depth range")?;
-        common::write_depth_png(&shot, bounds, depth)?;
-        println!("{}: mesh depth, 16-bit grey", depth.display());
+        if scene.meshes().next().is_none() {
+            bail!("the scene has no meshes, so its mesh depth would be empty");
+        }
+        let calibration = common::write_depth_png(&shot, depth)?;
+        println!(
+            "{}: mesh depth, 16-bit grey, {} to {} mm",
+            depth.display(),
+            calibration["near_mm"],
+            calibration["far_mm"]
+        );
     }
     Ok(())
 }

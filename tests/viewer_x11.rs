@@ -115,6 +115,32 @@ fn line(lines: &Receiver<String>, prefix: &str) -> String {
     }
 }
 
+/// Starts the viewer with `args` on `display`: the process, its standard output line by line,
+/// and its window once it exists.
+fn open_viewer(display: &str, args: &[&str]) -> (Guard, Receiver<String>, String) {
+    let mut viewer = Command::new(env!("CARGO_BIN_EXE_splatscene"))
+        .args(args)
+        .env("DISPLAY", display)
+        .env("NODEVICE_SELECT", "1")
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("start the viewer");
+    let stdout = viewer.stdout.take().unwrap();
+    let viewer = Guard(viewer);
+    let (send, lines) = channel();
+    std::thread::spawn(move || {
+        for l in BufReader::new(stdout).lines().map_while(Result::ok) {
+            let _ = send.send(l);
+        }
+    });
+    let window = wait_for("the viewer window", 60, || {
+        xdo(display, &["search", "--name", "^splatscene"])
+            .and_then(|s| s.lines().next().map(str::to_owned))
+    });
+    (viewer, lines, window)
+}
+
 /// Waits for the window title to contain `text` (the title changes after each frame).
 fn title(display: &str, window: &str, text: &str) -> String {
     title_where(display, window, &format!("a title with {text:?}"), |t| {
@@ -153,32 +179,16 @@ fn viewer_picks_switches_orderings_and_takes_screenshots_under_xvfb() {
     let dir: PathBuf =
         std::env::temp_dir().join(format!("splatscene-viewer-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
-    let mut viewer = Command::new(env!("CARGO_BIN_EXE_splatscene"))
-        .args([
+    let (viewer, lines, window) = open_viewer(
+        &display,
+        &[
             "view",
             "--size",
             "640x480",
             "--screenshots",
             dir.to_str().unwrap(),
-        ])
-        .env("DISPLAY", &display)
-        .env("NODEVICE_SELECT", "1")
-        .stdout(Stdio::piped())
-        .stderr(Stdio::null())
-        .spawn()
-        .expect("start the viewer");
-    let stdout = viewer.stdout.take().unwrap();
-    let viewer = Guard(viewer);
-    let (send, lines) = channel();
-    std::thread::spawn(move || {
-        for l in BufReader::new(stdout).lines().map_while(Result::ok) {
-            let _ = send.send(l);
-        }
-    });
-    let window = wait_for("the viewer window", 60, || {
-        xdo(&display, &["search", "--name", "^splatscene"])
-            .and_then(|s| s.lines().next().map(str::to_owned))
-    });
+        ],
+    );
     title(&display, &window, "splats");
     xdo(&display, &["windowfocus", "--sync", &window]);
     let first = screen(&display, &dir, "first");
@@ -355,33 +365,17 @@ fn viewer_orbits_upright_and_saves_views_that_render_reproduces() {
     )
     .unwrap();
     let (_xvfb, display) = start_xvfb();
-    let mut viewer = Command::new(env!("CARGO_BIN_EXE_splatscene"))
-        .args([
+    let (viewer, lines, window) = open_viewer(
+        &display,
+        &[
             "view",
             scene.to_str().unwrap(),
             "--size",
             "256x256",
             "--screenshots",
-        ])
-        .arg(&dir)
-        .env("DISPLAY", &display)
-        .env("NODEVICE_SELECT", "1")
-        .stdout(Stdio::piped())
-        .stderr(Stdio::null())
-        .spawn()
-        .expect("start the viewer");
-    let stdout = viewer.stdout.take().unwrap();
-    let viewer = Guard(viewer);
-    let (send, lines) = channel();
-    std::thread::spawn(move || {
-        for l in BufReader::new(stdout).lines().map_while(Result::ok) {
-            let _ = send.send(l);
-        }
-    });
-    let window = wait_for("the viewer window", 60, || {
-        xdo(&display, &["search", "--name", "^splatscene"])
-            .and_then(|s| s.lines().next().map(str::to_owned))
-    });
+            dir.to_str().unwrap(),
+        ],
+    );
     title(&display, &window, "splats");
     xdo(&display, &["windowfocus", "--sync", &window]);
     let shoot = || {

@@ -7,10 +7,9 @@
 use std::path::Path;
 
 use anyhow::{Context, Result};
-use glam::DVec3;
 use splatscene::render::{
-    FrameOptions, FrameReport, GpuContext, Renderer, Screenshot, depth_range, depth_to_luma16,
-    encode_png, frame_to_rgba8,
+    DepthImage, DepthMode, FrameOptions, FrameReport, GpuContext, Renderer, Screenshot, encode_png,
+    frame_to_rgba8,
 };
 use splatscene::scene::file::LoadedScene;
 
@@ -38,13 +37,24 @@ pub fn write_color_png(shot: &Screenshot, path: &Path) -> Result<()> {
     write_replacing(path, &png)
 }
 
-/// Writes the mesh depth of a screenshot as a 16-bit grey PNG, near black and far white, scaled
-/// to the view distances of the scene's bounding box so that the whole scene spans the range.
-pub fn write_depth_png(shot: &Screenshot, bounds: (DVec3, DVec3), path: &Path) -> Result<()> {
-    let range = depth_range(&shot.view, bounds);
-    let png = encode_png(&depth_to_luma16(&shot.depth, &shot.view, range))
+/// Writes the mesh depth of a screenshot as a calibrated 16-bit grey PNG (see
+/// `splatscene::render::DepthImage`), near black and far white, and returns its calibration.
+pub fn write_depth_png(shot: &Screenshot, path: &Path) -> Result<serde_json::Value> {
+    let image = DepthImage {
+        size: shot.view.size,
+        distances: shot
+            .depth
+            .iter()
+            .map(|&d| shot.view.distance_of(d))
+            .collect(),
+        mode: DepthMode::Mesh,
+        surface_opacity: None,
+    };
+    let (png, calibration) = image
+        .encode_png(&shot.view)
         .context("encoding the depth PNG")?;
-    write_replacing(path, &png)
+    write_replacing(path, &png)?;
+    Ok(calibration)
 }
 
 /// What a frame drew and where its time went, on one line.

@@ -18,7 +18,7 @@ mod view;
 pub use blit::{Blit, OVERLAY_FORMAT, overlay_texture, write_overlay};
 pub use context::GpuContext;
 pub use depth_image::{DepthImage, DepthMode};
-pub use output::{depth_range, depth_to_luma16, encode_png, frame_to_rgba8};
+pub use output::{encode_png, frame_to_rgba8};
 pub use renderer::{FrameOptions, FrameReport, FrameTimings, Renderer, Screenshot};
 pub use splat_pass::gpu_colors;
 pub use target::{COLOR_FORMAT, DEPTH_FORMAT, RenderTarget, read_texture};

@@ -193,17 +193,11 @@ fn split_compound(word: &str) -> Option<Vec<&'static str>> {
         ("supero", "superior"),
         ("infero", "inferior"),
     ];
-    const WORDS: [&str; 8] = [
-        "anterior",
-        "posterior",
-        "left",
-        "right",
-        "superior",
-        "inferior",
-        "lateral",
-        "medial",
-    ];
-    if let Some(w) = WORDS.iter().find(|w| **w == word) {
+    if let Some(w) = VIEW_WORDS
+        .iter()
+        .chain(&["lateral", "medial"])
+        .find(|w| **w == word)
+    {
         return Some(vec![w]);
     }
     let (prefix, full) = PREFIXES.iter().find(|(p, _)| word.starts_with(p))?;
