@@ -38,5 +38,6 @@ pub mod pick;
 pub mod render;
 pub mod report;
 pub mod scene;
+pub mod tiled;
 pub mod viewer;
 pub mod volume;

@@ -11,8 +11,8 @@ use splatscene::order::Ordering;
 use splatscene::pick::measure::{MarkerStyle, MeasureKind, Measurement, annotate};
 use splatscene::pick::{PickOptions, Picker, surface_distances};
 use splatscene::render::{
-    DepthImage, DepthMode, FrameOptions, FrameReport, GpuContext, Renderer, ViewSetup, encode_png,
-    frame_to_rgba8,
+    Compositor, DepthImage, DepthMode, FrameOptions, FrameReport, GpuContext, RenderError,
+    Renderer, ViewSetup, encode_png, frame_to_rgba8,
 };
 use splatscene::scene::{Scene, SceneCamera};
 
@@ -45,6 +45,11 @@ pub struct RenderArgs {
     /// The accumulated opacity that makes a volume's surface in the depth image (0 to 1).
     #[arg(long, default_value_t = 0.3, value_parser = parse_opacity)]
     surface_opacity: f32,
+    /// Who composites the splats: gpu (the splat pass), cpu (the tile compositor, meshes
+    /// still on the GPU), or auto: the CPU where the GPU adapter is itself a CPU (lavapipe),
+    /// and where there is no adapter at all for a scene without meshes.
+    #[arg(long, default_value = "auto")]
+    compositor: Compositor,
     /// Transparent background (the PNG's alpha is the coverage).
     #[arg(long)]
     transparent: bool,
@@ -197,11 +202,17 @@ pub fn run_render(args: RenderArgs) -> Result<()> {
             "--depth-mode mesh: the scene has no meshes, so the depth image would be empty; use --depth-mode surface for the volumes' surface"
         );
     }
-    let ctx = GpuContext::headless()?;
+    let ctx = context_for(args.compositor, &loaded.scene)?;
     // One renderer for every view: the volumes are classified once.
-    let mut renderer = Renderer::new();
+    let mut renderer = Renderer::with_compositor(args.compositor);
+    let device = ctx
+        .as_ref()
+        .map_or("no GPU adapter".into(), GpuContext::describe);
     for ((name, camera), (out, depth)) in cameras.iter().zip(outputs.iter().zip(&depths)) {
-        let shot = renderer.screenshot(&ctx, &loaded.scene, camera, size, &options)?;
+        let shot = match &ctx {
+            Some(ctx) => renderer.screenshot(ctx, &loaded.scene, camera, size, &options)?,
+            None => renderer.screenshot_without_gpu(&loaded.scene, camera, size, &options)?,
+        };
         let image = figure(&shot, &loaded.scene, camera, parts.as_ref(), &[])?;
         write_replacing(out, &encode_png(&image)?)?;
         if let Some(path) = depth {
@@ -211,10 +222,9 @@ pub fn run_render(args: RenderArgs) -> Result<()> {
             .as_deref()
             .map_or(String::new(), |n| format!(" {n} view"));
         eprintln!(
-            "{}x{}{view} on {}: {}",
+            "{}x{}{view} on {device}: {}",
             size.0,
             size.1,
-            ctx.describe(),
             describe(&shot.report)
         );
         eprintln!("wrote {}", out.display());
@@ -325,8 +335,19 @@ fn output_names(pattern: &Path, cameras: &[(Option<String>, SceneCamera)]) -> Re
 
 fn describe(r: &FrameReport) -> String {
     let ms = |d: std::time::Duration| d.as_secs_f64() * 1e3;
+    let splats = match r.tiles {
+        Some(t) => format!(
+            "splats on the CPU ({} projected, {} splat-tile pairs composited, {} skipped behind opaque pixels, {} of the tiles stopped early), composite {:.1} ms",
+            t.projected,
+            t.composited,
+            t.skipped_opaque,
+            t.tiles_stopped,
+            ms(r.timings.splat_pass)
+        ),
+        None => format!("splat pass {:.1} ms", ms(r.timings.splat_pass)),
+    };
     format!(
-        "{} meshes ({} triangles), {} splats; classify {:.0} ms, order {:.1} ms, upload {:.1} ms, mesh pass {:.1} ms, splat pass {:.1} ms, readback {:.1} ms",
+        "{} meshes ({} triangles), {} splats; classify {:.0} ms, order {:.1} ms, upload {:.1} ms, mesh pass {:.1} ms, {splats}, readback {:.1} ms",
         r.meshes,
         r.triangles,
         r.splats,
@@ -334,9 +355,23 @@ fn describe(r: &FrameReport) -> String {
         ms(r.timings.order),
         ms(r.timings.upload),
         ms(r.timings.mesh_pass),
-        ms(r.timings.splat_pass),
         ms(r.timings.readback)
     )
+}
+
+/// The GPU context, or none where there is no adapter and the CPU can draw the whole scene
+/// (volumes only, a compositor other than the GPU's).
+fn context_for(compositor: Compositor, scene: &Scene) -> Result<Option<GpuContext>> {
+    match GpuContext::headless() {
+        Ok(ctx) => Ok(Some(ctx)),
+        Err(e @ RenderError::NoAdapter(_))
+            if compositor != Compositor::Gpu && scene.meshes().next().is_none() =>
+        {
+            eprintln!("{e}\ncompositing the volumes on the CPU");
+            Ok(None)
+        }
+        Err(e) => Err(e.into()),
+    }
 }
 
 fn check_pixel(pixel: [u32; 2], size: (u32, u32)) -> Result<()> {

@@ -19,7 +19,7 @@ pub use blit::{Blit, OVERLAY_FORMAT, overlay_texture, write_overlay};
 pub use context::GpuContext;
 pub use depth_image::{DepthImage, DepthMode};
 pub use output::{encode_png, frame_to_rgba8};
-pub use renderer::{FrameOptions, FrameReport, FrameTimings, Renderer, Screenshot};
+pub use renderer::{Compositor, FrameOptions, FrameReport, FrameTimings, Renderer, Screenshot};
 pub use splat_pass::gpu_colors;
 pub use target::{COLOR_FORMAT, DEPTH_FORMAT, RenderTarget, read_texture};
 pub use view::ViewSetup;

@@ -8,7 +8,7 @@ use std::time::{Duration, Instant};
 use glam::{DMat3, DMat4};
 
 use super::mesh_pass::{GpuMesh, MeshPass};
-use super::splat_pass::{GpuVolume, SplatPass};
+use super::splat_pass::{GpuVolume, SplatPass, color_texels, gradient_texels, projection};
 use super::target::RenderTarget;
 use super::view::ViewSetup;
 use super::{GpuContext, RenderError};
@@ -16,6 +16,7 @@ use crate::classify::{Classified, classify_corrected, classify_shell, opacity_le
 use crate::composite::Frame;
 use crate::order::{OrderOptions, Orderer, Ordering, ViewCase, VolumeGeometry};
 use crate::scene::{NodeId, Scene, SceneCamera, VolumeNode, placed_geometry};
+use crate::tiled::{SplatTexels, TileStats, TiledCompositor};
 use crate::volume::CpuVolume;
 
 /// Per-frame choices that are not part of the scene.
@@ -83,6 +84,8 @@ pub struct FrameReport {
     pub splats: usize,
     /// Volumes classified this frame (0 when nothing changed).
     pub classified: usize,
+    /// What the CPU tile compositor did, when it composited the splats.
+    pub tiles: Option<TileStats>,
     /// Where the time went.
     pub timings: FrameTimings,
 }
@@ -108,9 +111,38 @@ struct VolumeState {
     /// The volume drawn: the node's own, or its halved copy for previews.
     volume: Arc<CpuVolume>,
     classified: Classified,
-    gpu: GpuVolume,
+    /// The GPU copy, made on the first frame the splat pass draws it.
+    gpu: Option<GpuVolume>,
+    /// The colours and normals of the CPU tile compositor, made on its first frame.
+    texels: Option<(Vec<u8>, Vec<u8>)>,
     orderer: Orderer,
     ids: Vec<u32>,
+}
+
+/// Who composites the splats of screenshots.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Compositor {
+    /// The CPU tile compositor where the adapter is a CPU (lavapipe), else the GPU (the
+    /// command line's default).
+    Auto,
+    /// The GPU's splat pass (the library's default).
+    #[default]
+    Gpu,
+    /// The CPU tile compositor ([`crate::tiled`]); meshes keep their GPU pass.
+    Cpu,
+}
+
+impl std::str::FromStr for Compositor {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s {
+            "auto" => Ok(Self::Auto),
+            "gpu" => Ok(Self::Gpu),
+            "cpu" => Ok(Self::Cpu),
+            other => Err(format!("unknown compositor {other:?}: auto, gpu or cpu")),
+        }
+    }
 }
 
 /// Draws scenes; keeps GPU resources between frames so that a camera move uploads only the
@@ -123,6 +155,10 @@ pub struct Renderer {
     volumes: HashMap<NodeId, VolumeState>,
     /// The halved copies drawn by preview frames.
     previews: HashMap<NodeId, VolumeState>,
+    /// Who composites the splats of screenshots.
+    compositor: Compositor,
+    /// The CPU tile compositor's buffers.
+    tiles: TiledCompositor,
 }
 
 impl std::fmt::Debug for Renderer {
@@ -143,6 +179,24 @@ impl Renderer {
         Self::default()
     }
 
+    /// A renderer whose screenshots composite their splats with `compositor`.
+    pub fn with_compositor(compositor: Compositor) -> Self {
+        Self {
+            compositor,
+            ..Self::default()
+        }
+    }
+
+    /// Whether screenshots on `ctx` composite on the CPU: asked for, or chosen by
+    /// [`Compositor::Auto`] for an adapter that is itself a CPU.
+    pub fn composites_on_cpu(&self, ctx: &GpuContext) -> bool {
+        match self.compositor {
+            Compositor::Gpu => false,
+            Compositor::Cpu => true,
+            Compositor::Auto => ctx.adapter.get_info().device_type == wgpu::DeviceType::Cpu,
+        }
+    }
+
     /// Renders `scene` seen through `view` into the given colour and depth views (formats
     /// [`super::COLOR_FORMAT`] and [`super::DEPTH_FORMAT`], of `view.size`).
     pub fn render(
@@ -157,7 +211,7 @@ impl Renderer {
         let mut report = FrameReport::default();
         self.sync_meshes(ctx, scene);
         let started = Instant::now();
-        report.classified = self.sync_volumes(ctx, scene, options.preview)?;
+        report.classified = self.sync_volumes(scene, options.preview)?;
         report.timings.classify = started.elapsed();
         let ordered = self.order_volumes(scene, view, options, &mut report)?;
         let started = Instant::now();
@@ -198,6 +252,9 @@ impl Renderer {
         size: (u32, u32),
         options: &FrameOptions,
     ) -> Result<Screenshot, RenderError> {
+        if self.composites_on_cpu(ctx) {
+            return self.screenshot_tiled(Some(ctx), scene, camera, size, options);
+        }
         let target = RenderTarget::new(ctx, size.0, size.1)?;
         let view = ViewSetup::new(camera, size, scene.bounds())?;
         let mut report = self.render(
@@ -218,6 +275,165 @@ impl Renderer {
             view,
             report,
         })
+    }
+
+    /// A screenshot of a scene without meshes on a machine with no GPU adapter at all: the
+    /// splats composited by the CPU tile compositor. A scene with meshes needs an adapter for
+    /// them ([`RenderError::NoAdapter`] says so).
+    pub fn screenshot_without_gpu(
+        &mut self,
+        scene: &Scene,
+        camera: &SceneCamera,
+        size: (u32, u32),
+        options: &FrameOptions,
+    ) -> Result<Screenshot, RenderError> {
+        self.screenshot_tiled(None, scene, camera, size, options)
+    }
+
+    /// A screenshot whose splats the CPU tile compositor draws over the meshes (drawn and read
+    /// back by the GPU, when the scene has any).
+    fn screenshot_tiled(
+        &mut self,
+        ctx: Option<&GpuContext>,
+        scene: &Scene,
+        camera: &SceneCamera,
+        size: (u32, u32),
+        options: &FrameOptions,
+    ) -> Result<Screenshot, RenderError> {
+        crate::composite::check_frame_size(size.0, size.1)
+            .map_err(|e| RenderError::BadCamera(e.to_string()))?;
+        let view = ViewSetup::new(camera, size, scene.bounds())?;
+        let mut report = FrameReport::default();
+        let started = Instant::now();
+        report.classified = self.sync_volumes(scene, options.preview)?;
+        report.timings.classify = started.elapsed();
+        let ordered = self.order_volumes(scene, &view, options, &mut report)?;
+        // What lies under the splats: the meshes on the GPU, or the background alone.
+        let has_meshes = scene.meshes().chain(scene.overlays()).next().is_some();
+        let pixels = size.0 as usize * size.1 as usize;
+        let (mut frame, depth, target) = match ctx {
+            Some(ctx) if has_meshes => {
+                self.sync_meshes(ctx, scene);
+                let target = RenderTarget::new(ctx, size.0, size.1)?;
+                self.upload(ctx, scene, &view, &[], options.preview, &mut report)?;
+                let started = Instant::now();
+                self.mesh_stage(ctx, scene, &target.color_view, &target.depth_view, options);
+                report.timings.mesh_pass = started.elapsed();
+                let started = Instant::now();
+                let (frame, depth) = (target.read_color(ctx)?, target.read_depth(ctx)?);
+                report.timings.readback = started.elapsed();
+                (frame, depth, Some((ctx, target)))
+            }
+            None if has_meshes => {
+                return Err(RenderError::NoAdapter(
+                    "the scene has meshes, which need a GPU adapter; only its volumes could be drawn without one".into(),
+                ));
+            }
+            _ => {
+                let fill = options
+                    .background
+                    .map_or([0.0; 4], |[r, g, b]| [r, g, b, 1.0]);
+                let frame = Frame {
+                    width: size.0,
+                    height: size.1,
+                    pixels: vec![fill; pixels],
+                };
+                (frame, vec![0.0; pixels], None)
+            }
+        };
+        let started = Instant::now();
+        report.tiles =
+            Some(self.composite_tiles(scene, &view, &ordered, options.preview, &depth, &mut frame));
+        report.timings.splat_pass = started.elapsed();
+        if let Some((ctx, target)) = &target
+            && scene.overlays().next().is_some()
+        {
+            // Measurement markers go over everything: drawn alone, then laid over the frame.
+            let started = Instant::now();
+            self.overlay_alone(ctx, scene, &target.color_view, &target.depth_view);
+            let overlay = target.read_color(ctx)?;
+            for (px, o) in frame.pixels.iter_mut().zip(&overlay.pixels) {
+                *px = std::array::from_fn(|k| o[k] + (1.0 - o[3]) * px[k]);
+            }
+            report.timings.readback += started.elapsed();
+        }
+        report.mesh_pipeline = self.mesh_pass.is_some();
+        report.overlay_pipeline = self.mesh_pass.as_ref().is_some_and(MeshPass::has_overlay);
+        Ok(Screenshot {
+            frame,
+            depth,
+            view,
+            report,
+        })
+    }
+
+    /// The ordered volumes' splats composited by the tile compositor over `frame`.
+    fn composite_tiles(
+        &mut self,
+        scene: &Scene,
+        view: &ViewSetup,
+        ordered: &[(NodeId, VolumeGeometry)],
+        preview: bool,
+        depth: &[f32],
+        frame: &mut Frame,
+    ) -> TileStats {
+        let Self {
+            volumes,
+            previews,
+            tiles,
+            ..
+        } = self;
+        let states = if preview { previews } else { volumes };
+        for (id, _) in ordered {
+            if let Some(state) = states.get_mut(id)
+                && state.texels.is_none()
+            {
+                state.texels = Some((
+                    color_texels(&state.classified),
+                    gradient_texels(&state.volume, &state.classified),
+                ));
+            }
+        }
+        let mut inputs = Vec::with_capacity(ordered.len());
+        for (id, geometry) in ordered {
+            let (Some(state), Some((_, node, _))) =
+                (states.get(id), scene.volumes().find(|(v, _, _)| v == id))
+            else {
+                continue;
+            };
+            let Some((colors, normals)) = &state.texels else {
+                continue;
+            };
+            let texels = SplatTexels {
+                colors: bytemuck::cast_slice(colors),
+                normals: bytemuck::cast_slice(normals),
+            };
+            let projection = projection(geometry, view, &node.splats, &scene.clipping);
+            inputs.push((projection, texels, state.ids.as_slice()));
+        }
+        tiles.composite(view.size, &inputs, depth, &mut frame.pixels)
+    }
+
+    /// Draws the overlay meshes alone into cleared targets (transparent, far depth).
+    fn overlay_alone(
+        &self,
+        ctx: &GpuContext,
+        scene: &Scene,
+        color: &wgpu::TextureView,
+        depth: &wgpu::TextureView,
+    ) {
+        let mut encoder = ctx.device.create_command_encoder(&Default::default());
+        {
+            let _ = begin(
+                &mut encoder,
+                color,
+                depth,
+                Some(wgpu::Color::TRANSPARENT),
+                "clear",
+            );
+        }
+        ctx.queue.submit([encoder.finish()]);
+        self.overlay_stage(ctx, scene, color, depth);
     }
 
     fn sync_meshes(&mut self, ctx: &GpuContext, scene: &Scene) {
@@ -255,17 +471,9 @@ impl Renderer {
 
     /// Classifies volumes whose data, transfer function or threshold changed, or their halved
     /// copies for a preview frame; returns how many.
-    fn sync_volumes(
-        &mut self,
-        ctx: &GpuContext,
-        scene: &Scene,
-        preview: bool,
-    ) -> Result<usize, RenderError> {
+    fn sync_volumes(&mut self, scene: &Scene, preview: bool) -> Result<usize, RenderError> {
         let Self {
-            splat_pass,
-            volumes,
-            previews,
-            ..
+            volumes, previews, ..
         } = self;
         let states = if preview { previews } else { volumes };
         let mut live = Vec::new();
@@ -303,8 +511,6 @@ impl Renderer {
                 states.remove(&id);
                 continue;
             }
-            let pass = splat_pass.get_or_insert_with(|| SplatPass::new(ctx));
-            let gpu = pass.upload(ctx, &volume, &result)?;
             let old = states.remove(&id);
             let (orderer, ids) = old.map(|o| (o.orderer, o.ids)).unwrap_or_default();
             states.insert(
@@ -313,7 +519,8 @@ impl Renderer {
                     key,
                     volume,
                     classified: result,
-                    gpu,
+                    gpu: None,
+                    texels: None,
                     orderer,
                     ids,
                 },
@@ -384,7 +591,13 @@ impl Renderer {
         preview: bool,
         report: &mut FrameReport,
     ) -> Result<(), RenderError> {
-        let states = self.states_mut(preview);
+        let Self {
+            splat_pass,
+            volumes,
+            previews,
+            ..
+        } = self;
+        let states = if preview { previews } else { volumes };
         for (id, geometry) in ordered {
             let Some(state) = states.get_mut(id) else {
                 continue;
@@ -394,8 +607,15 @@ impl Renderer {
                 .find(|(v, _, _)| v == id)
                 .map(|(_, node, _)| node.splats)
                 .unwrap_or_default();
-            SplatPass::upload_order(ctx, &mut state.gpu, &state.ids)?;
-            SplatPass::write_uniforms(ctx, &state.gpu, geometry, view, &settings, &scene.clipping);
+            let gpu = match &mut state.gpu {
+                Some(gpu) => gpu,
+                empty => {
+                    let pass = splat_pass.get_or_insert_with(|| SplatPass::new(ctx));
+                    empty.insert(pass.upload(ctx, &state.volume, &state.classified)?)
+                }
+            };
+            SplatPass::upload_order(ctx, gpu, &state.ids)?;
+            SplatPass::write_uniforms(ctx, gpu, geometry, view, &settings, &scene.clipping);
         }
         if let Some(pass) = &self.mesh_pass {
             pass.write_frame(ctx, view, &scene.lights, &scene.clipping);
@@ -470,8 +690,8 @@ impl Renderer {
         {
             let mut pass = begin(&mut encoder, color, depth, None, "splat pass");
             for (id, _) in ordered {
-                if let Some(state) = states.get(id) {
-                    splat_pass.draw(&mut pass, &state.gpu);
+                if let Some(gpu) = states.get(id).and_then(|s| s.gpu.as_ref()) {
+                    splat_pass.draw(&mut pass, gpu);
                 }
             }
         }

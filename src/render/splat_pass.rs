@@ -126,7 +126,26 @@ fn texture_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
 
 /// Unit index-space gradients of `volume` by central differences (one-sided at the faces),
 /// as snorm8 texels for the significant voxels (w = 127 where the gradient is not zero).
-fn gradient_texels(volume: &CpuVolume, classified: &Classified) -> Vec<u8> {
+/// Straight RGBA8 per voxel of the whole grid (zero where not significant): the colour
+/// texture of the splat pass, and the colours of the CPU tile compositor.
+pub(crate) fn color_texels(classified: &Classified) -> Vec<u8> {
+    let voxels = classified
+        .grid
+        .dims()
+        .iter()
+        .map(|&n| n as usize)
+        .product::<usize>();
+    let mut texels = vec![0u8; voxels * 4];
+    for (id, color) in classified.grid.ids().zip(&classified.colors) {
+        let i = id as usize * 4;
+        texels[i..i + 4].copy_from_slice(&straight_rgba8(*color));
+    }
+    texels
+}
+
+/// The unit index-space gradient per voxel as snorm8 (w = 127 where defined): the normal
+/// texture of the splat pass, and the normals of the CPU tile compositor.
+pub(crate) fn gradient_texels(volume: &CpuVolume, classified: &Classified) -> Vec<u8> {
     let [nx, ny, nz] = volume.dims.map(|n| n as usize);
     let value = |x: usize, y: usize, z: usize| {
         volume
@@ -250,17 +269,11 @@ impl SplatPass {
         if dims.iter().any(|&n| n > max) {
             return Err(RenderError::VolumeTooLarge { dims, max });
         }
-        let voxels = dims.iter().map(|&n| n as usize).product::<usize>();
-        let mut texels = vec![0u8; voxels * 4];
-        for (id, color) in classified.grid.ids().zip(&classified.colors) {
-            let i = id as usize * 4;
-            texels[i..i + 4].copy_from_slice(&straight_rgba8(*color));
-        }
         let colors = texture_3d(
             ctx,
             dims,
             wgpu::TextureFormat::Rgba8Unorm,
-            &texels,
+            &color_texels(classified),
             "splat colours",
         );
         let normals = texture_3d(
@@ -345,56 +358,7 @@ impl SplatPass {
         settings: &SplatSettings,
         clipping: &Clipping,
     ) {
-        let style = &settings.style;
-        let linear = geometry.index_to_world().matrix3;
-        let m = view.axes.transpose() * linear;
-        let cov = m * m.transpose() * (style.sigma * style.sigma);
-        let eye_index = geometry.world_to_index(view.camera.eye);
-        let min_spacing = geometry.spacing().into_iter().fold(f64::INFINITY, f64::min);
-        let row = |v: DVec3| [v.x as f32, v.y as f32, v.z as f32, 0.0];
-        let (w, h) = (f64::from(view.size.0), f64::from(view.size.1));
-        let cutoff = (style.cutoff / style.sigma).powi(2);
-        let ortho = view.is_orthographic();
-        let u = SplatUniforms {
-            m: [row(m.row(0)), row(m.row(1)), row(m.row(2))],
-            eye: [
-                eye_index.x as f32,
-                eye_index.y as f32,
-                eye_index.z as f32,
-                view.near.max(0.1 * min_spacing) as f32,
-            ],
-            cov: [row(cov.row(0)), row(cov.row(1)), row(cov.row(2))],
-            screen: [
-                (0.5 * w) as f32,
-                (0.5 * h) as f32,
-                view.focal as f32,
-                style.pixel_variance as f32,
-            ],
-            size: [
-                w as f32,
-                h as f32,
-                cutoff as f32,
-                if ortho { 1.0 } else { 0.0 },
-            ],
-            depth: [
-                view.near as f32,
-                view.near as f32,
-                view.far.min(f64::MAX) as f32,
-                0.0,
-            ],
-            dims: {
-                let d = geometry.dims();
-                let planes = clipping.all_planes().len().min(12) as u32;
-                [d[0], d[1], d[2], planes]
-            },
-            normal: {
-                let n = view.axes.transpose() * linear.inverse().transpose();
-                let mut rows = [row(n.row(0)), row(n.row(1)), row(n.row(2))];
-                rows[0][3] = settings.shading.clamp(0.0, 1.0);
-                rows
-            },
-            clip: camera_planes(view, clipping.all_planes().iter()),
-        };
+        let u = uniforms(geometry, view, settings, clipping);
         ctx.queue
             .write_buffer(&volume.uniforms, 0, bytemuck::bytes_of(&u));
     }
@@ -411,6 +375,94 @@ impl SplatPass {
         pass.set_bind_group(0, &volume.group, &[]);
         pass.set_vertex_buffer(0, order.slice(..u64::from(volume.count) * 4));
         pass.draw(0..4, 0..volume.count);
+    }
+}
+
+/// The splat pass's uniforms for one volume in one view.
+fn uniforms(
+    geometry: &VolumeGeometry,
+    view: &ViewSetup,
+    settings: &SplatSettings,
+    clipping: &Clipping,
+) -> SplatUniforms {
+    let style = &settings.style;
+    let linear = geometry.index_to_world().matrix3;
+    let m = view.axes.transpose() * linear;
+    let cov = m * m.transpose() * (style.sigma * style.sigma);
+    let eye_index = geometry.world_to_index(view.camera.eye);
+    let min_spacing = geometry.spacing().into_iter().fold(f64::INFINITY, f64::min);
+    let row = |v: DVec3| [v.x as f32, v.y as f32, v.z as f32, 0.0];
+    let (w, h) = (f64::from(view.size.0), f64::from(view.size.1));
+    let cutoff = (style.cutoff / style.sigma).powi(2);
+    let ortho = view.is_orthographic();
+    SplatUniforms {
+        m: [row(m.row(0)), row(m.row(1)), row(m.row(2))],
+        eye: [
+            eye_index.x as f32,
+            eye_index.y as f32,
+            eye_index.z as f32,
+            view.near.max(0.1 * min_spacing) as f32,
+        ],
+        cov: [row(cov.row(0)), row(cov.row(1)), row(cov.row(2))],
+        screen: [
+            (0.5 * w) as f32,
+            (0.5 * h) as f32,
+            view.focal as f32,
+            style.pixel_variance as f32,
+        ],
+        size: [
+            w as f32,
+            h as f32,
+            cutoff as f32,
+            if ortho { 1.0 } else { 0.0 },
+        ],
+        depth: [
+            view.near as f32,
+            view.near as f32,
+            view.far.min(f64::MAX) as f32,
+            0.0,
+        ],
+        dims: {
+            let d = geometry.dims();
+            let planes = clipping.all_planes().len().min(12) as u32;
+            [d[0], d[1], d[2], planes]
+        },
+        normal: {
+            let n = view.axes.transpose() * linear.inverse().transpose();
+            let mut rows = [row(n.row(0)), row(n.row(1)), row(n.row(2))];
+            rows[0][3] = settings.shading.clamp(0.0, 1.0);
+            rows
+        },
+        clip: camera_planes(view, clipping.all_planes().iter()),
+    }
+}
+
+/// The same projection for the CPU tile compositor, taken from the very f32 values the GPU
+/// gets, so that both draw the same splats.
+pub(crate) fn projection(
+    geometry: &VolumeGeometry,
+    view: &ViewSetup,
+    settings: &SplatSettings,
+    clipping: &Clipping,
+) -> crate::tiled::SplatProjection {
+    let u = uniforms(geometry, view, settings, clipping);
+    let v = |r: [f32; 4]| glam::Vec3::new(r[0], r[1], r[2]);
+    crate::tiled::SplatProjection {
+        m: u.m.map(v),
+        eye_index: v(u.eye),
+        near_cut: u.eye[3],
+        cov: u.cov.map(v),
+        centre: [u.screen[0], u.screen[1]],
+        focal: u.screen[2],
+        pixel_variance: u.screen[3],
+        cutoff: u.size[2],
+        orthographic: u.size[3] > 0.5,
+        near: u.depth[1],
+        far: u.depth[2],
+        dims: [u.dims[0], u.dims[1], u.dims[2]],
+        normal: u.normal.map(v),
+        shading: u.normal[0][3],
+        clip: u.clip[..u.dims[3] as usize].to_vec(),
     }
 }
 
