@@ -114,8 +114,11 @@ struct ChunkBins {
 }
 
 /// The compositor, with its buffers kept between frames.
-#[derive(Debug, Default)]
+#[derive(Debug)]
 pub struct TiledCompositor {
+    /// The accumulated opacity past which a pixel takes no more splats ([`OPAQUE`] by
+    /// default; 1 or more never stops a tile).
+    pub opaque: f32,
     projected: Vec<Projected>,
     bins: Vec<ChunkBins>,
     tiles: Vec<[f32; 4]>,
@@ -124,6 +127,18 @@ pub struct TiledCompositor {
 
 /// Splats projected per rayon task.
 const CHUNK: usize = 1 << 15;
+
+impl Default for TiledCompositor {
+    fn default() -> Self {
+        Self {
+            opaque: OPAQUE,
+            projected: Vec::new(),
+            bins: Vec::new(),
+            tiles: Vec::new(),
+            tile_stats: Vec::new(),
+        }
+    }
+}
 
 impl TiledCompositor {
     /// A compositor with nothing allocated yet.
@@ -174,14 +189,20 @@ impl TiledCompositor {
         // Composite every tile front to back.
         self.tiles.resize(tx * ty * TILE * TILE, [0.0; 4]);
         self.tile_stats.resize(tx * ty, (0, 0, false));
-        let (projected, bins) = (&self.projected, &self.bins[..chunks]);
+        let (projected, bins, opaque) = (&self.projected, &self.bins[..chunks], self.opaque);
         self.tiles
             .par_chunks_mut(TILE * TILE)
             .zip(self.tile_stats.par_iter_mut())
             .enumerate()
             .for_each(|(t, (pixels, tile_stats))| {
                 let origin = ((t % tx) * TILE, (t / tx) * TILE);
-                *tile_stats = composite_tile(t, origin, (w, h), projected, bins, depth, pixels);
+                let input = TileInput {
+                    projected,
+                    bins,
+                    depth,
+                    opaque,
+                };
+                *tile_stats = composite_tile(t, origin, (w, h), &input, pixels);
             });
         for &(done, skipped, stopped) in &self.tile_stats {
             stats.composited += done;
@@ -334,15 +355,27 @@ fn bin_chunk(splats: &[Projected], first: u32, tx: usize, ty: usize, bins: &mut 
 /// Composites tile `t` (its top-left pixel at `origin`) front to back into `pixels` (TILE x
 /// TILE, premultiplied, transparent where nothing covers); returns the splats composited, the
 /// splats skipped once the tile was opaque, and whether it stopped early.
+/// What every tile reads.
+struct TileInput<'a> {
+    projected: &'a [Projected],
+    bins: &'a [ChunkBins],
+    depth: &'a [f32],
+    opaque: f32,
+}
+
 fn composite_tile(
     t: usize,
     origin: (usize, usize),
     (w, h): (usize, usize),
-    projected: &[Projected],
-    bins: &[ChunkBins],
-    depth: &[f32],
+    input: &TileInput<'_>,
     pixels: &mut [[f32; 4]],
 ) -> (usize, usize, bool) {
+    let TileInput {
+        projected,
+        bins,
+        depth,
+        opaque,
+    } = *input;
     pixels.fill([0.0; 4]);
     let (x_end, y_end) = ((origin.0 + TILE).min(w), (origin.1 + TILE).min(h));
     let mut open = (x_end - origin.0) * (y_end - origin.1);
@@ -366,7 +399,7 @@ fn composite_tile(
                 let row = (y - origin.1) * TILE;
                 for x in xs.clone() {
                     let px = &mut pixels[row + x - origin.0];
-                    if px[3] >= OPAQUE || p.depth < depth[y * w + x] {
+                    if px[3] >= opaque || p.depth < depth[y * w + x] {
                         continue;
                     }
                     let dx = x as f32 + 0.5 - p.centre[0];
@@ -379,7 +412,7 @@ fn composite_tile(
                     for k in 0..4 {
                         px[k] += weight * p.color[k];
                     }
-                    if px[3] >= OPAQUE {
+                    if px[3] >= opaque {
                         open -= 1;
                     }
                 }

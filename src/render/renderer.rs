@@ -187,6 +187,11 @@ impl Renderer {
         }
     }
 
+    /// The CPU tile compositor, to set its opacity threshold.
+    pub fn tile_compositor_mut(&mut self) -> &mut TiledCompositor {
+        &mut self.tiles
+    }
+
     /// Whether screenshots on `ctx` composite on the CPU: asked for, or chosen by
     /// [`Compositor::Auto`] for an adapter that is itself a CPU.
     pub fn composites_on_cpu(&self, ctx: &GpuContext) -> bool {

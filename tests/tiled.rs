@@ -1,0 +1,244 @@
+//! The CPU tile compositor against the GPU splat pass (on whatever adapter wgpu finds,
+//! lavapipe in CI) and against the CPU reference compositor: the same splats in the same
+//! order must give the same picture, with meshes in front of and behind them, clip planes, a
+//! rotated anisotropic volume and an orthographic camera; early termination leaves out at most
+//! what its threshold allows; the command line picks the CPU on a CPU adapter.
+
+use std::sync::Arc;
+
+use glam::{DMat4, DVec3};
+use splatscene::classify::{TransferFunction, classify};
+use splatscene::composite::{Frame, ImageDifference, SplatStyle, SplatVolume, compare, composite};
+use splatscene::mesh::{CpuMesh, Material};
+use splatscene::order::{OrderOptions, Orderer, Ordering, ViewCase};
+use splatscene::render::{Compositor, FrameOptions, GpuContext, Renderer, gpu_colors};
+use splatscene::scene::{ClipPlane, MeshNode, NodeContent, Projection, Scene, SceneCamera};
+
+mod common;
+use common::{rotated_anisotropic, shells, volume_scene};
+
+fn context() -> GpuContext {
+    GpuContext::headless().expect("a GPU adapter (install mesa-vulkan-drivers)")
+}
+
+const OPTIONS: FrameOptions = FrameOptions {
+    ordering: None,
+    background: Some([0.05, 0.05, 0.1]),
+    measure: false,
+    preview: false,
+};
+
+fn shoot(ctx: &GpuContext, compositor: Compositor, scene: &Scene, camera: &SceneCamera) -> Frame {
+    Renderer::with_compositor(compositor)
+        .screenshot(ctx, scene, camera, (96, 80), &OPTIONS)
+        .unwrap()
+        .frame
+}
+
+/// What the two compositors may differ by: the GPU blends in 16-bit float, the tiles in f32,
+/// over the same f32 footprints (see `assert_matches_reference` in tests/render_gpu.rs for the
+/// edge jump between f32 and f64 footprints, which the reference adds).
+fn assert_alike(d: &ImageDifference, what: &str) {
+    let style = SplatStyle::default();
+    let edge_jump = (-0.5 * (style.cutoff / style.sigma).powi(2)).exp();
+    assert!(d.rmse < 0.002, "{what}: {d:?}");
+    assert!(d.max_abs < edge_jump + 3.0 / 255.0, "{what}: {d:?}");
+}
+
+fn gpu_against_tiles(scene: &Scene, camera: &SceneCamera, what: &str) -> ImageDifference {
+    let ctx = context();
+    let gpu = shoot(&ctx, Compositor::Gpu, scene, camera);
+    let cpu = shoot(&ctx, Compositor::Cpu, scene, camera);
+    let covered = gpu
+        .pixels
+        .iter()
+        .zip(&cpu.pixels)
+        .filter(|(a, b)| (a[0] - b[0]).abs() > 0.0 || a[3] > 0.0)
+        .count();
+    assert!(covered > 100, "{what}: the scene shows");
+    let d = compare(&gpu, &cpu).unwrap();
+    assert_alike(&d, what);
+    d
+}
+
+fn wall(y: f32, lo: f32, hi: f32) -> Arc<CpuMesh> {
+    let mut mesh = CpuMesh {
+        positions: vec![[lo, y, lo], [hi, y, lo], [hi, y, hi], [lo, y, hi]],
+        normals: Vec::new(),
+        indices: vec![0, 1, 2, 0, 2, 3],
+    };
+    mesh.compute_normals();
+    Arc::new(mesh)
+}
+
+fn add_mesh(scene: &mut Scene, name: &str, mesh: Arc<CpuMesh>) {
+    let node = MeshNode {
+        mesh,
+        material: Material {
+            base_color: [0.2, 0.5, 0.9, 1.0],
+            ..Default::default()
+        },
+    };
+    scene
+        .add(name, DMat4::IDENTITY, None, NodeContent::Mesh(node))
+        .unwrap();
+}
+
+fn camera_of(scene: &Scene) -> SceneCamera {
+    let centre = {
+        let (lo, hi) = scene.bounds().unwrap();
+        0.5 * (lo + hi)
+    };
+    SceneCamera::look_at(centre + DVec3::new(14.0, -42.0, 18.0), centre)
+}
+
+#[test]
+fn tiles_draw_what_the_gpu_draws() {
+    // Perspective and orthographic, shaded shells.
+    let mut scene = volume_scene(shells(20, [1.0, 1.0, 1.5]), Ordering::IpPbtfImplicit);
+    let (id, node, _) = scene.volumes().next().unwrap();
+    let mut shaded = node.clone();
+    shaded.splats.shading = 1.0;
+    scene.set_content(id, NodeContent::Volume(shaded)).unwrap();
+    let camera = camera_of(&scene);
+    gpu_against_tiles(&scene, &camera, "perspective");
+    let ortho = SceneCamera {
+        projection: Projection::Orthographic { height: 40.0 },
+        ..camera
+    };
+    gpu_against_tiles(&scene, &ortho, "orthographic");
+    // A rotated anisotropic volume far from the origin.
+    let rotated = volume_scene(rotated_anisotropic(), Ordering::Bucketed);
+    gpu_against_tiles(&rotated, &camera_of(&rotated), "rotated anisotropic");
+    // Clip planes cut the splats alike.
+    let mut clipped = volume_scene(shells(20, [1.0; 3]), Ordering::Pbtf);
+    clipped.clipping.planes.push(ClipPlane {
+        normal: DVec3::new(1.0, 0.3, 0.0),
+        offset: 12.0,
+        meshes: false,
+    });
+    gpu_against_tiles(&clipped, &camera_of(&clipped), "clipped");
+    // A wall through the middle hides the splats behind it; one in front of the volume hides
+    // all it covers, one behind hides none.
+    for (name, y) in [("through", 9.5), ("in front", -3.0), ("behind", 25.0)] {
+        let mut scene = volume_scene(shells(20, [1.0; 3]), Ordering::IpPbtfImplicit);
+        add_mesh(&mut scene, "wall", wall(y, 4.0, 15.0));
+        let camera = camera_of(&volume_scene(shells(20, [1.0; 3]), Ordering::Exact));
+        gpu_against_tiles(&scene, &camera, name);
+    }
+}
+
+#[test]
+fn tiles_match_the_cpu_reference_compositor() {
+    let ctx = context();
+    let volume = shells(20, [1.0, 1.0, 1.5]);
+    let geometry = volume.geometry().unwrap();
+    let scene = volume_scene(volume.clone(), Ordering::IpPbtfImplicit);
+    let camera = camera_of(&scene);
+    let transparent = FrameOptions {
+        background: None,
+        ..OPTIONS
+    };
+    let shot = Renderer::with_compositor(Compositor::Cpu)
+        .screenshot(&ctx, &scene, &camera, (96, 80), &transparent)
+        .unwrap();
+    let classified = classify(&volume, &TransferFunction::ct_bone(), 1.0 / 255.0).unwrap();
+    let colors = gpu_colors(&classified.colors);
+    let pinhole = shot.view.pinhole().unwrap();
+    let view = ViewCase::new(&geometry, pinhole.eye, pinhole.target).unwrap();
+    let mut ids = Vec::new();
+    let options = OrderOptions {
+        cull_behind_eye: true,
+        ..Default::default()
+    };
+    Orderer::new()
+        .order(
+            &classified.grid,
+            &view,
+            Ordering::IpPbtfImplicit,
+            &options,
+            &mut ids,
+        )
+        .unwrap();
+    let splats = SplatVolume {
+        geometry: &geometry,
+        grid: &classified.grid,
+        colors: &colors,
+    };
+    let (reference, _) = composite(&pinhole, &splats, &ids, &SplatStyle::default()).unwrap();
+    let d = compare(&shot.frame, &reference).unwrap();
+    assert_alike(&d, "reference");
+    let tiles = shot.report.tiles.expect("composited on the CPU");
+    assert_eq!(tiles.splats, ids.len());
+}
+
+#[test]
+fn early_termination_leaves_out_no_more_than_its_threshold() {
+    let ctx = context();
+    // A dense, nearly opaque block: most splats lie behind opaque pixels.
+    let mut volume = shells(24, [1.0; 3]);
+    volume.values.iter_mut().for_each(|v| *v = 1800.0);
+    let scene = volume_scene(volume, Ordering::IpPbtfImplicit);
+    let camera = camera_of(&scene);
+    let mut stopping = Renderer::with_compositor(Compositor::Cpu);
+    let mut full = Renderer::with_compositor(Compositor::Cpu);
+    full.tile_compositor_mut().opaque = 2.0;
+    let a = stopping
+        .screenshot(&ctx, &scene, &camera, (96, 80), &OPTIONS)
+        .unwrap();
+    let b = full
+        .screenshot(&ctx, &scene, &camera, (96, 80), &OPTIONS)
+        .unwrap();
+    let (sa, sb) = (a.report.tiles.unwrap(), b.report.tiles.unwrap());
+    assert_eq!(sb.skipped_opaque, 0);
+    assert!(
+        sa.skipped_opaque > sa.composited,
+        "most splat-tile pairs are skipped: {sa:?}"
+    );
+    let d = compare(&a.frame, &b.frame).unwrap();
+    let bound = f64::from(1.0 - splatscene::tiled::OPAQUE);
+    assert!(d.max_abs <= bound + 1e-5, "{d:?} against {bound}");
+}
+
+#[test]
+fn the_built_in_scene_looks_the_same_on_either_compositor() {
+    let scene = splatscene::scene::shoulder::shoulder_scene().unwrap();
+    let camera = scene.camera.unwrap();
+    gpu_against_tiles(&scene, &camera, "built-in");
+}
+
+#[test]
+fn auto_takes_the_cpu_on_a_cpu_adapter() {
+    let ctx = context();
+    let on_cpu = ctx.adapter.get_info().device_type == wgpu::DeviceType::Cpu;
+    assert_eq!(
+        Renderer::with_compositor(Compositor::Auto).composites_on_cpu(&ctx),
+        on_cpu
+    );
+    assert!(
+        !Renderer::new().composites_on_cpu(&ctx),
+        "the library's default is the GPU"
+    );
+    assert!(Renderer::with_compositor(Compositor::Cpu).composites_on_cpu(&ctx));
+    let out = std::env::temp_dir().join(format!("splatscene-tiled-{}.png", std::process::id()));
+    let result = std::process::Command::new(env!("CARGO_BIN_EXE_splatscene"))
+        .args(["render", "--size", "64x48", "--out"])
+        .arg(&out)
+        .env("NODEVICE_SELECT", "1")
+        .output()
+        .unwrap();
+    assert!(result.status.success());
+    let said = String::from_utf8_lossy(&result.stderr);
+    assert_eq!(said.contains("splats on the CPU"), on_cpu, "{said}");
+    let bad = std::process::Command::new(env!("CARGO_BIN_EXE_splatscene"))
+        .args(["render", "--compositor", "fast", "--out"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    let said = String::from_utf8_lossy(&bad.stderr);
+    assert!(
+        !bad.status.success() && said.contains("auto, gpu or cpu"),
+        "{said}"
+    );
+    std::fs::remove_file(&out).ok();
+}
