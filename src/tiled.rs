@@ -18,6 +18,7 @@
 
 use glam::{DMat3, DVec3, Vec3};
 use rayon::prelude::*;
+use strength_reduce::StrengthReducedU32;
 
 /// Tile side in pixels.
 pub const TILE: usize = 16;
@@ -53,6 +54,10 @@ pub struct SplatProjection {
     pub far: f32,
     /// Grid size.
     pub dims: [u32; 3],
+    /// Voxels in a row (x) and in a plane (x y) of the grid, for dividing voxel ids.
+    pub row: StrengthReducedU32,
+    /// See `row`.
+    pub plane: StrengthReducedU32,
     /// Rows of the index-space gradient to camera-space normal matrix.
     pub normal: [Vec3; 3],
     /// Shading strength (0 flat, 1 fully headlight-shaded).
@@ -61,14 +66,64 @@ pub struct SplatProjection {
     pub clip: Vec<[f32; 4]>,
 }
 
-/// A volume's splat data as the GPU keeps it: per voxel of the whole grid, straight RGBA8
-/// colour and a signed 8-bit unit gradient (w = 127 where defined).
-#[derive(Debug, Clone, Copy)]
-pub struct SplatTexels<'a> {
-    /// Straight RGBA8 per voxel.
-    pub colors: &'a [[u8; 4]],
-    /// Unit index-space gradient per voxel, snorm8.
-    pub normals: &'a [[i8; 4]],
+/// A volume's splat data as the GPU keeps it (straight RGBA8 colour, and the unit index-space
+/// gradient as snorm8 with w = 127 where defined), both in one 8-byte texel per voxel, stored
+/// in 4x4x4 bricks: the draw order runs along any axis, and in bricks the next voxel along y or
+/// z is as often in the same cache line as the next along x is in a plain x-fastest layout
+/// (measured: projecting the engine's splats took 33 ms with two separate x-fastest arrays).
+#[derive(Debug, Clone, Default)]
+pub struct SplatTexels {
+    dims: [u32; 3],
+    /// Bricks along x and y.
+    bricks: [usize; 2],
+    texels: Vec<[u8; 8]>,
+}
+
+/// Brick side in voxels.
+const BRICK: usize = 4;
+
+impl SplatTexels {
+    /// The texels of a grid of `dims` from the splat pass's colour and normal textures (four
+    /// bytes per voxel each, x fastest).
+    pub fn new(dims: [u32; 3], colors: &[u8], normals: &[u8]) -> Self {
+        let [nx, ny, nz] = dims.map(|n| n as usize);
+        let bricks = [nx.div_ceil(BRICK), ny.div_ceil(BRICK)];
+        let count = bricks[0] * bricks[1] * nz.div_ceil(BRICK) * BRICK.pow(3);
+        let mut out = Self {
+            dims,
+            bricks,
+            texels: vec![[0; 8]; count],
+        };
+        for z in 0..nz {
+            for y in 0..ny {
+                for x in 0..nx {
+                    let id = 4 * (x + nx * (y + ny * z));
+                    let (Some(c), Some(n)) = (colors.get(id..id + 4), normals.get(id..id + 4))
+                    else {
+                        continue;
+                    };
+                    let slot = out.slot(x, y, z);
+                    out.texels[slot] = [c[0], c[1], c[2], c[3], n[0], n[1], n[2], n[3]];
+                }
+            }
+        }
+        out
+    }
+
+    fn slot(&self, x: usize, y: usize, z: usize) -> usize {
+        let brick = ((z / BRICK) * self.bricks[1] + y / BRICK) * self.bricks[0] + x / BRICK;
+        brick * BRICK.pow(3) + ((z % BRICK) * BRICK + y % BRICK) * BRICK + x % BRICK
+    }
+
+    /// The texel of voxel `(x, y, z)`: straight RGBA8, then the gradient as snorm8.
+    fn get(&self, x: u32, y: u32, z: u32) -> Option<&[u8; 8]> {
+        let [nx, ny, nz] = self.dims;
+        if x >= nx || y >= ny || z >= nz {
+            return None;
+        }
+        self.texels
+            .get(self.slot(x as usize, y as usize, z as usize))
+    }
 }
 
 /// A splat projected to the screen.
@@ -89,9 +144,15 @@ struct Projected {
     y1: i32,
 }
 
-/// What a frame cost, in splats.
+/// What a frame cost, in splats and time.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct TileStats {
+    /// Projecting the splats.
+    pub project: std::time::Duration,
+    /// Binning them to tiles.
+    pub bin: std::time::Duration,
+    /// Compositing the tiles and laying them over what lies under them.
+    pub tiles: std::time::Duration,
     /// Splats in the draw orders.
     pub splats: usize,
     /// Splats projected onto the image (in front of the eye, kept by the clip planes, on
@@ -111,6 +172,8 @@ pub struct TileStats {
 struct ChunkBins {
     starts: Vec<u32>,
     entries: Vec<u32>,
+    /// Splats of the chunk that landed on the image.
+    projected: usize,
 }
 
 /// The compositor, with its buffers kept between frames.
@@ -153,18 +216,21 @@ impl TiledCompositor {
     pub fn composite(
         &mut self,
         size: (u32, u32),
-        volumes: &[(SplatProjection, SplatTexels<'_>, &[u32])],
+        volumes: &[(SplatProjection, &SplatTexels, &[u32])],
         depth: &[f32],
         under: &mut [[f32; 4]],
     ) -> TileStats {
         let (w, h) = (size.0 as usize, size.1 as usize);
         let (tx, ty) = (w.div_ceil(TILE), h.div_ceil(TILE));
         let mut stats = TileStats::default();
+        let started = std::time::Instant::now();
         // Project every splat in draw order, all volumes one after another.
         let total: usize = volumes.iter().map(|(_, _, ids)| ids.len()).sum();
         stats.splats = total;
-        self.projected.clear();
-        self.projected.resize(total, Projected::default());
+        // Every entry is written below: no need to clear what the last frame left.
+        if self.projected.len() != total {
+            self.projected.resize(total, Projected::default());
+        }
         let mut rest = self.projected.as_mut_slice();
         for (projection, texels, ids) in volumes {
             let (mine, others) = rest.split_at_mut(ids.len());
@@ -177,6 +243,8 @@ impl TiledCompositor {
                     }
                 });
         }
+        stats.project = started.elapsed();
+        let started = std::time::Instant::now();
         // Bin each chunk of splats into the tiles, keeping the order within each tile.
         let chunks = total.div_ceil(CHUNK);
         self.bins.resize_with(chunks, ChunkBins::default);
@@ -185,11 +253,15 @@ impl TiledCompositor {
             .zip(self.bins.par_iter_mut())
             .enumerate()
             .for_each(|(c, (splats, bins))| bin_chunk(splats, (c * CHUNK) as u32, tx, ty, bins));
-        stats.projected = self.projected.iter().filter(|p| p.x0 <= p.x1).count();
+        stats.projected = self.bins[..chunks].iter().map(|b| b.projected).sum();
+        stats.bin = started.elapsed();
+        let started = std::time::Instant::now();
         // Composite every tile front to back.
         self.tiles.resize(tx * ty * TILE * TILE, [0.0; 4]);
         self.tile_stats.resize(tx * ty, (0, 0, false));
         let (projected, bins, opaque) = (&self.projected, &self.bins[..chunks], self.opaque);
+        // Without meshes the depth is the far plane everywhere and every splat passes.
+        let depth = depth.iter().any(|&d| d != 0.0).then_some(depth);
         self.tiles
             .par_chunks_mut(TILE * TILE)
             .zip(self.tile_stats.par_iter_mut())
@@ -218,28 +290,30 @@ impl TiledCompositor {
                 *px = std::array::from_fn(|k| s[k] + keep * px[k]);
             }
         });
+        stats.tiles = started.elapsed();
         stats
     }
 }
 
 /// One splat on the screen, as the splat pass's vertex shader places it; a splat left out
 /// gets an empty rectangle.
-fn project(u: &SplatProjection, texels: &SplatTexels<'_>, id: u32, w: i32, h: i32) -> Projected {
+fn project(u: &SplatProjection, texels: &SplatTexels, id: u32, w: i32, h: i32) -> Projected {
     let none = Projected {
         x0: 1,
         x1: 0,
         ..Projected::default()
     };
-    let [nx, ny, _] = u.dims;
-    let k = Vec3::new(
-        (id % nx) as f32,
-        ((id / nx) % ny) as f32,
-        (id / (nx * ny)) as f32,
-    );
-    let Some(texel) = texels.colors.get(id as usize) else {
+    // Divisions by the grid's row and plane sizes, done by multiplication (the hardware
+    // divide was a fifth of the projection's time).
+    let z = id / u.plane;
+    let rest = id - z * u.plane.get();
+    let y = rest / u.row;
+    let x = rest - y * u.row.get();
+    let k = Vec3::new(x as f32, y as f32, z as f32);
+    let Some(texel) = texels.get(x, y, z) else {
         return none;
     };
-    let straight = texel.map(|v| f32::from(v) / 255.0);
+    let straight = [texel[0], texel[1], texel[2], texel[3]].map(|v| f32::from(v) / 255.0);
     let d = k - u.eye_index;
     let p = Vec3::new(u.m[0].dot(d), u.m[1].dot(d), u.m[2].dot(d));
     if straight[3] <= 0.0
@@ -277,25 +351,27 @@ fn project(u: &SplatProjection, texels: &SplatTexels<'_>, id: u32, w: i32, h: i3
     let b = j0.dot(cov(j1));
     let c = j1.dot(cov(j1)) + u.pixel_variance;
     let det = a * c - b * b;
-    if !(det > 0.0) {
+    // Also refuses a NaN determinant.
+    if det.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
         return none;
     }
+    let inv_det = 1.0 / det;
     // The quad of the vertex shader: +-(radius sqrt(a) + 0.5) by +-(radius sqrt(c) + 0.5);
     // the pixels whose centres it holds.
     let radius = u.cutoff.sqrt();
     let (ex, ey) = (radius * a.sqrt() + 0.5, radius * c.sqrt() + 0.5);
-    let x0 = (centre[0] - ex - 0.5).ceil().max(0.0);
-    let x1 = (centre[0] + ex - 0.5).floor().min((w - 1) as f32);
-    let y0 = (centre[1] - ey - 0.5).ceil().max(0.0);
-    let y1 = (centre[1] + ey - 0.5).floor().min((h - 1) as f32);
+    // The first and last pixel centres inside the quad, clamped to the image.
+    let lim = |v: f32, hi: i32| v.clamp(-1.0, hi as f32 + 1.0);
+    let x0 = ceil(lim(centre[0] - ex - 0.5, w)).max(0);
+    let x1 = floor(lim(centre[0] + ex - 0.5, w)).min(w - 1);
+    let y0 = ceil(lim(centre[1] - ey - 0.5, h)).max(0);
+    let y1 = floor(lim(centre[1] + ey - 0.5, h)).min(h - 1);
     if !(x0 <= x1 && y0 <= y1) {
         return none;
     }
     let mut rgb = [straight[0], straight[1], straight[2]];
-    if u.shading > 0.0
-        && let Some(g) = texels.normals.get(id as usize)
-        && g[3] > 63
-    {
+    let g = [4, 5, 6, 7].map(|i| texel[i] as i8);
+    if u.shading > 0.0 && g[3] > 63 {
         let g = Vec3::new(f32::from(g[0]), f32::from(g[1]), f32::from(g[2])) / 127.0;
         let n = Vec3::new(u.normal[0].dot(g), u.normal[1].dot(g), u.normal[2].dot(g));
         let lambert = n.normalize_or_zero().z.abs();
@@ -305,15 +381,28 @@ fn project(u: &SplatProjection, texels: &SplatTexels<'_>, id: u32, w: i32, h: i3
     let alpha = straight[3];
     Projected {
         centre,
-        conic: [c / det, -b / det, a / det],
+        conic: [c * inv_det, -b * inv_det, a * inv_det],
         color: [rgb[0] * alpha, rgb[1] * alpha, rgb[2] * alpha, alpha],
         depth,
         cutoff: u.cutoff,
-        x0: x0 as i32,
-        y0: y0 as i32,
-        x1: x1 as i32,
-        y1: y1 as i32,
+        x0,
+        y0,
+        x1,
+        y1,
     }
+}
+
+/// `v.floor()` for values well inside `i32`'s range, without the library call that
+/// `f32::floor` is on x86-64 before SSE 4.1 (a fifth of the projection's time).
+fn floor(v: f32) -> i32 {
+    let i = v as i32;
+    if (i as f32) > v { i - 1 } else { i }
+}
+
+/// `v.ceil()`, as [`floor`].
+fn ceil(v: f32) -> i32 {
+    let i = v as i32;
+    if (i as f32) < v { i + 1 } else { i }
 }
 
 /// Counts, then lists, the tiles each splat of a chunk touches (a counting sort by tile, which
@@ -326,7 +415,9 @@ fn bin_chunk(splats: &[Projected], first: u32, tx: usize, ty: usize, bins: &mut 
         let t = TILE as i32;
         (p.x0 / t, p.x1 / t, p.y0 / t, p.y1 / t)
     };
+    bins.projected = 0;
     for p in splats.iter().filter(|p| p.x0 <= p.x1) {
+        bins.projected += 1;
         let (a, b, c, d) = range(p);
         for y in c..=d {
             for x in a..=b {
@@ -359,7 +450,8 @@ fn bin_chunk(splats: &[Projected], first: u32, tx: usize, ty: usize, bins: &mut 
 struct TileInput<'a> {
     projected: &'a [Projected],
     bins: &'a [ChunkBins],
-    depth: &'a [f32],
+    /// The meshes' depth; `None` where there are no meshes to test against.
+    depth: Option<&'a [f32]>,
     opaque: f32,
 }
 
@@ -399,7 +491,7 @@ fn composite_tile(
                 let row = (y - origin.1) * TILE;
                 for x in xs.clone() {
                     let px = &mut pixels[row + x - origin.0];
-                    if px[3] >= opaque || p.depth < depth[y * w + x] {
+                    if px[3] >= opaque || depth.is_some_and(|d| p.depth < d[y * w + x]) {
                         continue;
                     }
                     let dx = x as f32 + 0.5 - p.centre[0];
@@ -409,8 +501,8 @@ fn composite_tile(
                         continue;
                     }
                     let weight = (1.0 - px[3]) * (-0.5 * q).exp();
-                    for k in 0..4 {
-                        px[k] += weight * p.color[k];
+                    for (v, c) in px.iter_mut().zip(p.color) {
+                        *v += weight * c;
                     }
                     if px[3] >= opaque {
                         open -= 1;

@@ -337,12 +337,14 @@ fn describe(r: &FrameReport) -> String {
     let ms = |d: std::time::Duration| d.as_secs_f64() * 1e3;
     let splats = match r.tiles {
         Some(t) => format!(
-            "splats on the CPU ({} projected, {} splat-tile pairs composited, {} skipped behind opaque pixels, {} of the tiles stopped early), composite {:.1} ms",
+            "splats on the CPU ({} projected, {} splat-tile pairs composited, {} skipped behind opaque pixels, {} tiles stopped early), project {:.1} ms, bin {:.1} ms, tiles {:.1} ms",
             t.projected,
             t.composited,
             t.skipped_opaque,
             t.tiles_stopped,
-            ms(r.timings.splat_pass)
+            ms(t.project),
+            ms(t.bin),
+            ms(t.tiles)
         ),
         None => format!("splat pass {:.1} ms", ms(r.timings.splat_pass)),
     };

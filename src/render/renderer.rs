@@ -114,7 +114,7 @@ struct VolumeState {
     /// The GPU copy, made on the first frame the splat pass draws it.
     gpu: Option<GpuVolume>,
     /// The colours and normals of the CPU tile compositor, made on its first frame.
-    texels: Option<(Vec<u8>, Vec<u8>)>,
+    texels: Option<SplatTexels>,
     orderer: Orderer,
     ids: Vec<u32>,
 }
@@ -393,9 +393,10 @@ impl Renderer {
             if let Some(state) = states.get_mut(id)
                 && state.texels.is_none()
             {
-                state.texels = Some((
-                    color_texels(&state.classified),
-                    gradient_texels(&state.volume, &state.classified),
+                state.texels = Some(SplatTexels::new(
+                    state.classified.grid.dims(),
+                    &color_texels(&state.classified),
+                    &gradient_texels(&state.volume, &state.classified),
                 ));
             }
         }
@@ -406,12 +407,8 @@ impl Renderer {
             else {
                 continue;
             };
-            let Some((colors, normals)) = &state.texels else {
+            let Some(texels) = &state.texels else {
                 continue;
-            };
-            let texels = SplatTexels {
-                colors: bytemuck::cast_slice(colors),
-                normals: bytemuck::cast_slice(normals),
             };
             let projection = projection(geometry, view, &node.splats, &scene.clipping);
             inputs.push((projection, texels, state.ids.as_slice()));

@@ -460,6 +460,8 @@ pub(crate) fn projection(
         near: u.depth[1],
         far: u.depth[2],
         dims: [u.dims[0], u.dims[1], u.dims[2]],
+        row: strength_reduce::StrengthReducedU32::new(u.dims[0].max(1)),
+        plane: strength_reduce::StrengthReducedU32::new((u.dims[0] * u.dims[1]).max(1)),
         normal: u.normal.map(v),
         shading: u.normal[0][3],
         clip: u.clip[..u.dims[3] as usize].to_vec(),

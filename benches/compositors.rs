@@ -1,0 +1,191 @@
+//! The two splat compositors side by side: the GPU splat pass (on whatever adapter wgpu finds,
+//! lavapipe on machines without a GPU) and the CPU tile compositor, alternating frame by frame
+//! on the same camera path, so that both see the same machine load. Whole frames: order,
+//! composite and readback (the GPU's frame read back to memory; the CPU's is there already).
+//!
+//! Views: the engine (ramp 100-200 to opacity 0.5) and the CT head (ramp 1200-1800 to 0.6),
+//! volumes only, fitted to their voxel centres looking along (-0.4, 1, -0.55) with a 35 degree
+//! field of view, turning 7 degrees a frame about the scene's up: the views of
+//! `benches/peers/vtk_raycast.py`. Then the CPU compositor's growth with the splat count (the
+//! engine halved, as is, and doubled along every axis) and with the image size.
+//!
+//! `cargo bench --bench compositors` (data from `SPLATSCENE_DATA`, default `../shared/data`);
+//! `-- quick` runs 3 frames a case instead of 9; `-- peers` only the first table.
+
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use glam::{DMat4, DVec3};
+use splatscene::classify::TransferFunction;
+use splatscene::render::{Compositor, FrameOptions, GpuContext, Renderer};
+use splatscene::scene::{NodeContent, Scene, SceneCamera, SplatSettings, VolumeNode};
+use splatscene::volume::CpuVolume;
+
+mod common;
+
+fn scene(volume: CpuVolume, tf: TransferFunction) -> Scene {
+    let mut scene = Scene::new();
+    let node = VolumeNode {
+        volume: Arc::new(volume),
+        transfer: Arc::new(tf),
+        splats: SplatSettings::default(),
+    };
+    scene
+        .add("ct", DMat4::IDENTITY, None, NodeContent::Volume(node))
+        .unwrap();
+    let bounds = scene.bounds().unwrap();
+    scene.camera = Some(SceneCamera::fit(
+        bounds,
+        DVec3::new(-0.4, 1.0, -0.55),
+        Default::default(),
+        1.0,
+    ));
+    scene
+}
+
+/// Every voxel repeated twice along each axis, at half the spacing: eight times the splats.
+fn doubled(v: &CpuVolume) -> CpuVolume {
+    let [nx, ny, nz] = v.dims.map(|n| n as usize);
+    let mut values = Vec::with_capacity(nx * ny * nz * 8);
+    for z in 0..2 * nz {
+        for y in 0..2 * ny {
+            for x in 0..2 * nx {
+                values.push(v.values[x / 2 + nx * (y / 2 + ny * (z / 2))]);
+            }
+        }
+    }
+    CpuVolume {
+        dims: v.dims.map(|n| 2 * n),
+        spacing: v.spacing.map(|s| s / 2.0),
+        values,
+        ..v.clone()
+    }
+}
+
+const OPTIONS: FrameOptions = FrameOptions {
+    ordering: None,
+    background: Some([0.0, 0.0, 0.0]),
+    measure: false,
+    preview: false,
+};
+
+fn median(mut v: Vec<Duration>) -> f64 {
+    v.sort();
+    v[v.len() / 2].as_secs_f64() * 1e3
+}
+
+/// Median whole-frame times of each renderer, frames alternating between them, after one
+/// warm-up frame each (classification, shader compilation).
+fn alternate(
+    ctx: &GpuContext,
+    scene: &Scene,
+    size: (u32, u32),
+    renderers: &mut [(&str, Renderer)],
+    frames: usize,
+) -> Vec<f64> {
+    let base = scene.camera.unwrap();
+    let up = scene.up_axis();
+    let mut times = vec![Vec::new(); renderers.len()];
+    for i in 0..=frames {
+        let camera = base.orbit_about(up, 7.0 * i as f64, 0.0);
+        for (k, (_, renderer)) in renderers.iter_mut().enumerate() {
+            let started = Instant::now();
+            let shot = renderer
+                .screenshot(ctx, scene, &camera, size, &OPTIONS)
+                .unwrap();
+            let elapsed = started.elapsed();
+            if i > 0 {
+                times[k].push(elapsed);
+            }
+            if i == 1
+                && let Some(t) = shot.report.tiles
+            {
+                let ms = |d: Duration| d.as_secs_f64() * 1e3;
+                eprintln!(
+                    "    {} splats: {} projected, {} splat-tile pairs composited, {} skipped behind opaque pixels, {} tiles stopped; project {:.1} ms, bin {:.1} ms, tiles {:.1} ms, order {:.1} ms",
+                    t.splats,
+                    t.projected,
+                    t.composited,
+                    t.skipped_opaque,
+                    t.tiles_stopped,
+                    ms(t.project),
+                    ms(t.bin),
+                    ms(t.tiles),
+                    ms(shot.report.timings.order)
+                );
+            }
+        }
+    }
+    times.into_iter().map(median).collect()
+}
+
+fn main() {
+    let quick = std::env::args().any(|a| a == "quick");
+    let frames = if quick { 3 } else { 9 };
+    let ctx = GpuContext::headless().expect("a GPU adapter (install mesa-vulkan-drivers)");
+    println!(
+        "adapter: {}; {} threads",
+        ctx.describe(),
+        rayon::current_num_threads()
+    );
+    let engine = common::engine();
+    let cases = [
+        (
+            "engine",
+            scene(
+                engine.clone(),
+                TransferFunction::ramp(100.0, 200.0, [0.85, 0.8, 0.75, 0.5]),
+            ),
+        ),
+        (
+            "cthead",
+            scene(
+                common::ct_head(),
+                TransferFunction::ramp(1200.0, 1800.0, [1.0, 0.93, 0.85, 0.6]),
+            ),
+        ),
+    ];
+    println!(
+        "\n| volume, 512x512 | GPU splat pass frame | CPU tiles frame | ratio |\n|---|---|---|---|"
+    );
+    for (name, scene) in &cases {
+        let mut renderers = [
+            ("gpu", Renderer::with_compositor(Compositor::Gpu)),
+            ("cpu", Renderer::with_compositor(Compositor::Cpu)),
+        ];
+        let t = alternate(&ctx, scene, (512, 512), &mut renderers, frames);
+        println!(
+            "| {name} | {:.1} ms | {:.1} ms | {:.1}x |",
+            t[0],
+            t[1],
+            t[0] / t[1]
+        );
+    }
+    if std::env::args().any(|a| a == "peers") {
+        return;
+    }
+    let tf = TransferFunction::ramp(100.0, 200.0, [0.85, 0.8, 0.75, 0.5]);
+    println!("\n| engine | splats | CPU tiles frame, 512x512 |\n|---|---|---|");
+    for (label, volume) in [
+        ("halved", engine.halved()),
+        ("as is", engine.clone()),
+        ("doubled", doubled(&engine)),
+    ] {
+        let scene = scene(volume, tf.clone());
+        let mut renderers = [("cpu", Renderer::with_compositor(Compositor::Cpu))];
+        let splats = Renderer::with_compositor(Compositor::Cpu)
+            .screenshot(&ctx, &scene, &scene.camera.unwrap(), (64, 64), &OPTIONS)
+            .unwrap()
+            .report
+            .splats;
+        let t = alternate(&ctx, &scene, (512, 512), &mut renderers, frames);
+        println!("| {label} | {splats} | {:.1} ms |", t[0]);
+    }
+    println!("\n| engine, image | CPU tiles frame |\n|---|---|");
+    let scene = scene(engine, tf);
+    for side in [256, 512, 1024] {
+        let mut renderers = [("cpu", Renderer::with_compositor(Compositor::Cpu))];
+        let t = alternate(&ctx, &scene, (side, side), &mut renderers, frames);
+        println!("| {side}x{side} | {:.1} ms |", t[0]);
+    }
+}
