@@ -242,3 +242,60 @@ fn auto_takes_the_cpu_on_a_cpu_adapter() {
     );
     std::fs::remove_file(&out).ok();
 }
+
+#[test]
+fn a_volume_renders_without_any_gpu_adapter_and_meshes_say_what_they_need() {
+    // A machine without an adapter: no Vulkan driver to load, and no other backend tried.
+    let dir = std::env::temp_dir().join(format!("splatscene-no-adapter-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let raw = dir.join("block.raw");
+    let mut bytes = vec![0u8; 16 * 16 * 16];
+    for (i, b) in bytes.iter_mut().enumerate() {
+        let (x, y, z) = (i % 16, i / 16 % 16, i / 256);
+        if (4..12).contains(&x) && (4..12).contains(&y) && (4..12).contains(&z) {
+            *b = 200;
+        }
+    }
+    std::fs::write(&raw, bytes).unwrap();
+    let out = dir.join("block.png");
+    let run = |args: &[&str]| {
+        std::process::Command::new(env!("CARGO_BIN_EXE_splatscene"))
+            .args(args)
+            .env("VK_ICD_FILENAMES", dir.join("no-such-driver.json"))
+            .env("WGPU_BACKEND", "vulkan")
+            .env("NODEVICE_SELECT", "1")
+            .output()
+            .unwrap()
+    };
+    let volume = run(&[
+        "render",
+        raw.to_str().unwrap(),
+        "--dims",
+        "16,16,16",
+        "--scalar",
+        "u8",
+        "--window",
+        "100,200",
+        "--size",
+        "64x48",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let said = String::from_utf8_lossy(&volume.stderr);
+    assert!(volume.status.success(), "{said}");
+    assert!(
+        said.contains("no GPU adapter") && said.contains("splats on the CPU"),
+        "{said}"
+    );
+    let image = image::open(&out).unwrap().to_rgba8();
+    let bright = image.pixels().filter(|p| p[0] > 100).count();
+    assert!(bright > 100, "the block shows: {bright} bright pixels");
+    // The built-in scene has meshes: they need an adapter, and the error says so.
+    let meshes = run(&["render", "--size", "64x48", "--out", out.to_str().unwrap()]);
+    let said = String::from_utf8_lossy(&meshes.stderr);
+    assert!(
+        !meshes.status.success() && said.contains("mesa-vulkan-drivers"),
+        "{said}"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}
