@@ -29,8 +29,8 @@ use crate::order::Ordering;
 use crate::pick::measure::{MarkerStyle, Measurement, annotate};
 use crate::pick::{PickOptions, Picker};
 use crate::render::{
-    Blit, FrameOptions, FrameReport, GpuContext, RenderError, RenderTarget, Renderer, ViewSetup,
-    encode_png, frame_to_rgba8, overlay_texture, write_overlay,
+    Blit, Compositor, FrameOptions, FrameReport, GpuContext, RenderError, RenderTarget, Renderer,
+    ViewSetup, encode_png, frame_to_rgba8, overlay_texture, write_overlay,
 };
 use crate::scene::file::{CameraSpec, SceneFile};
 use crate::scene::{ClipPlane, NodeContent, NodeId, Scene, SceneCamera};
@@ -58,6 +58,9 @@ pub struct ViewerOptions {
     /// Annotations drawn over the picture (orientation marker, edge letters, scale bar);
     /// `A` turns them off and on. `None` draws none until `A` is pressed.
     pub annotations: Option<Annotations>,
+    /// Who composites the splats: [`Compositor::Auto`] takes the CPU tile compositor where
+    /// the adapter is itself a CPU (lavapipe).
+    pub compositor: Compositor,
 }
 
 impl Default for ViewerOptions {
@@ -70,6 +73,7 @@ impl Default for ViewerOptions {
             scene_file: None,
             ordering: None,
             annotations: Some(Annotations::default()),
+            compositor: Compositor::Auto,
         }
     }
 }
@@ -151,6 +155,9 @@ struct Gpu {
     blit: Blit,
     /// Annotations over the frame, the window's size.
     overlay: wgpu::Texture,
+    /// The frame the CPU tile compositor drew, as the window shows it (the window's size),
+    /// and its pixels, which screenshots save; `None` while the GPU composites.
+    cpu_frame: (wgpu::Texture, Option<image::RgbaImage>),
 }
 
 struct Drag {
@@ -229,15 +236,17 @@ impl App {
         let target = RenderTarget::new(&ctx, config.width, config.height)?;
         let blit = Blit::new(&ctx, format);
         let overlay = overlay_texture(&ctx, config.width, config.height);
+        let cpu_frame = (overlay_texture(&ctx, config.width, config.height), None);
         self.gpu = Some(Gpu {
             window,
             ctx,
             surface,
             config,
             target,
-            renderer: Renderer::new(),
+            renderer: Renderer::with_compositor(self.options.compositor),
             blit,
             overlay,
+            cpu_frame,
         });
         Ok(())
     }
@@ -251,6 +260,10 @@ impl App {
         gpu.surface.configure(&gpu.ctx.device, &gpu.config);
         gpu.target = RenderTarget::new(&gpu.ctx, gpu.config.width, gpu.config.height)?;
         gpu.overlay = overlay_texture(&gpu.ctx, gpu.config.width, gpu.config.height);
+        gpu.cpu_frame = (
+            overlay_texture(&gpu.ctx, gpu.config.width, gpu.config.height),
+            None,
+        );
         gpu.window.request_redraw();
         Ok(())
     }
@@ -292,14 +305,32 @@ impl App {
         };
         let started = std::time::Instant::now();
         let target = &gpu.target;
-        self.last = gpu.renderer.render(
-            &gpu.ctx,
-            &self.scene,
-            &view,
-            &target.color_view,
-            &target.depth_view,
-            &options,
-        )?;
+        let on_cpu = gpu.renderer.composites_on_cpu(&gpu.ctx);
+        if on_cpu {
+            // The tile compositor's frame, shown through the present pass like the GPU's.
+            let shot = gpu.renderer.screenshot(
+                &gpu.ctx,
+                &self.scene,
+                &self.camera,
+                target.size,
+                &options,
+            )?;
+            self.last = shot.report;
+            let image = frame_to_rgba8(&shot.frame);
+            let (w, h) = target.size;
+            write_overlay(&gpu.ctx, &gpu.cpu_frame.0, image.as_raw(), w, h);
+            gpu.cpu_frame.1 = Some(image);
+        } else {
+            self.last = gpu.renderer.render(
+                &gpu.ctx,
+                &self.scene,
+                &view,
+                &target.color_view,
+                &target.depth_view,
+                &options,
+            )?;
+            gpu.cpu_frame.1 = None;
+        }
         let frame = match gpu.surface.get_current_texture() {
             wgpu::CurrentSurfaceTexture::Success(frame)
             | wgpu::CurrentSurfaceTexture::Suboptimal(frame) => frame,
@@ -336,12 +367,10 @@ impl App {
             }
             _ => None,
         };
-        gpu.blit.copy(
-            &gpu.ctx,
-            &target.color_view,
-            overlay.as_ref(),
-            &surface_view,
-        );
+        let cpu_view = on_cpu.then(|| gpu.cpu_frame.0.create_view(&Default::default()));
+        let source = cpu_view.as_ref().unwrap_or(&target.color_view);
+        gpu.blit
+            .copy(&gpu.ctx, source, overlay.as_ref(), &surface_view);
         gpu.window.pre_present_notify();
         gpu.ctx.queue.present(frame);
         let elapsed = started.elapsed();
@@ -352,8 +381,9 @@ impl App {
             .preset
             .map_or("scene transfer function", |p| PRESETS[p]);
         gpu.window.set_title(&format!(
-            "splatscene: {} | {preset} | frame {:.0} ms, order {:.1} ms | {} splats{}",
+            "splatscene: {}{} | {preset} | frame {:.0} ms, order {:.1} ms | {} splats{}",
             self.ordering,
+            if on_cpu { " (CPU tiles)" } else { "" },
             elapsed.as_secs_f64() * 1e3,
             self.last.timings.order.as_secs_f64() * 1e3,
             self.last.splats,
@@ -461,10 +491,12 @@ impl App {
         let Some(gpu) = &self.gpu else {
             return Ok(());
         };
-        let frame = gpu.target.read_color(&gpu.ctx)?;
-        let size = (frame.width, frame.height);
-        let png =
-            encode_png(&frame_to_rgba8(&frame)).map_err(|e| ViewerError::Window(e.to_string()))?;
+        let image = match &gpu.cpu_frame.1 {
+            Some(image) => image.clone(),
+            None => frame_to_rgba8(&gpu.target.read_color(&gpu.ctx)?),
+        };
+        let size = image.dimensions();
+        let png = encode_png(&image).map_err(|e| ViewerError::Window(e.to_string()))?;
         let dir = &self.options.screenshot_dir;
         // The first number whose picture and scene file are both free: nothing is replaced.
         let path = (1..)

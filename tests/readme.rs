@@ -163,6 +163,15 @@ fn open_viewer(args: &[String], work: &Path) {
     }
     let _ = viewer.kill();
     let _ = viewer.wait();
+    // SIGTERM, so that the X server removes its lock file and its display number is free again.
+    let _ = Command::new("kill")
+        .args(["-TERM", &xvfb.id().to_string()])
+        .stderr(Stdio::null())
+        .status();
+    let deadline = Instant::now() + Duration::from_secs(5);
+    while Instant::now() < deadline && matches!(xvfb.try_wait(), Ok(None)) {
+        std::thread::sleep(Duration::from_millis(50));
+    }
     let _ = xvfb.kill();
     let _ = xvfb.wait();
     assert!(drawn, "splatscene {}: no frame in 90 s", args.join(" "));

@@ -28,6 +28,19 @@ struct Guard(Child);
 
 impl Drop for Guard {
     fn drop(&mut self) {
+        // SIGTERM first, so that an X server removes its lock file and socket (a killed one
+        // leaves them, and its display number stays taken); SIGKILL if it lingers.
+        let _ = Command::new("kill")
+            .args(["-TERM", &self.0.id().to_string()])
+            .stderr(Stdio::null())
+            .status();
+        let deadline = Instant::now() + Duration::from_secs(5);
+        while Instant::now() < deadline {
+            if let Ok(Some(_)) = self.0.try_wait() {
+                return;
+            }
+            std::thread::sleep(Duration::from_millis(50));
+        }
         let _ = self.0.kill();
         let _ = self.0.wait();
     }
@@ -118,12 +131,18 @@ fn line(lines: &Receiver<String>, prefix: &str) -> String {
 /// Starts the viewer with `args` on `display`: the process, its standard output line by line,
 /// and its window once it exists.
 fn open_viewer(display: &str, args: &[&str]) -> (Guard, Receiver<String>, String) {
+    // The viewer's stderr goes to a file, shown if its window never comes.
+    let log = std::env::temp_dir().join(format!(
+        "splatscene-viewer-{}-{}.log",
+        std::process::id(),
+        display.trim_start_matches(':')
+    ));
     let mut viewer = Command::new(env!("CARGO_BIN_EXE_splatscene"))
         .args(args)
         .env("DISPLAY", display)
         .env("NODEVICE_SELECT", "1")
         .stdout(Stdio::piped())
-        .stderr(Stdio::null())
+        .stderr(std::fs::File::create(&log).expect("a log file"))
         .spawn()
         .expect("start the viewer");
     let stdout = viewer.stdout.take().unwrap();
@@ -134,10 +153,22 @@ fn open_viewer(display: &str, args: &[&str]) -> (Guard, Receiver<String>, String
             let _ = send.send(l);
         }
     });
-    let window = wait_for("the viewer window", 60, || {
-        xdo(display, &["search", "--name", "^splatscene"])
-            .and_then(|s| s.lines().next().map(str::to_owned))
-    });
+    let started = Instant::now();
+    let mut viewer = viewer;
+    let window = loop {
+        let found = xdo(display, &["search", "--name", "^splatscene"])
+            .and_then(|s| s.lines().next().map(str::to_owned));
+        if let Some(window) = found {
+            break window;
+        }
+        let exited = viewer.0.try_wait().ok().flatten();
+        if exited.is_some() || started.elapsed() > Duration::from_secs(60) {
+            let said = std::fs::read_to_string(&log).unwrap_or_default();
+            panic!("no viewer window on {display} (exit: {exited:?}): {said}");
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    };
+    std::fs::remove_file(&log).ok();
     (viewer, lines, window)
 }
 
@@ -181,15 +212,18 @@ fn viewer_picks_switches_orderings_and_takes_screenshots_under_xvfb() {
     std::fs::create_dir_all(&dir).unwrap();
     let (viewer, lines, window) = open_viewer(
         &display,
+        // The GPU's splat pass: its full frames take over 50 ms on lavapipe, so drags preview.
         &[
             "view",
             "--size",
             "640x480",
+            "--compositor",
+            "gpu",
             "--screenshots",
             dir.to_str().unwrap(),
         ],
     );
-    title(&display, &window, "splats");
+    title(&display, &window, " splats");
     xdo(&display, &["windowfocus", "--sync", &window]);
     let first = screen(&display, &dir, "first");
 
@@ -216,7 +250,7 @@ fn viewer_picks_switches_orderings_and_takes_screenshots_under_xvfb() {
         (from_centre - radius).abs() < 0.5,
         "the pick lies on the head's sphere: {from_centre} mm from its centre"
     );
-    title(&display, &window, "splats");
+    title(&display, &window, " splats");
     let marked = screen(&display, &dir, "marked");
     assert_ne!(first, marked, "the pick marker shows");
 
@@ -236,7 +270,7 @@ fn viewer_picks_switches_orderings_and_takes_screenshots_under_xvfb() {
     assert!(line(&lines, "clip plane").starts_with("on"));
     xdo(&display, &["key", "bracketleft"]).expect("key [");
     line(&lines, "clip plane offset");
-    title(&display, &window, "splats");
+    title(&display, &window, " splats");
     let clipped = screen(&display, &dir, "clipped");
     assert_ne!(dense, clipped, "the clip plane cuts the volume");
 
@@ -248,7 +282,7 @@ fn viewer_picks_switches_orderings_and_takes_screenshots_under_xvfb() {
     // A drag orbits with preview frames (an eighth of the splats), as it does where a full
     // frame takes over 50 ms (here on lavapipe, over 100 ms); the release draws the full frame
     // again.
-    let full = splats_in(&title(&display, &window, "splats"));
+    let full = splats_in(&title(&display, &window, " splats"));
     xdo(
         &display,
         &[
@@ -376,7 +410,7 @@ fn viewer_orbits_upright_and_saves_views_that_render_reproduces() {
             dir.to_str().unwrap(),
         ],
     );
-    title(&display, &window, "splats");
+    title(&display, &window, " splats");
     xdo(&display, &["windowfocus", "--sync", &window]);
     let shoot = || {
         xdo(&display, &["key", "s"]).expect("key s");
@@ -407,6 +441,12 @@ fn viewer_orbits_upright_and_saves_views_that_render_reproduces() {
         // A drag without a frame in between may end before the viewer saw the motion.
         std::thread::sleep(Duration::from_millis(500));
     };
+    // On a CPU adapter the tile compositor draws (auto), and says so in the title.
+    let on_cpu = splatscene::render::GpuContext::headless()
+        .is_ok_and(|c| c.adapter.get_info().device_type == wgpu::DeviceType::Cpu);
+    // (" splats": the title before the first frame, "splatscene", holds "splats" too.)
+    let first = title(&display, &window, " splats");
+    assert_eq!(first.contains("(CPU tiles)"), on_cpu, "{first}");
     let (home, _) = shoot();
     drag(2);
     let (nudged, _) = shoot();
@@ -451,7 +491,7 @@ fn viewer_orbits_upright_and_saves_views_that_render_reproduces() {
     let annotated = screen(&display, &dir, "annotated");
     xdo(&display, &["key", "a"]).expect("key a");
     assert_eq!(line(&lines, "annotations"), "off");
-    title(&display, &window, "splats");
+    title(&display, &window, " splats");
     std::thread::sleep(Duration::from_millis(500));
     let plain = screen(&display, &dir, "plain");
     assert_ne!(annotated, plain, "the annotations showed on screen");

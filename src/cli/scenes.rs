@@ -530,6 +530,10 @@ pub struct ViewerArgs {
     /// No annotations until the A key is pressed.
     #[arg(long, conflicts_with = "annotate")]
     no_annotate: bool,
+    /// Who composites the splats: auto (the CPU tile compositor where the GPU adapter is
+    /// itself a CPU), gpu or cpu.
+    #[arg(long, default_value = "auto")]
+    compositor: Compositor,
 }
 
 pub fn run_viewer(args: ViewerArgs) -> Result<()> {
@@ -558,6 +562,7 @@ pub fn run_viewer(args: ViewerArgs) -> Result<()> {
         scene_file: Some(file),
         ordering: loaded.ordering,
         annotations,
+        compositor: args.compositor,
     };
     eprintln!(
         "keys: 1 BTF, 2 PBTF, 3 IP-PBTF, 4 exact, 5 bucketed, 6 pyramid, 7 rows, T transfer function, A annotations, S screenshot and its scene file, C clip plane ([ and ] move it), R reset, Q quit; drag to orbit about the scene's up (right: pan), wheel to zoom, click to pick"
