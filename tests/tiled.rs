@@ -28,9 +28,15 @@ const OPTIONS: FrameOptions = FrameOptions {
     preview: false,
 };
 
-fn shoot(ctx: &GpuContext, compositor: Compositor, scene: &Scene, camera: &SceneCamera) -> Frame {
+fn shoot(
+    ctx: &GpuContext,
+    compositor: Compositor,
+    scene: &Scene,
+    camera: &SceneCamera,
+    size: (u32, u32),
+) -> Frame {
     Renderer::with_compositor(compositor)
-        .screenshot(ctx, scene, camera, (96, 80), &OPTIONS)
+        .screenshot(ctx, scene, camera, size, &OPTIONS)
         .unwrap()
         .frame
 }
@@ -46,9 +52,18 @@ fn assert_alike(d: &ImageDifference, what: &str) {
 }
 
 fn gpu_against_tiles(scene: &Scene, camera: &SceneCamera, what: &str) -> ImageDifference {
+    gpu_against_tiles_at(scene, camera, (96, 80), what)
+}
+
+fn gpu_against_tiles_at(
+    scene: &Scene,
+    camera: &SceneCamera,
+    size: (u32, u32),
+    what: &str,
+) -> ImageDifference {
     let ctx = context();
-    let gpu = shoot(&ctx, Compositor::Gpu, scene, camera);
-    let cpu = shoot(&ctx, Compositor::Cpu, scene, camera);
+    let gpu = shoot(&ctx, Compositor::Gpu, scene, camera, size);
+    let cpu = shoot(&ctx, Compositor::Cpu, scene, camera, size);
     let covered = gpu
         .pixels
         .iter()
@@ -298,4 +313,52 @@ fn a_volume_renders_without_any_gpu_adapter_and_meshes_say_what_they_need() {
         "{said}"
     );
     std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn the_engine_looks_the_same_on_either_compositor() {
+    // The GE engine block (Open SciVis datasets, General Electric), 1.05M splats.
+    let data = std::env::var_os("SPLATSCENE_DATA")
+        .filter(|v| !v.is_empty())
+        .map_or_else(|| std::path::PathBuf::from("../shared/data"), Into::into);
+    let path = data.join("volumes/engine/engine_256x256x128_uint8.raw");
+    if !path.exists() {
+        assert!(
+            std::env::var_os("CI").is_none(),
+            "{} is missing",
+            path.display()
+        );
+        eprintln!(
+            "skipped: {} is missing (set SPLATSCENE_DATA)",
+            path.display()
+        );
+        return;
+    }
+    let spec = splatscene::volume::RawSpec::new(
+        [256, 256, 128],
+        splatscene::volume::ScalarType::U8,
+        splatscene::volume::ByteOrder::Little,
+    );
+    let volume = splatscene::volume::load_raw(&path, &spec).unwrap();
+    let mut scene = Scene::new();
+    let node = splatscene::scene::VolumeNode {
+        volume: Arc::new(volume),
+        transfer: Arc::new(TransferFunction::ramp(100.0, 200.0, [0.85, 0.8, 0.75, 0.5])),
+        splats: Default::default(),
+    };
+    scene
+        .add("engine", DMat4::IDENTITY, None, NodeContent::Volume(node))
+        .unwrap();
+    let bounds = scene.bounds().unwrap();
+    let camera = SceneCamera::fit(
+        bounds,
+        DVec3::new(-0.4, 1.0, -0.55),
+        Default::default(),
+        1.2,
+    );
+    // At 288x240 rather than 96x80: with about 140 sub-pixel splats under each pixel of a
+    // 96x80 image, the GPU's 16-bit float blending drifts from the tiles' f32 (RMSE 0.0043,
+    // largest 0.037, measured on lavapipe), and more so with early termination off (0.0049,
+    // 0.040): the drift is the GPU's. At 288x240: 0.0018 and 0.019.
+    gpu_against_tiles_at(&scene, &camera, (288, 240), "engine");
 }
