@@ -6,15 +6,15 @@ use std::sync::Arc;
 
 use glam::{DMat4, DVec3};
 use splatscene::classify::{TransferFunction, classify};
-use splatscene::composite::{SplatStyle, SplatVolume, compare, composite};
+use splatscene::composite::{SplatStyle, compare};
 use splatscene::mesh::{CpuMesh, Material};
-use splatscene::order::{OrderOptions, Orderer, Ordering, ViewCase};
-use splatscene::render::{FrameOptions, GpuContext, Renderer, gpu_colors};
+use splatscene::order::Ordering;
+use splatscene::render::{FrameOptions, GpuContext, Renderer};
 use splatscene::scene::{MeshNode, NodeContent, Scene, SceneCamera};
 use splatscene::volume::CpuVolume;
 
 mod common;
-use common::{shells, volume_scene};
+use common::{reference_frame, shells, volume_scene};
 
 fn context() -> GpuContext {
     GpuContext::headless().expect("a GPU adapter (install mesa-vulkan-drivers)")
@@ -70,38 +70,15 @@ fn gpu_against_cpu_of(
     size: (u32, u32),
 ) -> (splatscene::composite::ImageDifference, usize) {
     let ctx = context();
-    let geometry = volume.geometry().unwrap();
     let scene = volume_scene(volume.clone(), Ordering::IpPbtfImplicit);
     let mut renderer = Renderer::new();
     let shot = renderer
         .screenshot(&ctx, &scene, &camera, size, &TRANSPARENT)
         .unwrap();
 
-    let classified = classify(&volume, &TransferFunction::ct_bone(), 1.0 / 255.0).unwrap();
-    let colors = gpu_colors(&classified.colors);
     let pinhole = shot.view.pinhole().unwrap();
-    let view = ViewCase::new(&geometry, pinhole.eye, pinhole.target).unwrap();
-    let mut ids = Vec::new();
-    let options = OrderOptions {
-        cull_behind_eye: true,
-        ..Default::default()
-    };
-    Orderer::new()
-        .order(
-            &classified.grid,
-            &view,
-            Ordering::IpPbtfImplicit,
-            &options,
-            &mut ids,
-        )
-        .unwrap();
-    let splats = SplatVolume {
-        geometry: &geometry,
-        grid: &classified.grid,
-        colors: &colors,
-    };
-    let (reference, _) = composite(&pinhole, &splats, &ids, &SplatStyle::default()).unwrap();
-    assert_eq!(shot.report.splats, ids.len());
+    let (reference, drawn) = reference_frame(&volume, &pinhole, Ordering::IpPbtfImplicit);
+    assert_eq!(shot.report.splats, drawn);
     let covered = reference.pixels.iter().filter(|p| p[3] > 0.05).count();
     (compare(&shot.frame, &reference).unwrap(), covered)
 }

@@ -7,15 +7,15 @@
 use std::sync::Arc;
 
 use glam::{DMat4, DVec3};
-use splatscene::classify::{TransferFunction, classify};
-use splatscene::composite::{Frame, ImageDifference, SplatStyle, SplatVolume, compare, composite};
+use splatscene::classify::TransferFunction;
+use splatscene::composite::{Frame, ImageDifference, SplatStyle, compare};
 use splatscene::mesh::{CpuMesh, Material};
-use splatscene::order::{OrderOptions, Orderer, Ordering, ViewCase};
-use splatscene::render::{Compositor, FrameOptions, GpuContext, Renderer, gpu_colors};
+use splatscene::order::Ordering;
+use splatscene::render::{Compositor, FrameOptions, GpuContext, Renderer};
 use splatscene::scene::{ClipPlane, MeshNode, NodeContent, Projection, Scene, SceneCamera};
 
 mod common;
-use common::{rotated_anisotropic, shells, volume_scene};
+use common::{reference_frame, rotated_anisotropic, shells, volume_scene};
 
 fn context() -> GpuContext {
     GpuContext::headless().expect("a GPU adapter (install mesa-vulkan-drivers)")
@@ -147,7 +147,6 @@ fn tiles_draw_what_the_gpu_draws() {
 fn tiles_match_the_cpu_reference_compositor() {
     let ctx = context();
     let volume = shells(20, [1.0, 1.0, 1.5]);
-    let geometry = volume.geometry().unwrap();
     let scene = volume_scene(volume.clone(), Ordering::IpPbtfImplicit);
     let camera = camera_of(&scene);
     let transparent = FrameOptions {
@@ -157,34 +156,15 @@ fn tiles_match_the_cpu_reference_compositor() {
     let shot = Renderer::with_compositor(Compositor::Cpu)
         .screenshot(&ctx, &scene, &camera, (96, 80), &transparent)
         .unwrap();
-    let classified = classify(&volume, &TransferFunction::ct_bone(), 1.0 / 255.0).unwrap();
-    let colors = gpu_colors(&classified.colors);
-    let pinhole = shot.view.pinhole().unwrap();
-    let view = ViewCase::new(&geometry, pinhole.eye, pinhole.target).unwrap();
-    let mut ids = Vec::new();
-    let options = OrderOptions {
-        cull_behind_eye: true,
-        ..Default::default()
-    };
-    Orderer::new()
-        .order(
-            &classified.grid,
-            &view,
-            Ordering::IpPbtfImplicit,
-            &options,
-            &mut ids,
-        )
-        .unwrap();
-    let splats = SplatVolume {
-        geometry: &geometry,
-        grid: &classified.grid,
-        colors: &colors,
-    };
-    let (reference, _) = composite(&pinhole, &splats, &ids, &SplatStyle::default()).unwrap();
+    let (reference, drawn) = reference_frame(
+        &volume,
+        &shot.view.pinhole().unwrap(),
+        Ordering::IpPbtfImplicit,
+    );
     let d = compare(&shot.frame, &reference).unwrap();
     assert_alike(&d, "reference");
     let tiles = shot.report.tiles.expect("composited on the CPU");
-    assert_eq!(tiles.splats, ids.len());
+    assert_eq!(tiles.splats, drawn);
 }
 
 #[test]

@@ -5,8 +5,11 @@
 use std::sync::Arc;
 
 use glam::{DMat3, DMat4, DVec3};
-use splatscene::classify::TransferFunction;
-use splatscene::order::Ordering;
+use splatscene::camera::Camera;
+use splatscene::classify::{TransferFunction, classify};
+use splatscene::composite::{Frame, SplatStyle, SplatVolume, composite};
+use splatscene::order::{OrderOptions, Orderer, Ordering, ViewCase};
+use splatscene::render::gpu_colors;
 use splatscene::scene::{NodeContent, Scene, SplatSettings, VolumeNode};
 use splatscene::volume::CpuVolume;
 
@@ -60,4 +63,29 @@ pub fn rotated_anisotropic() -> CpuVolume {
     volume.direction = DMat3::from_rotation_z(0.5) * DMat3::from_rotation_x(0.35);
     volume.origin = [100.0, -50.0, 30.0];
     volume
+}
+
+/// The CPU reference compositor's frame of `volume` (classified with the CT bone preset, in the
+/// GPU's 8-bit colours) through `pinhole`, splats in `ordering` with those behind the eye left
+/// out as the renderer leaves them; and the number of splats drawn.
+pub fn reference_frame(volume: &CpuVolume, pinhole: &Camera, ordering: Ordering) -> (Frame, usize) {
+    let geometry = volume.geometry().unwrap();
+    let classified = classify(volume, &TransferFunction::ct_bone(), 1.0 / 255.0).unwrap();
+    let colors = gpu_colors(&classified.colors);
+    let view = ViewCase::new(&geometry, pinhole.eye, pinhole.target).unwrap();
+    let mut ids = Vec::new();
+    let options = OrderOptions {
+        cull_behind_eye: true,
+        ..Default::default()
+    };
+    Orderer::new()
+        .order(&classified.grid, &view, ordering, &options, &mut ids)
+        .unwrap();
+    let splats = SplatVolume {
+        geometry: &geometry,
+        grid: &classified.grid,
+        colors: &colors,
+    };
+    let (frame, _) = composite(pinhole, &splats, &ids, &SplatStyle::default()).unwrap();
+    (frame, ids.len())
 }
