@@ -127,11 +127,25 @@ fn open_viewer(args: &[String], work: &Path) {
             "1024x768x24",
             "-nolisten",
             "tcp",
+            // No reset when the last client leaves: a client connecting then is refused.
+            "-noreset",
         ])
         .stdout(Stdio::null())
         .stderr(Stdio::null())
         .spawn()
         .expect("start Xvfb");
+    // The server takes a moment to listen: wait for it before the viewer connects.
+    let started = Instant::now();
+    while started.elapsed() < Duration::from_secs(10) {
+        let probe = Command::new("xdotool")
+            .arg("getmouselocation")
+            .env("DISPLAY", &display)
+            .output();
+        if probe.is_ok_and(|o| o.status.success()) {
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    }
     let mut viewer = Command::new(env!("CARGO_BIN_EXE_splatscene"))
         .args(args)
         .current_dir(work)

@@ -60,6 +60,9 @@ fn start_xvfb() -> (Guard, String) {
                 "1024x768x24",
                 "-nolisten",
                 "tcp",
+                // No reset when the last client leaves: a client connecting during a reset is
+                // refused (xdotool's probe is often the last client before the viewer).
+                "-noreset",
             ])
             .stdout(Stdio::null())
             .stderr(Stdio::null())
