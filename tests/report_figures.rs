@@ -741,3 +741,34 @@ fn a_folder_of_several_dicom_series_lists_them_and_renders_the_one_chosen() {
     std::fs::remove_dir_all(&dir).ok();
     std::fs::remove_dir_all(&empty).ok();
 }
+
+#[test]
+fn the_built_in_scene_takes_meshes_and_transfer_functions_like_any_scene() {
+    let Some(humerus) = data("meshes/myosim_shoulder/humerus.stl") else {
+        return;
+    };
+    let dir = scratch("builtin");
+    let out = dir.join("plan.png");
+    let result = ok(&[
+        "render",
+        "--mesh",
+        s(&humerus),
+        "--mesh-units",
+        "m",
+        "--preset",
+        "ct-soft-tissue",
+        "--size",
+        "96x72",
+        "--out",
+        s(&out),
+    ]);
+    let stderr = String::from_utf8_lossy(&result.stderr);
+    // The prosthesis' three parts and the humerus.
+    assert!(stderr.contains("4 meshes"), "{stderr}");
+    let message = fails(&["render", "--orientation", "LPS", "--out", s(&out)]);
+    assert!(
+        message.contains("--orientation") && message.contains("built-in"),
+        "{message}"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -14,7 +14,6 @@ use splatscene::scene::file::{
     CameraSpec, LoadedScene, MeshSpec, SceneFile, TransformSpec, VolumeSpec, named_view_camera,
 };
 use splatscene::scene::patient::NamedView;
-use splatscene::scene::shoulder::shoulder_scene;
 use splatscene::scene::{Projection, SceneCamera};
 use splatscene::volume::VolumeError;
 use splatscene::volume::detect::detect_format;
@@ -132,12 +131,16 @@ impl InputArgs {
                             .map_or("the built-in scene".into(), |p| p.display().to_string())
                     );
                 }
-                let Input::Scene(path) = input else {
-                    return Ok((self.builtin()?, builtin_file()?));
-                };
-                let file = SceneFile::read(path).map_err(|e| scene_or_volume(e, path))?;
-                let base = path.parent().unwrap_or(Path::new(".")).to_path_buf();
-                (file, path.to_path_buf(), base)
+                match input {
+                    // The built-in scene through its scene file, so that meshes, presets and
+                    // windows from the command line apply to it as to any other.
+                    Input::Scene(path) => {
+                        let file = SceneFile::read(path).map_err(|e| scene_or_volume(e, path))?;
+                        let base = path.parent().unwrap_or(Path::new(".")).to_path_buf();
+                        (file, path.to_path_buf(), base)
+                    }
+                    _ => (builtin_file()?, "the built-in scene".into(), ".".into()),
+                }
             }
             Input::Volume(path) => (self.volume_scene(path)?, path.to_path_buf(), ".".into()),
         };
@@ -147,20 +150,6 @@ impl InputArgs {
         file.meshes.extend(self.mesh_specs()?);
         let loaded = file.load(&path, &base)?;
         Ok((loaded, file.with_paths_from(&base)))
-    }
-
-    fn builtin(&self) -> Result<LoadedScene> {
-        if !self.meshes.is_empty() || self.preset.is_some() || self.window.is_some() {
-            bail!(
-                "--mesh, --preset and --window apply to a scene file or volume given as the input, not the built-in scene"
-            );
-        }
-        Ok(LoadedScene {
-            scene: shoulder_scene()?,
-            size: None,
-            background: Some([0.06, 0.07, 0.09]),
-            ordering: None,
-        })
     }
 
     /// A scene file holding the volume at `path`, seen from the front.
@@ -251,7 +240,7 @@ impl InputArgs {
 }
 
 /// The scene file of the built-in scene (`examples/scenes/shoulder.toml`, which a test keeps
-/// equal to the scene the code builds).
+/// equal to the scene `scene::shoulder::shoulder_scene` builds).
 fn builtin_file() -> Result<SceneFile> {
     let text = include_str!("../../examples/scenes/shoulder.toml");
     Ok(SceneFile::parse(text, Path::new("the built-in scene"))?)
