@@ -170,9 +170,16 @@ impl SparseGrid {
             word_rank,
             rows: Default::default(),
         };
-        for axis in 0..3 {
-            grid.rows[axis] = grid.build_rows(axis);
-        }
+        // The three axes' run tables are independent walks over the bitmap: one task each.
+        let [x, y, z] = {
+            let g = &grid;
+            let (x, (y, z)) = rayon::join(
+                || g.build_rows(0),
+                || rayon::join(|| g.build_rows(1), || g.build_rows(2)),
+            );
+            [x, y, z]
+        };
+        grid.rows = [x, y, z];
         grid
     }
 
