@@ -16,7 +16,7 @@
 //! (compositing). Every buffer lives in the [`TiledCompositor`] and is reused from frame to
 //! frame.
 
-use glam::{DMat3, DVec3, Vec3};
+use glam::Vec3;
 use rayon::prelude::*;
 use strength_reduce::StrengthReducedU32;
 
@@ -512,9 +512,4 @@ fn composite_tile(
         }
     }
     (done, left, left > 0)
-}
-
-/// The rows of a 3x3 matrix as f32 vectors.
-pub fn rows_f32(m: DMat3) -> [Vec3; 3] {
-    [m.row(0), m.row(1), m.row(2)].map(|r: DVec3| r.as_vec3())
 }
