@@ -47,6 +47,9 @@ enum Command {
     Measure(cli::scenes::MeasureArgs),
     /// Open a viewer window: orbit, pick, switch orderings and transfer functions.
     View(cli::scenes::ViewerArgs),
+    /// Render the pictures a manifest lists, many cases and views in one process (volumes
+    /// classified once per job), resumable, and sharded over a Slurm array with --shard.
+    Batch(cli::batch::BatchArgs),
     /// Describe volumes as JSON: size, spacing, origin, direction, scalar type, minimum,
     /// maximum and mean (one object for one file, an array for several). A DICOM series is
     /// given as its folder, a .dat or .nhdr volume as its header.
@@ -148,6 +151,7 @@ fn main() -> Result<()> {
         Command::Measure(args) => cli::scenes::run_measure(args),
         Command::View(args) => cli::scenes::run_viewer(args),
         Command::Info(args) => run_info(args),
+        Command::Batch(args) => cli::batch::run_batch(args),
     }
 }
 
@@ -302,25 +306,45 @@ fn available_memory() -> Option<u64> {
 /// is followed and the file it names written; a device, pipe or socket (`/dev/null`, a FIFO)
 /// is written into as it is, never replaced by a plain file.
 pub(crate) fn write_replacing(path: &Path, bytes: &[u8]) -> Result<()> {
+    if write_atomic(path, bytes)? {
+        eprintln!("replaced the existing {}", path.display());
+    }
+    Ok(())
+}
+
+/// [`write_replacing`] without a word: writes `bytes` to `path` through a temporary file of
+/// this process's own beside it and a rename, so that neither a failed write nor another
+/// process writing the same file at once leaves a partial file. Returns whether a file was
+/// replaced.
+pub(crate) fn write_atomic(path: &Path, bytes: &[u8]) -> Result<bool> {
+    static TEMPORARIES: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
     let path = &follow_links(path)?;
     if let Ok(meta) = std::fs::metadata(path)
         && !meta.is_file()
         && !meta.is_dir()
     {
-        return std::fs::write(path, bytes).with_context(|| format!("writing {}", path.display()));
+        std::fs::write(path, bytes).with_context(|| format!("writing {}", path.display()))?;
+        return Ok(false);
     }
     let existed = path.exists();
     let name = path
         .file_name()
         .context("the output path has no file name")?;
-    let tmp = path.with_file_name(format!(".{}.partial", name.to_string_lossy()));
-    std::fs::write(&tmp, bytes).with_context(|| format!("writing {}", tmp.display()))?;
-    std::fs::rename(&tmp, path)
-        .with_context(|| format!("renaming {} to {}", tmp.display(), path.display()))?;
-    if existed {
-        eprintln!("replaced the existing {}", path.display());
+    let n = TEMPORARIES.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let tmp = path.with_file_name(format!(
+        ".{}.{}-{n}.partial",
+        name.to_string_lossy(),
+        std::process::id()
+    ));
+    if let Err(e) = std::fs::write(&tmp, bytes) {
+        let _ = std::fs::remove_file(&tmp);
+        return Err(e).with_context(|| format!("writing {}", tmp.display()));
     }
-    Ok(())
+    if let Err(e) = std::fs::rename(&tmp, path) {
+        let _ = std::fs::remove_file(&tmp);
+        return Err(e).with_context(|| format!("renaming {} to {}", tmp.display(), path.display()));
+    }
+    Ok(existed)
 }
 
 /// `path`, or the file its chain of symbolic links names (which need not exist yet).

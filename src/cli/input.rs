@@ -145,7 +145,7 @@ impl InputArgs {
             Input::Volume(path) => (self.volume_scene(path)?, path.to_path_buf(), ".".into()),
         };
         for spec in &mut file.volumes {
-            self.apply_transfer(spec);
+            apply_transfer(spec, self.preset.as_deref(), self.window, self.shift);
         }
         file.meshes.extend(self.mesh_specs()?);
         let loaded = file.load(&path, &base)?;
@@ -176,30 +176,6 @@ impl InputArgs {
             volumes: vec![volume],
             ..SceneFile::default()
         })
-    }
-
-    /// `--preset`, `--window` and `--shift` on a volume.
-    fn apply_transfer(&self, spec: &mut VolumeSpec) {
-        match (&self.preset, self.window) {
-            (Some(preset), window) => {
-                spec.transfer = Some(preset.clone());
-                spec.window = None;
-                spec.color = None;
-                spec.level_width = window.map(|[lo, hi]| [0.5 * (lo + hi), hi - lo]);
-            }
-            (None, Some(window)) => {
-                if spec.transfer.as_deref() != Some("ramp") {
-                    spec.color = None;
-                }
-                spec.transfer = Some("ramp".into());
-                spec.window = Some(window);
-                spec.level_width = None;
-            }
-            (None, None) => {}
-        }
-        if let Some(shift) = self.shift {
-            spec.shift = Some(shift);
-        }
     }
 
     fn mesh_specs(&self) -> Result<Vec<MeshSpec>> {
@@ -236,6 +212,38 @@ impl InputArgs {
             });
         }
         Ok(specs)
+    }
+}
+
+/// A preset, a value window and a shift given for every volume (`--preset`, `--window`,
+/// `--shift`, and their batch manifest keys) applied to one volume's spec: a preset replaces
+/// the transfer function (stretched over the window when one is given); a window alone makes a
+/// ramp over it.
+pub fn apply_transfer(
+    spec: &mut VolumeSpec,
+    preset: Option<&str>,
+    window: Option<[f32; 2]>,
+    shift: Option<f32>,
+) {
+    match (preset, window) {
+        (Some(preset), window) => {
+            spec.transfer = Some(preset.to_owned());
+            spec.window = None;
+            spec.color = None;
+            spec.level_width = window.map(|[lo, hi]| [0.5 * (lo + hi), hi - lo]);
+        }
+        (None, Some(window)) => {
+            if spec.transfer.as_deref() != Some("ramp") {
+                spec.color = None;
+            }
+            spec.transfer = Some("ramp".into());
+            spec.window = Some(window);
+            spec.level_width = None;
+        }
+        (None, None) => {}
+    }
+    if let Some(shift) = shift {
+        spec.shift = Some(shift);
     }
 }
 

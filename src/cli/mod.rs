@@ -1,4 +1,5 @@
 //! Command-line commands that look at scenes.
 
+pub mod batch;
 pub mod input;
 pub mod scenes;

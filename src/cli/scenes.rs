@@ -95,7 +95,7 @@ impl AnnotateArgs {
     }
 }
 
-/// The image of a screenshot, annotated when asked.
+/// The image of a screenshot, annotated when asked, with what was drawn said on stderr.
 fn figure(
     shot: &splatscene::render::Screenshot,
     scene: &Scene,
@@ -103,9 +103,8 @@ fn figure(
     parts: Option<&Annotations>,
     labels: &[Label],
 ) -> Result<image::RgbaImage> {
-    let mut image = frame_to_rgba8(&shot.frame);
-    if let Some(parts) = parts {
-        let drawn = annotate_image(&mut image, camera, &scene.patient_frame(), labels, parts)?;
+    let (image, drawn) = figure_image(shot, scene, camera, parts, labels)?;
+    if let Some(drawn) = drawn {
         let mut said = Vec::new();
         if drawn.edge_letters.iter().any(|l| !l.is_empty()) {
             let [l, r, t, b] = &drawn.edge_letters;
@@ -122,6 +121,29 @@ fn figure(
         }
     }
     Ok(image)
+}
+
+/// The image of a screenshot, annotated when asked (with the patient frame of `scene`), and
+/// what the annotation drew.
+pub(crate) fn figure_image(
+    shot: &splatscene::render::Screenshot,
+    scene: &Scene,
+    camera: &SceneCamera,
+    parts: Option<&Annotations>,
+    labels: &[Label],
+) -> Result<(image::RgbaImage, Option<splatscene::annotate::Drawn>)> {
+    let mut image = frame_to_rgba8(&shot.frame);
+    let drawn = match parts {
+        Some(parts) => Some(annotate_image(
+            &mut image,
+            camera,
+            &scene.patient_frame(),
+            labels,
+            parts,
+        )?),
+        None => None,
+    };
+    Ok((image, drawn))
 }
 
 /// `splatscene pick`.
@@ -240,23 +262,7 @@ fn write_depth(
     mode: DepthMode,
     surface_opacity: f32,
 ) -> Result<()> {
-    let view = &shot.view;
-    let mut distances: Vec<Option<f64>> = shot.depth.iter().map(|&d| view.distance_of(d)).collect();
-    if mode == DepthMode::Surface {
-        let surface = surface_distances(scene, view, surface_opacity, Some(&distances));
-        for (d, s) in distances.iter_mut().zip(surface) {
-            if s.is_some() {
-                *d = s;
-            }
-        }
-    }
-    let image = DepthImage {
-        size: view.size,
-        distances,
-        mode,
-        surface_opacity: (mode == DepthMode::Surface).then_some(surface_opacity),
-    };
-    let (png, calibration) = image.encode_png(view)?;
+    let (png, calibration) = depth_files(shot, scene, mode, surface_opacity)?;
     if calibration["near_mm"].is_null() {
         eprintln!(
             "warning: {}: nothing was hit, every pixel is 65535 (no depth)",
@@ -278,6 +284,32 @@ fn write_depth(
         sidecar.display()
     );
     Ok(())
+}
+
+/// The depth image of `shot` as a 16-bit PNG, and its calibration (the JSON written beside it).
+pub(crate) fn depth_files(
+    shot: &splatscene::render::Screenshot,
+    scene: &Scene,
+    mode: DepthMode,
+    surface_opacity: f32,
+) -> Result<(Vec<u8>, Value)> {
+    let view = &shot.view;
+    let mut distances: Vec<Option<f64>> = shot.depth.iter().map(|&d| view.distance_of(d)).collect();
+    if mode == DepthMode::Surface {
+        let surface = surface_distances(scene, view, surface_opacity, Some(&distances));
+        for (d, s) in distances.iter_mut().zip(surface) {
+            if s.is_some() {
+                *d = s;
+            }
+        }
+    }
+    let image = DepthImage {
+        size: view.size,
+        distances,
+        mode,
+        surface_opacity: (mode == DepthMode::Surface).then_some(surface_opacity),
+    };
+    Ok(image.encode_png(view)?)
 }
 
 /// Refuses outputs that name one file, so that no image replaces another.
@@ -333,7 +365,7 @@ fn output_names(pattern: &Path, cameras: &[(Option<String>, SceneCamera)]) -> Re
         .collect())
 }
 
-fn describe(r: &FrameReport) -> String {
+pub(crate) fn describe(r: &FrameReport) -> String {
     let ms = |d: std::time::Duration| d.as_secs_f64() * 1e3;
     let splats = match r.tiles {
         Some(t) => format!(

@@ -456,6 +456,48 @@ impl SceneFile {
         file
     }
 
+    /// What cannot be found among the files the scene names, one message each, without
+    /// reading them: paths that do not resolve or do not exist. Relative paths are taken from
+    /// `base`, `data:` paths from [`data_dir`].
+    pub fn missing_files(&self, base: &Path) -> Vec<String> {
+        let data = data_dir();
+        let named = self
+            .volumes
+            .iter()
+            .enumerate()
+            .map(|(i, v)| (format!("volume {}", i + 1), &v.name, &v.path))
+            .chain(
+                self.meshes
+                    .iter()
+                    .enumerate()
+                    .map(|(i, m)| (format!("mesh {}", i + 1), &m.name, &m.path)),
+            );
+        let mut missing = Vec::new();
+        for (what, name, path) in named {
+            if path.starts_with("builtin:") {
+                continue;
+            }
+            let what = match name {
+                Some(n) => format!("{what} ({n})"),
+                None => what,
+            };
+            match resolve_path(path, base, &data) {
+                Err(e) => missing.push(format!("{what}: {e}")),
+                Ok(file) if !file.exists() => missing.push(if path.starts_with("data:") {
+                    format!(
+                        "{what}: {} not found: `data:` paths are read from ${DATA_ENV} ({})",
+                        file.display(),
+                        describe_data_dir(std::env::var_os(DATA_ENV).as_deref())
+                    )
+                } else {
+                    format!("{what}: {} not found", file.display())
+                }),
+                Ok(_) => {}
+            }
+        }
+        missing
+    }
+
     /// The file as TOML text, as [`SceneFile::parse`] reads it back.
     pub fn to_toml(&self) -> Result<String, String> {
         toml::to_string(self).map_err(|e| e.to_string())
@@ -951,7 +993,17 @@ fn lights(spec: &LightsSpec) -> Lights {
     lights
 }
 
-fn camera(spec: Option<&CameraSpec>, scene: &Scene, aspect: f64) -> Result<SceneCamera, String> {
+/// The camera a scene file's `[camera]` table describes for `scene`, fitted to it where the
+/// table gives no eye; `aspect` is the image's width over its height.
+///
+/// # Errors
+///
+/// A message naming the key whose value cannot make a camera.
+pub fn camera(
+    spec: Option<&CameraSpec>,
+    scene: &Scene,
+    aspect: f64,
+) -> Result<SceneCamera, String> {
     let default = CameraSpec::default();
     let spec = spec.unwrap_or(&default);
     let bounds = scene.bounds().unwrap_or((DVec3::splat(-1.0), DVec3::ONE));

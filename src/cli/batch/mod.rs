@@ -1,0 +1,739 @@
+//! `splatscene batch`: every picture a manifest asks for, rendered by one process that loads
+//! and classifies each job's volumes once and keeps one GPU context; resumable (a job whose
+//! outputs are there and whose inputs hash as before is left alone), and shardable over a
+//! cluster's array tasks, whose indexes `--merge` joins.
+
+use std::io::IsTerminal;
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, Result, bail};
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+
+use splatscene::annotate::Annotations;
+use splatscene::render::{
+    Compositor, DepthMode, FrameOptions, GpuContext, RenderError, Renderer, encode_png,
+};
+use splatscene::scene::file::{LoadedScene, camera as scene_camera, named_view_camera};
+use splatscene::scene::{NodeContent, NodeId, Scene};
+
+use super::scenes::{depth_files, figure_image};
+use index::{CameraRecord, FileHash, Index, InputRecord, JobRecord, OutputRecord, Status, Timings};
+use manifest::{Content, PlannedJob, ViewKind};
+
+pub mod index;
+pub mod manifest;
+
+/// `splatscene batch`.
+#[derive(clap::Args)]
+pub struct BatchArgs {
+    /// The manifest (TOML): its jobs, each a scene or a volume with meshes, and the views,
+    /// sizes, orderings and contents to draw them in.
+    #[arg(required_unless_present = "merge")]
+    manifest: Option<PathBuf>,
+    /// The output folder: the pictures and the index (index.json, or index-K-of-N.json for a
+    /// shard).
+    #[arg(long, required_unless_present = "merge")]
+    out: Option<PathBuf>,
+    /// Run shard K of N: the K-th job and every N-th after it (K from 1 to N). Inside a Slurm
+    /// array job, SLURM_ARRAY_TASK_ID and SLURM_ARRAY_TASK_COUNT give it when this is absent.
+    #[arg(long, value_name = "K/N")]
+    shard: Option<String>,
+    /// Render every job, also those whose outputs are there from the same inputs.
+    #[arg(long)]
+    force: bool,
+    /// Check the manifest and list what each job would write; render nothing.
+    #[arg(long)]
+    check: bool,
+    /// Join the shard indexes in this output folder into its index.json.
+    #[arg(long, value_name = "DIR", conflicts_with_all = ["manifest", "out", "shard", "force", "check"])]
+    merge: Option<PathBuf>,
+    /// Who composites the splats: auto (the CPU tile compositor where the GPU adapter is
+    /// itself a CPU), gpu or cpu.
+    #[arg(long, default_value = "auto")]
+    compositor: Compositor,
+}
+
+/// Runs `splatscene batch`.
+pub fn run_batch(args: BatchArgs) -> Result<()> {
+    if let Some(dir) = &args.merge {
+        let index = index::merge(dir)?;
+        let s = &index.summary;
+        eprintln!(
+            "merged {} shard indexes into {}: {} jobs rendered, {} up to date, {} failed, {} pending",
+            index.merged_shards.unwrap_or(0),
+            dir.join("index.json").display(),
+            s.rendered,
+            s.up_to_date,
+            s.failed,
+            s.pending
+        );
+        return finish(&index, &dir.join("index.json"));
+    }
+    let (Some(manifest_path), Some(out)) = (&args.manifest, &args.out) else {
+        bail!("give a manifest and --out, or --merge DIR");
+    };
+    let shard = shard_from(args.shard.as_deref(), &|k| std::env::var(k).ok())?;
+    let manifest = manifest::read(manifest_path)?;
+    let base = manifest_path.parent().unwrap_or(Path::new("."));
+    let jobs = manifest::plan(&manifest, base).map_err(|problems| {
+        let list: Vec<String> = problems.iter().map(|p| format!("  {p}")).collect();
+        anyhow::anyhow!(
+            "{}: {} problem{} found; nothing was rendered:\n{}",
+            manifest_path.display(),
+            problems.len(),
+            if problems.len() == 1 { "" } else { "s" },
+            list.join("\n")
+        )
+    })?;
+    let total_jobs = jobs.len();
+    let mine: Vec<PlannedJob> = match shard {
+        Some((k, n)) => jobs
+            .into_iter()
+            .filter(|j| j.position % n == k - 1)
+            .collect(),
+        None => jobs,
+    };
+    if args.check {
+        for job in &mine {
+            eprintln!(
+                "job {} ({}): {} pictures",
+                job.position + 1,
+                job.name,
+                job.items.len()
+            );
+            for item in &job.items {
+                let depth = item
+                    .depth
+                    .as_ref()
+                    .map_or(String::new(), |d| format!(" and {}", d.display()));
+                eprintln!("  {}{depth}", item.image.display());
+            }
+        }
+        eprintln!(
+            "{} of the manifest's {total_jobs} jobs{}; the manifest is sound",
+            mine.len(),
+            shard.map_or(String::new(), |(k, n)| format!(" (shard {k} of {n})"))
+        );
+        return Ok(());
+    }
+    std::fs::create_dir_all(out).with_context(|| format!("{}: cannot create", out.display()))?;
+    let index_path = out.join(index::index_name(shard));
+    let _lock = lock(&index_path)?;
+    let earlier = if args.force {
+        Default::default()
+    } else {
+        index::finished_jobs(out)?
+    };
+    let manifest_bytes = std::fs::read(manifest_path)
+        .with_context(|| format!("{}: cannot read", manifest_path.display()))?;
+    let ctx = match GpuContext::headless() {
+        Ok(ctx) => Some(ctx),
+        Err(e @ RenderError::NoAdapter(_)) if args.compositor != Compositor::Gpu => {
+            eprintln!("{e}\njobs without meshes are composited on the CPU; jobs with meshes fail");
+            None
+        }
+        Err(e) => return Err(e.into()),
+    };
+    let mut index = Index {
+        splatscene: env!("CARGO_PKG_VERSION").into(),
+        manifest: FileHash {
+            path: std::path::absolute(manifest_path)
+                .unwrap_or_else(|_| manifest_path.clone())
+                .display()
+                .to_string(),
+            blake3: blake3::hash(&manifest_bytes).to_hex().to_string(),
+        },
+        manifest_jobs: total_jobs,
+        shard: shard.map(|(k, n)| [k, n]),
+        merged_shards: None,
+        device: ctx
+            .as_ref()
+            .map_or("no GPU adapter".into(), GpuContext::describe),
+        compositor: compositor_name(args.compositor).into(),
+        jobs: mine
+            .iter()
+            .map(|j| JobRecord {
+                job: j.position + 1,
+                name: j.name.clone(),
+                status: Status::Pending,
+                hash: None,
+                inputs: Vec::new(),
+                outputs: Vec::new(),
+                timings_ms: None,
+                error: None,
+            })
+            .collect(),
+        summary: Default::default(),
+    };
+    index.count();
+    index.write(&index_path)?;
+
+    let pictures: usize = mine.iter().map(|j| j.items.len()).sum();
+    let bar = progress_bar(pictures as u64);
+    let mut renderer = Renderer::with_compositor(args.compositor);
+    let settings = Settings {
+        out,
+        compositor: args.compositor,
+        ctx: ctx.as_ref(),
+    };
+    for (slot, job) in mine.iter().enumerate() {
+        bar.set_message(job.name.clone());
+        let started = Instant::now();
+        let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+            run_job(job, &settings, &earlier, &mut renderer, &bar)
+        }));
+        let record = match outcome {
+            Ok(Ok(record)) => record,
+            Ok(Err((e, partial))) => failed(job, partial, format!("{e:#}")),
+            Err(panic) => {
+                // The renderer may be left half-way through a frame: start afresh.
+                renderer = Renderer::with_compositor(args.compositor);
+                let text = panic
+                    .downcast_ref::<String>()
+                    .cloned()
+                    .or_else(|| panic.downcast_ref::<&str>().map(|s| (*s).to_owned()))
+                    .unwrap_or_else(|| "unknown".into());
+                failed(job, None, format!("internal error (panic): {text}"))
+            }
+        };
+        let done = slot + 1;
+        let line = match record.status {
+            Status::Failed => format!(
+                "job {} ({}) failed: {}",
+                job.position + 1,
+                job.name,
+                record.error.as_deref().unwrap_or("")
+            ),
+            Status::UpToDate => format!(
+                "job {} ({}): {} pictures up to date",
+                job.position + 1,
+                job.name,
+                job.items.len()
+            ),
+            _ => format!(
+                "job {} ({}): {} pictures in {:.1} s",
+                job.position + 1,
+                job.name,
+                job.items.len(),
+                started.elapsed().as_secs_f64()
+            ),
+        };
+        bar.suspend(|| eprintln!("[{done}/{}] {line}", mine.len()));
+        // A failed job's remaining pictures still count toward the bar's end.
+        let drawn = (bar.position() as usize).min(pictures);
+        let expected: usize = mine[..=slot].iter().map(|j| j.items.len()).sum();
+        bar.inc(expected.saturating_sub(drawn) as u64);
+        index.jobs[slot] = record;
+        index.count();
+        index.write(&index_path)?;
+    }
+    bar.finish_and_clear();
+    let s = &index.summary;
+    eprintln!(
+        "{} jobs: {} rendered, {} up to date, {} failed; index {}",
+        index.jobs.len(),
+        s.rendered,
+        s.up_to_date,
+        s.failed,
+        index_path.display()
+    );
+    finish(&index, &index_path)
+}
+
+/// The exit status: an error when any job failed or was not reached.
+fn finish(index: &Index, path: &Path) -> Result<()> {
+    let s = &index.summary;
+    if s.failed + s.pending > 0 {
+        bail!(
+            "{} of {} jobs failed{}; see {}",
+            s.failed + s.pending,
+            index.jobs.len(),
+            if s.pending > 0 {
+                format!(" or were not reached ({} pending)", s.pending)
+            } else {
+                String::new()
+            },
+            path.display()
+        );
+    }
+    Ok(())
+}
+
+fn compositor_name(c: Compositor) -> &'static str {
+    match c {
+        Compositor::Auto => "auto",
+        Compositor::Gpu => "gpu",
+        Compositor::Cpu => "cpu",
+    }
+}
+
+/// The shard to run: `--shard K/N`, else a Slurm array task's (`env` reads the environment).
+fn shard_from(
+    arg: Option<&str>,
+    env: &dyn Fn(&str) -> Option<String>,
+) -> Result<Option<(usize, usize)>> {
+    if let Some(text) = arg {
+        let (k, n) = text
+            .split_once('/')
+            .and_then(|(k, n)| {
+                Some((
+                    k.trim().parse::<usize>().ok()?,
+                    n.trim().parse::<usize>().ok()?,
+                ))
+            })
+            .with_context(|| format!("--shard {text:?}: expected K/N, such as 2/4"))?;
+        if n == 0 {
+            bail!("--shard {text}: N, the number of shards, must be at least 1");
+        }
+        if k == 0 || k > n {
+            bail!("--shard {text}: K counts the shards from 1 to N (here 1 to {n})");
+        }
+        return Ok(Some((k, n)));
+    }
+    let (Some(id), Some(count)) = (env("SLURM_ARRAY_TASK_ID"), env("SLURM_ARRAY_TASK_COUNT"))
+    else {
+        return Ok(None);
+    };
+    let number = |name: &str, text: &str| {
+        text.trim()
+            .parse::<usize>()
+            .with_context(|| format!("{name}={text:?} is not a number"))
+    };
+    let id = number("SLURM_ARRAY_TASK_ID", &id)?;
+    let count = number("SLURM_ARRAY_TASK_COUNT", &count)?;
+    let min = match env("SLURM_ARRAY_TASK_MIN") {
+        Some(m) => number("SLURM_ARRAY_TASK_MIN", &m)?,
+        None => 0,
+    };
+    if let Some(step) = env("SLURM_ARRAY_TASK_STEP")
+        && number("SLURM_ARRAY_TASK_STEP", &step)? != 1
+    {
+        bail!(
+            "SLURM_ARRAY_TASK_STEP={step}: the batch shards over an array of consecutive task ids (--array=1-N or 0-(N-1)); give --shard K/N for other arrays"
+        );
+    }
+    if count == 0 || id < min || id - min >= count {
+        bail!(
+            "SLURM_ARRAY_TASK_ID={id} does not lie among SLURM_ARRAY_TASK_COUNT={count} tasks from SLURM_ARRAY_TASK_MIN={min}; give --shard K/N"
+        );
+    }
+    let shard = (id - min + 1, count);
+    eprintln!("shard {} of {} (Slurm array task {id})", shard.0, shard.1);
+    Ok(Some(shard))
+}
+
+/// Holds the lock on an index for this process's life, so that two processes never run the
+/// same shard into one folder (a killed process's lock goes with it).
+fn lock(index: &Path) -> Result<std::fs::File> {
+    let name = index.file_name().unwrap_or_default().to_string_lossy();
+    let path = index.with_file_name(format!(".{name}.lock"));
+    let file = std::fs::OpenOptions::new()
+        .create(true)
+        .truncate(false)
+        .write(true)
+        .open(&path)
+        .with_context(|| format!("{}: cannot create", path.display()))?;
+    match file.try_lock() {
+        Ok(()) => Ok(file),
+        Err(std::fs::TryLockError::WouldBlock) => bail!(
+            "another batch is writing {} (it holds {}); wait for it, or give this one another shard or folder",
+            index.display(),
+            path.display()
+        ),
+        Err(std::fs::TryLockError::Error(e)) => {
+            Err(e).with_context(|| format!("{}: cannot lock", path.display()))
+        }
+    }
+}
+
+fn progress_bar(len: u64) -> ProgressBar {
+    let bar = ProgressBar::with_draw_target(
+        Some(len),
+        if std::io::stderr().is_terminal() {
+            ProgressDrawTarget::stderr()
+        } else {
+            ProgressDrawTarget::hidden()
+        },
+    );
+    bar.set_style(
+        ProgressStyle::with_template(
+            "{spinner} {pos}/{len} pictures [{wide_bar}] {per_sec}, {eta} left, {msg}",
+        )
+        .unwrap_or_else(|_| ProgressStyle::default_bar())
+        .progress_chars("=> "),
+    );
+    bar.enable_steady_tick(Duration::from_millis(200));
+    bar
+}
+
+/// What every job shares.
+struct Settings<'a> {
+    out: &'a Path,
+    compositor: Compositor,
+    ctx: Option<&'a GpuContext>,
+}
+
+fn failed(job: &PlannedJob, partial: Option<JobRecord>, error: String) -> JobRecord {
+    let mut record = partial.unwrap_or_else(|| JobRecord {
+        job: job.position + 1,
+        name: job.name.clone(),
+        status: Status::Failed,
+        hash: None,
+        inputs: Vec::new(),
+        outputs: Vec::new(),
+        timings_ms: None,
+        error: None,
+    });
+    record.status = Status::Failed;
+    record.error = Some(error);
+    record
+}
+
+fn ms(d: Duration) -> f64 {
+    d.as_secs_f64() * 1e3
+}
+
+/// Renders one job, or finds it up to date. On failure, the record as far as it got.
+fn run_job(
+    job: &PlannedJob,
+    settings: &Settings,
+    earlier: &std::collections::HashMap<String, JobRecord>,
+    renderer: &mut Renderer,
+    bar: &ProgressBar,
+) -> std::result::Result<JobRecord, (anyhow::Error, Option<JobRecord>)> {
+    let started = Instant::now();
+    let mut record = JobRecord {
+        job: job.position + 1,
+        name: job.name.clone(),
+        status: Status::Rendered,
+        hash: None,
+        inputs: Vec::new(),
+        outputs: Vec::new(),
+        timings_ms: None,
+        error: None,
+    };
+    let mut timings = Timings::default();
+    let loaded = job
+        .file
+        .load(&job.source, Path::new("."))
+        .map_err(|e| (anyhow::Error::from(e), None))?;
+    timings.load = ms(started.elapsed());
+    let hashing = Instant::now();
+    let (inputs, hash) = job_hash(job, &loaded, settings.compositor).map_err(|e| (e, None))?;
+    record.inputs = inputs;
+    record.hash = Some(hash.clone());
+    if let Some(done) = earlier.get(&hash)
+        && index::outputs_intact(settings.out, done)
+    {
+        let mut kept = done.clone();
+        kept.job = record.job;
+        kept.name = record.name;
+        kept.status = Status::UpToDate;
+        kept.error = None;
+        bar.inc(job.items.len() as u64);
+        return Ok(kept);
+    }
+    timings.hash = ms(hashing.elapsed());
+    let result = render_job(
+        job,
+        settings,
+        &loaded,
+        renderer,
+        bar,
+        &mut record,
+        &mut timings,
+    );
+    timings.total = ms(started.elapsed());
+    record.timings_ms = Some(timings);
+    match result {
+        Ok(()) => Ok(record),
+        Err(e) => Err((e, Some(record))),
+    }
+}
+
+fn render_job(
+    job: &PlannedJob,
+    settings: &Settings,
+    loaded: &LoadedScene,
+    renderer: &mut Renderer,
+    bar: &ProgressBar,
+    record: &mut JobRecord,
+    timings: &mut Timings,
+) -> Result<()> {
+    let full = &loaded.scene;
+    if settings.ctx.is_none() && full.meshes().next().is_some() {
+        bail!("the job has meshes, which need a GPU adapter, and there is none");
+    }
+    let parts = match &job.annotate {
+        Some(p) => Some(Annotations::parse_parts(p).map_err(anyhow::Error::msg)?),
+        None => None,
+    };
+    let base = full.camera.context("the scene has no camera")?;
+    let mut scenes: Vec<(Content, Scene)> = Vec::new();
+    for item in &job.items {
+        let scene = match scenes.iter().find(|(c, _)| *c == item.content) {
+            Some((_, s)) => s,
+            None => {
+                scenes.push((item.content, content_scene(full, item.content)?));
+                &scenes.last().context("a scene was just added")?.1
+            }
+        };
+        let view = &job.views[item.view];
+        let aspect = f64::from(item.size.0) / f64::from(item.size.1);
+        // Cameras come from the whole scene, so that a picture without the volumes is seen
+        // from where the one with them is.
+        let camera = match &view.kind {
+            ViewKind::Scene => base,
+            ViewKind::Named(v) => {
+                let mut c = named_view_camera(full, v, base.projection, aspect);
+                c.near = base.near;
+                c
+            }
+            ViewKind::Camera(spec) => {
+                scene_camera(Some(spec), full, aspect).map_err(anyhow::Error::msg)?
+            }
+        };
+        let options = FrameOptions {
+            ordering: Some(item.ordering),
+            background: if job.transparent {
+                None
+            } else {
+                loaded.background
+            },
+            measure: true,
+            preview: false,
+        };
+        let drawing = Instant::now();
+        let shot = match settings.ctx {
+            Some(ctx) => renderer.screenshot(ctx, scene, &camera, item.size, &options)?,
+            None => renderer.screenshot_without_gpu(scene, &camera, item.size, &options)?,
+        };
+        let classify = ms(shot.report.timings.classify);
+        timings.classify += classify;
+        timings.render += ms(drawing.elapsed()) - classify;
+        let writing = Instant::now();
+        let mut item_parts = parts.clone();
+        if let Some(caption) = &item.caption {
+            let p = item_parts
+                .get_or_insert_with(|| Annotations::parse_parts("none").unwrap_or_default());
+            p.caption = Some(caption.clone());
+        }
+        let (image, _) = figure_image(&shot, full, &camera, item_parts.as_ref(), &[])?;
+        let describe = |file: &Path, kind: &str, bytes: &[u8]| OutputRecord {
+            file: file
+                .components()
+                .map(|c| c.as_os_str().to_string_lossy())
+                .collect::<Vec<_>>()
+                .join("/"),
+            kind: kind.into(),
+            blake3: blake3::hash(bytes).to_hex().to_string(),
+            view: view.name.clone(),
+            content: item.content.name().into(),
+            ordering: item.ordering.name().into(),
+            size: [item.size.0, item.size.1],
+            camera: CameraRecord::of(&camera),
+        };
+        let png = encode_png(&image)?;
+        write_output(settings.out, &item.image, &png)?;
+        record.outputs.push(describe(&item.image, "image", &png));
+        if let Some(depth) = &item.depth {
+            let mode = match job.depth_mode.as_deref() {
+                Some("surface") => DepthMode::Surface,
+                Some(_) => DepthMode::Mesh,
+                None if scene.meshes().next().is_some() => DepthMode::Mesh,
+                None => DepthMode::Surface,
+            };
+            let (png, calibration) = depth_files(&shot, scene, mode, job.surface_opacity)?;
+            let json = serde_json::to_string_pretty(&calibration)?;
+            let sidecar = depth.with_extension("json");
+            write_output(settings.out, depth, &png)?;
+            write_output(settings.out, &sidecar, json.as_bytes())?;
+            record.outputs.push(describe(depth, "depth", &png));
+            record
+                .outputs
+                .push(describe(&sidecar, "depth-calibration", json.as_bytes()));
+        }
+        timings.write += ms(writing.elapsed());
+        bar.inc(1);
+    }
+    Ok(())
+}
+
+/// Writes one output file inside the output folder, making its folders.
+fn write_output(out: &Path, file: &Path, bytes: &[u8]) -> Result<()> {
+    let path = out.join(file);
+    if let Some(parent) = path.parent() {
+        std::fs::create_dir_all(parent)
+            .with_context(|| format!("{}: cannot create", parent.display()))?;
+    }
+    crate::write_atomic(&path, bytes)?;
+    Ok(())
+}
+
+/// The scene with the volumes (for `meshes`) or the meshes (for `volumes`) emptied out; node
+/// ids stay as they are, so the renderer keeps what it made for the nodes that remain.
+fn content_scene(full: &Scene, content: Content) -> Result<Scene> {
+    let mut scene = full.clone();
+    let drop: Vec<NodeId> = match content {
+        Content::All => return Ok(scene),
+        Content::Meshes => full.volumes().map(|(id, _, _)| id).collect(),
+        Content::Volumes => full.meshes().map(|(id, _, _)| id).collect(),
+    };
+    for id in drop {
+        scene.set_content(id, NodeContent::Empty)?;
+    }
+    Ok(scene)
+}
+
+/// The job's inputs with their content hashes, and the job hash: BLAKE3 over the version, the
+/// compositor, the job's settings (paths as the manifest writes them) and the input hashes.
+fn job_hash(
+    job: &PlannedJob,
+    loaded: &LoadedScene,
+    compositor: Compositor,
+) -> Result<(Vec<InputRecord>, String)> {
+    let scene = &loaded.scene;
+    let mut inputs = Vec::new();
+    if let Some(path) = &job.scene_path {
+        let bytes =
+            std::fs::read(path).with_context(|| format!("{}: cannot read", path.display()))?;
+        inputs.push(InputRecord {
+            kind: "scene".into(),
+            path: path.display().to_string(),
+            blake3: blake3::hash(&bytes).to_hex().to_string(),
+        });
+    }
+    // Volumes are the first root nodes, in file order; each mesh file is the root after them.
+    let roots: Vec<NodeId> = (0..scene.nodes().len())
+        .map(NodeId)
+        .filter(|id| scene.nodes()[id.0].parent().is_none())
+        .collect();
+    let volume_ids: Vec<NodeId> = scene.volumes().map(|(id, _, _)| id).collect();
+    for (spec, id) in job.file.volumes.iter().zip(&volume_ids) {
+        let NodeContent::Volume(node) = &scene.nodes()[id.0].content else {
+            continue;
+        };
+        let v = &node.volume;
+        let mut h = blake3::Hasher::new();
+        for d in v.dims {
+            h.update(&d.to_le_bytes());
+        }
+        for x in v
+            .spacing
+            .iter()
+            .chain(&v.origin)
+            .chain(&v.direction.to_cols_array())
+        {
+            h.update(&x.to_le_bytes());
+        }
+        h.update(bytemuck::cast_slice(&v.values));
+        inputs.push(InputRecord {
+            kind: "volume".into(),
+            path: spec.path.clone(),
+            blake3: h.finalize().to_hex().to_string(),
+        });
+    }
+    for (spec, root) in job
+        .file
+        .meshes
+        .iter()
+        .zip(roots.iter().skip(job.file.volumes.len()))
+    {
+        let mut h = blake3::Hasher::new();
+        for &child in scene.nodes()[root.0].children() {
+            let node = &scene.nodes()[child.0];
+            if let NodeContent::Mesh(m) = &node.content {
+                h.update(bytemuck::cast_slice(&m.mesh.positions));
+                h.update(bytemuck::cast_slice(&m.mesh.normals));
+                h.update(bytemuck::cast_slice(&m.mesh.indices));
+                h.update(bytemuck::cast_slice(&m.material.base_color));
+                h.update(&m.material.roughness.to_le_bytes());
+                h.update(&m.material.metallic.to_le_bytes());
+                for x in node.local().to_cols_array() {
+                    h.update(&x.to_le_bytes());
+                }
+            }
+        }
+        inputs.push(InputRecord {
+            kind: "mesh".into(),
+            path: spec.path.clone(),
+            blake3: h.finalize().to_hex().to_string(),
+        });
+    }
+    // The scene as loaded, paths left out: the content hashes stand for the files.
+    let mut file = job.file.clone();
+    for v in &mut file.volumes {
+        v.path.clear();
+    }
+    for m in &mut file.meshes {
+        m.path.clear();
+    }
+    let settings = serde_json::json!({
+        "splatscene": env!("CARGO_PKG_VERSION"),
+        "compositor": compositor_name(compositor),
+        "job": job.spec,
+        "scene": file,
+        "inputs": inputs.iter().map(|i| &i.blake3).collect::<Vec<_>>(),
+    });
+    let hash = blake3::hash(serde_json::to_string(&settings)?.as_bytes());
+    Ok((inputs, hash.to_hex().to_string()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn env_of(pairs: &[(&str, &str)]) -> impl Fn(&str) -> Option<String> {
+        let pairs: Vec<(String, String)> = pairs
+            .iter()
+            .map(|(k, v)| (k.to_string(), v.to_string()))
+            .collect();
+        move |k| pairs.iter().find(|(n, _)| n == k).map(|(_, v)| v.clone())
+    }
+
+    #[test]
+    fn shards_are_checked() {
+        let none = env_of(&[]);
+        assert_eq!(shard_from(Some("2/4"), &none).unwrap(), Some((2, 4)));
+        assert_eq!(shard_from(Some("1/1"), &none).unwrap(), Some((1, 1)));
+        for bad in ["3/2", "0/0", "0/2", "2", "a/b", "1/0", "-1/2"] {
+            let e = shard_from(Some(bad), &none).unwrap_err().to_string();
+            assert!(e.contains("--shard"), "{bad}: {e}");
+        }
+        assert_eq!(shard_from(None, &none).unwrap(), None);
+    }
+
+    #[test]
+    fn slurm_array_tasks_give_the_shard() {
+        // --array=0-3 and --array=1-4 both make shards 1 to 4.
+        let zero = env_of(&[
+            ("SLURM_ARRAY_TASK_ID", "0"),
+            ("SLURM_ARRAY_TASK_COUNT", "4"),
+            ("SLURM_ARRAY_TASK_MIN", "0"),
+            ("SLURM_ARRAY_TASK_STEP", "1"),
+        ]);
+        assert_eq!(shard_from(None, &zero).unwrap(), Some((1, 4)));
+        let one = env_of(&[
+            ("SLURM_ARRAY_TASK_ID", "4"),
+            ("SLURM_ARRAY_TASK_COUNT", "4"),
+            ("SLURM_ARRAY_TASK_MIN", "1"),
+        ]);
+        assert_eq!(shard_from(None, &one).unwrap(), Some((4, 4)));
+        // --shard wins over the environment.
+        assert_eq!(shard_from(Some("2/3"), &one).unwrap(), Some((2, 3)));
+        let stepped = env_of(&[
+            ("SLURM_ARRAY_TASK_ID", "2"),
+            ("SLURM_ARRAY_TASK_COUNT", "2"),
+            ("SLURM_ARRAY_TASK_MIN", "0"),
+            ("SLURM_ARRAY_TASK_STEP", "2"),
+        ]);
+        assert!(shard_from(None, &stepped).is_err());
+        let outside = env_of(&[
+            ("SLURM_ARRAY_TASK_ID", "7"),
+            ("SLURM_ARRAY_TASK_COUNT", "4"),
+            ("SLURM_ARRAY_TASK_MIN", "0"),
+        ]);
+        assert!(shard_from(None, &outside).is_err());
+    }
+}
