@@ -343,11 +343,48 @@ pub fn plan(manifest: &Manifest, base: &Path) -> Result<Vec<PlannedJob>, Vec<Pro
         });
     }
     let mut jobs = Vec::new();
+    let own_keys = |job: &JobSpec| match serde_json::to_value(job) {
+        Ok(serde_json::Value::Object(map)) => map
+            .into_iter()
+            .filter(|(_, v)| !v.is_null())
+            .map(|(k, _)| k)
+            .collect(),
+        _ => Vec::new(),
+    };
+    let default_keys = own_keys(d);
     for (position, job) in manifest.jobs.iter().enumerate() {
         let spec = job.merged(d);
+        let own = own_keys(job);
         match plan_job(position, spec, base) {
             Ok(planned) => jobs.push(planned),
-            Err(mut p) => problems.append(&mut p),
+            Err(found) => {
+                // A key the job takes from the defaults is reported once, as the defaults'.
+                for mut p in found {
+                    if default_keys.contains(&p.key) && !own.contains(&p.key) {
+                        p.job = "defaults".into();
+                    }
+                    if !problems.contains(&p) {
+                        problems.push(p);
+                    }
+                }
+            }
+        }
+    }
+    // Names given in the manifest are checked here, also for jobs with other problems;
+    // names taken from file stems once the jobs are planned.
+    let mut named: HashMap<&str, usize> = HashMap::new();
+    for (position, job) in manifest.jobs.iter().enumerate() {
+        if let Some(name) = job.name.as_deref()
+            && let Some(first) = named.insert(name, position)
+        {
+            problems.push(Problem {
+                job: label(position, Some(name)),
+                key: "name".into(),
+                message: format!(
+                    "job {} has this name too; give each job its own `name`",
+                    first + 1
+                ),
+            });
         }
     }
     check_names(&jobs, &mut problems);
@@ -860,15 +897,18 @@ fn fill_pattern(
 }
 
 fn check_names(jobs: &[PlannedJob], problems: &mut Vec<Problem>) {
-    let mut seen: HashMap<&str, usize> = HashMap::new();
+    let mut seen: HashMap<&str, &PlannedJob> = HashMap::new();
     for job in jobs {
-        if let Some(first) = seen.insert(&job.name, job.position) {
+        // Two names given in the manifest were compared already.
+        if let Some(first) = seen.insert(&job.name, job)
+            && (job.spec.name.is_none() || first.spec.name.is_none())
+        {
             problems.push(Problem {
                 job: label(job.position, Some(&job.name)),
                 key: "name".into(),
                 message: format!(
-                    "job {} has this name too; give each job its own `name`",
-                    first + 1
+                    "job {} has this name too (a job without `name` is named after its file); give each job its own `name`",
+                    first.position + 1
                 ),
             });
         }

@@ -1,0 +1,510 @@
+//! `splatscene batch` as a planning service runs it: a manifest of cases and views, checked
+//! before anything is drawn, one index of inputs and outputs, resumed after a kill without
+//! redoing finished jobs, and split into shards whose merged index and pictures equal the
+//! unsharded batch's.
+
+use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output, Stdio};
+
+use serde_json::Value;
+
+fn splatscene(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_splatscene"))
+        .args(args)
+        .env("NODEVICE_SELECT", "1")
+        .env_remove("SLURM_ARRAY_TASK_ID")
+        .env_remove("SLURM_ARRAY_TASK_COUNT")
+        .output()
+        .expect("run splatscene")
+}
+
+fn ok(args: &[&str]) -> String {
+    let out = splatscene(args);
+    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert!(
+        out.status.success(),
+        "splatscene {}: {stderr}",
+        args.join(" ")
+    );
+    stderr
+}
+
+fn fails(args: &[&str]) -> String {
+    let out = splatscene(args);
+    assert!(
+        !out.status.success(),
+        "splatscene {} succeeded",
+        args.join(" ")
+    );
+    String::from_utf8_lossy(&out.stderr).into_owned()
+}
+
+/// A fresh folder for one test's files.
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("splatscene-batch-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+fn repo(rel: &str) -> String {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join(rel)
+        .display()
+        .to_string()
+}
+
+/// A 20^3 u8 volume: a ball of 200 in a cube of 10.
+fn write_ball(path: &Path) {
+    let n = 20i32;
+    let mut bytes = Vec::new();
+    for z in 0..n {
+        for y in 0..n {
+            for x in 0..n {
+                let d2 = (x - 10).pow(2) + (y - 9).pow(2) + (z - 10).pow(2);
+                bytes.push(if d2 < 36 { 200 } else { 10 });
+            }
+        }
+    }
+    std::fs::write(path, bytes).unwrap();
+}
+
+/// A manifest of three small cases: the built-in scene (with and without its volume), a raw
+/// volume and a second raw volume placed and coloured otherwise.
+fn small_manifest(dir: &Path) -> PathBuf {
+    write_ball(&dir.join("ball.raw"));
+    let text = format!(
+        r#"
+[defaults]
+views = ["anterior", "right"]
+sizes = [[96, 72]]
+
+[[job]]
+name = "shoulder"
+scene = "{}"
+contents = ["all", "meshes"]
+annotate = true
+depth = "depth/{{job}}-{{view}}-{{content}}.png"
+out = "{{job}}-{{view}}-{{content}}.png"
+
+[[job]]
+name = "ball"
+volume = {{ path = "ball.raw", dims = [20, 20, 20], scalar = "u8", spacing = [2, 2, 2] }}
+window = [50, 150]
+
+[[job]]
+name = "ball-superior"
+volume = {{ path = "ball.raw", dims = [20, 20, 20], scalar = "u8", orientation = "LPS" }}
+views = ["superior", {{ name = "oblique", view_from = [1, 1, -1] }}]
+orderings = ["ip-pbtf", "btf"]
+"#,
+        repo("examples/scenes/shoulder.toml")
+    );
+    let path = dir.join("manifest.toml");
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+fn index(path: &Path) -> Value {
+    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+}
+
+fn statuses(index: &Value) -> Vec<(String, String)> {
+    index["jobs"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|j| {
+            (
+                j["name"].as_str().unwrap().to_owned(),
+                j["status"].as_str().unwrap().to_owned(),
+            )
+        })
+        .collect()
+}
+
+/// Every picture in `dir` (not the index) with its decoded pixels.
+fn pictures(dir: &Path) -> Vec<(String, Vec<u8>)> {
+    let mut found = Vec::new();
+    let mut folders = vec![dir.to_path_buf()];
+    while let Some(folder) = folders.pop() {
+        for entry in std::fs::read_dir(&folder).unwrap().flatten() {
+            let path = entry.path();
+            if path.is_dir() {
+                folders.push(path);
+            } else if path.extension().is_some_and(|e| e == "png") {
+                let rel = path.strip_prefix(dir).unwrap().display().to_string();
+                let pixels = image::open(&path).unwrap().into_bytes();
+                found.push((rel, pixels));
+            }
+        }
+    }
+    found.sort();
+    found
+}
+
+#[test]
+fn a_batch_renders_every_picture_with_an_index_and_leaves_finished_jobs_alone() {
+    let dir = scratch("resume");
+    let manifest = small_manifest(&dir);
+    let out = dir.join("out");
+    let (m, o) = (manifest.to_str().unwrap(), out.to_str().unwrap());
+    ok(&["batch", m, "--out", o]);
+    let first = index(&out.join("index.json"));
+    assert_eq!(
+        statuses(&first),
+        [
+            ("shoulder".into(), "rendered".into()),
+            ("ball".into(), "rendered".into()),
+            ("ball-superior".into(), "rendered".into())
+        ]
+    );
+    assert_eq!(first["manifest_jobs"], 3);
+    let jobs = first["jobs"].as_array().unwrap();
+    // 2 contents x 2 views, each with a depth image and its calibration; 2 views; 2 x 2.
+    assert_eq!(jobs[0]["outputs"].as_array().unwrap().len(), 12);
+    assert_eq!(jobs[1]["outputs"].as_array().unwrap().len(), 2);
+    assert_eq!(jobs[2]["outputs"].as_array().unwrap().len(), 4);
+    for job in jobs {
+        for output in job["outputs"].as_array().unwrap() {
+            let file = out.join(output["file"].as_str().unwrap());
+            let bytes = std::fs::read(&file).unwrap();
+            assert_eq!(
+                blake3::hash(&bytes).to_hex().as_str(),
+                output["blake3"].as_str().unwrap(),
+                "{}",
+                file.display()
+            );
+            assert!(output["camera"]["eye"].is_array());
+        }
+        assert!(job["timings_ms"]["total"].as_f64().unwrap() > 0.0);
+        assert!(!job["inputs"].as_array().unwrap().is_empty());
+    }
+    assert!(out.join("shoulder-right-meshes.png").exists());
+    assert!(out.join("depth/shoulder-anterior-all.json").exists());
+    assert!(out.join("ball-superior-oblique-btf.png").exists());
+    assert!(
+        out.join("ball-superior-superior-ip-pbtf-implicit.png")
+            .exists()
+    );
+    // The picture without the volume is seen from where the one with it is.
+    let cameras: Vec<&Value> = jobs[0]["outputs"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|o| o["view"] == "right" && o["kind"] == "image")
+        .map(|o| &o["camera"])
+        .collect();
+    assert_eq!(cameras.len(), 2);
+    assert_eq!(cameras[0], cameras[1]);
+    // Without the volume the picture differs.
+    let all = image::open(out.join("shoulder-right-all.png")).unwrap();
+    let meshes = image::open(out.join("shoulder-right-meshes.png")).unwrap();
+    assert_ne!(all.as_bytes(), meshes.as_bytes());
+
+    // A second run leaves every file as it was.
+    let before = pictures(&out);
+    let modified = std::fs::metadata(out.join("ball-anterior.png"))
+        .unwrap()
+        .modified()
+        .unwrap();
+    let stderr = ok(&["batch", m, "--out", o]);
+    assert!(stderr.contains("0 rendered, 3 up to date"), "{stderr}");
+    assert_eq!(
+        std::fs::metadata(out.join("ball-anterior.png"))
+            .unwrap()
+            .modified()
+            .unwrap(),
+        modified
+    );
+    assert_eq!(pictures(&out), before);
+
+    // A changed input renders its jobs again, and only them; so does a damaged output.
+    let mut ball = std::fs::read(dir.join("ball.raw")).unwrap();
+    ball[0] = 11;
+    std::fs::write(dir.join("ball.raw"), ball).unwrap();
+    std::fs::write(out.join("shoulder-anterior-meshes.png"), b"not a png").unwrap();
+    ok(&["batch", m, "--out", o]);
+    assert_eq!(
+        statuses(&index(&out.join("index.json"))),
+        [
+            ("shoulder".into(), "rendered".into()),
+            ("ball".into(), "rendered".into()),
+            ("ball-superior".into(), "rendered".into())
+        ]
+    );
+    assert_eq!(pictures(&out), before, "the same pictures again");
+    ok(&["batch", m, "--out", o]);
+    let stderr = ok(&["batch", m, "--out", o, "--force"]);
+    assert!(stderr.contains("3 rendered, 0 up to date"), "{stderr}");
+}
+
+#[test]
+fn batch_pictures_are_those_of_render() {
+    let dir = scratch("same-as-render");
+    let manifest = small_manifest(&dir);
+    let out = dir.join("out");
+    ok(&[
+        "batch",
+        manifest.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let single = dir.join("single.png");
+    ok(&[
+        "render",
+        &repo("examples/scenes/shoulder.toml"),
+        "--view",
+        "right",
+        "--size",
+        "96x72",
+        "--annotate",
+        "--out",
+        single.to_str().unwrap(),
+    ]);
+    let a = image::open(&single).unwrap();
+    let b = image::open(out.join("shoulder-right-all.png")).unwrap();
+    assert_eq!(a.as_bytes(), b.as_bytes());
+}
+
+#[test]
+fn shards_merge_into_the_unsharded_batch() {
+    let dir = scratch("shards");
+    let manifest = small_manifest(&dir);
+    let m = manifest.to_str().unwrap();
+    let whole = dir.join("whole");
+    ok(&["batch", m, "--out", whole.to_str().unwrap()]);
+    let sharded = dir.join("sharded");
+    let s = sharded.to_str().unwrap();
+    let stderr = fails(&["batch", "--merge", s]);
+    assert!(stderr.contains("no shard indexes"), "{stderr}");
+    ok(&["batch", m, "--out", s, "--shard", "2/2"]);
+    let stderr = fails(&["batch", "--merge", s]);
+    assert!(stderr.contains("missing index-1-of-2.json"), "{stderr}");
+    ok(&["batch", m, "--out", s, "--shard", "1/2"]);
+    let one = index(&sharded.join("index-1-of-2.json"));
+    assert_eq!(
+        statuses(&one),
+        [
+            ("shoulder".into(), "rendered".into()),
+            ("ball-superior".into(), "rendered".into())
+        ]
+    );
+    ok(&["batch", "--merge", s]);
+    let merged = index(&sharded.join("index.json"));
+    let unsharded = index(&whole.join("index.json"));
+    assert_eq!(merged["merged_shards"], 2);
+    assert_eq!(statuses(&merged), statuses(&unsharded));
+    let outputs = |i: &Value| -> Vec<Value> {
+        i["jobs"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .flat_map(|j| j["outputs"].as_array().unwrap().clone())
+            .collect()
+    };
+    assert_eq!(outputs(&merged), outputs(&unsharded));
+    assert_eq!(pictures(&sharded), pictures(&whole));
+}
+
+#[test]
+fn manifest_problems_are_all_reported_before_anything_is_drawn() {
+    let dir = scratch("problems");
+    let text = format!(
+        r#"
+[defaults]
+views = ["anterior", "sideways"]
+sizes = [[0, 100], [640, 480]]
+
+[[job]]
+name = "a"
+scene = "{}"
+out = "same.png"
+
+[[job]]
+name = "b"
+volume = "missing.nrrd"
+out = "same.png"
+
+[[job]]
+name = "a"
+scene = "nowhere.toml"
+orderings = ["sideways"]
+contents = ["meshes"]
+out = "../escape-{{view}}.png"
+"#,
+        repo("examples/scenes/shoulder.toml")
+    );
+    let manifest = dir.join("bad.toml");
+    std::fs::write(&manifest, text).unwrap();
+    let out = dir.join("out");
+    let stderr = fails(&[
+        "batch",
+        manifest.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    for expected in [
+        "defaults, key `views`",
+        "\"sideways\"",
+        "key `sizes`: [0, 100]",
+        "job 2 (b), key `volume`",
+        "missing.nrrd not found",
+        "job 3 (a), key `scene`",
+        "job 3 (a), key `name`: job 1 has this name too",
+        "nowhere.toml",
+        "job 3 (a), key `orderings`",
+        "job 3 (a), key `out`",
+        "nothing was rendered",
+    ] {
+        assert!(stderr.contains(expected), "{expected:?} not in {stderr}");
+    }
+    assert!(!out.exists(), "nothing is written for a bad manifest");
+
+    // Names that collide only: both jobs write one file.
+    let text = format!(
+        r#"
+[defaults]
+views = ["anterior"]
+sizes = [[64, 48]]
+out = "figure-{{view}}.png"
+
+[[job]]
+name = "one"
+scene = "{0}"
+
+[[job]]
+name = "two"
+scene = "{0}"
+"#,
+        repo("examples/scenes/shoulder.toml")
+    );
+    std::fs::write(&manifest, text).unwrap();
+    let stderr = fails(&[
+        "batch",
+        manifest.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(
+        stderr.contains(
+            "job 2 (two), key `out`: figure-anterior.png is written by one view anterior"
+        ),
+        "{stderr}"
+    );
+    // Unknown keys and misspelt tables name the key.
+    std::fs::write(
+        &manifest,
+        "[[job]]\nname = \"x\"\nscene = \"s.toml\"\nveiws = [\"anterior\"]\n",
+    )
+    .unwrap();
+    let stderr = fails(&[
+        "batch",
+        manifest.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(stderr.contains("veiws"), "{stderr}");
+    for bad in ["3/2", "0/0"] {
+        let stderr = fails(&[
+            "batch",
+            manifest.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--shard",
+            bad,
+        ]);
+        assert!(stderr.contains(&format!("--shard {bad}")), "{stderr}");
+    }
+}
+
+#[test]
+fn a_failing_job_is_recorded_and_the_batch_goes_on() {
+    let dir = scratch("failing");
+    write_ball(&dir.join("ball.raw"));
+    // Too short for its size: the job fails when it loads, not when the manifest is checked.
+    std::fs::write(dir.join("short.raw"), [0u8; 100]).unwrap();
+    let manifest = dir.join("manifest.toml");
+    std::fs::write(
+        &manifest,
+        r#"
+[defaults]
+views = ["anterior"]
+sizes = [[48, 48]]
+
+[[job]]
+name = "short"
+volume = { path = "short.raw", dims = [20, 20, 20], scalar = "u8" }
+
+[[job]]
+name = "ball"
+volume = { path = "ball.raw", dims = [20, 20, 20], scalar = "u8" }
+"#,
+    )
+    .unwrap();
+    let out = dir.join("out");
+    let stderr = fails(&[
+        "batch",
+        manifest.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(stderr.contains("1 of 2 jobs failed"), "{stderr}");
+    let i = index(&out.join("index.json"));
+    assert_eq!(
+        statuses(&i),
+        [
+            ("short".into(), "failed".into()),
+            ("ball".into(), "rendered".into())
+        ]
+    );
+    let error = i["jobs"][0]["error"].as_str().unwrap();
+    assert!(error.contains("short.raw"), "{error}");
+    assert!(out.join("ball-anterior.png").exists());
+}
+
+#[test]
+fn a_second_process_on_one_index_is_refused_and_a_killed_batch_resumes() {
+    let dir = scratch("kill");
+    let manifest = small_manifest(&dir);
+    let out = dir.join("out");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_splatscene"))
+        .args(["batch", manifest.to_str().unwrap(), "--out"])
+        .arg(&out)
+        .env("NODEVICE_SELECT", "1")
+        .env_remove("SLURM_ARRAY_TASK_ID")
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut lines = BufReader::new(child.stderr.take().unwrap()).lines();
+    // Once the first job is done, a second process on the same folder and shard is refused,
+    // and the first is killed.
+    loop {
+        let line = lines.next().expect("the batch ended early").unwrap();
+        if line.starts_with("[1/3]") {
+            break;
+        }
+    }
+    let stderr = fails(&[
+        "batch",
+        manifest.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(stderr.contains("another batch is writing"), "{stderr}");
+    child.kill().unwrap();
+    child.wait().unwrap();
+    let killed = index(&out.join("index.json"));
+    assert_eq!(killed["jobs"][0]["status"], "rendered");
+    ok(&[
+        "batch",
+        manifest.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let resumed = index(&out.join("index.json"));
+    assert_eq!(resumed["jobs"][0]["status"], "up-to-date");
+    assert_eq!(resumed["summary"]["failed"], 0);
+    assert_eq!(resumed["summary"]["pending"], 0);
+}
