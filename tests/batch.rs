@@ -508,3 +508,103 @@ fn a_second_process_on_one_index_is_refused_and_a_killed_batch_resumes() {
     assert_eq!(resumed["summary"]["failed"], 0);
     assert_eq!(resumed["summary"]["pending"], 0);
 }
+
+#[test]
+fn a_plans_measurements_are_written_as_json_and_drawn() {
+    let dir = scratch("measurements");
+    std::fs::write(
+        dir.join("plan.toml"),
+        r#"
+[[volume]]
+path = "builtin:shoulder-phantom"
+
+[[mesh]]
+name = "prosthesis"
+path = "builtin:prosthesis"
+seat = "phantom"
+
+[[measurement]]
+kind = "line-angle"
+label = "neck-shaft angle"
+node = "prosthesis"
+points = [[0, 0, 0], [0, 0, -40], [0, 0, 0], [-7.0004, 0, 7.0004]]
+
+[[measurement]]
+kind = "distance"
+label = "offset"
+points = [[0, 0, 0], [3, 4, 12]]
+"#,
+    )
+    .unwrap();
+    let manifest = dir.join("manifest.toml");
+    std::fs::write(
+        &manifest,
+        r#"
+[defaults]
+views = ["anterior"]
+sizes = [[128, 96]]
+
+[[job]]
+name = "labelled"
+scene = "plan.toml"
+
+[[job]]
+name = "unlabelled"
+scene = "plan.toml"
+annotate = "marker"
+measurements = "values/{job}.json"
+"#,
+    )
+    .unwrap();
+    let out = dir.join("out");
+    ok(&[
+        "batch",
+        manifest.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let json: Value = serde_json::from_str(
+        &std::fs::read_to_string(out.join("labelled-measurements.json")).unwrap(),
+    )
+    .unwrap();
+    let list = json["measurements"].as_array().unwrap();
+    assert_eq!(list.len(), 2);
+    assert_eq!(list[0]["label"], "neck-shaft angle");
+    assert_eq!(list[0]["node"], "prosthesis");
+    assert!(
+        (list[0]["value"].as_f64().unwrap() - 135.0).abs() < 1e-6,
+        "{json}"
+    );
+    assert_eq!(list[1]["value"].as_f64().unwrap(), 13.0);
+    assert_eq!(json["frame"], "RAS");
+    assert!(out.join("values/unlabelled.json").exists());
+    let i = index(&out.join("index.json"));
+    assert!(
+        i["jobs"][0]["outputs"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|o| o["kind"] == "measurements" && o["file"] == "labelled-measurements.json")
+    );
+    // The values are written beside the markers unless the annotations leave them out; the
+    // markers are drawn either way.
+    let labelled = image::open(out.join("labelled-anterior.png")).unwrap();
+    let unlabelled = image::open(out.join("unlabelled-anterior.png")).unwrap();
+    assert_ne!(labelled.as_bytes(), unlabelled.as_bytes());
+    let plain = dir.join("plain.png");
+    ok(&[
+        "render",
+        dir.join("plan.toml").to_str().unwrap(),
+        "--view",
+        "anterior",
+        "--size",
+        "128x96",
+        "--out",
+        plain.to_str().unwrap(),
+    ]);
+    assert_eq!(
+        image::open(&plain).unwrap().as_bytes(),
+        labelled.as_bytes(),
+        "batch and render draw a plan's measurements alike"
+    );
+}

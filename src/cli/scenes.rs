@@ -8,7 +8,9 @@ use serde_json::{Value, json};
 
 use splatscene::annotate::{Annotations, Label, annotate_image};
 use splatscene::order::Ordering;
-use splatscene::pick::measure::{MarkerStyle, MeasureKind, Measurement, annotate};
+use splatscene::pick::measure::{
+    MarkerStyle, Measurement, annotate, draw_scene_measurements, label_text,
+};
 use splatscene::pick::{PickOptions, Picker, surface_distances};
 use splatscene::render::{
     Compositor, DepthImage, DepthMode, FrameOptions, FrameReport, GpuContext, RenderError,
@@ -168,7 +170,8 @@ pub struct MeasureArgs {
     #[command(flatten)]
     view: ViewArgs,
     /// Pixels X,Y to pick, in order: two for a distance, three for the angle at the second,
-    /// four for the angle between the lines through the first two and the last two.
+    /// four for the angle between the directed lines from the first to the second and from
+    /// the third to the fourth (0 to 180 degrees).
     #[arg(long = "pixel", value_parser = parse_u32x2, required = true)]
     pixels: Vec<[u32; 2]>,
     /// World points X,Y,Z to measure instead of picking pixels.
@@ -224,7 +227,20 @@ pub fn run_render(args: RenderArgs) -> Result<()> {
             "--depth-mode mesh: the scene has no meshes, so the depth image would be empty; use --depth-mode surface for the volumes' surface"
         );
     }
-    let ctx = context_for(args.compositor, &loaded.scene)?;
+    // The scene's measurements are drawn in, their values written beside them unless the
+    // annotations asked for leave them out.
+    let mut drawn = loaded.scene.clone();
+    let mut labels = draw_scene_measurements(&mut drawn).map_err(anyhow::Error::msg)?;
+    if parts.as_ref().is_some_and(|p| !p.measurements) {
+        labels.clear();
+    }
+    let label_parts = match (&parts, labels.is_empty()) {
+        (None, false) => {
+            Some(Annotations::parse_parts("measurements").map_err(anyhow::Error::msg)?)
+        }
+        (p, _) => p.clone(),
+    };
+    let ctx = context_for(args.compositor, &drawn)?;
     // One renderer for every view: the volumes are classified once.
     let mut renderer = Renderer::with_compositor(args.compositor);
     let device = ctx
@@ -232,10 +248,10 @@ pub fn run_render(args: RenderArgs) -> Result<()> {
         .map_or("no GPU adapter".into(), GpuContext::describe);
     for ((name, camera), (out, depth)) in cameras.iter().zip(outputs.iter().zip(&depths)) {
         let shot = match &ctx {
-            Some(ctx) => renderer.screenshot(ctx, &loaded.scene, camera, size, &options)?,
-            None => renderer.screenshot_without_gpu(&loaded.scene, camera, size, &options)?,
+            Some(ctx) => renderer.screenshot(ctx, &drawn, camera, size, &options)?,
+            None => renderer.screenshot_without_gpu(&drawn, camera, size, &options)?,
         };
-        let image = figure(&shot, &loaded.scene, camera, parts.as_ref(), &[])?;
+        let image = figure(&shot, &loaded.scene, camera, label_parts.as_ref(), &labels)?;
         write_replacing(out, &encode_png(&image)?)?;
         if let Some(path) = depth {
             write_depth(path, &shot, &loaded.scene, depth_mode, args.surface_opacity)?;
@@ -399,7 +415,8 @@ fn context_for(compositor: Compositor, scene: &Scene) -> Result<Option<GpuContex
     match GpuContext::headless() {
         Ok(ctx) => Ok(Some(ctx)),
         Err(e @ RenderError::NoAdapter(_))
-            if compositor != Compositor::Gpu && scene.meshes().next().is_none() =>
+            if compositor != Compositor::Gpu
+                && scene.meshes().chain(scene.overlays()).next().is_none() =>
         {
             eprintln!("{e}\ncompositing the volumes on the CPU");
             Ok(None)
@@ -484,15 +501,8 @@ pub fn run_measure(args: MeasureArgs) -> Result<()> {
     }
     println!("{}", serde_json::to_string_pretty(&out)?);
     if let Some(path) = &args.out {
-        let radius = loaded
-            .scene
-            .bounds()
-            .map_or(1.0, |(lo, hi)| (hi - lo).length() * 0.006);
-        let style = MarkerStyle {
-            point_radius: radius,
-            line_radius: radius * 0.3,
-            ..MarkerStyle::default()
-        };
+        let style = MarkerStyle::for_scene(&loaded.scene);
+        let mut labels = draw_scene_measurements(&mut loaded.scene).map_err(anyhow::Error::msg)?;
         annotate(&mut loaded.scene, &measurement, &style)?;
         let options = FrameOptions {
             background: loaded.background,
@@ -506,7 +516,7 @@ pub fn run_measure(args: MeasureArgs) -> Result<()> {
             .parts()?
             .unwrap_or_else(|| Annotations::parse_parts("measurements").unwrap_or_default());
         parts.measurements = true;
-        let labels = [measurement_label(&measurement)];
+        labels.push(measurement_label(&measurement));
         let image = figure(&shot, &loaded.scene, &camera, Some(&parts), &labels)?;
         write_replacing(path, &encode_png(&image)?)?;
         eprintln!("wrote {}", path.display());
@@ -517,14 +527,10 @@ pub fn run_measure(args: MeasureArgs) -> Result<()> {
 /// The text of a measurement and where it goes: the middle of a distance, the vertex of an
 /// angle, the middle of the first line of a line angle.
 fn measurement_label(m: &Measurement) -> Label {
-    let p: Vec<DVec3> = m.points.iter().map(|p| DVec3::from(*p)).collect();
-    let (at, text) = match (m.kind, p.as_slice()) {
-        (MeasureKind::Distance, [a, b]) => (0.5 * (*a + *b), format!("{:.1} mm", m.value)),
-        (MeasureKind::Angle, [_, v, _]) => (*v, format!("{:.1}\u{b0}", m.value)),
-        (_, [a, b, ..]) => (0.5 * (*a + *b), format!("{:.1}\u{b0}", m.value)),
-        _ => (DVec3::ZERO, String::new()),
-    };
-    Label { at, text }
+    Label {
+        at: m.label_anchor(),
+        text: label_text(m, None),
+    }
 }
 
 /// Whether two output paths name one file, also when reached two ways (`./`, `..`, links).

@@ -5,43 +5,135 @@ use std::f64::consts::PI;
 use std::sync::Arc;
 
 use glam::{DMat4, DQuat, DVec3};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use crate::mesh::{CpuMesh, Material};
 use crate::scene::{MeshNode, NodeContent, NodeId, Scene, SceneError};
 
 /// What was measured.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum MeasureKind {
     /// Distance between two points, millimetres.
     Distance,
-    /// Angle at the middle of three points, degrees.
+    /// Angle at the middle of three points, degrees (0 to 180).
     Angle,
-    /// Angle between the lines through two pairs of points, degrees (0 to 90).
+    /// Angle between the directed lines from the first point to the second and from the third
+    /// to the fourth, degrees (0 to 180): a neck-shaft angle of 135 degrees reads 135, not 45.
     LineAngle,
+    /// A marked point (a landmark); it has no value.
+    Point,
+}
+
+impl MeasureKind {
+    /// How many points a measurement of this kind takes.
+    pub fn point_count(self) -> usize {
+        match self {
+            Self::Distance => 2,
+            Self::Angle => 3,
+            Self::LineAngle => 4,
+            Self::Point => 1,
+        }
+    }
+
+    /// The name in scene files and JSON.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Distance => "distance",
+            Self::Angle => "angle",
+            Self::LineAngle => "line-angle",
+            Self::Point => "point",
+        }
+    }
 }
 
 /// A measurement: its kind, the world points it was taken from and its value.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Measurement {
-    /// Distance or angle.
+    /// Distance, angle or point.
     pub kind: MeasureKind,
     /// The points, in world millimetres.
     pub points: Vec<[f64; 3]>,
-    /// The value, in `unit`.
-    pub value: f64,
-    /// "mm" or "degrees".
+    /// The value, in `unit` (none for a point).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub value: Option<f64>,
+    /// "mm" or "degrees" (a point's coordinates are in mm).
     pub unit: &'static str,
 }
 
 impl Measurement {
+    /// The measurement of `kind` over `points`.
+    ///
+    /// # Errors
+    ///
+    /// A message when the number of points is not the kind's, a point is not finite, or the
+    /// points make no angle (a point on its vertex, a line of one point).
+    pub fn new(kind: MeasureKind, points: &[DVec3]) -> Result<Self, String> {
+        if points.len() != kind.point_count() {
+            let article = if kind == MeasureKind::Angle {
+                "an"
+            } else {
+                "a"
+            };
+            return Err(format!(
+                "{article} {} takes {} point{}, not {}",
+                kind.name(),
+                kind.point_count(),
+                if kind.point_count() == 1 { "" } else { "s" },
+                points.len()
+            ));
+        }
+        if let Some(bad) = points.iter().find(|p| !p.is_finite()) {
+            return Err(format!("point {bad} is not finite"));
+        }
+        match (kind, points) {
+            (MeasureKind::Distance, [a, b]) => Ok(Self::distance(*a, *b)),
+            (MeasureKind::Angle, [a, v, b]) => Self::angle(*a, *v, *b).ok_or_else(|| {
+                "an angle needs its first and last points apart from its vertex".into()
+            }),
+            (MeasureKind::LineAngle, [a0, a1, b0, b1]) => Self::line_angle(*a0, *a1, *b0, *b1)
+                .ok_or_else(|| "each line of a line angle needs two distinct points".into()),
+            (MeasureKind::Point, [p]) => Ok(Self::point(*p)),
+            _ => Err(format!("a {} cannot be made of these points", kind.name())),
+        }
+    }
+
+    /// A marked point.
+    pub fn point(p: DVec3) -> Self {
+        Self {
+            kind: MeasureKind::Point,
+            points: vec![p.to_array()],
+            value: None,
+            unit: "mm",
+        }
+    }
+
+    /// The value as text with its unit (`42.3 mm`, `131.9°`), none for a point.
+    pub fn value_text(&self) -> Option<String> {
+        let value = self.value?;
+        Some(match self.kind {
+            MeasureKind::Distance => format!("{value:.1} mm"),
+            _ => format!("{value:.1}\u{b0}"),
+        })
+    }
+
+    /// Where a label goes: the middle of a distance, the vertex of an angle, the middle of the
+    /// first line of a line angle, the point itself.
+    pub fn label_anchor(&self) -> DVec3 {
+        let p: Vec<DVec3> = self.points.iter().map(|p| DVec3::from(*p)).collect();
+        match (self.kind, p.as_slice()) {
+            (MeasureKind::Angle, [_, v, _]) => *v,
+            (_, [a, b, ..]) => 0.5 * (*a + *b),
+            (_, [a]) => *a,
+            _ => DVec3::ZERO,
+        }
+    }
     /// The distance from `a` to `b`.
     pub fn distance(a: DVec3, b: DVec3) -> Self {
         Self {
             kind: MeasureKind::Distance,
             points: vec![a.to_array(), b.to_array()],
-            value: a.distance(b),
+            value: Some(a.distance(b)),
             unit: "mm",
         }
     }
@@ -53,20 +145,21 @@ impl Measurement {
         Some(Self {
             kind: MeasureKind::Angle,
             points: vec![a.to_array(), vertex.to_array(), b.to_array()],
-            value,
+            value: Some(value),
             unit: "degrees",
         })
     }
 
-    /// The angle between the line through `a0, a1` and the line through `b0, b1` (0 to 90
-    /// degrees: lines have no direction), as for the inclination of a prosthesis against the
-    /// shaft axis; `None` for a degenerate line.
+    /// The angle between the directed line from `a0` to `a1` and the directed line from `b0`
+    /// to `b1` (0 to 180 degrees), as for a neck-shaft angle (the shaft axis drawn from distal
+    /// to proximal, the neck axis from the shaft to the head); `None` for a line of one point.
+    /// Swapping the points of one line gives 180 degrees less the angle.
     pub fn line_angle(a0: DVec3, a1: DVec3, b0: DVec3, b1: DVec3) -> Option<Self> {
         let value = angle_between(a1 - a0, b1 - b0)?;
         Some(Self {
             kind: MeasureKind::LineAngle,
             points: vec![a0.to_array(), a1.to_array(), b0.to_array(), b1.to_array()],
-            value: value.min(180.0 - value),
+            value: Some(value),
             unit: "degrees",
         })
     }
@@ -112,6 +205,54 @@ impl Default for MarkerStyle {
             },
         }
     }
+}
+
+impl MarkerStyle {
+    /// Markers sized for `scene`: points of 0.6% of its diagonal.
+    pub fn for_scene(scene: &Scene) -> Self {
+        let radius = scene
+            .bounds()
+            .map_or(1.0, |(lo, hi)| (hi - lo).length() * 0.006);
+        Self {
+            point_radius: radius,
+            line_radius: radius * 0.3,
+            ..Self::default()
+        }
+    }
+}
+
+/// The text written beside a measurement: `label: value`, the value alone, or for a point its
+/// label (or `point`).
+pub fn label_text(m: &Measurement, label: Option<&str>) -> String {
+    match (label, m.value_text()) {
+        (Some(l), Some(v)) => format!("{l}: {v}"),
+        (None, Some(v)) => v,
+        (Some(l), None) => l.to_owned(),
+        (None, None) => "point".into(),
+    }
+}
+
+/// Draws the scene's own measurements into it (markers and lines, as [`annotate`] does) and
+/// returns their values as text with where to write them.
+///
+/// # Errors
+///
+/// A message naming the measurement whose points no longer make one (a node moved onto
+/// another point).
+pub fn draw_scene_measurements(scene: &mut Scene) -> Result<Vec<crate::annotate::Label>, String> {
+    let style = MarkerStyle::for_scene(scene);
+    let mut labels = Vec::new();
+    for (i, m) in scene.measurements.clone().iter().enumerate() {
+        let value = scene
+            .measure(m)
+            .map_err(|e| format!("measurement {}: {e}", i + 1))?;
+        annotate(scene, &value, &style).map_err(|e| e.to_string())?;
+        labels.push(crate::annotate::Label {
+            at: value.label_anchor(),
+            text: label_text(&value, m.label.as_deref()),
+        });
+    }
+    Ok(labels)
 }
 
 /// Adds `measurement` to the scene as a group of marker spheres and line cylinders, drawn as
@@ -208,29 +349,60 @@ mod tests {
     #[test]
     fn distances_and_angles() {
         let d = Measurement::distance(DVec3::ZERO, DVec3::new(3.0, 4.0, 0.0));
-        assert_eq!((d.value, d.unit), (5.0, "mm"));
+        assert_eq!((d.value, d.unit), (Some(5.0), "mm"));
+        assert_eq!(d.value_text().unwrap(), "5.0 mm");
         let a = Measurement::angle(DVec3::X, DVec3::ZERO, DVec3::new(-1.0, 1.0, 0.0)).unwrap();
-        assert!((a.value - 135.0).abs() < 1e-12, "{}", a.value);
+        let value = a.value.unwrap();
+        assert!((value - 135.0).abs() < 1e-12, "{value}");
+        assert_eq!(a.value_text().unwrap(), "135.0\u{b0}");
         let tiny = Measurement::angle(DVec3::X, DVec3::ZERO, DVec3::new(1.0, 1e-9, 0.0)).unwrap();
         assert!(
-            (tiny.value - 1e-9f64.to_degrees()).abs() < 1e-15,
+            (tiny.value.unwrap() - 1e-9f64.to_degrees()).abs() < 1e-15,
             "accurate near zero"
         );
         assert!(Measurement::angle(DVec3::ZERO, DVec3::ZERO, DVec3::X).is_none());
-        // Lines have no direction: 150 degrees between directions is 30 between lines.
-        let l = Measurement::line_angle(
-            DVec3::ZERO,
-            DVec3::Z,
-            DVec3::ZERO,
-            DVec3::new(0.5, 0.0, -(0.75f64).sqrt()),
-        )
-        .unwrap();
-        assert!((l.value - 30.0).abs() < 1e-9, "{}", l.value);
+        // Lines are directed: 150 degrees between the directions, 30 with one line reversed.
+        let down = DVec3::new(0.5, 0.0, -(0.75f64).sqrt());
+        let l = Measurement::line_angle(DVec3::ZERO, DVec3::Z, DVec3::ZERO, down).unwrap();
+        assert!((l.value.unwrap() - 150.0).abs() < 1e-9, "{:?}", l.value);
+        let r = Measurement::line_angle(DVec3::Z, DVec3::ZERO, DVec3::ZERO, down).unwrap();
+        assert!((r.value.unwrap() - 30.0).abs() < 1e-9, "{:?}", r.value);
         let json = serde_json::to_string(&a).unwrap();
         assert!(
             json.contains("\"kind\":\"angle\"") && json.contains("\"unit\":\"degrees\""),
             "{json}"
         );
+        let p = Measurement::point(DVec3::ONE);
+        assert_eq!(p.value_text(), None);
+        assert!(!serde_json::to_string(&p).unwrap().contains("value"));
+    }
+
+    #[test]
+    fn measurements_are_checked() {
+        let p = [DVec3::ZERO, DVec3::X, DVec3::Y, DVec3::Z];
+        for kind in [
+            MeasureKind::Distance,
+            MeasureKind::Angle,
+            MeasureKind::LineAngle,
+            MeasureKind::Point,
+        ] {
+            let n = kind.point_count();
+            assert!(Measurement::new(kind, &p[..n]).is_ok(), "{kind:?}");
+            let e = Measurement::new(kind, &p[..n - 1]).unwrap_err();
+            assert!(e.contains(&format!("takes {n} point")), "{e}");
+        }
+        let nan = DVec3::new(f64::NAN, 0.0, 0.0);
+        assert!(Measurement::new(MeasureKind::Distance, &[nan, DVec3::X]).is_err());
+        assert!(Measurement::new(MeasureKind::Angle, &[DVec3::X, DVec3::X, DVec3::Y]).is_err());
+        assert!(
+            Measurement::new(
+                MeasureKind::LineAngle,
+                &[DVec3::X, DVec3::X, DVec3::Y, DVec3::Z]
+            )
+            .is_err()
+        );
+        let a = Measurement::new(MeasureKind::Angle, &[DVec3::X, DVec3::ZERO, DVec3::Y]).unwrap();
+        assert_eq!(a.label_anchor(), DVec3::ZERO);
     }
 
     #[test]

@@ -53,12 +53,14 @@ use super::shoulder::{
     add_model, cut_away_anterior_humerus, prosthesis_model, resect_humeral_head,
 };
 use super::{
-    Light, Lights, NodeContent, NodeId, Projection, Scene, SceneCamera, SplatSettings, VolumeNode,
+    Light, Lights, NodeContent, NodeId, Projection, Scene, SceneCamera, SceneMeasurement,
+    SplatSettings, VolumeNode,
 };
 use crate::classify::{TransferFunction, auto_transfer};
 use crate::mesh::prosthesis::seat_in_phantom;
 use crate::mesh::{MeshError, load_mesh};
 use crate::order::Ordering;
+use crate::pick::measure::MeasureKind;
 use crate::volume::dicom::SeriesChoice;
 use crate::volume::phantom::{DEFAULT_DIMS, DEFAULT_SPACING};
 use crate::volume::{
@@ -305,6 +307,22 @@ pub struct MeshSpec {
     pub transform: TransformSpec,
 }
 
+/// A measurement of the plan: `kind = "distance" | "angle" | "line-angle" | "point"` and its
+/// 2, 3, 4 or 1 `points`, in world millimetres or, with `node`, in that node's frame (so that
+/// a landmark on an implant moves with it).
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct MeasurementSpec {
+    /// What is measured.
+    pub kind: MeasureKind,
+    /// The points.
+    pub points: Vec<[f64; 3]>,
+    /// The name written beside the value.
+    pub label: Option<String>,
+    /// The name of the node (a mesh or volume) whose frame the points are in.
+    pub node: Option<String>,
+}
+
 /// A whole scene file.
 #[derive(Debug, Clone, Default, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
@@ -323,6 +341,9 @@ pub struct SceneFile {
     /// Meshes.
     #[serde(default, rename = "mesh")]
     pub meshes: Vec<MeshSpec>,
+    /// Measurements.
+    #[serde(default, rename = "measurement", skip_serializing_if = "Vec::is_empty")]
+    pub measurements: Vec<MeasurementSpec>,
 }
 
 /// A loaded scene with the output settings of its file.
@@ -408,6 +429,10 @@ impl SceneFile {
                     .clone(),
                 id,
             ));
+        }
+        for (i, spec) in self.measurements.iter().enumerate() {
+            let m = measurement(&scene, spec, i).map_err(&invalid)?;
+            scene.measurements.push(m);
         }
         for warning in scale_warnings(&scene, &meshes) {
             eprintln!("warning: {}: {warning}", path.display());
@@ -865,6 +890,55 @@ fn load_mesh_spec(
         .ok_or_else(|| invalid(format!("mesh {name}: transform is singular")))
 }
 
+/// Longest measurement label, in characters.
+const MAX_LABEL: usize = 200;
+
+/// A scene file's measurement, checked against the scene loaded so far.
+fn measurement(
+    scene: &Scene,
+    spec: &MeasurementSpec,
+    index: usize,
+) -> Result<SceneMeasurement, String> {
+    let name = match &spec.label {
+        Some(l) => format!("measurement {} ({l:?})", index + 1),
+        None => format!("measurement {}", index + 1),
+    };
+    if let Some(label) = &spec.label
+        && (label.trim().is_empty()
+            || label.chars().count() > MAX_LABEL
+            || label.chars().any(char::is_control))
+    {
+        return Err(format!(
+            "{name}: label must be 1 to {MAX_LABEL} characters of text on one line"
+        ));
+    }
+    let node = match &spec.node {
+        None => None,
+        Some(n) => Some(scene.find(n).ok_or_else(|| {
+            let names: Vec<&str> = scene
+                .nodes()
+                .iter()
+                .filter(|node| node.parent().is_none())
+                .map(|node| node.name.as_str())
+                .collect();
+            format!(
+                "{name}: node {n:?} is not in the scene (its top nodes: {})",
+                names.join(", ")
+            )
+        })?),
+    };
+    let m = SceneMeasurement {
+        kind: spec.kind,
+        points: spec.points.iter().map(|p| DVec3::from(*p)).collect(),
+        node,
+        label: spec.label.clone(),
+    };
+    scene
+        .measure(&m)
+        .map_err(|e| format!("{name}: points: {e}"))?;
+    Ok(m)
+}
+
 /// Warnings for meshes whose size is under 1/100 or over 100 times the largest volume's: most
 /// likely a file in other units than the scene (an STL in metres in a millimetre CT).
 pub fn scale_warnings(scene: &Scene, meshes: &[(String, NodeId)]) -> Vec<String> {
@@ -1221,6 +1295,71 @@ mod tests {
         let message = err.to_string();
         assert!(message.contains(DATA_ENV), "{message}");
         assert!(message.contains("scene.toml"), "{message}");
+    }
+
+    #[test]
+    fn measurements_load_with_their_node_and_bad_ones_name_the_key() {
+        let dir = TempDir::new("measurements");
+        let scene = |measurement: &str| {
+            format!(
+                "[[mesh]]\nname = \"stem\"\npath = \"builtin:prosthesis\"\ntransform = {{ translate = [10, 0, 0] }}\n{measurement}"
+            )
+        };
+        let good = dir.write(
+            "good.toml",
+            &scene(
+                "[[measurement]]\nkind = \"line-angle\"\nlabel = \"neck-shaft angle\"\nnode = \"stem\"\npoints = [[0, 0, 0], [0, 0, -40], [0, 0, 0], [-7, 0, 7]]\n\n[[measurement]]\nkind = \"distance\"\npoints = [[0, 0, 0], [3, 4, 0]]\n\n[[measurement]]\nkind = \"point\"\nnode = \"stem\"\npoints = [[1, 2, 3]]\n",
+            ),
+        );
+        let loaded = load_scene_file(&good).unwrap();
+        let s = &loaded.scene;
+        assert_eq!(s.measurements.len(), 3);
+        let angle = s.measure(&s.measurements[0]).unwrap();
+        assert!((angle.value.unwrap() - 135.0).abs() < 1e-9, "{angle:?}");
+        assert_eq!(s.measure(&s.measurements[1]).unwrap().value, Some(5.0));
+        // Points given in a node's frame move with it.
+        let point = s.measure(&s.measurements[2]).unwrap();
+        assert_eq!(point.points, vec![[11.0, 2.0, 3.0]]);
+        // The file written back keeps them.
+        let file = SceneFile::read(&good).unwrap();
+        let again = SceneFile::parse(&file.to_toml().unwrap(), &good).unwrap();
+        assert_eq!(again.measurements.len(), 3);
+
+        for (text, expected) in [
+            (
+                "[[measurement]]\nkind = \"angle\"\npoints = [[0, 0, 0], [1, 0, 0]]\n",
+                "measurement 1: points: an angle takes 3 points, not 2",
+            ),
+            (
+                "[[measurement]]\nkind = \"diameter\"\npoints = [[0, 0, 0]]\n",
+                "unknown variant `diameter`",
+            ),
+            (
+                "[[measurement]]\nkind = \"distance\"\npoints = [[nan, 0, 0], [1, 0, 0]]\n",
+                "not finite",
+            ),
+            (
+                "[[measurement]]\nkind = \"point\"\nlabel = 7\npoints = [[0, 0, 0]]\n",
+                "label",
+            ),
+            (
+                "[[measurement]]\nkind = \"point\"\nnode = \"humerus\"\npoints = [[0, 0, 0]]\n",
+                "node \"humerus\" is not in the scene (its top nodes: stem)",
+            ),
+            (
+                "[[measurement]]\nkind = \"point\"\nlabel = \"  \"\npoints = [[0, 0, 0]]\n",
+                "label must be",
+            ),
+            (
+                "[[measurement]]\nkind = \"point\"\npoints = [[0, 0]]\n",
+                "measurement",
+            ),
+        ] {
+            let path = dir.write("bad.toml", &scene(text));
+            let e = load_scene_file(&path).unwrap_err().to_string();
+            assert!(e.contains(expected), "{text}: {e}");
+            assert!(e.contains("bad.toml"), "{e}");
+        }
     }
 
     #[test]

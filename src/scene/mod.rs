@@ -11,6 +11,7 @@ use crate::classify::TransferFunction;
 use crate::composite::SplatStyle;
 use crate::mesh::{CpuMesh, Material};
 use crate::order::{OrderError, Ordering, VolumeGeometry};
+use crate::pick::measure::{MeasureKind, Measurement};
 use crate::volume::CpuVolume;
 
 mod clip;
@@ -158,6 +159,22 @@ pub struct Scene {
     /// The scene's up, the axis orbits turn about; `None` takes the patient's superior axis
     /// (see [`Scene::up_axis`]).
     pub up: Option<DVec3>,
+    /// Measurements kept with the scene (a plan's distances, angles and landmarks).
+    pub measurements: Vec<SceneMeasurement>,
+}
+
+/// A measurement kept in a scene: its points in world millimetres, or in a node's frame so
+/// that they move with the node (a landmark on an implant).
+#[derive(Debug, Clone, PartialEq)]
+pub struct SceneMeasurement {
+    /// Distance, angle, line angle or point.
+    pub kind: MeasureKind,
+    /// The points, in the frame of `node` when it is set, else in the world.
+    pub points: Vec<DVec3>,
+    /// The node the points move with.
+    pub node: Option<NodeId>,
+    /// The name written beside the value (`neck-shaft angle`).
+    pub label: Option<String>,
 }
 
 impl Scene {
@@ -235,6 +252,21 @@ impl Scene {
     /// A node's transform to world space (kept up to date on every edit).
     pub fn world(&self, id: NodeId) -> DMat4 {
         self.world.get(id.0).copied().unwrap_or(DMat4::IDENTITY)
+    }
+
+    /// The value of a measurement of this scene, its points in the world.
+    ///
+    /// # Errors
+    ///
+    /// A message when the points make no measurement of its kind (see [`Measurement::new`]).
+    pub fn measure(&self, m: &SceneMeasurement) -> Result<Measurement, String> {
+        let to_world = m.node.map_or(DMat4::IDENTITY, |id| self.world(id));
+        let points: Vec<DVec3> = m
+            .points
+            .iter()
+            .map(|p| to_world.transform_point3(*p))
+            .collect();
+        Measurement::new(m.kind, &points)
     }
 
     /// Counts edits; a renderer compares it with the value it last saw to know what to redo.

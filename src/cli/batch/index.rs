@@ -75,20 +75,25 @@ impl CameraRecord {
 pub struct OutputRecord {
     /// The file, relative to the output folder, with `/` between folders.
     pub file: String,
-    /// `image`, `depth` or `depth-calibration`.
+    /// `image`, `depth`, `depth-calibration` or `measurements`.
     pub kind: String,
     /// BLAKE3 of the file's bytes.
     pub blake3: String,
-    /// The view's name.
-    pub view: String,
-    /// `all`, `meshes` or `volumes`.
-    pub content: String,
-    /// The ordering.
-    pub ordering: String,
-    /// Width and height.
-    pub size: [u32; 2],
-    /// The camera.
-    pub camera: CameraRecord,
+    /// The view's name (pictures).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub view: Option<String>,
+    /// `all`, `meshes` or `volumes` (pictures).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub content: Option<String>,
+    /// The ordering (pictures).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ordering: Option<String>,
+    /// Width and height (pictures).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub size: Option<[u32; 2]>,
+    /// The camera (pictures).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub camera: Option<CameraRecord>,
 }
 
 /// How a job ended.

@@ -134,6 +134,9 @@ pub struct JobSpec {
     pub depth_mode: Option<String>,
     /// The opacity that makes a volume's surface in surface depth images.
     pub surface_opacity: Option<f32>,
+    /// Where the scene's measurements go as JSON, when it has any (`{job}-measurements.json`
+    /// by default); `{job}` is replaced.
+    pub measurements: Option<String>,
 }
 
 impl JobSpec {
@@ -162,7 +165,8 @@ impl JobSpec {
             out,
             depth,
             depth_mode,
-            surface_opacity
+            surface_opacity,
+            measurements
         )
     }
 }
@@ -254,6 +258,8 @@ pub struct PlannedJob {
     pub depth_mode: Option<String>,
     /// The surface opacity of surface depth images.
     pub surface_opacity: f32,
+    /// The measurements' JSON file, when the scene has measurements.
+    pub measurements: Option<PathBuf>,
     /// The merged spec, hashed with the inputs so that a changed key renders the job again.
     pub spec: JobSpec,
 }
@@ -496,7 +502,7 @@ fn plan_job(position: usize, spec: JobSpec, base: &Path) -> Result<PlannedJob, V
         file.meshes.append(&mut added.meshes);
     }
     if let Some([lo, hi]) = spec.window
-        && !(lo < hi)
+        && lo >= hi
     {
         problem(
             "window",
@@ -714,6 +720,29 @@ fn plan_job(position: usize, spec: JobSpec, base: &Path) -> Result<PlannedJob, V
             problem(key, e);
         }
     }
+    let measurements_out = spec
+        .measurements
+        .clone()
+        .unwrap_or_else(|| "{job}-measurements.json".into());
+    if let Err(e) = check_pattern(&measurements_out, false) {
+        problem("measurements", e);
+    } else if Path::new(&measurements_out)
+        .extension()
+        .is_none_or(|e| !e.eq_ignore_ascii_case("json"))
+    {
+        problem(
+            "measurements",
+            format!(
+                "{measurements_out:?}: measurements are written as JSON; end the name with .json"
+            ),
+        );
+    }
+    if spec.measurements.is_some() && file.measurements.is_empty() {
+        problem(
+            "measurements",
+            "the scene has no [[measurement]] to write".into(),
+        );
+    }
     if let Some(caption) = &spec.caption
         && let Err(e) = check_placeholders(caption)
     {
@@ -743,8 +772,11 @@ fn plan_job(position: usize, spec: JobSpec, base: &Path) -> Result<PlannedJob, V
             }
         }
     }
+    let measurements = (!file.measurements.is_empty())
+        .then(|| PathBuf::from(measurements_out.replace("{job}", &name)));
     Ok(PlannedJob {
         position,
+        measurements,
         name,
         file,
         source,
@@ -919,6 +951,22 @@ fn check_names(jobs: &[PlannedJob], problems: &mut Vec<Problem>) {
 fn check_outputs(jobs: &[PlannedJob], problems: &mut Vec<Problem>) {
     let mut owners: HashMap<PathBuf, (usize, String)> = HashMap::new();
     for job in jobs {
+        if let Some(file) = &job.measurements {
+            let what = format!("{} measurements", job.name);
+            match owners.get(&normal(file)) {
+                Some((_, other)) => problems.push(Problem {
+                    job: label(job.position, Some(&job.name)),
+                    key: "measurements".into(),
+                    message: format!(
+                        "{} is written by {other} and by {what}; put {{job}} in the name",
+                        file.display()
+                    ),
+                }),
+                None => {
+                    owners.insert(normal(file), (job.position, what));
+                }
+            }
+        }
         for item in &job.items {
             let mut files = vec![("out", normal(&item.image))];
             if let Some(d) = &item.depth {

@@ -17,6 +17,8 @@ use splatscene::render::{
 use splatscene::scene::file::{LoadedScene, camera as scene_camera, named_view_camera};
 use splatscene::scene::{NodeContent, NodeId, Scene};
 
+use splatscene::pick::measure::draw_scene_measurements;
+
 use super::scenes::{depth_files, figure_image};
 use index::{CameraRecord, FileHash, Index, InputRecord, JobRecord, OutputRecord, Status, Timings};
 use manifest::{Content, PlannedJob, ViewKind};
@@ -184,8 +186,7 @@ pub fn run_batch(args: BatchArgs) -> Result<()> {
             run_job(job, &settings, &earlier, &mut renderer, &bar)
         }));
         let record = match outcome {
-            Ok(Ok(record)) => record,
-            Ok(Err((e, partial))) => failed(job, partial, format!("{e:#}")),
+            Ok(record) => record,
             Err(panic) => {
                 // The renderer may be left half-way through a frame: start afresh.
                 renderer = Renderer::with_compositor(args.compositor);
@@ -401,7 +402,7 @@ fn run_job(
     earlier: &std::collections::HashMap<String, JobRecord>,
     renderer: &mut Renderer,
     bar: &ProgressBar,
-) -> std::result::Result<JobRecord, (anyhow::Error, Option<JobRecord>)> {
+) -> JobRecord {
     let started = Instant::now();
     let mut record = JobRecord {
         job: job.position + 1,
@@ -414,13 +415,16 @@ fn run_job(
         error: None,
     };
     let mut timings = Timings::default();
-    let loaded = job
-        .file
-        .load(&job.source, Path::new("."))
-        .map_err(|e| (anyhow::Error::from(e), None))?;
+    let loaded = match job.file.load(&job.source, Path::new(".")) {
+        Ok(loaded) => loaded,
+        Err(e) => return failed(job, None, format!("{:#}", anyhow::Error::from(e))),
+    };
     timings.load = ms(started.elapsed());
     let hashing = Instant::now();
-    let (inputs, hash) = job_hash(job, &loaded, settings.compositor).map_err(|e| (e, None))?;
+    let (inputs, hash) = match job_hash(job, &loaded, settings.compositor) {
+        Ok(h) => h,
+        Err(e) => return failed(job, None, format!("{e:#}")),
+    };
     record.inputs = inputs;
     record.hash = Some(hash.clone());
     if let Some(done) = earlier.get(&hash)
@@ -432,7 +436,7 @@ fn run_job(
         kept.status = Status::UpToDate;
         kept.error = None;
         bar.inc(job.items.len() as u64);
-        return Ok(kept);
+        return kept;
     }
     timings.hash = ms(hashing.elapsed());
     let result = render_job(
@@ -447,8 +451,8 @@ fn run_job(
     timings.total = ms(started.elapsed());
     record.timings_ms = Some(timings);
     match result {
-        Ok(()) => Ok(record),
-        Err(e) => Err((e, Some(record))),
+        Ok(()) => record,
+        Err(e) => failed(job, Some(record), format!("{e:#}")),
     }
 }
 
@@ -471,11 +475,28 @@ fn render_job(
     };
     let base = full.camera.context("the scene has no camera")?;
     let mut scenes: Vec<(Content, Scene)> = Vec::new();
+    let mut labels = Vec::new();
+    if let Some(file) = &job.measurements {
+        let json = measurements_json(full)?;
+        write_output(settings.out, file, json.as_bytes())?;
+        record.outputs.push(OutputRecord {
+            file: slashed(file),
+            kind: "measurements".into(),
+            blake3: blake3::hash(json.as_bytes()).to_hex().to_string(),
+            view: None,
+            content: None,
+            ordering: None,
+            size: None,
+            camera: None,
+        });
+    }
     for item in &job.items {
         let scene = match scenes.iter().find(|(c, _)| *c == item.content) {
             Some((_, s)) => s,
             None => {
-                scenes.push((item.content, content_scene(full, item.content)?));
+                let mut scene = content_scene(full, item.content)?;
+                labels = draw_scene_measurements(&mut scene).map_err(anyhow::Error::msg)?;
+                scenes.push((item.content, scene));
                 &scenes.last().context("a scene was just added")?.1
             }
         };
@@ -513,26 +534,31 @@ fn render_job(
         timings.classify += classify;
         timings.render += ms(drawing.elapsed()) - classify;
         let writing = Instant::now();
+        // As `render` draws them: measurement values unless the parts leave them out.
         let mut item_parts = parts.clone();
+        let item_labels = match &item_parts {
+            Some(p) if !p.measurements => &[][..],
+            _ => &labels[..],
+        };
+        if item_parts.is_none() && !item_labels.is_empty() {
+            item_parts =
+                Some(Annotations::parse_parts("measurements").map_err(anyhow::Error::msg)?);
+        }
         if let Some(caption) = &item.caption {
             let p = item_parts
                 .get_or_insert_with(|| Annotations::parse_parts("none").unwrap_or_default());
             p.caption = Some(caption.clone());
         }
-        let (image, _) = figure_image(&shot, full, &camera, item_parts.as_ref(), &[])?;
+        let (image, _) = figure_image(&shot, full, &camera, item_parts.as_ref(), item_labels)?;
         let describe = |file: &Path, kind: &str, bytes: &[u8]| OutputRecord {
-            file: file
-                .components()
-                .map(|c| c.as_os_str().to_string_lossy())
-                .collect::<Vec<_>>()
-                .join("/"),
+            file: slashed(file),
             kind: kind.into(),
             blake3: blake3::hash(bytes).to_hex().to_string(),
-            view: view.name.clone(),
-            content: item.content.name().into(),
-            ordering: item.ordering.name().into(),
-            size: [item.size.0, item.size.1],
-            camera: CameraRecord::of(&camera),
+            view: Some(view.name.clone()),
+            content: Some(item.content.name().into()),
+            ordering: Some(item.ordering.name().into()),
+            size: Some([item.size.0, item.size.1]),
+            camera: Some(CameraRecord::of(&camera)),
         };
         let png = encode_png(&image)?;
         write_output(settings.out, &item.image, &png)?;
@@ -558,6 +584,41 @@ fn render_job(
         bar.inc(1);
     }
     Ok(())
+}
+
+/// A relative path with `/` between its folders, as the index writes it.
+fn slashed(file: &Path) -> String {
+    file.components()
+        .map(|c| c.as_os_str().to_string_lossy())
+        .collect::<Vec<_>>()
+        .join("/")
+}
+
+/// The scene's measurements as JSON: each with its label, kind, world points and value.
+fn measurements_json(scene: &Scene) -> Result<String> {
+    let mut list = Vec::new();
+    for (i, m) in scene.measurements.iter().enumerate() {
+        let value = scene
+            .measure(m)
+            .map_err(|e| anyhow::anyhow!("measurement {}: {e}", i + 1))?;
+        let mut entry = serde_json::to_value(&value)?;
+        if let Some(object) = entry.as_object_mut() {
+            object.insert("label".into(), m.label.clone().into());
+            object.insert(
+                "node".into(),
+                m.node
+                    .and_then(|id| scene.node(id).ok())
+                    .map(|n| n.name.clone())
+                    .into(),
+            );
+        }
+        list.push(entry);
+    }
+    Ok(serde_json::to_string_pretty(&serde_json::json!({
+        "frame": "RAS",
+        "units": "points in millimetres; angles in degrees",
+        "measurements": list,
+    }))?)
 }
 
 /// Writes one output file inside the output folder, making its folders.
