@@ -34,8 +34,9 @@ pub struct BatchArgs {
     #[arg(required_unless_present = "merge")]
     manifest: Option<PathBuf>,
     /// The output folder: the pictures and the index (index.json, or index-K-of-N.json for a
-    /// shard).
-    #[arg(long, required_unless_present = "merge")]
+    /// shard); by default a folder named after the manifest (planning-report for
+    /// planning-report.toml) in the current folder.
+    #[arg(long)]
     out: Option<PathBuf>,
     /// Run shard K of N: the K-th job and every N-th after it (K from 1 to N). Inside a Slurm
     /// array job, SLURM_ARRAY_TASK_ID and SLURM_ARRAY_TASK_COUNT give it when this is absent.
@@ -72,8 +73,21 @@ pub fn run_batch(args: BatchArgs) -> Result<()> {
         );
         return finish(&index, &dir.join("index.json"));
     }
-    let (Some(manifest_path), Some(out)) = (&args.manifest, &args.out) else {
-        bail!("give a manifest and --out, or --merge DIR");
+    let Some(manifest_path) = &args.manifest else {
+        bail!("give a manifest, or --merge DIR");
+    };
+    let out = &match &args.out {
+        Some(out) => out.clone(),
+        None => {
+            let stem = manifest_path
+                .file_stem()
+                .with_context(|| format!("{}: no file name", manifest_path.display()))?;
+            let out = PathBuf::from(stem);
+            if !args.check {
+                eprintln!("writing into {}", out.display());
+            }
+            out
+        }
     };
     let shard = shard_from(args.shard.as_deref(), &|k| std::env::var(k).ok())?;
     let manifest = manifest::read(manifest_path)?;
@@ -359,9 +373,15 @@ fn progress_bar(len: u64) -> ProgressBar {
     );
     bar.set_style(
         ProgressStyle::with_template(
-            "{spinner} {pos}/{len} pictures [{wide_bar}] {per_sec}, {eta} left, {msg}",
+            "{spinner} {pos}/{len} pictures [{wide_bar}] {rate}, {eta} left, {msg}",
         )
         .unwrap_or_else(|_| ProgressStyle::default_bar())
+        .with_key(
+            "rate",
+            |state: &indicatif::ProgressState, w: &mut dyn std::fmt::Write| {
+                let _ = write!(w, "{:.1} pictures/s", state.per_sec());
+            },
+        )
         .progress_chars("=> "),
     );
     bar.enable_steady_tick(Duration::from_millis(200));
