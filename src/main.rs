@@ -45,7 +45,9 @@ enum Command {
     Pick(cli::scenes::PickArgs),
     /// Measure a distance or an angle between picked pixels or given points, as JSON.
     Measure(cli::scenes::MeasureArgs),
-    /// Open a viewer window: orbit, pick, switch orderings and transfer functions.
+    /// Open a viewer window: orbit, pick, select and move meshes, measure, undo, save the plan,
+    /// switch orderings and transfer functions.
+    #[command(after_help = splatscene::viewer::keys_help())]
     View(cli::scenes::ViewerArgs),
     /// Render the pictures a manifest lists, many cases and views in one process (volumes
     /// classified once per job), resumable, and sharded over a Slurm array with --shard.

@@ -465,9 +465,51 @@ volume = { path = "ball.raw", dims = [20, 20, 20], scalar = "u8" }
 }
 
 #[test]
-fn a_second_process_on_one_index_is_refused_and_a_killed_batch_resumes() {
+fn a_second_process_on_one_index_is_refused() {
+    let dir = scratch("lock");
+    let manifest = small_manifest(&dir);
+    let out = dir.join("out");
+    std::fs::create_dir_all(&out).unwrap();
+    // This test holds the lock a running batch would hold.
+    let lock = std::fs::File::create(out.join(".index.json.lock")).unwrap();
+    lock.lock().unwrap();
+    let stderr = fails(&[
+        "batch",
+        manifest.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(stderr.contains("another batch is writing"), "{stderr}");
+    assert!(!out.join("index.json").exists());
+    // Another shard takes another lock.
+    ok(&[
+        "batch",
+        manifest.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--shard",
+        "1/2",
+    ]);
+    drop(lock);
+    ok(&[
+        "batch",
+        manifest.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+}
+
+#[test]
+fn a_killed_batch_resumes_without_redoing_finished_jobs() {
     let dir = scratch("kill");
     let manifest = small_manifest(&dir);
+    // A fourth job that takes seconds: the batch is killed while it draws.
+    let mut text = std::fs::read_to_string(&manifest).unwrap();
+    text.push_str(&format!(
+        "\n[[job]]\nname = \"slow\"\nscene = \"{}\"\nviews = [\"anterior\", \"posterior\", \"left\", \"right\", \"superior\", \"inferior\"]\nsizes = [[640, 480], [800, 600]]\norderings = [\"ip-pbtf\", \"btf\", \"pbtf\"]\n",
+        repo("examples/scenes/shoulder.toml")
+    ));
+    std::fs::write(&manifest, text).unwrap();
     let out = dir.join("out");
     let mut child = Command::new(env!("CARGO_BIN_EXE_splatscene"))
         .args(["batch", manifest.to_str().unwrap(), "--out"])
@@ -478,35 +520,34 @@ fn a_second_process_on_one_index_is_refused_and_a_killed_batch_resumes() {
         .spawn()
         .unwrap();
     let mut lines = BufReader::new(child.stderr.take().unwrap()).lines();
-    // Once the first job is done, a second process on the same folder and shard is refused,
-    // and the first is killed.
     loop {
         let line = lines.next().expect("the batch ended early").unwrap();
-        if line.starts_with("[1/3]") {
+        if line.starts_with("[3/4]") {
             break;
         }
     }
-    let stderr = fails(&[
-        "batch",
-        manifest.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-    ]);
-    assert!(stderr.contains("another batch is writing"), "{stderr}");
     child.kill().unwrap();
     child.wait().unwrap();
     let killed = index(&out.join("index.json"));
-    assert_eq!(killed["jobs"][0]["status"], "rendered");
-    ok(&[
+    assert_eq!(
+        statuses(&killed),
+        [
+            ("shoulder".into(), "rendered".into()),
+            ("ball".into(), "rendered".into()),
+            ("ball-superior".into(), "rendered".into()),
+            ("slow".into(), "pending".into())
+        ]
+    );
+    let stderr = ok(&[
         "batch",
         manifest.to_str().unwrap(),
         "--out",
         out.to_str().unwrap(),
     ]);
+    assert!(stderr.contains("1 rendered, 3 up to date"), "{stderr}");
     let resumed = index(&out.join("index.json"));
-    assert_eq!(resumed["jobs"][0]["status"], "up-to-date");
-    assert_eq!(resumed["summary"]["failed"], 0);
     assert_eq!(resumed["summary"]["pending"], 0);
+    assert_eq!(resumed["jobs"][3]["outputs"].as_array().unwrap().len(), 36);
 }
 
 #[test]

@@ -505,3 +505,211 @@ fn viewer_orbits_upright_and_saves_views_that_render_reproduces() {
     });
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// A world point from a pick line's hit.
+fn hit_point(pick: &serde_json::Value) -> Option<glam::DVec3> {
+    let p = &pick["hit"]["point"];
+    p.is_array()
+        .then(|| glam::DVec3::from_array(std::array::from_fn(|i| p[i].as_f64().unwrap())))
+}
+
+/// The translation of the mesh `name` in the scene file at `path`, as loaded.
+fn mesh_translation(path: &Path, name: &str) -> glam::DVec3 {
+    let scene = splatscene::scene::file::load_scene_file(path)
+        .unwrap()
+        .scene;
+    let id = scene.find(name).unwrap();
+    scene.node(id).unwrap().local().w_axis.truncate()
+}
+
+#[test]
+fn a_plan_made_in_the_viewer_is_saved_undone_measured_and_reloaded_under_xvfb() {
+    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    if !(have("Xvfb") && have("xdotool") && have("xwd")) {
+        assert!(
+            std::env::var_os("CI").is_none(),
+            "CI must install xvfb, xdotool and x11-apps"
+        );
+        eprintln!("skipped: needs Xvfb, xdotool and xwd (apt-get install xvfb xdotool x11-apps)");
+        return;
+    }
+    let (_xvfb, display) = start_xvfb();
+    let dir: PathBuf = std::env::temp_dir().join(format!("splatscene-plan-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    // Each step's screenshot stays in this folder when the test fails.
+    eprintln!("screenshots in {}", dir.display());
+    let original = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/scenes/shoulder.toml");
+    let scene_path = dir.join("shoulder.toml");
+    std::fs::copy(&original, &scene_path).unwrap();
+    let (viewer, lines, window) = open_viewer(
+        &display,
+        &[
+            "view",
+            scene_path.to_str().unwrap(),
+            "--size",
+            "640x480",
+            "--screenshots",
+            dir.to_str().unwrap(),
+        ],
+    );
+    title(&display, &window, " splats");
+    xdo(&display, &["windowfocus", "--sync", &window]);
+    let first = screen(&display, &dir, "1-opened");
+
+    // Click the prosthesis head (at 320,160 in this view): it is picked and selected.
+    xdo(
+        &display,
+        &["mousemove", "--window", &window, "320", "160", "click", "1"],
+    )
+    .expect("click");
+    line(&lines, "pick");
+    assert_eq!(line(&lines, "selected"), "prosthesis");
+    title(&display, &window, " splats");
+    let selected = screen(&display, &dir, "2-selected");
+    assert_ne!(first, selected, "the selection is tinted");
+
+    // Shift-drag it 40 pixels to the right.
+    let before = mesh_translation(&scene_path, "prosthesis");
+    for step in [
+        vec!["keydown", "shift"],
+        vec![
+            "mousemove",
+            "--window",
+            &window,
+            "320",
+            "160",
+            "mousedown",
+            "1",
+        ],
+        vec!["mousemove", "--window", &window, "340", "160"],
+        vec!["mousemove", "--window", &window, "360", "160"],
+        vec!["mouseup", "1"],
+        vec!["keyup", "shift"],
+    ] {
+        xdo(&display, &step).expect("drag");
+        std::thread::sleep(Duration::from_millis(150));
+    }
+    assert!(line(&lines, "moved").starts_with("prosthesis"));
+    title(&display, &window, " splats");
+    let moved = screen(&display, &dir, "3-moved");
+    assert_ne!(selected, moved, "the prosthesis moved on screen");
+    xdo(&display, &["key", "ctrl+s"]).expect("ctrl+s");
+    let saved = PathBuf::from(line(&lines, "saved plan"));
+    assert_eq!(saved, dir.join("shoulder-plan.toml"));
+    let after = mesh_translation(&saved, "prosthesis");
+    // The pivot (the mesh's origin) followed the cursor: 40 pixels at its depth.
+    let loaded = splatscene::scene::file::load_scene_file(&scene_path).unwrap();
+    let camera = loaded.scene.camera.unwrap();
+    let forward = (camera.target - camera.eye).normalize();
+    let right = forward.cross(camera.up).normalize();
+    let depth = (before - camera.eye).dot(forward);
+    let splatscene::scene::Projection::Perspective { fov_y_degrees } = camera.projection else {
+        panic!("the scene's camera is perspective");
+    };
+    let pixel = 2.0 * depth * (0.5 * fov_y_degrees.to_radians()).tan() / 480.0;
+    let expected = before + 40.0 * pixel * right;
+    assert!(
+        after.distance(expected) < 1e-6,
+        "moved to {after}, expected {expected} (40 px of {pixel} mm from {before})"
+    );
+
+    // Undo puts it back; the next save is a new file with the old place.
+    xdo(&display, &["key", "ctrl+z"]).expect("ctrl+z");
+    assert_eq!(line(&lines, "undo"), "move prosthesis");
+    xdo(&display, &["key", "ctrl+s"]).expect("ctrl+s");
+    let undone = PathBuf::from(line(&lines, "saved plan"));
+    assert_eq!(undone, dir.join("shoulder-plan-2.toml"));
+    assert!(mesh_translation(&undone, "prosthesis").distance(before) < 1e-9);
+    title(&display, &window, " splats");
+    screen(&display, &dir, "4-undone");
+
+    // Measure an angle with three clicks on the bone and the implant.
+    xdo(&display, &["key", "Escape"]).expect("escape");
+    assert_eq!(line(&lines, "selected"), "nothing");
+    xdo(&display, &["key", "m"]).expect("m");
+    assert_eq!(line(&lines, "measure"), "distance");
+    xdo(&display, &["key", "m"]).expect("m");
+    assert_eq!(line(&lines, "measure"), "angle");
+    let mut points = Vec::new();
+    for (x, y) in [
+        (250, 330),
+        (320, 160),
+        (380, 300),
+        (300, 380),
+        (420, 260),
+        (200, 250),
+    ] {
+        xdo(
+            &display,
+            &[
+                "mousemove",
+                "--window",
+                &window,
+                &x.to_string(),
+                &y.to_string(),
+                "click",
+                "1",
+            ],
+        )
+        .expect("click");
+        let pick: serde_json::Value = serde_json::from_str(&line(&lines, "pick")).unwrap();
+        if let Some(p) = hit_point(&pick) {
+            points.push(p);
+        }
+        if points.len() == 3 {
+            break;
+        }
+    }
+    assert_eq!(points.len(), 3, "three of the clicks hit the scene");
+    let said = line(&lines, "measurement 1");
+    let (u, v) = (points[0] - points[1], points[2] - points[1]);
+    let angle = u.angle_between(v).to_degrees();
+    assert!(
+        said.contains(&format!("{angle:.1}")),
+        "{said} against {angle}"
+    );
+    title(&display, &window, " splats");
+    let measured_shot = screen(&display, &dir, "5-measured");
+    xdo(&display, &["key", "l"]).expect("l");
+    xdo(&display, &["type", "neck"]).expect("type");
+    xdo(&display, &["key", "Return"]).expect("enter");
+    assert!(line(&lines, "measurement 1").contains("neck"));
+    xdo(&display, &["key", "ctrl+s"]).expect("ctrl+s");
+    let measured = PathBuf::from(line(&lines, "saved plan"));
+    let plan = splatscene::scene::file::load_scene_file(&measured)
+        .unwrap()
+        .scene;
+    assert_eq!(plan.measurements.len(), 1);
+    assert_eq!(plan.measurements[0].label.as_deref(), Some("neck"));
+    let value = plan.measure(&plan.measurements[0]).unwrap().value.unwrap();
+    assert!(
+        (value - angle).abs() < 1e-6,
+        "saved {value}, clicked {angle}"
+    );
+
+    // An edit of the scene file beside the viewer is read again, the camera kept.
+    let text = std::fs::read_to_string(&scene_path).unwrap();
+    std::fs::write(
+        &scene_path,
+        text.replace(
+            "name = \"prosthesis\"",
+            "name = \"prosthesis\"\ncolor = [0.2, 0.4, 0.9]",
+        ),
+    )
+    .unwrap();
+    assert_eq!(PathBuf::from(line(&lines, "reloaded")), scene_path);
+    title(&display, &window, " splats");
+    let reloaded = screen(&display, &dir, "6-reloaded");
+    assert_ne!(reloaded, measured_shot, "the blue prosthesis shows");
+
+    xdo(&display, &["key", "q"]).expect("key q");
+    let mut viewer = viewer;
+    let status = wait_for("the viewer to quit", 30, || {
+        viewer.0.try_wait().ok().flatten()
+    });
+    assert!(status.success(), "{status:?}");
+    if std::env::var_os("SPLATSCENE_KEEP").is_none() {
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+}

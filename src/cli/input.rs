@@ -103,6 +103,14 @@ impl InputArgs {
         }
     }
 
+    /// The scene file given as the input, if the input is one.
+    pub fn scene_path(&self) -> Option<PathBuf> {
+        match self.input() {
+            Ok(Input::Scene(path)) => Some(path.to_path_buf()),
+            _ => None,
+        }
+    }
+
     /// Loads the scene the arguments describe, with the scene file that describes it (relative
     /// paths made absolute, so that it can be saved anywhere: the viewer's screenshots do).
     pub fn load(&self) -> Result<(LoadedScene, SceneFile)> {

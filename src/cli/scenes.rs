@@ -583,6 +583,7 @@ pub fn run_viewer(args: ViewerArgs) -> Result<()> {
                 .map_err(|e| anyhow::anyhow!("--annotate: {e}"))?,
         )
     };
+    let scene_path = args.view.input.scene_path();
     let view = args.view.load()?;
     let camera = view.single_camera()?;
     let View {
@@ -601,9 +602,10 @@ pub fn run_viewer(args: ViewerArgs) -> Result<()> {
         ordering: loaded.ordering,
         annotations,
         compositor: args.compositor,
+        scene_path,
     };
     eprintln!(
-        "keys: 1 BTF, 2 PBTF, 3 IP-PBTF, 4 exact, 5 bucketed, 6 pyramid, 7 rows, T transfer function, A annotations, S screenshot and its scene file, C clip plane ([ and ] move it), R reset, Q quit; drag to orbit about the scene's up (right: pan), wheel to zoom, click to pick"
+        "drag to orbit, right drag to pan, wheel to zoom, click to pick and select a mesh; H in the window (or view --help) lists every key"
     );
     splatscene::viewer::run(loaded.scene, options)?;
     Ok(())

@@ -523,6 +523,66 @@ impl SceneFile {
         missing
     }
 
+    /// The same file with the plan `scene` holds now: each mesh's transform as the node stands
+    /// (written as a matrix, so that the file loads to the same placement), and the scene's
+    /// measurements (those attached to a node by the node's name). `scene` must have been
+    /// loaded from this file: its mesh files are the top nodes after the volumes, in order.
+    ///
+    /// # Errors
+    ///
+    /// A message when a mesh's placement cannot be expressed (a singular seat or frame) or a
+    /// mesh node is missing.
+    pub fn with_plan(&self, scene: &Scene) -> Result<Self, String> {
+        let mut file = self.clone();
+        let roots: Vec<NodeId> = (0..scene.nodes().len())
+            .map(NodeId)
+            .filter(|id| scene.nodes()[id.0].parent().is_none())
+            .collect();
+        let invalid = |message: String| SceneFileError::Invalid {
+            path: PathBuf::new(),
+            message,
+        };
+        for (i, spec) in file.meshes.iter_mut().enumerate() {
+            let id = *roots
+                .get(self.volumes.len() + i)
+                .ok_or_else(|| format!("mesh {}: no node in the scene", i + 1))?;
+            let local = scene.node(id).map_err(|e| e.to_string())?.local();
+            let seat = match spec.seat.as_deref() {
+                Some("phantom") => {
+                    seat_in_phantom(&shoulder_landmarks(DEFAULT_DIMS, DEFAULT_SPACING))
+                }
+                _ => DMat4::IDENTITY,
+            };
+            let frame = file_frame(spec, &invalid).map_err(|e| e.to_string())?;
+            let (ds, df) = (seat.determinant(), frame.determinant());
+            if !(ds.is_normal() && df.is_normal()) {
+                return Err(format!("mesh {}: its seat or frame is singular", i + 1));
+            }
+            // Round-off of turns by whole angles (1e-17 for 0) is written as 0.
+            let matrix = (seat.inverse() * local * frame.inverse())
+                .to_cols_array()
+                .map(|x| if x.abs() < 1e-12 { 0.0 } else { x });
+            spec.transform = TransformSpec {
+                matrix: Some(matrix),
+                ..TransformSpec::default()
+            };
+        }
+        file.measurements = scene
+            .measurements
+            .iter()
+            .map(|m| MeasurementSpec {
+                kind: m.kind,
+                points: m.points.iter().map(|p| p.to_array()).collect(),
+                label: m.label.clone(),
+                node: m
+                    .node
+                    .and_then(|id| scene.node(id).ok())
+                    .map(|n| n.name.clone()),
+            })
+            .collect();
+        Ok(file)
+    }
+
     /// The file as TOML text, as [`SceneFile::parse`] reads it back.
     pub fn to_toml(&self) -> Result<String, String> {
         toml::to_string(self).map_err(|e| e.to_string())
@@ -1360,6 +1420,45 @@ mod tests {
             assert!(e.contains(expected), "{text}: {e}");
             assert!(e.contains("bad.toml"), "{e}");
         }
+    }
+
+    #[test]
+    fn a_plan_saved_from_a_scene_loads_to_the_same_placement() {
+        let dir = TempDir::new("plan");
+        let path = dir.write(
+            "plan.toml",
+            "[[mesh]]\nname = \"implant\"\npath = \"builtin:prosthesis\"\nseat = \"phantom\"\nunits = \"cm\"\nframe = \"LPS\"\ntransform = { rotate_degrees = [0, 10, 0] }\n\n[[mesh]]\nname = \"second\"\npath = \"builtin:prosthesis\"\n\n[[measurement]]\nkind = \"point\"\nlabel = \"head centre\"\nnode = \"implant\"\npoints = [[1, 2, 3]]\n",
+        );
+        let file = SceneFile::read(&path).unwrap();
+        let mut scene = file.load(&path, dir.0.as_path()).unwrap().scene;
+        let implant = scene.find("implant").unwrap();
+        let moved = DMat4::from_translation(DVec3::new(5.0, -3.0, 2.0))
+            * scene.node(implant).unwrap().local();
+        scene.set_local(implant, moved).unwrap();
+        scene.measurements.push(SceneMeasurement {
+            kind: MeasureKind::Distance,
+            points: vec![DVec3::ZERO, DVec3::X],
+            node: None,
+            label: Some("gap".into()),
+        });
+        let saved = file.with_plan(&scene).unwrap();
+        let text = saved.to_toml().unwrap();
+        let again = dir.write("again.toml", &text);
+        let reloaded = load_scene_file(&again).unwrap().scene;
+        let id = reloaded.find("implant").unwrap();
+        let a = reloaded.node(id).unwrap().local().to_cols_array();
+        for (x, y) in a.iter().zip(moved.to_cols_array()) {
+            assert!((x - y).abs() < 1e-9, "{a:?} against {moved:?}");
+        }
+        let second = reloaded.find("second").unwrap();
+        assert_eq!(reloaded.node(second).unwrap().local(), DMat4::IDENTITY);
+        assert_eq!(reloaded.measurements.len(), 2);
+        let landmark = reloaded.measure(&reloaded.measurements[0]).unwrap();
+        let before = scene.measure(&scene.measurements[0]).unwrap();
+        for (p, q) in landmark.points[0].iter().zip(before.points[0]) {
+            assert!((p - q).abs() < 1e-9, "the landmark moved with its mesh");
+        }
+        assert_eq!(reloaded.measurements[1].label.as_deref(), Some("gap"));
     }
 
     #[test]

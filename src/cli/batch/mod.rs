@@ -234,14 +234,15 @@ pub fn run_batch(args: BatchArgs) -> Result<()> {
                 started.elapsed().as_secs_f64()
             ),
         };
+        // The index first: a job said to be done is done on disk.
+        index.jobs[slot] = record;
+        index.count();
+        index.write(&index_path)?;
         bar.suspend(|| eprintln!("[{done}/{}] {line}", mine.len()));
         // A failed job's remaining pictures still count toward the bar's end.
         let drawn = (bar.position() as usize).min(pictures);
         let expected: usize = mine[..=slot].iter().map(|j| j.items.len()).sum();
         bar.inc(expected.saturating_sub(drawn) as u64);
-        index.jobs[slot] = record;
-        index.count();
-        index.write(&index_path)?;
     }
     bar.finish_and_clear();
     let s = &index.summary;
