@@ -624,6 +624,53 @@ fn a_plan_made_in_the_viewer_is_saved_undone_measured_and_reloaded_under_xvfb() 
     title(&display, &window, " splats");
     screen(&display, &dir, "4-undone");
 
+    // Snap: a point of the prosthesis (its head) onto a point of the bone.
+    xdo(&display, &["key", "n"]).expect("n");
+    assert!(line(&lines, "snap:").starts_with("click a point"));
+    xdo(
+        &display,
+        &["mousemove", "--window", &window, "320", "160", "click", "1"],
+    )
+    .expect("click");
+    let source: serde_json::Value = serde_json::from_str(&line(&lines, "pick")).unwrap();
+    let source = hit_point(&source).expect("the head is hit");
+    assert!(line(&lines, "snap:").starts_with("now click"));
+    let mut target = None;
+    for (x, y) in [(250, 330), (300, 380), (380, 300), (420, 260)] {
+        xdo(
+            &display,
+            &[
+                "mousemove",
+                "--window",
+                &window,
+                &x.to_string(),
+                &y.to_string(),
+                "click",
+                "1",
+            ],
+        )
+        .expect("click");
+        let pick: serde_json::Value = serde_json::from_str(&line(&lines, "pick")).unwrap();
+        if let Some(p) = hit_point(&pick) {
+            target = Some(p);
+            break;
+        }
+    }
+    let target = target.expect("a click hit the bone");
+    assert!(line(&lines, "snapped by").starts_with('('));
+    xdo(&display, &["key", "ctrl+s"]).expect("ctrl+s");
+    let snapped = PathBuf::from(line(&lines, "saved plan"));
+    let moved_by = mesh_translation(&snapped, "prosthesis") - before;
+    assert!(
+        moved_by.distance(target - source) < 1e-6,
+        "snapped by {moved_by}, the points are {} apart",
+        target - source
+    );
+    title(&display, &window, " splats");
+    screen(&display, &dir, "4b-snapped");
+    xdo(&display, &["key", "ctrl+z"]).expect("ctrl+z");
+    assert_eq!(line(&lines, "undo"), "move prosthesis");
+
     // Measure an angle with three clicks on the bone and the implant.
     xdo(&display, &["key", "Escape"]).expect("escape");
     assert_eq!(line(&lines, "selected"), "nothing");

@@ -53,8 +53,8 @@ use super::shoulder::{
     add_model, cut_away_anterior_humerus, prosthesis_model, resect_humeral_head,
 };
 use super::{
-    Light, Lights, NodeContent, NodeId, Projection, Scene, SceneCamera, SceneMeasurement,
-    SplatSettings, VolumeNode,
+    ClipPlane, Clipping, Light, Lights, MAX_CLIP_PLANES, NodeContent, NodeId, Projection, Scene,
+    SceneCamera, SceneMeasurement, SplatSettings, VolumeNode,
 };
 use crate::classify::{TransferFunction, auto_transfer};
 use crate::mesh::prosthesis::seat_in_phantom;
@@ -278,6 +278,35 @@ pub struct VolumeSpec {
     /// Node transform.
     #[serde(default)]
     pub transform: TransformSpec,
+    /// Keep only what lies inside this box, in world millimetres (it cuts every volume of the
+    /// scene; one crop box per scene).
+    pub crop_box: Option<BoxSpec>,
+    /// Whether the crop box cuts the meshes too (it cuts only the volumes by default).
+    pub clip_meshes: Option<bool>,
+}
+
+/// A box in world millimetres.
+#[derive(Debug, Clone, Copy, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct BoxSpec {
+    /// The low corner.
+    pub min: [f64; 3],
+    /// The high corner.
+    pub max: [f64; 3],
+}
+
+/// A clip plane: through a point, cutting away the side its normal points to; volumes always,
+/// meshes when `meshes` is true.
+#[derive(Debug, Clone, Copy, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct ClipSpec {
+    /// A point of the plane (world millimetres).
+    pub through: [f64; 3],
+    /// Points to the side cut away.
+    pub normal: [f64; 3],
+    /// Whether the plane cuts the meshes too.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub meshes: bool,
 }
 
 /// A mesh file.
@@ -344,6 +373,9 @@ pub struct SceneFile {
     /// Measurements.
     #[serde(default, rename = "measurement", skip_serializing_if = "Vec::is_empty")]
     pub measurements: Vec<MeasurementSpec>,
+    /// Clip planes.
+    #[serde(default, rename = "clip", skip_serializing_if = "Vec::is_empty")]
+    pub clip: Vec<ClipSpec>,
 }
 
 /// A loaded scene with the output settings of its file.
@@ -434,6 +466,7 @@ impl SceneFile {
             let m = measurement(&scene, spec, i).map_err(&invalid)?;
             scene.measurements.push(m);
         }
+        scene.clipping = clipping(self).map_err(&invalid)?;
         for warning in scale_warnings(&scene, &meshes) {
             eprintln!("warning: {}: {warning}", path.display());
         }
@@ -566,6 +599,31 @@ impl SceneFile {
                 matrix: Some(matrix),
                 ..TransformSpec::default()
             };
+        }
+        file.clip = scene
+            .clipping
+            .planes
+            .iter()
+            .map(|p| ClipSpec {
+                through: (p.normal * (p.offset / p.normal.length_squared())).to_array(),
+                normal: p.normal.to_array(),
+                meshes: p.meshes,
+            })
+            .collect();
+        for v in &mut file.volumes {
+            v.crop_box = None;
+            v.clip_meshes = None;
+        }
+        if let Some((lo, hi)) = scene.clipping.crop {
+            let v = file
+                .volumes
+                .first_mut()
+                .ok_or("a crop box needs a volume to keep it in the scene file")?;
+            v.crop_box = Some(BoxSpec {
+                min: lo.to_array(),
+                max: hi.to_array(),
+            });
+            v.clip_meshes = scene.clipping.crop_meshes.then_some(true);
         }
         file.measurements = scene
             .measurements
@@ -948,6 +1006,68 @@ fn load_mesh_spec(
         .unwrap_or_else(|| format!("mesh {}", index + 1));
     add_model(scene, &name, local, &model)
         .ok_or_else(|| invalid(format!("mesh {name}: transform is singular")))
+}
+
+/// The clip planes and the crop box of a scene file, checked.
+fn clipping(file: &SceneFile) -> Result<Clipping, String> {
+    let mut clipping = Clipping::default();
+    if file.clip.len() > MAX_CLIP_PLANES {
+        return Err(format!(
+            "{} clip planes: at most {MAX_CLIP_PLANES}",
+            file.clip.len()
+        ));
+    }
+    for (i, c) in file.clip.iter().enumerate() {
+        let finite = c.through.iter().chain(&c.normal).all(|x| x.is_finite());
+        let normal = DVec3::from(c.normal);
+        if !finite || normal.length() == 0.0 {
+            return Err(format!(
+                "clip {}: through and normal must be finite, the normal not zero",
+                i + 1
+            ));
+        }
+        clipping
+            .planes
+            .push(ClipPlane::through(DVec3::from(c.through), normal, c.meshes));
+    }
+    let mut boxes = file
+        .volumes
+        .iter()
+        .enumerate()
+        .filter_map(|(i, v)| v.crop_box.map(|b| (i, b, v.clip_meshes)));
+    if let Some((i, b, meshes)) = boxes.next() {
+        if let Some((j, ..)) = boxes.next() {
+            return Err(format!(
+                "volumes {} and {} both have a crop_box: a scene has one",
+                i + 1,
+                j + 1
+            ));
+        }
+        let (lo, hi) = (DVec3::from(b.min), DVec3::from(b.max));
+        if !(lo.is_finite() && hi.is_finite() && lo.cmplt(hi).all()) {
+            return Err(format!(
+                "volume {}: crop_box min {:?} must lie below max {:?} on every axis",
+                i + 1,
+                b.min,
+                b.max
+            ));
+        }
+        clipping.crop = Some((lo, hi));
+        clipping.crop_meshes = meshes.unwrap_or(false);
+    }
+    if let Some((i, v)) = file
+        .volumes
+        .iter()
+        .enumerate()
+        .find(|(_, v)| v.clip_meshes.is_some() && v.crop_box.is_none())
+    {
+        return Err(format!(
+            "volume {} ({}): clip_meshes has no effect without a crop_box",
+            i + 1,
+            v.path
+        ));
+    }
+    Ok(clipping)
 }
 
 /// Longest measurement label, in characters.
@@ -1459,6 +1579,62 @@ mod tests {
             assert!((p - q).abs() < 1e-9, "the landmark moved with its mesh");
         }
         assert_eq!(reloaded.measurements[1].label.as_deref(), Some("gap"));
+    }
+
+    #[test]
+    fn clip_planes_and_the_crop_box_load_check_and_save() {
+        let dir = TempDir::new("clipping");
+        let volume = "[[volume]]\npath = \"builtin:shoulder-phantom\"\n";
+        let path = dir.write(
+            "clip.toml",
+            &format!(
+                "{volume}crop_box = {{ min = [0, 0, 0], max = [60, 50, 40] }}\nclip_meshes = true\n\n[[clip]]\nthrough = [0, 20, 0]\nnormal = [0, 2, 0]\nmeshes = true\n"
+            ),
+        );
+        let file = SceneFile::read(&path).unwrap();
+        let scene = file.load(&path, dir.0.as_path()).unwrap().scene;
+        let c = &scene.clipping;
+        assert_eq!(c.crop, Some((DVec3::ZERO, DVec3::new(60.0, 50.0, 40.0))));
+        assert!(c.crop_meshes);
+        assert_eq!(c.planes.len(), 1);
+        assert!(c.planes[0].keeps(DVec3::new(5.0, 19.0, 5.0)));
+        assert!(!c.planes[0].keeps(DVec3::new(5.0, 21.0, 5.0)));
+        // Saved and read again: the same clipping.
+        let again = dir.write(
+            "again.toml",
+            &file.with_plan(&scene).unwrap().to_toml().unwrap(),
+        );
+        let reloaded = load_scene_file(&again).unwrap().scene;
+        assert_eq!(reloaded.clipping, scene.clipping);
+
+        for (text, expected) in [
+            (
+                format!("{volume}crop_box = {{ min = [0, 0, 0], max = [60, 0, 40] }}\n"),
+                "must lie below max",
+            ),
+            (
+                format!("{volume}clip_meshes = true\n"),
+                "no effect without a crop_box",
+            ),
+            (
+                format!("{volume}\n[[clip]]\nthrough = [0, 0, 0]\nnormal = [0, 0, 0]\n"),
+                "the normal not zero",
+            ),
+            (
+                format!(
+                    "{volume}crop_box = {{ min = [0, 0, 0], max = [1, 1, 1] }}\n{volume}crop_box = {{ min = [0, 0, 0], max = [1, 1, 1] }}\n"
+                ),
+                "both have a crop_box",
+            ),
+            (
+                format!("{volume}\n[[clip]]\nthrough = [0, 0, 0]\nnormal = [0, 0, 1]\nside = 2\n"),
+                "side",
+            ),
+        ] {
+            let path = dir.write("bad.toml", &text);
+            let e = load_scene_file(&path).unwrap_err().to_string();
+            assert!(e.contains(expected), "{text}: {e}");
+        }
     }
 
     #[test]

@@ -55,6 +55,10 @@ pub const KEYS: &[(&str, &str)] = &[
     ("+ / -", "move it toward / away from the eye by 1 mm"),
     ("Ctrl+Z, Ctrl+Y", "undo, redo"),
     ("M", "measure: distance, angle, line angle, point, off"),
+    (
+        "N",
+        "snap: click a point of the selected mesh, then where it goes",
+    ),
     ("X", "clear the points clicked so far"),
     ("Tab", "select the next measurement"),
     ("L", "label the selected measurement (type, Enter)"),
@@ -185,6 +189,7 @@ pub fn run(scene: Scene, options: ViewerOptions) -> Result<(), ViewerError> {
         history: History::new(),
         selected: None,
         measuring: None,
+        snapping: None,
         chosen: None,
         labelling: None,
         message: None,
@@ -254,6 +259,9 @@ struct App {
     selected: Option<NodeId>,
     /// The measurement being clicked, in measure mode.
     measuring: Option<Pending>,
+    /// Snap mode: `Some(None)` waits for a point on the selected mesh, `Some(Some(p))` for
+    /// the target that point moves to.
+    snapping: Option<Option<DVec3>>,
     /// The selected measurement (an index into the scene's).
     chosen: Option<usize>,
     /// The label being typed for the selected measurement.
@@ -504,8 +512,32 @@ impl App {
             .measuring
             .iter()
             .flat_map(|m| m.points.iter().map(|(p, _)| *p));
-        for point in pending.chain(self.hit) {
+        let snap = self.snapping.flatten();
+        for point in pending.chain(self.hit).chain(snap) {
             let _ = annotate(&mut scene, &Measurement::point(point), &style);
+        }
+        if let Some((lo, hi)) = self.scene.clipping.crop {
+            // The crop box's twelve edges, thin.
+            let thin = MarkerStyle {
+                point_radius: style.line_radius,
+                line_radius: 0.5 * style.line_radius,
+                ..style
+            };
+            let corner = |i: u32| {
+                DVec3::new(
+                    if i & 1 == 0 { lo.x } else { hi.x },
+                    if i & 2 == 0 { lo.y } else { hi.y },
+                    if i & 4 == 0 { lo.z } else { hi.z },
+                )
+            };
+            for a in 0..8u32 {
+                for bit in [1, 2, 4] {
+                    if a & bit == 0 {
+                        let edge = Measurement::distance(corner(a), corner(a | bit));
+                        let _ = annotate(&mut scene, &edge, &thin);
+                    }
+                }
+            }
         }
         if let Some(top) = self.selected {
             tint(&mut scene, top);
@@ -541,6 +573,15 @@ impl App {
                 at.z,
                 angle.to_degrees()
             ));
+        }
+        match self.snapping {
+            Some(None) => {
+                lines.push("snap: click a point of the selected mesh (Escape cancels)".into());
+            }
+            Some(Some(_)) => {
+                lines.push("snap: click where that point goes (Escape cancels)".into());
+            }
+            None => {}
         }
         if let Some(m) = &self.measuring {
             lines.push(format!(
@@ -643,6 +684,29 @@ impl App {
             Some(Hit::Mesh(m)) => Some(plan::top_node(&self.scene, m.node)),
             _ => None,
         };
+        if let Some(from) = self.snapping {
+            let Some(hit) = hit else {
+                return Ok(());
+            };
+            match (from, self.selected) {
+                (None, Some(top)) if on_mesh == Some(top) => {
+                    self.snapping = Some(Some(hit.point()));
+                    self.say("snap: now click where that point goes".into());
+                }
+                (None, _) => self.say("snap: click a point of the selected mesh".into()),
+                (Some(source), Some(_)) => {
+                    self.snapping = None;
+                    let delta = hit.point() - source;
+                    self.move_selected(|l, _| plan::translated(l, delta));
+                    self.say(format!(
+                        "snapped by ({:.1}, {:.1}, {:.1}) mm",
+                        delta.x, delta.y, delta.z
+                    ));
+                }
+                (Some(_), None) => self.snapping = None,
+            }
+            return Ok(());
+        }
         if let Some(pending) = &mut self.measuring {
             let Some(hit) = hit else {
                 return Ok(());
@@ -961,9 +1025,6 @@ impl App {
                 volume.shift = None;
             }
         }
-        if !self.scene.clipping.planes.is_empty() {
-            eprintln!("note: the clip plane is not saved in the scene file");
-        }
         let text = file.to_toml()?;
         Ok(format!(
             "# Saved by splatscene's viewer: `splatscene render THIS.toml --out view.png` draws\n# the same picture, and `splatscene view THIS.toml` opens the plan again.\n\n{text}"
@@ -1025,7 +1086,9 @@ impl App {
         let (right, up, forward) = plan::screen_axes(&self.camera);
         match key {
             Key::Named(NamedKey::Escape) => {
-                if self
+                if self.snapping.take().is_some() {
+                    println!("snap off");
+                } else if self
                     .measuring
                     .as_ref()
                     .is_some_and(|m| !m.points.is_empty())
@@ -1106,7 +1169,17 @@ impl App {
                 (false, "m") => {
                     let kind = plan::next_kind(self.measuring.as_ref().map(|m| m.kind));
                     self.measuring = kind.map(Pending::new);
+                    self.snapping = None;
                     println!("measure {}", kind.map_or("off", MeasureKind::name));
+                }
+                (false, "n") => {
+                    if self.selected.is_some() {
+                        self.snapping = Some(None);
+                        self.measuring = None;
+                        self.say("snap: click a point of the selected mesh".into());
+                    } else {
+                        self.say("snap: select a mesh first (click it)".into());
+                    }
                 }
                 (false, "x") => {
                     if let Some(m) = &mut self.measuring {
