@@ -735,6 +735,50 @@ fn a_plan_made_in_the_viewer_is_saved_undone_measured_and_reloaded_under_xvfb() 
         "saved {value}, clicked {angle}"
     );
 
+    // T: the presets that fit this CT (ct-bone, the scene's own, is left out), then the
+    // scene's own again; Alt+drag sets a window, saved as the volume's level_width.
+    xdo(&display, &["key", "t"]).expect("t");
+    assert_eq!(line(&lines, "transfer function"), "ct-soft-tissue");
+    xdo(&display, &["key", "t"]).expect("t");
+    assert_eq!(line(&lines, "transfer function"), "ct-metal");
+    xdo(&display, &["key", "t"]).expect("t");
+    assert_eq!(line(&lines, "transfer function"), "of the scene");
+    for step in [
+        vec!["keydown", "alt"],
+        vec![
+            "mousemove",
+            "--window",
+            &window,
+            "100",
+            "400",
+            "mousedown",
+            "1",
+        ],
+        vec!["mousemove", "--window", &window, "140", "400"],
+        vec!["mouseup", "1"],
+        vec!["keyup", "alt"],
+    ] {
+        xdo(&display, &step).expect("alt drag");
+        std::thread::sleep(Duration::from_millis(150));
+    }
+    let window_said = line(&lines, "window level");
+    title(&display, &window, "window level");
+    screen(&display, &dir, "5b-windowed");
+    xdo(&display, &["key", "ctrl+s"]).expect("ctrl+s");
+    let windowed = PathBuf::from(line(&lines, "saved plan"));
+    let file = splatscene::scene::file::SceneFile::read(&windowed).unwrap();
+    let [level, width] = file.volumes[0].level_width.expect("the window is saved");
+    // ct-bone spans 150 to 1200 HU: 40 pixels right raise the level by a tenth of that.
+    assert!((width - 1050.0).abs() < 1e-3, "{width}");
+    assert!(
+        (level - (675.0 + 40.0 * 1050.0 / 400.0)).abs() < 1e-2,
+        "{level}"
+    );
+    assert!(
+        window_said.starts_with(&format!("{level:.0} width {width:.0}")),
+        "{window_said}"
+    );
+
     // An edit of the scene file beside the viewer is read again, the camera kept.
     let text = std::fs::read_to_string(&scene_path).unwrap();
     std::fs::write(

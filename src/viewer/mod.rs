@@ -69,7 +69,14 @@ pub const KEYS: &[(&str, &str)] = &[
         "1-7",
         "ordering: BTF, PBTF, IP-PBTF, exact, bucketed, pyramid, rows",
     ),
-    ("T", "next transfer function"),
+    (
+        "T",
+        "transfer function: the scene's, then the presets that fit the data",
+    ),
+    (
+        "Alt+drag",
+        "window: right raises the level, up narrows the width",
+    ),
     ("A", "annotations off and on"),
     ("S", "screenshot and its scene file"),
     ("C, [, ]", "clip plane on and off, move it"),
@@ -206,6 +213,10 @@ pub fn run(scene: Scene, options: ViewerOptions) -> Result<(), ViewerError> {
         camera: home,
         ordering,
         preset: None,
+        fitting: Vec::new(),
+        own: Vec::new(),
+        window: None,
+        windowing: None,
         gpu: None,
         cursor: (0.0, 0.0),
         drag: None,
@@ -216,6 +227,7 @@ pub fn run(scene: Scene, options: ViewerOptions) -> Result<(), ViewerError> {
         annotations_on: true,
         error: None,
     };
+    app.remember_transfers();
     event_loop
         .run_app(&mut app)
         .map_err(|e| ViewerError::Window(e.to_string()))?;
@@ -285,7 +297,15 @@ struct App {
     camera: SceneCamera,
     ordering: Ordering,
     /// The preset the `T` key chose last; `None` while the scene's own functions hold.
-    preset: Option<usize>,
+    preset: Option<&'static str>,
+    /// The presets that fit the data: the CT ones for Hounsfield data, else the MR one.
+    fitting: Vec<&'static str>,
+    /// Each volume's own transfer function, as the scene gave it.
+    own: Vec<(NodeId, Arc<TransferFunction>)>,
+    /// A window `(level, width)` set with Alt+drag over the chosen function.
+    window: Option<(f32, f32)>,
+    /// The window when an Alt+drag began.
+    windowing: Option<(f32, f32)>,
     gpu: Option<Gpu>,
     cursor: (f64, f64),
     drag: Option<Drag>,
@@ -414,6 +434,7 @@ impl App {
         let started = std::time::Instant::now();
         let (drawn, labels) = self.drawn_scene();
         let hud = self.hud_lines();
+        let preset = self.transfer_label();
         let Some(gpu) = &mut self.gpu else {
             return Ok(());
         };
@@ -480,9 +501,6 @@ impl App {
         if !preview {
             self.full_frame = elapsed;
         }
-        let preset = self
-            .preset
-            .map_or("scene transfer function", |p| PRESETS[p]);
         gpu.window.set_title(&format!(
             "splatscene: {}{} | {preset} | frame {:.0} ms, order {:.1} ms | {} splats{}",
             self.ordering,
@@ -548,9 +566,7 @@ impl App {
     /// The lines of on-screen text.
     fn hud_lines(&self) -> Vec<String> {
         let ms = |d: Duration| d.as_secs_f64() * 1e3;
-        let transfer = self
-            .preset
-            .map_or_else(|| self.transfer_name(), |p| PRESETS[p].to_owned());
+        let transfer = self.transfer_label();
         let mut lines = vec![format!(
             "{} | {transfer} | frame {:.0} ms, order {:.1} ms, classify {:.0} ms | {} splats",
             self.ordering,
@@ -642,6 +658,12 @@ impl App {
             name.push_str(&format!(" shifted {shift:+}"));
         }
         name
+    }
+
+    fn request_redraw(&self) {
+        if let Some(gpu) = &self.gpu {
+            gpu.window.request_redraw();
+        }
     }
 
     /// Says `text` on screen for a few seconds and on standard output.
@@ -879,6 +901,7 @@ impl App {
                 self.scene.clipping = clipping;
                 self.picker = Picker::new(&self.scene);
                 self.options.scene_file = Some(file);
+                self.remember_transfers();
                 self.history = History::new();
                 self.selected = None;
                 self.measuring = None;
@@ -914,34 +937,92 @@ impl App {
         }
     }
 
-    fn next_preset(&mut self) {
-        // The first press moves to the first preset that differs from what the scene shows.
-        let current = self
+    /// Keeps each volume's own transfer function, and the presets that fit the data, for
+    /// the `T` key.
+    fn remember_transfers(&mut self) {
+        self.own = self
+            .scene
+            .volumes()
+            .map(|(id, v, _)| (id, Arc::clone(&v.transfer)))
+            .collect();
+        let hounsfield = self
             .scene
             .volumes()
             .next()
-            .map(|(_, v, _)| Arc::clone(&v.transfer));
-        let next = match self.preset {
-            Some(p) => (p + 1) % PRESETS.len(),
-            None => (0..PRESETS.len())
-                .find(|&i| TransferFunction::preset(PRESETS[i]).as_ref() != current.as_deref())
-                .unwrap_or(0),
+            .is_some_and(|(_, v, _)| crate::classify::is_hounsfield(&v.volume.values));
+        self.fitting = PRESETS
+            .iter()
+            .copied()
+            .filter(|p| p.starts_with("ct-") == hounsfield)
+            .collect();
+        self.preset = None;
+        self.window = None;
+    }
+
+    /// What the transfer function is called on screen.
+    fn transfer_label(&self) -> String {
+        let mut name = match self.preset {
+            Some(p) => p.to_owned(),
+            None => format!("scene: {}", self.transfer_name()),
         };
-        self.preset = Some(next);
-        let Some(transfer) = TransferFunction::preset(PRESETS[next]).map(Arc::new) else {
-            return;
-        };
-        let ids: Vec<NodeId> = self.scene.volumes().map(|(id, _, _)| id).collect();
-        for id in ids {
+        if let Some((level, width)) = self.window {
+            name.push_str(&format!(", window level {level:.0} width {width:.0}"));
+        }
+        name
+    }
+
+    /// Gives every volume the chosen function (its own, or the preset) under the window.
+    fn apply_transfer(&mut self) {
+        let preset = self.preset.and_then(TransferFunction::preset).map(Arc::new);
+        for (id, own) in self.own.clone() {
+            let base = preset.clone().unwrap_or(own);
+            let transfer = match self.window {
+                Some((level, width)) => Arc::new(base.windowed(level, width)),
+                None => base,
+            };
             if let Ok(node) = self.scene.node(id)
                 && let NodeContent::Volume(v) = &node.content
+                && !Arc::ptr_eq(&v.transfer, &transfer)
             {
                 let mut v = v.clone();
-                v.transfer = Arc::clone(&transfer);
+                v.transfer = transfer;
                 let _ = self.scene.set_content(id, NodeContent::Volume(v));
             }
         }
-        println!("transfer function {}", PRESETS[next]);
+    }
+
+    /// The `T` key: the scene's own function, then each preset that fits the data and draws
+    /// otherwise, in turn.
+    fn next_preset(&mut self) {
+        let own = self.own.first().map(|(_, t)| Arc::clone(t));
+        let choices: Vec<&'static str> = self
+            .fitting
+            .iter()
+            .copied()
+            .filter(|p| TransferFunction::preset(p).as_ref() != own.as_deref())
+            .collect();
+        self.preset = match self.preset {
+            None => choices.first().copied(),
+            Some(p) => choices
+                .iter()
+                .position(|c| *c == p)
+                .and_then(|i| choices.get(i + 1))
+                .copied(),
+        };
+        self.window = None;
+        self.apply_transfer();
+        println!(
+            "transfer function {}",
+            self.preset.unwrap_or("of the scene")
+        );
+    }
+
+    /// The window of the function now drawn: its points' span.
+    fn current_window(&self) -> Option<(f32, f32)> {
+        let (_, node, _) = self.scene.volumes().next()?;
+        let points = node.transfer.points();
+        let (first, last) = (points.first()?.0, points.last()?.0);
+        Some((0.5 * (first + last), (last - first).max(1.0)))
     }
 
     fn toggle_clip(&mut self) {
@@ -1016,12 +1097,18 @@ impl App {
         file.camera = Some(CameraSpec::from_camera(&self.camera, self.scene.up_axis()));
         file.output.size = Some([size.0, size.1]);
         file.output.ordering = Some(self.ordering.to_string());
-        if let Some(p) = self.preset {
-            for volume in &mut file.volumes {
-                volume.transfer = Some(PRESETS[p].to_owned());
+        for volume in &mut file.volumes {
+            if let Some(p) = self.preset {
+                volume.transfer = Some(p.to_owned());
                 volume.window = None;
                 volume.color = None;
                 volume.level_width = None;
+                volume.shift = None;
+            }
+            // A window over any function (preset, ramp or auto) is its level_width: the
+            // loader stretches the function over it, as the drag did.
+            if let Some((level, width)) = self.window {
+                volume.level_width = Some([level, width]);
                 volume.shift = None;
             }
         }
@@ -1234,6 +1321,16 @@ impl App {
         if (self.cursor.0 - drag.start.0).abs() + (self.cursor.1 - drag.start.1).abs() > 3.0 {
             drag.moved = true;
         }
+        if let Some((level0, width0)) = self.windowing {
+            // Alt+drag: right raises the level, up narrows the window, both from where the
+            // drag began.
+            let (tx, ty) = (self.cursor.0 - drag.start.0, self.cursor.1 - drag.start.1);
+            let width = width0 * (ty as f32 * 0.01).exp();
+            let level = level0 + tx as f32 * width0 / 400.0;
+            self.window = Some((level, width.max(1e-3)));
+            self.apply_transfer();
+            return;
+        }
         if drag.button == MouseButton::Left
             && self.moving.is_some()
             && let Some(top) = self.selected
@@ -1305,6 +1402,9 @@ impl App {
             WindowEvent::CursorMoved { position, .. } => self.mouse_moved(position),
             WindowEvent::MouseInput { state, button, .. } => match state {
                 ElementState::Pressed => {
+                    self.windowing = (self.modifiers.alt_key() && button == MouseButton::Left)
+                        .then(|| self.window.or_else(|| self.current_window()))
+                        .flatten();
                     let modified = self.modifiers.shift_key() || self.modifiers.control_key();
                     self.moving = match self.selected {
                         Some(top) if modified && button == MouseButton::Left => {
@@ -1321,6 +1421,16 @@ impl App {
                 }
                 ElementState::Released => {
                     let drag = self.drag.take();
+                    if self.windowing.take().is_some() {
+                        if let Some((level, width)) = self.window {
+                            self.say(format!(
+                                "window level {level:.0} width {width:.0} (classified in {:.0} ms)",
+                                self.last.timings.classify.as_secs_f64() * 1e3
+                            ));
+                        }
+                        self.request_redraw();
+                        return Ok(());
+                    }
                     if let (Some(before), Some(top)) = (self.moving.take(), self.selected)
                         && let Ok(node) = self.scene.node(top)
                     {
