@@ -31,7 +31,9 @@ struct Object {
 @group(1) @binding(0) var<uniform> object: Object;
 
 struct VsOut {
-    @builtin(position) clip: vec4<f32>,
+    // Invariant: translucent meshes are drawn twice (depth, then colour where the depth is
+    // equal), and both draws must give the same depth.
+    @invariant @builtin(position) clip: vec4<f32>,
     @location(0) rel: vec3<f32>,
     @location(1) normal: vec3<f32>,
 }
@@ -83,5 +85,8 @@ fn fs_main(in: VsOut, @builtin(front_facing) front: bool) -> @location(0) vec4<f
     for (var i = 0u; i < count; i++) {
         c += frame.light_color[i].rgb * shade(n, -frame.light_dir[i].xyz, v, base);
     }
-    return vec4<f32>(c, 1.0);
+    // Premultiplied: an opaque mesh (alpha 1) writes its colour, a translucent one is
+    // blended over what lies behind it.
+    let a = clamp(object.base_color.a, 0.0, 1.0);
+    return vec4<f32>(c * a, a);
 }

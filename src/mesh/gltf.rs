@@ -1216,8 +1216,14 @@ fn material_of(primitive: &Primitive<'_>) -> Material {
             0.0
         }
     };
+    let mut base_color = pbr.base_color_factor().map(unit);
+    // glTF: alpha counts only in BLEND mode (and MASK cuts, which is not drawn here); an
+    // OPAQUE material is opaque whatever its alpha.
+    if primitive.material().alpha_mode() != gltf::material::AlphaMode::Blend {
+        base_color[3] = 1.0;
+    }
     Material {
-        base_color: pbr.base_color_factor().map(unit),
+        base_color,
         roughness: unit(pbr.roughness_factor()),
         metallic: unit(pbr.metallic_factor()),
     }

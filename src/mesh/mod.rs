@@ -83,7 +83,7 @@ impl CpuMesh {
 /// Surface appearance of a mesh.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Material {
-    /// Linear RGBA base colour (alpha is kept but meshes are drawn opaque).
+    /// Linear RGBA base colour; an alpha below 1 draws the mesh translucent.
     pub base_color: [f32; 4],
     /// Perceptual roughness in 0..1 (0 is mirror-like).
     pub roughness: f32,

@@ -50,6 +50,10 @@ pub(crate) struct MeshPass {
     pipeline: wgpu::RenderPipeline,
     /// Overlays (measurement markers) drawn over everything: built on first use.
     overlay: Option<wgpu::RenderPipeline>,
+    /// Translucent meshes: first their nearest surface's depth (tested against what is
+    /// there), then their colour blended where the depth is that surface's, so that a closed
+    /// mesh blends once, not once per layer.
+    translucent: Option<(wgpu::RenderPipeline, wgpu::RenderPipeline)>,
     layout: wgpu::PipelineLayout,
     module: wgpu::ShaderModule,
     object_layout: wgpu::BindGroupLayout,
@@ -107,6 +111,8 @@ impl MeshPass {
             &module,
             wgpu::CompareFunction::Greater,
             true,
+            None,
+            wgpu::ColorWrites::ALL,
         );
         let frame_buffer = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("mesh frame"),
@@ -125,6 +131,7 @@ impl MeshPass {
         Self {
             pipeline,
             overlay: None,
+            translucent: None,
             layout,
             module,
             object_layout,
@@ -263,7 +270,50 @@ impl MeshPass {
                 &self.module,
                 compare,
                 false,
+                None,
+                wgpu::ColorWrites::ALL,
             ));
+        }
+    }
+
+    /// Builds the translucent pipeline if it is not there yet.
+    pub(crate) fn prepare_translucent(&mut self, ctx: &GpuContext) {
+        if self.translucent.is_none() {
+            let depth = mesh_pipeline(
+                &ctx.device,
+                &self.layout,
+                &self.module,
+                wgpu::CompareFunction::Greater,
+                true,
+                None,
+                wgpu::ColorWrites::empty(),
+            );
+            let color = mesh_pipeline(
+                &ctx.device,
+                &self.layout,
+                &self.module,
+                wgpu::CompareFunction::Equal,
+                false,
+                Some(wgpu::BlendState::PREMULTIPLIED_ALPHA_BLENDING),
+                wgpu::ColorWrites::ALL,
+            );
+            self.translucent = Some((depth, color));
+        }
+    }
+
+    /// Records translucent meshes, in the order given (far to near): each one's nearest
+    /// surface, hidden behind what is nearer, blended over what is there (after
+    /// [`Self::prepare_translucent`]). The depth is left holding those surfaces.
+    pub(crate) fn draw_translucent<'a>(
+        &self,
+        pass: &mut wgpu::RenderPass<'_>,
+        meshes: impl Iterator<Item = &'a GpuMesh>,
+    ) {
+        if let Some((depth, color)) = &self.translucent {
+            for mesh in meshes {
+                self.draw_with(depth, pass, std::iter::once(mesh));
+                self.draw_with(color, pass, std::iter::once(mesh));
+            }
         }
     }
 
@@ -300,17 +350,27 @@ impl MeshPass {
     }
 }
 
-/// A mesh pipeline with the given depth test; opaque meshes write depth, overlays do not.
+/// A mesh pipeline with the given depth test and blending; opaque meshes write depth,
+/// overlays and translucent meshes do not.
 fn mesh_pipeline(
     device: &wgpu::Device,
     layout: &wgpu::PipelineLayout,
     module: &wgpu::ShaderModule,
     compare: wgpu::CompareFunction,
     write_depth: bool,
+    blend: Option<wgpu::BlendState>,
+    write_mask: wgpu::ColorWrites,
 ) -> wgpu::RenderPipeline {
     let attributes = wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x3];
     device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-        label: Some(if write_depth { "mesh" } else { "overlay" }),
+        label: Some(
+            match (write_depth, blend.is_some(), write_mask.is_empty()) {
+                (true, _, true) => "translucent mesh depth",
+                (true, _, false) => "mesh",
+                (false, false, _) => "overlay",
+                (false, true, _) => "translucent mesh",
+            },
+        ),
         layout: Some(layout),
         vertex: wgpu::VertexState {
             module,
@@ -337,7 +397,11 @@ fn mesh_pipeline(
             module,
             entry_point: Some("fs_main"),
             compilation_options: Default::default(),
-            targets: &[Some(COLOR_FORMAT.into())],
+            targets: &[Some(wgpu::ColorTargetState {
+                format: COLOR_FORMAT,
+                blend,
+                write_mask,
+            })],
         }),
         multiview_mask: None,
         cache: None,

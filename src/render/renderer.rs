@@ -5,7 +5,7 @@ use std::collections::HashMap;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use glam::{DMat3, DMat4};
+use glam::{DMat3, DMat4, DVec3};
 
 use super::mesh_pass::{GpuMesh, MeshPass};
 use super::splat_pass::{GpuVolume, SplatPass, color_texels, gradient_texels, projection};
@@ -239,6 +239,7 @@ impl Renderer {
             finish_drawing(ctx, color)?;
         }
         report.timings.splat_pass = started.elapsed();
+        self.translucent_stage(ctx, scene, view, color, depth);
         if report.overlays > 0 {
             self.overlay_stage(ctx, scene, color, depth);
         }
@@ -316,7 +317,7 @@ impl Renderer {
         // What lies under the splats: the meshes on the GPU, or the background alone.
         let has_meshes = scene.meshes().chain(scene.overlays()).next().is_some();
         let pixels = size.0 as usize * size.1 as usize;
-        let (mut frame, depth, target) = match ctx {
+        let (mut frame, mut depth, target) = match ctx {
             Some(ctx) if has_meshes => {
                 self.sync_meshes(ctx, scene);
                 let target = RenderTarget::new(ctx, size.0, size.1)?;
@@ -350,6 +351,26 @@ impl Renderer {
         report.tiles =
             Some(self.composite_tiles(scene, &view, &ordered, options.preview, &depth, &mut frame));
         report.timings.splat_pass = started.elapsed();
+        if let Some((ctx, target)) = &target
+            && scene.meshes().any(|(_, m, _)| is_translucent(m))
+        {
+            // Translucent meshes go over the splats: drawn alone on a clear colour against
+            // the opaque meshes' depth, then laid over the frame.
+            let started = Instant::now();
+            let mut encoder = ctx.device.create_command_encoder(&Default::default());
+            {
+                let _ = begin_keeping_depth(&mut encoder, &target.color_view, &target.depth_view);
+            }
+            ctx.queue.submit([encoder.finish()]);
+            self.translucent_stage(ctx, scene, &view, &target.color_view, &target.depth_view);
+            let layer = target.read_color(ctx)?;
+            // The depth now holds the translucent surfaces too, as the GPU path's does.
+            depth = target.read_depth(ctx)?;
+            for (px, o) in frame.pixels.iter_mut().zip(&layer.pixels) {
+                *px = std::array::from_fn(|k| o[k] + (1.0 - o[3]) * px[k]);
+            }
+            report.timings.readback += started.elapsed();
+        }
         if let Some((ctx, target)) = &target
             && scene.overlays().next().is_some()
         {
@@ -443,6 +464,10 @@ impl Renderer {
         if scene.overlays().next().is_some() {
             let pass = self.mesh_pass.get_or_insert_with(|| MeshPass::new(ctx));
             pass.prepare_overlay(ctx);
+        }
+        if scene.meshes().any(|(_, m, _)| is_translucent(m)) {
+            let pass = self.mesh_pass.get_or_insert_with(|| MeshPass::new(ctx));
+            pass.prepare_translucent(ctx);
         }
         for (id, node, _) in scene.meshes().chain(scene.overlays()) {
             if node.mesh.indices.len() < 3 {
@@ -665,7 +690,10 @@ impl Renderer {
         {
             let mut pass = begin(&mut encoder, color, depth, Some(clear), "mesh pass");
             if let Some(mesh_pass) = &self.mesh_pass {
-                let meshes = scene.meshes().filter_map(|(id, _, _)| self.meshes.get(&id));
+                let meshes = scene
+                    .meshes()
+                    .filter(|(_, m, _)| !is_translucent(m))
+                    .filter_map(|(id, _, _)| self.meshes.get(&id));
                 mesh_pass.draw(&mut pass, meshes);
             }
         }
@@ -701,6 +729,47 @@ impl Renderer {
     }
 
     /// Draws overlay meshes over the finished frame.
+    /// Draws the translucent meshes far to near (by their centres' distance from the eye):
+    /// each one's nearest surface blended over what is there, hidden by the opaque meshes and
+    /// by nearer translucent ones. Approximate in two ways: splats in front of a translucent
+    /// mesh are drawn under it (translucent meshes come after all splats), and of a
+    /// translucent mesh seen through another, only the parts the sort puts behind show. The
+    /// depth is left holding the translucent surfaces (so depth images and picks see them).
+    fn translucent_stage(
+        &self,
+        ctx: &GpuContext,
+        scene: &Scene,
+        view: &ViewSetup,
+        color: &wgpu::TextureView,
+        depth: &wgpu::TextureView,
+    ) {
+        let Some(mesh_pass) = &self.mesh_pass else {
+            return;
+        };
+        let eye = view.camera.eye;
+        let mut far_to_near: Vec<(f64, NodeId)> = scene
+            .meshes()
+            .filter(|(_, m, _)| is_translucent(m))
+            .map(|(id, m, world)| {
+                let centre = m.mesh.bounds().map_or(DVec3::ZERO, |(lo, hi)| {
+                    0.5 * (DVec3::from(lo.map(f64::from)) + DVec3::from(hi.map(f64::from)))
+                });
+                (world.transform_point3(centre).distance_squared(eye), id)
+            })
+            .collect();
+        if far_to_near.is_empty() {
+            return;
+        }
+        far_to_near.sort_by(|a, b| b.0.total_cmp(&a.0));
+        let mut encoder = ctx.device.create_command_encoder(&Default::default());
+        {
+            let mut pass = begin(&mut encoder, color, depth, None, "translucent pass");
+            let meshes = far_to_near.iter().filter_map(|(_, id)| self.meshes.get(id));
+            mesh_pass.draw_translucent(&mut pass, meshes);
+        }
+        ctx.queue.submit([encoder.finish()]);
+    }
+
     fn overlay_stage(
         &self,
         ctx: &GpuContext,
@@ -755,6 +824,44 @@ fn finish_drawing(ctx: &GpuContext, color: &wgpu::TextureView) -> Result<(), Ren
 
 /// A render pass on the targets; `clear` clears colour (and depth to 0, reversed far),
 /// `None` keeps what is there.
+/// Whether a mesh is drawn translucent: its material's alpha is below 1.
+fn is_translucent(mesh: &crate::scene::MeshNode) -> bool {
+    mesh.material.base_color[3] < 1.0
+}
+
+/// A pass that clears the colour to transparent and keeps the depth.
+fn begin_keeping_depth<'e>(
+    encoder: &'e mut wgpu::CommandEncoder,
+    color: &wgpu::TextureView,
+    depth: &wgpu::TextureView,
+) -> wgpu::RenderPass<'e> {
+    encoder
+        .begin_render_pass(&wgpu::RenderPassDescriptor {
+            label: Some("clear the colour"),
+            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                view: color,
+                depth_slice: None,
+                resolve_target: None,
+                ops: wgpu::Operations {
+                    load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
+                    store: wgpu::StoreOp::Store,
+                },
+            })],
+            depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                view: depth,
+                depth_ops: Some(wgpu::Operations {
+                    load: wgpu::LoadOp::Load,
+                    store: wgpu::StoreOp::Store,
+                }),
+                stencil_ops: None,
+            }),
+            timestamp_writes: None,
+            occlusion_query_set: None,
+            multiview_mask: None,
+        })
+        .forget_lifetime()
+}
+
 fn begin<'e>(
     encoder: &'e mut wgpu::CommandEncoder,
     color: &wgpu::TextureView,

@@ -317,8 +317,12 @@ pub struct MeshSpec {
     pub name: Option<String>,
     /// A glTF, OBJ or STL file, or `builtin:prosthesis`.
     pub path: String,
-    /// Base colour (RGB or RGBA, linear) replacing the file's.
+    /// Base colour (RGB or RGBA, linear) replacing the file's; an alpha below 1 draws the
+    /// mesh translucent.
     pub color: Option<Vec<f32>>,
+    /// Opacity from 0 (exclusive) to 1, multiplying the colour's alpha: below 1 the mesh is
+    /// drawn translucent, over the volume, so that what lies inside shows.
+    pub opacity: Option<f32>,
     /// Roughness replacing the file's.
     pub roughness: Option<f32>,
     /// Metalness replacing the file's.
@@ -989,6 +993,15 @@ fn load_mesh_spec(
         }
         if let Some(r) = spec.roughness {
             part.material.roughness = r.clamp(0.0, 1.0);
+        }
+        if let Some(o) = spec.opacity {
+            if !(o > 0.0 && o <= 1.0) {
+                return Err(invalid(format!(
+                    "mesh {}: opacity {o} must lie in (0, 1]",
+                    spec.path
+                )));
+            }
+            part.material.base_color[3] *= o;
         }
         if let Some(m) = spec.metallic {
             part.material.metallic = m.clamp(0.0, 1.0);
