@@ -540,7 +540,9 @@ fn a_plan_made_in_the_viewer_is_saved_undone_measured_and_reloaded_under_xvfb() 
     // Each step's screenshot stays in this folder when the test fails.
     eprintln!("screenshots in {}", dir.display());
     let original = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/scenes/shoulder.toml");
-    let scene_path = dir.join("shoulder.toml");
+    let case = dir.join("case");
+    std::fs::create_dir_all(&case).unwrap();
+    let scene_path = case.join("shoulder.toml");
     std::fs::copy(&original, &scene_path).unwrap();
     let (viewer, lines, window) = open_viewer(
         &display,
@@ -596,7 +598,7 @@ fn a_plan_made_in_the_viewer_is_saved_undone_measured_and_reloaded_under_xvfb() 
     assert_ne!(selected, moved, "the prosthesis moved on screen");
     xdo(&display, &["key", "ctrl+s"]).expect("ctrl+s");
     let saved = PathBuf::from(line(&lines, "saved plan"));
-    assert_eq!(saved, dir.join("shoulder-plan.toml"));
+    assert_eq!(saved, case.join("shoulder-plan.toml"));
     let after = mesh_translation(&saved, "prosthesis");
     // The pivot (the mesh's origin) followed the cursor: 40 pixels at its depth.
     let loaded = splatscene::scene::file::load_scene_file(&scene_path).unwrap();
@@ -619,7 +621,7 @@ fn a_plan_made_in_the_viewer_is_saved_undone_measured_and_reloaded_under_xvfb() 
     assert_eq!(line(&lines, "undo"), "move prosthesis");
     xdo(&display, &["key", "ctrl+s"]).expect("ctrl+s");
     let undone = PathBuf::from(line(&lines, "saved plan"));
-    assert_eq!(undone, dir.join("shoulder-plan-2.toml"));
+    assert_eq!(undone, case.join("shoulder-plan-2.toml"));
     assert!(mesh_translation(&undone, "prosthesis").distance(before) < 1e-9);
     title(&display, &window, " splats");
     screen(&display, &dir, "4-undone");
@@ -734,6 +736,63 @@ fn a_plan_made_in_the_viewer_is_saved_undone_measured_and_reloaded_under_xvfb() 
         (value - angle).abs() < 1e-6,
         "saved {value}, clicked {angle}"
     );
+
+    // The screenshot key's scene file renders to the same picture, measurement markers
+    // included (the values are on-screen text, not in the screenshot).
+    xdo(&display, &["key", "s"]).expect("s");
+    let shot = PathBuf::from(line(&lines, "screenshot"));
+    let view_file = PathBuf::from(line(&lines, "view"));
+    let rendered = dir.join("rendered.png");
+    let out = Command::new(env!("CARGO_BIN_EXE_splatscene"))
+        .args(["render", view_file.to_str().unwrap(), "--annotate", "none"])
+        .args(["--out", rendered.to_str().unwrap()])
+        .env("NODEVICE_SELECT", "1")
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let (a, b) = (
+        image::open(&shot).unwrap().to_rgba8(),
+        image::open(&rendered).unwrap().to_rgba8(),
+    );
+    assert_eq!(a.dimensions(), b.dimensions());
+    let differing = a.pixels().zip(b.pixels()).filter(|(p, q)| p != q).count();
+    assert!(
+        differing * 1000 < (a.width() * a.height()) as usize,
+        "{differing} pixels differ between the viewer's screenshot and render of its file"
+    );
+
+    // B: a crop box, outlined, saved with the plan.
+    xdo(&display, &["key", "b"]).expect("b");
+    assert!(line(&lines, "crop box").starts_with("on"));
+    title(&display, &window, " splats");
+    screen(&display, &dir, "5a-cropped");
+    xdo(&display, &["key", "ctrl+s"]).expect("ctrl+s");
+    let cropped = PathBuf::from(line(&lines, "saved plan"));
+    let file = splatscene::scene::file::SceneFile::read(&cropped).unwrap();
+    assert!(file.volumes[0].crop_box.is_some(), "the crop box is saved");
+    xdo(&display, &["key", "b"]).expect("b");
+    assert_eq!(line(&lines, "crop box"), "off");
+
+    // A plan that cannot be written is said so, and kept: its folder gone, then back.
+    xdo(&display, &["key", "Delete"]).expect("delete");
+    assert!(line(&lines, "measurement 1").starts_with("delete"));
+    let moved_away = dir.join("case-moved");
+    std::fs::rename(&case, &moved_away).unwrap();
+    xdo(&display, &["key", "ctrl+s"]).expect("ctrl+s");
+    assert!(line(&lines, "the plan was not saved").contains("kept here"));
+    std::fs::rename(&moved_away, &case).unwrap();
+    xdo(&display, &["key", "ctrl+z"]).expect("ctrl+z");
+    assert!(line(&lines, "undo").starts_with("delete"));
+    xdo(&display, &["key", "ctrl+s"]).expect("ctrl+s");
+    let kept = PathBuf::from(line(&lines, "saved plan"));
+    let plan = splatscene::scene::file::load_scene_file(&kept)
+        .unwrap()
+        .scene;
+    assert_eq!(plan.measurements.len(), 1, "the undone deletion is saved");
 
     // T: the presets that fit this CT (ct-bone, the scene's own, is left out), then the
     // scene's own again; Alt+drag sets a window, saved as the volume's level_width.

@@ -80,6 +80,10 @@ pub const KEYS: &[(&str, &str)] = &[
     ("A", "annotations off and on"),
     ("S", "screenshot and its scene file"),
     ("C, [, ]", "clip plane on and off, move it"),
+    (
+        "B, {, }",
+        "crop box around the selected mesh on and off, shrink, grow by 5 mm",
+    ),
     ("R", "reset the camera"),
     ("H", "this help"),
     ("Escape", "cancel, deselect; with nothing to cancel, quit"),
@@ -534,28 +538,23 @@ impl App {
         for point in pending.chain(self.hit).chain(snap) {
             let _ = annotate(&mut scene, &Measurement::point(point), &style);
         }
+        // The crop box's edges and each clip plane's cut through the scene's box, thin.
+        let thin = MarkerStyle {
+            point_radius: style.line_radius,
+            line_radius: 0.5 * style.line_radius,
+            ..style
+        };
+        let mut outline = Vec::new();
         if let Some((lo, hi)) = self.scene.clipping.crop {
-            // The crop box's twelve edges, thin.
-            let thin = MarkerStyle {
-                point_radius: style.line_radius,
-                line_radius: 0.5 * style.line_radius,
-                ..style
-            };
-            let corner = |i: u32| {
-                DVec3::new(
-                    if i & 1 == 0 { lo.x } else { hi.x },
-                    if i & 2 == 0 { lo.y } else { hi.y },
-                    if i & 4 == 0 { lo.z } else { hi.z },
-                )
-            };
-            for a in 0..8u32 {
-                for bit in [1, 2, 4] {
-                    if a & bit == 0 {
-                        let edge = Measurement::distance(corner(a), corner(a | bit));
-                        let _ = annotate(&mut scene, &edge, &thin);
-                    }
-                }
+            outline.extend(box_edges(lo, hi));
+        }
+        if let Some((lo, hi)) = self.scene.bounds() {
+            for plane in &self.scene.clipping.planes {
+                outline.extend(plane_outline(plane, lo, hi));
             }
+        }
+        for (a, b) in outline {
+            let _ = annotate(&mut scene, &Measurement::distance(a, b), &thin);
         }
         if let Some(top) = self.selected {
             tint(&mut scene, top);
@@ -1036,6 +1035,47 @@ impl App {
         }
     }
 
+    /// The `B` key: a crop box around the selected mesh (20 mm beyond it), or around the
+    /// middle of the scene; off again.
+    fn toggle_crop(&mut self) {
+        if self.scene.clipping.crop.take().is_some() {
+            println!("crop box off");
+            return;
+        }
+        let around = match self.selected {
+            Some(top) => self
+                .scene
+                .subtree_bounds(top)
+                .map(|(lo, hi)| (lo - DVec3::splat(20.0), hi + DVec3::splat(20.0))),
+            None => self.scene.bounds().map(|(lo, hi)| {
+                let inset = 0.15 * (hi - lo);
+                (lo + inset, hi - inset)
+            }),
+        };
+        if let Some((lo, hi)) = around {
+            self.scene.clipping.crop = Some((lo, hi));
+            println!(
+                "crop box on, min ({:.1}, {:.1}, {:.1}) max ({:.1}, {:.1}, {:.1})",
+                lo.x, lo.y, lo.z, hi.x, hi.y, hi.z
+            );
+        }
+    }
+
+    /// Grows the crop box by `mm` on every side (shrinks it for negative `mm`, down to 1 mm).
+    fn grow_crop(&mut self, mm: f64) {
+        if let Some((lo, hi)) = &mut self.scene.clipping.crop {
+            let centre = 0.5 * (*lo + *hi);
+            let half = (0.5 * (*hi - *lo) + DVec3::splat(mm)).max(DVec3::splat(0.5));
+            (*lo, *hi) = (centre - half, centre + half);
+            println!(
+                "crop box size ({:.1}, {:.1}, {:.1})",
+                2.0 * half.x,
+                2.0 * half.y,
+                2.0 * half.z
+            );
+        }
+    }
+
     /// Moves the clip plane by 2% of the scene's size: `sign` 1 toward the eye (cutting less).
     fn move_clip(&mut self, sign: f64) {
         let step = self
@@ -1297,6 +1337,9 @@ impl App {
                 }
                 (false, "r") => self.camera = self.home,
                 (false, "c") => self.toggle_clip(),
+                (false, "b") => self.toggle_crop(),
+                (false, "{") => self.grow_crop(-5.0),
+                (false, "}") => self.grow_crop(5.0),
                 (false, "[") => self.move_clip(-1.0),
                 (false, "]") => self.move_clip(1.0),
                 (false, digit) => {
@@ -1588,5 +1631,75 @@ fn draw_hud(image: &mut image::RgbaImage, lines: &[String], help: bool) {
             painter.text(what, 130.0, y, Anchor::TopLeft, [235, 235, 235, 255]);
             y += step;
         }
+    }
+}
+
+/// The twelve edges of the box `lo`..`hi`.
+fn box_edges(lo: DVec3, hi: DVec3) -> Vec<(DVec3, DVec3)> {
+    let corner = |i: u32| {
+        DVec3::new(
+            if i & 1 == 0 { lo.x } else { hi.x },
+            if i & 2 == 0 { lo.y } else { hi.y },
+            if i & 4 == 0 { lo.z } else { hi.z },
+        )
+    };
+    let mut edges = Vec::with_capacity(12);
+    for a in 0..8u32 {
+        for bit in [1, 2, 4] {
+            if a & bit == 0 {
+                edges.push((corner(a), corner(a | bit)));
+            }
+        }
+    }
+    edges
+}
+
+/// Where a clip plane cuts the box `lo`..`hi`: the sides of that polygon.
+fn plane_outline(plane: &ClipPlane, lo: DVec3, hi: DVec3) -> Vec<(DVec3, DVec3)> {
+    let Some(n) = plane.normal.try_normalize() else {
+        return Vec::new();
+    };
+    let d = plane.offset / plane.normal.length();
+    let mut points: Vec<DVec3> = Vec::new();
+    for (a, b) in box_edges(lo, hi) {
+        let (da, db) = (n.dot(a) - d, n.dot(b) - d);
+        if (da <= 0.0) != (db <= 0.0) {
+            points.push(a + (b - a) * (da / (da - db)));
+        }
+    }
+    if points.len() < 3 {
+        return Vec::new();
+    }
+    // Around their centre, in the plane.
+    let centre = points.iter().copied().sum::<DVec3>() / points.len() as f64;
+    let u = (points[0] - centre).normalize_or(n.any_orthonormal_vector());
+    let v = n.cross(u);
+    points.sort_by(|p, q| {
+        let angle = |x: &DVec3| (*x - centre).dot(v).atan2((*x - centre).dot(u));
+        angle(p).total_cmp(&angle(q))
+    });
+    (0..points.len())
+        .map(|i| (points[i], points[(i + 1) % points.len()]))
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_clip_plane_is_outlined_where_it_cuts_the_box() {
+        let plane = ClipPlane::through(DVec3::new(0.0, 0.0, 0.5), DVec3::Z * 2.0, false);
+        let sides = plane_outline(&plane, DVec3::ZERO, DVec3::ONE);
+        assert_eq!(sides.len(), 4);
+        let mut length = 0.0;
+        for (a, b) in &sides {
+            assert!((a.z - 0.5).abs() < 1e-12 && (b.z - 0.5).abs() < 1e-12);
+            length += a.distance(*b);
+        }
+        assert!((length - 4.0).abs() < 1e-12, "a unit square: {length}");
+        let outside = ClipPlane::through(DVec3::splat(5.0), DVec3::X, false);
+        assert!(plane_outline(&outside, DVec3::ZERO, DVec3::ONE).is_empty());
+        assert_eq!(box_edges(DVec3::ZERO, DVec3::ONE).len(), 12);
     }
 }
