@@ -44,7 +44,10 @@ pub const KEYS: &[(&str, &str)] = &[
         "click",
         "pick (a JSON line on stdout); on a mesh, select it",
     ),
-    ("Shift+drag", "move the selected mesh in the view plane"),
+    (
+        "drag on it",
+        "move the selected mesh in the view plane (also Shift+drag)",
+    ),
     ("Ctrl+drag", "turn the selected mesh about its pivot"),
     (
         "Shift+wheel",
@@ -764,6 +767,26 @@ impl App {
         Ok(())
     }
 
+    /// Whether the window pixel `at` shows the selected mesh (meshes only, nearest hit).
+    fn on_selected(&mut self, at: (f64, f64)) -> bool {
+        let (Some(top), Some(Ok(view))) = (self.selected, self.view()) else {
+            return false;
+        };
+        let (px, py) = (at.0.max(0.0) as u32, at.1.max(0.0) as u32);
+        if px >= view.size.0 || py >= view.size.1 {
+            return false;
+        }
+        self.picker.update(&self.scene);
+        let options = PickOptions {
+            volumes: false,
+            ..PickOptions::default()
+        };
+        match self.picker.pick_pixel(&self.scene, &view, px, py, &options) {
+            Some(Hit::Mesh(m)) => plan::top_node(&self.scene, m.node) == top,
+            _ => false,
+        }
+    }
+
     /// Moves the selected mesh to `after` (its local transform), as one undoable edit.
     fn move_selected(&mut self, after: impl Fn(DMat4, DVec3) -> DMat4) {
         let Some(top) = self.selected else {
@@ -1448,9 +1471,16 @@ impl App {
                     self.windowing = (self.modifiers.alt_key() && button == MouseButton::Left)
                         .then(|| self.window.or_else(|| self.current_window()))
                         .flatten();
+                    // A drag that starts on the selected mesh moves it (Ctrl: turns it), as does
+                    // a Shift or Ctrl drag anywhere; other drags move the camera.
                     let modified = self.modifiers.shift_key() || self.modifiers.control_key();
+                    let grabbed = self.selected.is_some() && self.on_selected(self.cursor);
                     self.moving = match self.selected {
-                        Some(top) if modified && button == MouseButton::Left => {
+                        Some(top)
+                            if (modified || grabbed)
+                                && button == MouseButton::Left
+                                && self.windowing.is_none() =>
+                        {
                             self.scene.node(top).ok().map(|n| n.local())
                         }
                         _ => None,
@@ -1474,8 +1504,10 @@ impl App {
                         self.request_redraw();
                         return Ok(());
                     }
+                    let dragged = drag.as_ref().is_some_and(|d| d.moved);
                     if let (Some(before), Some(top)) = (self.moving.take(), self.selected)
                         && let Ok(node) = self.scene.node(top)
+                        && dragged
                     {
                         // The drag moved the mesh as it went: keep the whole drag as one edit.
                         let after = node.local();
