@@ -338,8 +338,20 @@ pub(crate) fn write_atomic(path: &Path, bytes: &[u8]) -> Result<bool> {
         name.to_string_lossy(),
         std::process::id()
     ));
-    if let Err(e) = std::fs::write(&tmp, bytes) {
-        let _ = std::fs::remove_file(&tmp);
+    // Created exclusively: a file or a link already at the temporary's name is never
+    // written through or replaced.
+    let written = std::fs::OpenOptions::new()
+        .write(true)
+        .create_new(true)
+        .open(&tmp)
+        .and_then(|mut f| {
+            use std::io::Write;
+            f.write_all(bytes)
+        });
+    if let Err(e) = written {
+        if e.kind() != std::io::ErrorKind::AlreadyExists {
+            let _ = std::fs::remove_file(&tmp);
+        }
         return Err(e).with_context(|| format!("writing {}", tmp.display()));
     }
     if let Err(e) = std::fs::rename(&tmp, path) {

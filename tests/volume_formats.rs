@@ -391,3 +391,24 @@ fn every_recognised_volume_file_loads() {
     // 5 .dat, quarter.nhdr, hydrogen.vti, ironProt.vtk, 2 .nii.gz.
     assert_eq!(loaded, 10);
 }
+
+/// `.vti` files as VTK's own writer makes them by default: appended base64, the header encoded
+/// on its own and the zlib blocks after it, a second array behind the first, and the closing
+/// tags after the data (`tests/data/vtk/`, written by VTK 9.7.2).
+#[test]
+fn vti_files_written_by_vtk_load() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/vtk");
+    for name in ["vtk-appended-zlib.vti", "vtk-appended-base64.vti"] {
+        let loaded = load_checked(
+            &dir.join(name),
+            VolumeFormat::VtkXml,
+            ScalarType::I16,
+            [5, 4, 3],
+            [0.5, 0.75, 2.0],
+        );
+        let v = &loaded.volume;
+        assert_eq!(v.origin, [-10.0, 20.0, 5.5], "{name}");
+        let expected: Vec<f32> = (0..60).map(|i| (7 * i - 100) as f32).collect();
+        assert_eq!(v.values, expected, "{name}");
+    }
+}

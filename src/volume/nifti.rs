@@ -12,7 +12,9 @@
 //! files) and their unit vectors the direction, its last column the origin. Otherwise, with
 //! `qform_code > 0`, the quaternion (`quatern_b/c/d`), `pixdim` and `qfac` (`pixdim[0]`) give
 //! the rotation, spacing and a z flip, and `quatern_x/y/z` the origin. Otherwise `pixdim` alone
-//! gives the spacing, with the identity orientation and the origin at 0.
+//! gives the spacing, with the identity orientation and the origin at 0. Lengths are in the
+//! header's spatial unit (`xyzt_units`): metres and micrometres are turned to millimetres,
+//! an unknown unit is taken as millimetres (as ITK does; nibabel leaves lengths as they are).
 //!
 //! **Sizes.** `dim` is checked against the grid limit ([`voxel_count`]: at most 2^32 voxels)
 //! before anything is read. A plain `.nii` must hold `vox_offset` plus the declared values
@@ -230,11 +232,29 @@ fn rescale(values: &mut [f32], slope: f32, inter: f32) {
     }
 }
 
-/// The voxel-to-world placement: sform, else qform, else pixdim alone (see the module docs).
+/// Millimetres per unit of the header's spatial unit (`xyzt_units & 7`): metres 1000,
+/// millimetres and unknown 1 (as ITK takes it), micrometres 0.001.
+fn millimetres_per_unit(path: &Path, h: &NiftiHeader) -> Result<f64, VolumeError> {
+    match h.xyzt_units & 0x07 {
+        0 | 2 => Ok(1.0),
+        1 => Ok(1000.0),
+        3 => Ok(0.001),
+        other => Err(header_error(
+            path,
+            format!(
+                "xyzt_units spatial code {other} is none of 0 (unknown), 1 (m), 2 (mm), 3 (um)"
+            ),
+        )),
+    }
+}
+
+/// The voxel-to-world placement: sform, else qform, else pixdim alone (see the module docs),
+/// in millimetres whatever the header's spatial unit.
 fn placement(path: &Path, h: &NiftiHeader) -> Result<Placement, VolumeError> {
-    let pixdim = [1, 2, 3].map(|i| f64::from(h.pixdim[i]));
+    let mm = millimetres_per_unit(path, h)?;
+    let pixdim = [1, 2, 3].map(|i| f64::from(h.pixdim[i]) * mm);
     if h.sform_code > 0 {
-        let rows = [h.srow_x, h.srow_y, h.srow_z].map(|r| r.map(f64::from));
+        let rows = [h.srow_x, h.srow_y, h.srow_z].map(|r| r.map(|x| f64::from(x) * mm));
         let column = |j: usize| DVec3::new(rows[0][j], rows[1][j], rows[2][j]);
         Placement::from_columns(path, [column(0), column(1), column(2)], column(3))
     } else if h.qform_code > 0 {
@@ -242,7 +262,7 @@ fn placement(path: &Path, h: &NiftiHeader) -> Result<Placement, VolumeError> {
         let qfac = if h.pixdim[0] < 0.0 { -1.0 } else { 1.0 };
         let steps = [pixdim[0], pixdim[1], pixdim[2] * qfac];
         let columns = [0, 1, 2].map(|i| rotation.col(i) * steps[i]);
-        let origin = DVec3::new(h.quatern_x.into(), h.quatern_y.into(), h.quatern_z.into());
+        let origin = DVec3::new(h.quatern_x.into(), h.quatern_y.into(), h.quatern_z.into()) * mm;
         Placement::from_columns(path, columns, origin)
     } else {
         Placement::axis_aligned(path, pixdim, [0.0; 3])
@@ -347,6 +367,67 @@ mod tests {
             s.volume.direction,
             DMat3::from_cols(DVec3::Y, DVec3::Z, -DVec3::X)
         );
+        std::fs::remove_dir_all(dir).ok();
+    }
+
+    #[test]
+    fn lengths_in_metres_or_micrometres_become_millimetres() {
+        let dir = scratch("nifti-units");
+        let mut bytes = header_bytes([2, 1, 2], 4, 16);
+        put_f32(&mut bytes, 80, &[0.5, 0.25, 3.0]);
+        // qform: a quarter turn about z, origin (10, 20, 30) in the file's unit.
+        put_i16(&mut bytes, 252, 1);
+        let d = std::f32::consts::FRAC_1_SQRT_2;
+        put_f32(&mut bytes, 256, &[0.0, 0.0, d, 10.0, 20.0, 30.0]);
+        bytes.extend([1i16, 2, 3, 4].iter().flat_map(|v| v.to_le_bytes()));
+        for (units, mm) in [(0u8, 1.0), (2, 1.0), (1, 1000.0), (3, 0.001), (10, 1.0)] {
+            // xyzt_units: the spatial code in the low 3 bits (10 = mm with seconds).
+            bytes[123] = units;
+            let v = load_nifti(&write(&dir, "u.nii", &bytes)).unwrap().volume;
+            for (got, want) in v.spacing.iter().zip([0.5, 0.25, 3.0]) {
+                assert!(
+                    (got - want * mm).abs() < 1e-9 * mm,
+                    "{units}: {:?}",
+                    v.spacing
+                );
+            }
+            for (got, want) in v.origin.iter().zip([10.0, 20.0, 30.0]) {
+                assert!(
+                    (got - want * mm).abs() < 1e-6 * mm,
+                    "{units}: {:?}",
+                    v.origin
+                );
+            }
+            assert!(
+                v.direction.col(0).abs_diff_eq(DVec3::Y, 1e-6),
+                "the turn stays"
+            );
+        }
+        // The sform too.
+        put_i16(&mut bytes, 254, 1);
+        put_f32(
+            &mut bytes,
+            280,
+            &[
+                0.002, 0.0, 0.0, 0.1, 0.0, 0.003, 0.0, 0.2, 0.0, 0.0, 0.004, 0.3,
+            ],
+        );
+        bytes[123] = 1;
+        let v = load_nifti(&write(&dir, "m.nii", &bytes)).unwrap().volume;
+        assert!(
+            v.spacing
+                .iter()
+                .zip([2.0, 3.0, 4.0])
+                .all(|(a, b)| (a - b).abs() < 1e-4),
+            "{:?}",
+            v.spacing
+        );
+        assert!((v.origin[2] - 300.0).abs() < 1e-3, "{:?}", v.origin);
+        bytes[123] = 5;
+        let e = load_nifti(&write(&dir, "x.nii", &bytes))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("xyzt_units"), "{e}");
         std::fs::remove_dir_all(dir).ok();
     }
 

@@ -253,7 +253,14 @@ impl<'a> Xml<'a> {
                 let u = at
                     + underscore
                         .ok_or_else(|| header_error(path, "AppendedData without its `_`"))?;
-                (&bytes[..u], Some(&bytes[u + 1..]))
+                // The data run to the closing tag (the last one: raw data may hold its bytes).
+                let close = b"</AppendedData>";
+                let end = bytes
+                    .windows(close.len())
+                    .rposition(|w| w == close)
+                    .filter(|&e| e > u)
+                    .unwrap_or(bytes.len());
+                (&bytes[..u], Some(&bytes[u + 1..end]))
             }
         };
         let text = std::str::from_utf8(head)
@@ -591,7 +598,17 @@ impl Encoding {
             return self.inflate_blocks(path, &header, &data, format, (count, bytes));
         }
         let data = match blob {
-            Blob::Base64(text) => base64(path, text)?,
+            // Header and values are one base64 stream; an appended array is followed by the
+            // next one's, so only this one's characters are decoded.
+            Blob::Base64(text) => {
+                let text = without_whitespace(text);
+                let want = usize::try_from(bytes)
+                    .ok()
+                    .and_then(|b| b.checked_add(self.word))
+                    .map(encoded_len)
+                    .ok_or_else(overflow)?;
+                base64(path, text.get(..want).unwrap_or(&text))?
+            }
             Blob::Raw(data) => data.to_vec(),
         };
         let stated = self
@@ -633,11 +650,7 @@ impl Encoding {
                 Ok((data[..len].to_vec(), data[len..].to_vec()))
             }
             Blob::Base64(text) => {
-                let text: Vec<u8> = text
-                    .iter()
-                    .copied()
-                    .filter(|b| !b.is_ascii_whitespace())
-                    .collect();
+                let text = without_whitespace(text);
                 // The first base64 groups covering one header word give the block count.
                 let first = base64(path, text.get(..encoded_len(self.word)).ok_or_else(short)?)?;
                 let blocks = self.word_at(&first, 0).ok_or_else(short)?;
@@ -645,7 +658,23 @@ impl Encoding {
                     .map(encoded_len)
                     .filter(|&l| l <= text.len())
                     .ok_or_else(short)?;
-                Ok((base64(path, &text[..len])?, base64(path, &text[len..])?))
+                let header = base64(path, &text[..len])?;
+                // The blocks' compressed sizes say how many characters follow: an appended
+                // array is followed by the next one's.
+                let mut compressed = 0usize;
+                for i in 0..blocks {
+                    let size = usize::try_from(i + 3)
+                        .ok()
+                        .and_then(|i| self.word_at(&header, i))
+                        .and_then(|s| usize::try_from(s).ok())
+                        .ok_or_else(short)?;
+                    compressed = compressed.checked_add(size).ok_or_else(short)?;
+                }
+                let end = len
+                    .checked_add(encoded_len(compressed))
+                    .filter(|&e| e <= text.len())
+                    .ok_or_else(|| header_error(path, "compressed blocks run past the data"))?;
+                Ok((header, base64(path, &text[len..end])?))
             }
         }
     }
@@ -726,6 +755,14 @@ fn header_len(word: usize, blocks: u64) -> Option<usize> {
         .ok()?
         .checked_add(3)?
         .checked_mul(word)
+}
+
+/// The text with its whitespace (line breaks, indentation) left out.
+fn without_whitespace(text: &[u8]) -> Vec<u8> {
+    text.iter()
+        .copied()
+        .filter(|b| !b.is_ascii_whitespace())
+        .collect()
 }
 
 /// Base64 characters encoding `bytes` bytes, padded.
