@@ -308,8 +308,10 @@ fn available_memory() -> Option<u64> {
 /// is followed and the file it names written; a device, pipe or socket (`/dev/null`, a FIFO)
 /// is written into as it is, never replaced by a plain file.
 pub(crate) fn write_replacing(path: &Path, bytes: &[u8]) -> Result<()> {
-    if write_atomic(path, bytes)? {
-        eprintln!("replaced the existing {}", path.display());
+    // The file a link names is the one written, and the one to name.
+    let target = follow_links(path)?;
+    if write_atomic(&target, bytes)? {
+        eprintln!("replaced the existing {}", target.display());
     }
     Ok(())
 }
