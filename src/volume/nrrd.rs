@@ -14,9 +14,12 @@
 //! `left-anterior-superior` by negating x. Non-anatomical spaces (`scanner-xyz`,
 //! `3D-right-handed`, `3D-left-handed`) and a bare `space dimension: 3` are taken as they are.
 //!
+//! `ascii` (`text`, `txt`) data are white-space-separated numbers (no `endian` needed). Without
+//! a `space`, `axis mins` place the first sample as teem and ITK do: at the minimum for
+//! `node`-centred axes, half a step past it for `cell`-centred ones (teem's default).
+//!
 //! Not read (a typed [`VolumeError::Unsupported`]): other dimensions than 3 (vectors, time
-//! series, images), 64-bit integers and `block`, the `ascii`/`text`, `hex` and `bzip2`
-//! encodings, `none` axes in `space directions`, spaces with a time axis, and data files that
+//! series, images), 64-bit integers and `block`, the `hex` and `bzip2` encodings, `none` axes in `space directions`, spaces with a time axis, and data files that
 //! do not each hold whole z slices.
 //!
 //! Every declared size is checked before voxel memory is allocated: raw data against the data
@@ -46,6 +49,7 @@ pub fn load_nrrd(path: &Path) -> Result<LoadedVolume, VolumeError> {
     let volume = match header.encoding {
         Encoding::Raw => read_raw(path, &header)?,
         Encoding::Gzip => read_gzip(path, &header)?,
+        Encoding::Ascii => read_ascii(path, &header)?,
     };
     Ok(LoadedVolume {
         volume: placement.apply(volume),
@@ -59,6 +63,8 @@ pub fn load_nrrd(path: &Path) -> Result<LoadedVolume, VolumeError> {
 enum Encoding {
     Raw,
     Gzip,
+    /// Numbers written as text, separated by white space.
+    Ascii,
 }
 
 /// Where the data are: after the header in the same file, or in other files.
@@ -210,8 +216,8 @@ impl Header {
             ));
         }
         let dims = fields.numbers(fields.require("sizes", "sizes")?)?;
-        let format = scalar_format(&fields)?;
         let encoding = encoding(&fields)?;
+        let format = scalar_format(&fields, encoding)?;
         let (byte_skip, line_skip) = skips(&fields, encoding)?;
         let data = match fields.get("datafile") {
             None => Data::Attached(offset),
@@ -332,9 +338,9 @@ const TYPE_NAMES: [(&[&str], Option<ScalarType>); 9] = [
     ),
 ];
 
-/// The value type and byte order; `endian` is needed only for multi-byte types but checked
-/// whenever given.
-fn scalar_format(fields: &Fields) -> Result<ScalarFormat, VolumeError> {
+/// The value type and byte order; `endian` is needed only for multi-byte types in binary
+/// encodings (text has no byte order) but checked whenever given.
+fn scalar_format(fields: &Fields, encoding: Encoding) -> Result<ScalarFormat, VolumeError> {
     let field = fields.require("type", "type")?;
     let name = field.value.split_whitespace().collect::<Vec<_>>().join(" ");
     let lower = name.to_ascii_lowercase();
@@ -353,7 +359,7 @@ fn scalar_format(fields: &Fields) -> Result<ScalarFormat, VolumeError> {
             let message = format!("endian {:?} is neither little nor big", f.value);
             return Err(fields.error(f.line, message));
         }
-        None if scalar.size() == 1 => ByteOrder::Little,
+        None if scalar.size() == 1 || encoding == Encoding::Ascii => ByteOrder::Little,
         None => {
             let message = format!("no `endian` field for {name}");
             return Err(header_error(&fields.path, message));
@@ -367,9 +373,13 @@ fn encoding(fields: &Fields) -> Result<Encoding, VolumeError> {
     match field.value.to_ascii_lowercase().as_str() {
         "raw" => Ok(Encoding::Raw),
         "gzip" | "gz" => Ok(Encoding::Gzip),
-        "txt" | "text" | "ascii" | "hex" | "bzip2" | "bz2" => Err(unsupported(
+        "txt" | "text" | "ascii" => Ok(Encoding::Ascii),
+        "hex" | "bzip2" | "bz2" => Err(unsupported(
             &fields.path,
-            format!("encoding {}; only raw and gzip are read", field.value),
+            format!(
+                "encoding {}; only raw, gzip and ascii are read",
+                field.value
+            ),
         )),
         other => Err(fields.error(field.line, format!("unknown encoding {other:?}"))),
     }
@@ -531,9 +541,53 @@ fn placement(fields: &Fields) -> Result<([DVec3; 3], DVec3), VolumeError> {
             [Some(o)] => *o,
             _ => return Err(fields.error(f.line, "expected one origin vector")),
         },
+        // Without a space, `axis mins` place the grid as teem (and so ITK) does: the first
+        // sample at the minimum, half a step further for cell-centred axes (the default).
+        None if fields.get("space").is_none() && fields.get("spacedimension").is_none() => {
+            axis_mins_origin(fields, &columns)?
+        }
         None => DVec3::ZERO,
     };
     Ok((columns.map(|c| c * flip), origin * flip))
+}
+
+/// The first sample's position from `axis mins` (and `centers`), for headers without a space;
+/// the origin when there are no mins.
+fn axis_mins_origin(fields: &Fields, columns: &[DVec3; 3]) -> Result<DVec3, VolumeError> {
+    let Some(f) = fields.get("axismins") else {
+        return Ok(DVec3::ZERO);
+    };
+    let mins: [f64; 3] = fields.numbers(f)?;
+    let centers: [String; 3] = match fields.get("centers").or_else(|| fields.get("centerings")) {
+        Some(c) => {
+            let words: Vec<String> = c
+                .value
+                .split_whitespace()
+                .map(str::to_ascii_lowercase)
+                .collect();
+            words
+                .try_into()
+                .map_err(|_| fields.error(c.line, "expected 3 centers"))?
+        }
+        None => std::array::from_fn(|_| "cell".to_owned()),
+    };
+    let mut origin = DVec3::ZERO;
+    for axis in 0..3 {
+        if !mins[axis].is_finite() {
+            // `nan`: no minimum on this axis; teem then places none of them.
+            return Ok(DVec3::ZERO);
+        }
+        let half_step = match centers[axis].as_str() {
+            "cell" | "???" | "none" => 0.5 * columns[axis][axis],
+            "node" => 0.0,
+            other => {
+                let line = fields.get("centers").map_or(0, |c| c.line);
+                return Err(fields.error(line, format!("unknown center {other:?} (cell or node)")));
+            }
+        };
+        origin[axis] = mins[axis] + half_step;
+    }
+    Ok(origin)
 }
 
 /// The sign flips that take the header's `space` into RAS.
@@ -700,6 +754,56 @@ fn read_gzip(path: &Path, header: &Header) -> Result<CpuVolume, VolumeError> {
     })
 }
 
+/// Text data: the declared number of values, as white-space-separated numbers, after the
+/// skipped lines (and bytes) of each data file.
+fn read_ascii(path: &Path, header: &Header) -> Result<CpuVolume, VolumeError> {
+    let sources = header.sources(path)?;
+    let (total, _) = bytes_per_file(path, header, sources.len())?;
+    let count = total / sources.len().max(1);
+    let mut values = Vec::with_capacity(total.min(1 << 24));
+    for (file, start) in &sources {
+        let mut f = File::open(file).map_err(io_error(file))?;
+        let len = f.metadata().map_err(io_error(file))?.len();
+        f.seek(SeekFrom::Start(
+            start.saturating_add(header.byte_skip.unwrap_or(0)),
+        ))
+        .map_err(io_error(file))?;
+        // Nothing longer than the file is read (a device file cannot keep it reading).
+        let mut text = String::new();
+        f.take(len)
+            .read_to_string(&mut text)
+            .map_err(|e| header_error(file, format!("the text data are not UTF-8 text: {e}")))?;
+        let before = values.len();
+        for word in text.split_whitespace().take(count + 1) {
+            let value: f64 = word.parse().map_err(|_| {
+                header_error(file, format!("{word:?} in the text data is not a number"))
+            })?;
+            values.push(value as f32);
+        }
+        let got = values.len() - before;
+        if got != count {
+            return Err(header_error(
+                file,
+                format!(
+                    "the text data hold {} values where {count} are declared",
+                    if got > count {
+                        format!("more than {count}")
+                    } else {
+                        got.to_string()
+                    }
+                ),
+            ));
+        }
+    }
+    Ok(CpuVolume {
+        dims: header.dims,
+        spacing: [1.0; 3],
+        origin: [0.0; 3],
+        direction: glam::DMat3::IDENTITY,
+        values,
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -829,6 +933,68 @@ mod tests {
             }
             other => panic!("expected a header error with {text:?}, got {other:?}"),
         }
+    }
+
+    #[test]
+    fn ascii_data_need_no_byte_order() {
+        let dir = scratch("nrrd-ascii");
+        // As teem and pynrrd write text: one line per row, a short type without `endian`.
+        let text = attached(
+            "type: short\ndimension: 3\nsizes: 3 2 2\nencoding: ascii\nspacings: 1 2 3\n",
+            b"1 -2 3\n4 5 6\n-7 8 9\n10 11 12.5\n",
+        );
+        let v = load(&dir, "a.nrrd", &text).unwrap().volume;
+        assert_eq!(
+            v.values,
+            [
+                1.0, -2.0, 3.0, 4.0, 5.0, 6.0, -7.0, 8.0, 9.0, 10.0, 11.0, 12.5
+            ]
+        );
+        assert_eq!(v.spacing, [1.0, 2.0, 3.0]);
+        // Too few or too many values, or a word that is no number: errors naming the file.
+        for (data, expected) in [
+            (&b"1 2 3"[..], "hold 3 values where 12"),
+            (&b"1 2 3 4 5 6 7 8 9 10 11 12 13"[..], "more than 12"),
+            (&b"1 2 3 4 5 six 7 8 9 10 11 12"[..], "\"six\""),
+        ] {
+            let text = attached(
+                "type: float\ndimension: 3\nsizes: 3 2 2\nencoding: text\n",
+                data,
+            );
+            let e = load(&dir, "bad.nrrd", &text).unwrap_err().to_string();
+            assert!(e.contains(expected) && e.contains("bad.nrrd"), "{e}");
+        }
+        std::fs::remove_dir_all(dir).ok();
+    }
+
+    #[test]
+    fn axis_mins_place_a_grid_without_a_space() {
+        let dir = scratch("nrrd-mins");
+        let data = [0u8; 8];
+        let base = "type: uchar\ndimension: 3\nsizes: 2 2 2\nencoding: raw\nspacings: 0.5 2 4\naxis mins: 10 -20 30\n";
+        // Cell-centred (teem's default): the first sample half a step past the minimum.
+        // SimpleITK 2.5.7 reads these two files with the same origins: (10.25, -19, 32) and
+        // (10, -20, 32) (`sitk.ReadImage(f).GetOrigin()`).
+        let cell = load(&dir, "c.nrrd", &attached(base, &data)).unwrap().volume;
+        assert_eq!(cell.origin, [10.25, -19.0, 32.0]);
+        let node = load(
+            &dir,
+            "n.nrrd",
+            &attached(&format!("{base}centers: node node cell\n"), &data),
+        )
+        .unwrap()
+        .volume;
+        assert_eq!(node.origin, [10.0, -20.0, 32.0]);
+        // With a space, the space origin rules (here none: the origin is 0).
+        let spaced = load(
+            &dir,
+            "s.nrrd",
+            &attached(&format!("{base}space dimension: 3\n"), &data),
+        )
+        .unwrap()
+        .volume;
+        assert_eq!(spaced.origin, [0.0; 3]);
+        std::fs::remove_dir_all(dir).ok();
     }
 
     #[test]
