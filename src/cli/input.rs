@@ -23,7 +23,7 @@ use crate::{parse_f32x2, parse_f64x2, parse_f64x3, parse_finite_f32, parse_size,
 /// The input: a scene file or a volume, meshes added to it, and its transfer function.
 #[derive(clap::Args)]
 pub struct InputArgs {
-    /// A scene file (TOML), a volume file (NRRD, NIfTI, DICOM, VTK, Voreen .dat; a raw file
+    /// A scene file (TOML), a volume file (NRRD, NIfTI, DICOM, MetaImage, VTK, Voreen .dat; a raw file
     /// with --dims and --scalar) or a DICOM series folder, told apart by their content; the
     /// built-in shoulder scene when absent.
     pub input: Option<PathBuf>,
@@ -268,7 +268,7 @@ fn scene_or_volume(e: splatscene::scene::file::SceneFileError, path: &Path) -> a
     use splatscene::scene::file::SceneFileError;
     match e {
         SceneFileError::Parse { .. } | SceneFileError::Invalid { .. } => anyhow::anyhow!(
-            "{e}\n{} is neither a volume format splatscene recognises (NRRD, NIfTI, DICOM, VTK, Voreen .dat) nor a valid scene file; a headerless raw volume needs --dims and --scalar",
+            "{e}\n{} is neither a volume format splatscene recognises (NRRD, NIfTI, DICOM, MetaImage, VTK, Voreen .dat) nor a valid scene file; a headerless raw volume needs --dims and --scalar",
             path.display()
         ),
         other => other.into(),

@@ -26,7 +26,9 @@ use glam::{DMat3, DVec3};
 use serde_json::{Value, json};
 
 use super::raw::decode;
-use super::{CpuVolume, ScalarFormat, ScalarType, VolumeError, dat, dicom, nifti, nrrd, vtk};
+use super::{
+    CpuVolume, ScalarFormat, ScalarType, VolumeError, dat, dicom, metaimage, nifti, nrrd, vtk,
+};
 
 /// The volume file formats [`load_volume`] recognises.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -43,6 +45,8 @@ pub enum VolumeFormat {
     Nifti,
     /// A Voreen-style `.dat` text header next to a raw file.
     Dat,
+    /// MetaImage (`.mha`, or `.mhd` with a data file), ITK's format.
+    MetaImage,
 }
 
 impl VolumeFormat {
@@ -55,6 +59,7 @@ impl VolumeFormat {
             Self::VtkXml => "vti",
             Self::Nifti => "nifti",
             Self::Dat => "dat",
+            Self::MetaImage => "metaimage",
         }
     }
 }
@@ -166,6 +171,7 @@ pub fn load_volume_choosing(
         VolumeFormat::VtkXml => vtk::load_vti(path),
         VolumeFormat::Nifti => nifti::load_nifti(path),
         VolumeFormat::Dat => dat::load_dat(path),
+        VolumeFormat::MetaImage => metaimage::load_metaimage(path),
     }
 }
 
@@ -201,6 +207,8 @@ pub fn detect_format(path: &Path) -> Result<VolumeFormat, VolumeError> {
         detect_gzip(path)
     } else if dicom::is_dicom(&head) {
         Ok(VolumeFormat::Dicom)
+    } else if metaimage::is_metaimage(&head) {
+        Ok(VolumeFormat::MetaImage)
     } else if is_dat(&head) {
         Ok(VolumeFormat::Dat)
     } else {
