@@ -444,3 +444,44 @@ fn metaimage_files_written_by_itk_land_where_itk_puts_them() {
         );
     }
 }
+
+/// 4-D NIfTI from nibabel's test data: each 3-D frame is read (the first by default), its
+/// values rescaled; a frame past the last is an error naming the file. The sums were computed
+/// once in Python from the file's own bytes (`gzip`, `struct` and NumPy: the frame's int16
+/// values times `scl_slope` plus `scl_inter`).
+#[test]
+fn four_dimensional_nifti_frames() {
+    let Some(dir) = data_dir() else { return };
+    let dir = dir.join("../reader_tests/nibabel_test_data");
+    use splatscene::volume::detect::load_volume_frame;
+    let sum = |path: &Path, frame: Option<u32>| -> f64 {
+        let loaded = load_volume_frame(path, None, frame).unwrap_or_else(|e| panic!("{e}"));
+        loaded.volume.values.iter().map(|&v| f64::from(v)).sum()
+    };
+    let functional = dir.join("functional.nii");
+    let first = load_volume_with_info(&functional).unwrap().volume;
+    assert_eq!(first.dims, [17, 21, 3]);
+    for (frame, expected) in [
+        (None, 3883746.552329719),
+        (Some(0), 3883746.552329719),
+        (Some(1), 3884191.0010026097),
+        (Some(19), 3888072.273083091),
+    ] {
+        let got = sum(&functional, frame);
+        assert!((got - expected).abs() < 0.5, "frame {frame:?}: {got} against {expected}");
+    }
+    let example = dir.join("example4d.nii.gz");
+    assert!((sum(&example, Some(1)) - 50990959.0).abs() < 0.5);
+    assert!((sum(&example, None) - 50994397.0).abs() < 0.5);
+    let e = load_volume_frame(&functional, None, Some(20))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("functional.nii") && e.contains("frame 20") && e.contains("20 frames"),
+        "{e}"
+    );
+    // A frame of a 3-D file past 0, or of another format, is refused.
+    let anatomical = dir.join("anatomical.nii");
+    assert!(load_volume_frame(&anatomical, None, Some(0)).is_ok());
+    assert!(load_volume_frame(&anatomical, None, Some(1)).is_err());
+}

@@ -57,6 +57,9 @@ pub struct InputArgs {
     /// (without it, such a folder lists its series).
     #[arg(long)]
     series: Option<String>,
+    /// 4-D NIfTI: the 3-D frame to draw, from 0 (default 0, said on stderr).
+    #[arg(long)]
+    frame: Option<u32>,
     /// Raw volume: size NX,NY,NZ.
     #[arg(long, value_parser = parse_u32x3)]
     dims: Option<[u32; 3]>,
@@ -128,6 +131,7 @@ impl InputArgs {
             ("--origin", self.origin.is_some()),
             ("--orientation", self.orientation.is_some()),
             ("--series", self.series.is_some()),
+            ("--frame", self.frame.is_some()),
         ];
         let (mut file, path, base) = match input {
             Input::Builtin | Input::Scene(_) => {
@@ -174,6 +178,7 @@ impl InputArgs {
             origin: self.origin,
             orientation: self.orientation.clone(),
             series: self.series.clone(),
+            frame: self.frame,
             ..VolumeSpec::default()
         };
         Ok(SceneFile {

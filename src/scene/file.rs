@@ -245,6 +245,8 @@ pub struct VolumeSpec {
     /// DICOM: the series to load from a folder holding several, by SeriesNumber or
     /// SeriesInstanceUID.
     pub series: Option<String>,
+    /// 4-D NIfTI: the 3-D frame to draw, from 0 (the first by default, said on stderr).
+    pub frame: Option<u32>,
     /// Raw: where the index axes run in the patient frame, one letter per axis naming the
     /// side it increases toward (`RAS`, the default, puts the grid along world +x, +y, +z;
     /// `LPS`, `LPI`...; see [`super::patient`]).
@@ -896,7 +898,11 @@ fn load_raw_volume(
         // Not described as raw: a format with its own header (NRRD, NIfTI, VTK, Voreen .dat)
         // or a DICOM series folder, found from the first bytes and the name.
         let choice = spec.series.clone().map(SeriesChoice);
-        let loaded = match crate::volume::detect::load_volume_choosing(path, choice.as_ref()) {
+        let loaded = match crate::volume::detect::load_volume_frame(
+            path,
+            choice.as_ref(),
+            spec.frame,
+        ) {
             Err(VolumeError::NoHeader { .. }) if looks_like_scene_file(path) => {
                 return Err(invalid(format!(
                     "volume {}: this is a scene file, not a volume; give it to render or view as the scene, or name the volume file it holds",

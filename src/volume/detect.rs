@@ -146,7 +146,29 @@ pub fn load_volume_choosing(
     path: &Path,
     series: Option<&dicom::SeriesChoice>,
 ) -> Result<LoadedVolume, VolumeError> {
+    load_volume_frame(path, series, None)
+}
+
+/// [`load_volume_choosing`], with the 3-D frame to read from a 4-D NIfTI file (`None`: the
+/// first); a frame given for another format is [`VolumeError::Unsupported`].
+pub fn load_volume_frame(
+    path: &Path,
+    series: Option<&dicom::SeriesChoice>,
+    frame: Option<u32>,
+) -> Result<LoadedVolume, VolumeError> {
     let format = detect_format(path)?;
+    if frame.is_some() && format != VolumeFormat::Nifti {
+        return Err(unsupported(
+            path,
+            format!(
+                "a frame of a {} file; frames are read from 4-D NIfTI",
+                format.name()
+            ),
+        ));
+    }
+    if format == VolumeFormat::Nifti {
+        return nifti::load_nifti_frame(path, frame);
+    }
     match format {
         VolumeFormat::Dicom => {
             // The DICOM loader reads a whole folder; a single slice stands for its series.

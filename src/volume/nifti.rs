@@ -42,8 +42,15 @@ use crate::grid::voxel_count;
 /// Bytes of a NIfTI-1 header.
 const HEADER_BYTES: u64 = 348;
 
-/// Loads a NIfTI-1 volume, plain or gzip-compressed.
+/// Loads a NIfTI-1 volume, plain or gzip-compressed; of a 4-D file, its first frame (said on
+/// stderr).
 pub fn load_nifti(path: &Path) -> Result<LoadedVolume, VolumeError> {
+    load_nifti_frame(path, None)
+}
+
+/// Loads frame `frame` (from 0) of a 4-D NIfTI-1 volume (`dim[4]` frames); `None` takes the
+/// first and says so when there are others. A 3-D file has one frame, 0.
+pub fn load_nifti_frame(path: &Path, frame: Option<u32>) -> Result<LoadedVolume, VolumeError> {
     let gz = read_head(path, 2)?.starts_with(&GZIP_MAGIC);
     let file = File::open(path).map_err(io_error(path))?;
     let mut reader: Box<dyn Read> = match gz {
@@ -51,11 +58,30 @@ pub fn load_nifti(path: &Path) -> Result<LoadedVolume, VolumeError> {
         false => Box::new(BufReader::new(file)),
     };
     let header = read_header(path, &mut reader)?;
-    let layout = Layout::from_header(path, &header)?;
+    let mut layout = Layout::from_header(path, &header)?;
+    let chosen = frame.unwrap_or(0);
+    if chosen >= layout.frames {
+        return Err(header_error(
+            path,
+            format!(
+                "frame {chosen}: the file has {} frame{} (dim[4]), counted from 0",
+                layout.frames,
+                if layout.frames == 1 { "" } else { "s" }
+            ),
+        ));
+    }
+    if frame.is_none() && layout.frames > 1 {
+        eprintln!(
+            "{}: 4-D NIfTI with {} frames; frame 0 is drawn (frame = N in a scene file, --frame N on the command line, picks another)",
+            path.display(),
+            layout.frames
+        );
+    }
+    layout.frame = chosen;
     let placement = placement(path, &header)?;
     let mut volume = match gz {
         true => layout.inflate(path, &mut reader)?,
-        false => load_raw(path, &layout.raw_spec())?,
+        false => load_raw(path, &layout.raw_spec(path)?)?,
     };
     rescale(&mut volume.values, header.scl_slope, header.scl_inter);
     Ok(LoadedVolume {
@@ -71,6 +97,9 @@ struct Layout {
     count: u64,
     format: ScalarFormat,
     vox_offset: u64,
+    /// 3-D frames in the file (`dim[4]`), and the one to read.
+    frames: u32,
+    frame: u32,
 }
 
 impl Layout {
@@ -81,7 +110,7 @@ impl Layout {
                 "a .hdr/.img pair; only single-file .nii is read",
             ));
         }
-        let dims = dims(path, &header.dim)?;
+        let (dims, frames) = dims(path, &header.dim)?;
         let count = voxel_count(dims).map_err(|source| VolumeError::Grid {
             path: path.into(),
             source,
@@ -99,14 +128,31 @@ impl Layout {
             count,
             format,
             vox_offset: vox_offset(path, header.vox_offset)?,
+            frames,
+            frame: 0,
         })
     }
 
-    fn raw_spec(&self) -> RawSpec {
-        RawSpec {
-            header_bytes: self.vox_offset,
+    /// Bytes of one frame.
+    fn frame_bytes(&self, path: &Path) -> Result<u64, VolumeError> {
+        self.count
+            .checked_mul(self.format.scalar.size() as u64)
+            .ok_or_else(|| header_error(path, "declared size overflows"))
+    }
+
+    /// Where the chosen frame starts in the (inflated) file.
+    fn frame_start(&self, path: &Path) -> Result<u64, VolumeError> {
+        self.frame_bytes(path)?
+            .checked_mul(u64::from(self.frame))
+            .and_then(|b| b.checked_add(self.vox_offset))
+            .ok_or_else(|| header_error(path, "declared size overflows"))
+    }
+
+    fn raw_spec(&self, path: &Path) -> Result<RawSpec, VolumeError> {
+        Ok(RawSpec {
+            header_bytes: self.frame_start(path)?,
             ..RawSpec::new(self.dims, self.format.scalar, self.format.order)
-        }
+        })
     }
 
     /// Reads the values from a decompressing reader positioned just after the header.
@@ -117,10 +163,17 @@ impl Layout {
             .ok_or_else(|| header_error(path, "declared size overflows"))?;
         let count = usize::try_from(self.count)
             .map_err(|_| header_error(path, "declared size overflows"))?;
-        skip_inflated(path, reader, self.vox_offset - HEADER_BYTES, bytes)?;
+        let start = self.frame_start(path)?;
+        skip_inflated(path, reader, start - HEADER_BYTES, bytes)?;
         let mut values = Vec::new();
         inflate_values(path, reader, bytes, self.format, count, &mut values)?;
-        expect_end(path, reader, self.vox_offset + bytes)?;
+        // The frames after this one must be there too, and nothing past them.
+        let after = bytes
+            .checked_mul(u64::from(self.frames - self.frame - 1))
+            .ok_or_else(|| header_error(path, "declared size overflows"))?;
+        let end = start + bytes + after;
+        skip_inflated(path, reader, after, 0)?;
+        expect_end(path, reader, end)?;
         Ok(CpuVolume {
             dims: self.dims,
             spacing: [1.0; 3],
@@ -168,7 +221,8 @@ fn read_header(path: &Path, reader: &mut dyn Read) -> Result<NiftiHeader, Volume
 
 /// The grid size from `dim`: `dim[0]` axes, missing ones of size 1, any past the third of
 /// size 1 (a 4-D file with one frame is a 3-D volume).
-fn dims(path: &Path, dim: &[u16; 8]) -> Result<[u32; 3], VolumeError> {
+/// The 3-D size and the number of 3-D frames (`dim[4]`).
+fn dims(path: &Path, dim: &[u16; 8]) -> Result<([u32; 3], u32), VolumeError> {
     let rank = usize::from(dim[0]);
     if !(1..=7).contains(&rank) {
         return Err(header_error(
@@ -190,13 +244,16 @@ fn dims(path: &Path, dim: &[u16; 8]) -> Result<[u32; 3], VolumeError> {
             format!("dim[{i}] = {} is not positive", size(i)),
         ));
     }
-    if let Some(i) = (4..=rank).find(|&i| size(i) != 1) {
+    if let Some(i) = (5..=rank).find(|&i| size(i) != 1) {
         return Err(unsupported(
             path,
-            format!("dim[{i}] = {}: only one 3-D frame is read", size(i)),
+            format!(
+                "dim[{i}] = {}: volumes of 3-D frames (dim[4]) are read, not more dimensions",
+                size(i)
+            ),
         ));
     }
-    Ok([1, 2, 3].map(|i| size(i) as u32))
+    Ok(([1, 2, 3].map(|i| size(i) as u32), size(4) as u32))
 }
 
 fn scalar_type(path: &Path, header: &NiftiHeader) -> Result<ScalarType, VolumeError> {
