@@ -9,6 +9,10 @@ use std::process::{Command, Output, Stdio};
 
 use serde_json::Value;
 
+#[path = "common/pictures.rs"]
+mod pictures;
+use pictures::pictures;
+
 fn splatscene(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_splatscene"))
         .args(args)
@@ -122,26 +126,6 @@ fn statuses(index: &Value) -> Vec<(String, String)> {
             )
         })
         .collect()
-}
-
-/// Every picture in `dir` (not the index) with its decoded pixels.
-fn pictures(dir: &Path) -> Vec<(String, Vec<u8>)> {
-    let mut found = Vec::new();
-    let mut folders = vec![dir.to_path_buf()];
-    while let Some(folder) = folders.pop() {
-        for entry in std::fs::read_dir(&folder).unwrap().flatten() {
-            let path = entry.path();
-            if path.is_dir() {
-                folders.push(path);
-            } else if path.extension().is_some_and(|e| e == "png") {
-                let rel = path.strip_prefix(dir).unwrap().display().to_string();
-                let pixels = image::open(&path).unwrap().into_bytes();
-                found.push((rel, pixels));
-            }
-        }
-    }
-    found.sort();
-    found
 }
 
 #[test]

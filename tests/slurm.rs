@@ -16,6 +16,10 @@ use std::time::{Duration, Instant};
 
 use serde_json::Value;
 
+#[path = "common/pictures.rs"]
+mod pictures;
+use pictures::pictures;
+
 fn repo() -> &'static Path {
     Path::new(env!("CARGO_MANIFEST_DIR"))
 }
@@ -155,25 +159,6 @@ fn statuses(index: &Value) -> Vec<String> {
             )
         })
         .collect()
-}
-
-/// Every picture below `dir` with its decoded pixels.
-fn pictures(dir: &Path) -> Vec<(String, Vec<u8>)> {
-    let mut found = Vec::new();
-    let mut folders = vec![dir.to_path_buf()];
-    while let Some(folder) = folders.pop() {
-        for entry in std::fs::read_dir(&folder).unwrap().flatten() {
-            let path = entry.path();
-            if path.is_dir() {
-                folders.push(path);
-            } else if path.extension().is_some_and(|e| e == "png") {
-                let rel = path.strip_prefix(dir).unwrap().display().to_string();
-                found.push((rel, image::open(&path).unwrap().into_bytes()));
-            }
-        }
-    }
-    found.sort();
-    found
 }
 
 /// Six cases over three shards: shard 2 holds a quick case (the 2nd) and a slow one (the

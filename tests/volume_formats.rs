@@ -468,7 +468,10 @@ fn four_dimensional_nifti_frames() {
         (Some(19), 3888072.273083091),
     ] {
         let got = sum(&functional, frame);
-        assert!((got - expected).abs() < 0.5, "frame {frame:?}: {got} against {expected}");
+        assert!(
+            (got - expected).abs() < 0.5,
+            "frame {frame:?}: {got} against {expected}"
+        );
     }
     let example = dir.join("example4d.nii.gz");
     assert!((sum(&example, Some(1)) - 50990959.0).abs() < 0.5);

@@ -822,8 +822,6 @@ fn finish_drawing(ctx: &GpuContext, color: &wgpu::TextureView) -> Result<(), Ren
     ctx.wait()
 }
 
-/// A render pass on the targets; `clear` clears colour (and depth to 0, reversed far),
-/// `None` keeps what is there.
 /// Whether a mesh is drawn translucent: its material's alpha is below 1.
 fn is_translucent(mesh: &crate::scene::MeshNode) -> bool {
     mesh.material.base_color[3] < 1.0
@@ -835,33 +833,17 @@ fn begin_keeping_depth<'e>(
     color: &wgpu::TextureView,
     depth: &wgpu::TextureView,
 ) -> wgpu::RenderPass<'e> {
-    encoder
-        .begin_render_pass(&wgpu::RenderPassDescriptor {
-            label: Some("clear the colour"),
-            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                view: color,
-                depth_slice: None,
-                resolve_target: None,
-                ops: wgpu::Operations {
-                    load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
-                    store: wgpu::StoreOp::Store,
-                },
-            })],
-            depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                view: depth,
-                depth_ops: Some(wgpu::Operations {
-                    load: wgpu::LoadOp::Load,
-                    store: wgpu::StoreOp::Store,
-                }),
-                stencil_ops: None,
-            }),
-            timestamp_writes: None,
-            occlusion_query_set: None,
-            multiview_mask: None,
-        })
-        .forget_lifetime()
+    let clear = wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT);
+    begin_with(
+        encoder,
+        (color, clear),
+        (depth, wgpu::LoadOp::Load),
+        "clear the colour",
+    )
 }
 
+/// A render pass on the targets; `clear` clears colour (and depth to 0, reversed far),
+/// `None` keeps what is there.
 fn begin<'e>(
     encoder: &'e mut wgpu::CommandEncoder,
     color: &wgpu::TextureView,
@@ -875,6 +857,16 @@ fn begin<'e>(
     } else {
         wgpu::LoadOp::Load
     };
+    begin_with(encoder, (color, load), (depth, depth_load), label)
+}
+
+/// A render pass on the targets with each one's load operation.
+fn begin_with<'e>(
+    encoder: &'e mut wgpu::CommandEncoder,
+    (color, load): (&wgpu::TextureView, wgpu::LoadOp<wgpu::Color>),
+    (depth, depth_load): (&wgpu::TextureView, wgpu::LoadOp<f32>),
+    label: &str,
+) -> wgpu::RenderPass<'e> {
     encoder
         .begin_render_pass(&wgpu::RenderPassDescriptor {
             label: Some(label),
