@@ -918,9 +918,8 @@ impl App {
         self.watched = Some((path.clone(), modified(&path)));
         match loaded {
             Ok((file, loaded)) => {
-                let clipping = std::mem::take(&mut self.scene.clipping);
+                // The file's clipping, measurements and placements replace the viewer's.
                 self.scene = loaded.scene;
-                self.scene.clipping = clipping;
                 self.picker = Picker::new(&self.scene);
                 self.options.scene_file = Some(file);
                 self.remember_transfers();

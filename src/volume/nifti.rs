@@ -81,7 +81,23 @@ pub fn load_nifti_frame(path: &Path, frame: Option<u32>) -> Result<LoadedVolume,
     let placement = placement(path, &header)?;
     let mut volume = match gz {
         true => layout.inflate(path, &mut reader)?,
-        false => load_raw(path, &layout.raw_spec(path)?)?,
+        false => {
+            // Every frame must be there, not only the one drawn.
+            let expected = layout
+                .frame_bytes(path)?
+                .checked_mul(u64::from(layout.frames))
+                .and_then(|b| b.checked_add(layout.vox_offset))
+                .ok_or_else(|| header_error(path, "declared size overflows"))?;
+            let actual = std::fs::metadata(path).map_err(io_error(path))?.len();
+            if actual < expected {
+                return Err(VolumeError::TooShort {
+                    path: path.into(),
+                    expected,
+                    actual,
+                });
+            }
+            load_raw(path, &layout.raw_spec(path)?)?
+        }
     };
     rescale(&mut volume.values, header.scl_slope, header.scl_inter);
     Ok(LoadedVolume {
@@ -510,12 +526,21 @@ mod tests {
                 "unknown datatype 3",
             ),
             (
+                // Three frames of 8 bytes declared, two there.
                 "4d.nii",
                 with(base.clone(), &|h| {
                     put_i16(h, 40, 4);
-                    put_i16(h, 48, 2)
+                    put_i16(h, 48, 3)
                 }),
-                "one 3-D frame",
+                "bytes",
+            ),
+            (
+                "5d.nii",
+                with(base.clone(), &|h| {
+                    put_i16(h, 40, 5);
+                    put_i16(h, 50, 2)
+                }),
+                "not more dimensions",
             ),
             (
                 "neg.nii",
