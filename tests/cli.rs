@@ -294,6 +294,11 @@ fn info_describes_volumes_as_json_and_names_bad_files() {
     );
     let nhdr = data.join("volumes/vtk_headsq/quarter.nhdr");
     if !nhdr.exists() {
+        assert!(
+            std::env::var_os("CI").is_none(),
+            "{} is missing under CI: set SPLATSCENE_DATA",
+            nhdr.display()
+        );
         eprintln!(
             "skipped: no data under {} (set SPLATSCENE_DATA)",
             data.display()
@@ -383,6 +388,11 @@ fn orderings_on_a_raw_volume_show_ordering_errors() {
     );
     let raw = data.join("volumes/datraw_small/neghip_64x64x64_uint8.raw");
     if !raw.exists() {
+        assert!(
+            std::env::var_os("CI").is_none(),
+            "{} is missing under CI: set SPLATSCENE_DATA",
+            raw.display()
+        );
         eprintln!("skipped: no data under {}", data.display());
         return;
     }

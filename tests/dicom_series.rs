@@ -25,6 +25,11 @@ fn series_dir() -> Option<PathBuf> {
         .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data"));
     let dir = data.join("volumes/totalseg_ct/example_ct_dicom");
     if !dir.is_dir() {
+        assert!(
+            std::env::var_os("CI").is_none(),
+            "{} is missing under CI: set SPLATSCENE_DATA",
+            dir.display()
+        );
         eprintln!(
             "skipped: {} not found (set SPLATSCENE_DATA to the shared data directory)",
             dir.display()

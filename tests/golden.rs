@@ -140,6 +140,11 @@ fn overlay_example_scene() {
         PathBuf::from,
     );
     if !data.join("volumes/lidc2").is_dir() {
+        assert!(
+            std::env::var_os("CI").is_none(),
+            "{} is missing under CI: set SPLATSCENE_DATA",
+            data.display()
+        );
         eprintln!(
             "skipped: no LIDC2 under {} (set SPLATSCENE_DATA)",
             data.display()

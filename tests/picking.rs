@@ -115,6 +115,11 @@ fn mesh_scene(meshes: &[(CpuMesh, DMat4)]) -> Scene {
 fn shoulder_bones(scale: f64, offset: DVec3) -> Option<Scene> {
     let dir = data_dir().join("meshes/myosim_shoulder");
     if !dir.is_dir() {
+        assert!(
+            std::env::var_os("CI").is_none(),
+            "{} is missing under CI: set SPLATSCENE_DATA",
+            dir.display()
+        );
         eprintln!(
             "skipped: no shoulder bones under {} (set SPLATSCENE_DATA)",
             dir.display()
@@ -154,6 +159,11 @@ fn bvh_equals_brute_force_on_the_shoulder_bones_and_the_prosthesis() {
 fn bvh_equals_brute_force_on_gltf_files() {
     let dir = data_dir().join("gltf/gltf_rs");
     if !dir.is_dir() {
+        assert!(
+            std::env::var_os("CI").is_none(),
+            "{} is missing under CI: set SPLATSCENE_DATA",
+            dir.display()
+        );
         eprintln!("skipped: no glTF files under {}", dir.display());
         return;
     }

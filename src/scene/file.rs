@@ -1463,6 +1463,11 @@ mod tests {
     fn a_data_volume_loads_through_the_data_folder() {
         let rel = "volumes/datraw_small/Bucky_32x32x32_uint8.raw";
         if !data_dir().join(rel).exists() {
+            assert!(
+                std::env::var_os("CI").is_none(),
+                "{} has no {rel} under CI: set {DATA_ENV}",
+                data_dir().display()
+            );
             eprintln!(
                 "skipped: {} has no {rel} (set {DATA_ENV})",
                 data_dir().display()
