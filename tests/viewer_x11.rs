@@ -46,6 +46,20 @@ impl Drop for Guard {
     }
 }
 
+/// Whether Xvfb, xdotool and xwd are here; without them the test is skipped with a note,
+/// except under CI (`CI` set), which must have them.
+fn x11_tools() -> bool {
+    if have("Xvfb") && have("xdotool") && have("xwd") {
+        return true;
+    }
+    assert!(
+        std::env::var_os("CI").is_none(),
+        "CI must install xvfb, xdotool and x11-apps"
+    );
+    eprintln!("skipped: needs Xvfb, xdotool and xwd (apt-get install xvfb xdotool x11-apps)");
+    false
+}
+
 fn start_xvfb() -> (Guard, String) {
     for n in 90..140 {
         if Path::new(&format!("/tmp/.X{n}-lock")).exists() {
@@ -201,12 +215,7 @@ fn splats_in(title: &str) -> usize {
 #[test]
 fn viewer_picks_switches_orderings_and_takes_screenshots_under_xvfb() {
     let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
-    if !(have("Xvfb") && have("xdotool") && have("xwd")) {
-        assert!(
-            std::env::var_os("CI").is_none(),
-            "CI must install xvfb, xdotool and x11-apps"
-        );
-        eprintln!("skipped: needs Xvfb, xdotool and xwd (apt-get install xvfb xdotool x11-apps)");
+    if !x11_tools() {
         return;
     }
     let (_xvfb, display) = start_xvfb();
@@ -366,12 +375,7 @@ fn row_profile(width: u32, values: &[f64]) -> Vec<f64> {
 #[test]
 fn viewer_orbits_upright_and_saves_views_that_render_reproduces() {
     let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
-    if !(have("Xvfb") && have("xdotool") && have("xwd")) {
-        assert!(
-            std::env::var_os("CI").is_none(),
-            "CI must install xvfb, xdotool and x11-apps"
-        );
-        eprintln!("skipped: needs Xvfb, xdotool and xwd (apt-get install xvfb xdotool x11-apps)");
+    if !x11_tools() {
         return;
     }
     let data = std::env::var_os("SPLATSCENE_DATA")
@@ -525,12 +529,7 @@ fn mesh_translation(path: &Path, name: &str) -> glam::DVec3 {
 #[test]
 fn a_plan_made_in_the_viewer_is_saved_undone_measured_and_reloaded_under_xvfb() {
     let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
-    if !(have("Xvfb") && have("xdotool") && have("xwd")) {
-        assert!(
-            std::env::var_os("CI").is_none(),
-            "CI must install xvfb, xdotool and x11-apps"
-        );
-        eprintln!("skipped: needs Xvfb, xdotool and xwd (apt-get install xvfb xdotool x11-apps)");
+    if !x11_tools() {
         return;
     }
     let (_xvfb, display) = start_xvfb();
