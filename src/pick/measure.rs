@@ -263,8 +263,13 @@ pub fn annotate(
     style: &MarkerStyle,
 ) -> Result<NodeId, SceneError> {
     let group = scene.add("measurement", DMat4::IDENTITY, None, NodeContent::Empty)?;
-    let sphere = Arc::new(uv_sphere(12, 8));
-    let cylinder = Arc::new(unit_cylinder(12));
+    // One sphere and one cylinder for every marker ever drawn: the renderer keeps a mesh's
+    // upload while its `Arc` is the same, so markers redrawn each frame (the viewer's) are not
+    // uploaded again.
+    static SPHERE: std::sync::OnceLock<Arc<CpuMesh>> = std::sync::OnceLock::new();
+    static CYLINDER: std::sync::OnceLock<Arc<CpuMesh>> = std::sync::OnceLock::new();
+    let sphere = Arc::clone(SPHERE.get_or_init(|| Arc::new(uv_sphere(12, 8))));
+    let cylinder = Arc::clone(CYLINDER.get_or_init(|| Arc::new(unit_cylinder(12))));
     let node = |mesh: &Arc<CpuMesh>| {
         NodeContent::Overlay(MeshNode {
             mesh: Arc::clone(mesh),
