@@ -458,7 +458,16 @@ fn metaimage_files_written_by_itk_land_where_itk_puts_them() {
 fn four_dimensional_nifti_frames() {
     let Some(dir) = data_dir() else { return };
     let dir = dir.join("../reader_tests/nibabel_test_data");
-    use splatscene::volume::detect::load_volume_frame;
+    use splatscene::volume::VolumeError;
+    use splatscene::volume::detect::{LoadOptions, LoadedVolume};
+    let load_volume_frame =
+        |path: &Path, _: Option<()>, frame: Option<u32>| -> Result<LoadedVolume, VolumeError> {
+            let options = LoadOptions {
+                frame,
+                ..LoadOptions::default()
+            };
+            splatscene::volume::detect::load_volume_with(path, &options)
+        };
     let sum = |path: &Path, frame: Option<u32>| -> f64 {
         let loaded = load_volume_frame(path, None, frame).unwrap_or_else(|e| panic!("{e}"));
         loaded.volume.values.iter().map(|&v| f64::from(v)).sum()

@@ -60,6 +60,15 @@ pub struct InputArgs {
     /// 4-D NIfTI: the 3-D frame to draw, from 0 (default 0, said on stderr).
     #[arg(long)]
     frame: Option<u32>,
+    /// NIfTI: the transform that places the grid when both are set: sform (default, as
+    /// nibabel), qform, or itk (ITK's and 3D Slicer's rule: the sform only when its code is
+    /// 1, scanner, else the qform).
+    #[arg(long, value_parser = ["sform", "qform", "itk"])]
+    nifti_transform: Option<String>,
+    /// VTK, .dat, or NRRD without an anatomical space: the patient frame of the file's
+    /// coordinates, RAS (default) or LPS (as ITK-based tools write them).
+    #[arg(long, value_parser = ["RAS", "LPS"])]
+    coordinate_frame: Option<String>,
     /// Raw volume: size NX,NY,NZ.
     #[arg(long, value_parser = parse_u32x3)]
     dims: Option<[u32; 3]>,
@@ -132,6 +141,8 @@ impl InputArgs {
             ("--orientation", self.orientation.is_some()),
             ("--series", self.series.is_some()),
             ("--frame", self.frame.is_some()),
+            ("--nifti-transform", self.nifti_transform.is_some()),
+            ("--coordinate-frame", self.coordinate_frame.is_some()),
         ];
         let (mut file, path, base) = match input {
             Input::Builtin | Input::Scene(_) => {
@@ -179,6 +190,8 @@ impl InputArgs {
             orientation: self.orientation.clone(),
             series: self.series.clone(),
             frame: self.frame,
+            nifti_transform: self.nifti_transform.clone(),
+            coordinate_frame: self.coordinate_frame.clone(),
             ..VolumeSpec::default()
         };
         Ok(SceneFile {

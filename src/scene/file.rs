@@ -61,7 +61,7 @@ use crate::mesh::prosthesis::seat_in_phantom;
 use crate::mesh::{MeshError, load_mesh};
 use crate::order::Ordering;
 use crate::pick::measure::MeasureKind;
-use crate::volume::dicom::SeriesChoice;
+use crate::volume::detect::{LoadOptions, SeriesChoice};
 use crate::volume::phantom::{DEFAULT_DIMS, DEFAULT_SPACING};
 use crate::volume::{
     CpuVolume, RawSpec, ScalarFormat, VolumeError, load_raw, load_raw_slices, shoulder_landmarks,
@@ -247,6 +247,14 @@ pub struct VolumeSpec {
     pub series: Option<String>,
     /// 4-D NIfTI: the 3-D frame to draw, from 0 (the first by default, said on stderr).
     pub frame: Option<u32>,
+    /// NIfTI: which transform places the grid when both are set, `sform` (the default, as
+    /// nibabel), `qform`, or `itk` (ITK's and 3D Slicer's rule: the sform only when its code
+    /// is 1, scanner, else the qform).
+    pub nifti_transform: Option<String>,
+    /// A file whose format states no patient frame (VTK `.vtk`/`.vti`, `.dat`, NRRD without
+    /// an anatomical `space`): the frame its coordinates are in, `RAS` (the default) or `LPS`
+    /// (what ITK-based tools write). Refused for a file that states its own.
+    pub coordinate_frame: Option<String>,
     /// Raw: where the index axes run in the patient frame, one letter per axis naming the
     /// side it increases toward (`RAS`, the default, puts the grid along world +x, +y, +z;
     /// `LPS`, `LPI`...; see [`super::patient`]).
@@ -875,6 +883,19 @@ fn load_volume(
     })
 }
 
+/// The value of a volume key that names a choice, parsed.
+fn parse_key<T: std::str::FromStr<Err = String>>(
+    path: &Path,
+    key: &str,
+    value: &Option<String>,
+) -> Result<Option<T>, String> {
+    value
+        .as_deref()
+        .map(str::parse)
+        .transpose()
+        .map_err(|e| format!("volume {}: {key}: {e}", path.display()))
+}
+
 fn load_raw_volume(
     spec: &VolumeSpec,
     path: &Path,
@@ -888,21 +909,36 @@ fn load_raw_volume(
         ("origin", spec.origin.is_some()),
         ("orientation", spec.orientation.is_some()),
     ];
-    if spec.series.is_some() && (spec.dims.is_some() || spec.scalar.is_some()) {
+    let file_keys = [
+        ("series", spec.series.is_some(), "DICOM"),
+        ("frame", spec.frame.is_some(), "4-D NIfTI"),
+        ("nifti_transform", spec.nifti_transform.is_some(), "NIfTI"),
+        (
+            "coordinate_frame",
+            spec.coordinate_frame.is_some(),
+            "files whose format states no frame (a raw volume takes orientation)",
+        ),
+    ];
+    if (spec.dims.is_some() || spec.scalar.is_some())
+        && let Some((key, _, applies)) = file_keys.iter().find(|(_, given, _)| *given)
+    {
         return Err(invalid(format!(
-            "volume {}: series applies to DICOM only, not to a raw volume",
+            "volume {}: {key} applies to {applies}, not to a raw volume",
             path.display()
         )));
     }
     if spec.dims.is_none() && spec.scalar.is_none() {
         // Not described as raw: a format with its own header (NRRD, NIfTI, VTK, Voreen .dat)
         // or a DICOM series folder, found from the first bytes and the name.
-        let choice = spec.series.clone().map(SeriesChoice);
-        let loaded = match crate::volume::detect::load_volume_frame(
-            path,
-            choice.as_ref(),
-            spec.frame,
-        ) {
+        let options = LoadOptions {
+            series: spec.series.clone().map(SeriesChoice),
+            frame: spec.frame,
+            coordinate_frame: parse_key(path, "coordinate_frame", &spec.coordinate_frame)
+                .map_err(invalid)?,
+            nifti_transform: parse_key(path, "nifti_transform", &spec.nifti_transform)
+                .map_err(invalid)?,
+        };
+        let loaded = match crate::volume::detect::load_volume_with(path, &options) {
             Err(VolumeError::NoHeader { .. }) if looks_like_scene_file(path) => {
                 return Err(invalid(format!(
                     "volume {}: this is a scene file, not a volume; give it to render or view as the scene, or name the volume file it holds",
@@ -917,13 +953,6 @@ fn load_raw_volume(
             }
             other => other?,
         };
-        if spec.series.is_some() && loaded.format != crate::volume::detect::VolumeFormat::Dicom {
-            return Err(invalid(format!(
-                "volume {}: series applies to DICOM only; this is a {} file",
-                path.display(),
-                loaded.format.name()
-            )));
-        }
         let volume = loaded.volume;
         // The file's header places the grid; a raw key here would silently do nothing.
         if let Some((key, _)) = raw_keys.iter().find(|(_, given)| *given) {

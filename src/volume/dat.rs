@@ -16,7 +16,7 @@
 
 use std::path::Path;
 
-use super::detect::{LoadedVolume, Placement, VolumeFormat, header_error, read_head, unsupported};
+use super::loader::{LoadedVolume, Placement, VolumeFormat, header_error, read_head, unsupported};
 use super::{ByteOrder, RawSpec, ScalarType, VolumeError, load_raw};
 
 /// Longest `.dat` header read; real ones are a few hundred bytes.
@@ -38,6 +38,7 @@ pub fn load_dat(path: &Path) -> Result<LoadedVolume, VolumeError> {
         volume: placement.apply(load_raw(&data, &spec)?),
         format: VolumeFormat::Dat,
         scalar_type: Some(header.scalar),
+        patient_frame: false,
     })
 }
 
@@ -147,7 +148,7 @@ fn scalar_type(name: &str) -> Option<Option<ScalarType>> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::volume::detect::tests::scratch;
+    use crate::volume::loader::tests::scratch;
 
     fn write(dir: &Path, name: &str, text: &str) -> std::path::PathBuf {
         let path = dir.join(name);

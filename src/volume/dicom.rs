@@ -1,18 +1,26 @@
-//! DICOM series: a folder of single-frame slice images (CT, MR) loaded as one [`CpuVolume`].
+//! DICOM volumes: a folder of single-frame slice images (CT, MR), or one multi-frame object
+//! (enhanced CT/MR, RT dose grids), loaded as one [`CpuVolume`].
 //!
-//! **Which files.** Every regular file in the folder (not its subfolders) whose bytes carry the
-//! `DICM` magic after the 128-byte preamble is read; other files are skipped. DICOM files without
-//! pixel data (a `DICOMDIR`, structured reports, presentation states) are skipped as well; the
-//! `DICOMDIR` index is not used to find files. A DICOM file that cannot be parsed or decoded
-//! fails the whole load rather than leaving a hole in the volume.
+//! **Which files.** Every regular file in the folder (not its subfolders) that looks like DICOM
+//! is read: the `DICM` magic after the 128-byte preamble, the magic at the very start (no
+//! preamble), or a bare data set starting with a group-0008 element (no preamble and no file
+//! meta group, as some old tools wrote; its transfer syntax is told from the bytes). DICOM files
+//! without pixel data (a `DICOMDIR`, structured reports, presentation states) are skipped; the
+//! `DICOMDIR` index is not used to find files. Files that cannot be parsed are ignored and
+//! counted in a note on stderr, since their series is unknown; only a folder with no readable
+//! image is an error.
 //!
-//! **Which series.** Images are grouped by SeriesInstanceUID. A folder holding one series
-//! loads it; a folder holding several is [`VolumeError::DicomSeries`], which lists them
-//! (number, description, modality, size, image count, UID) until one is chosen by
-//! SeriesNumber or UID ([`SeriesChoice`]); a single file given instead of its folder chooses its
-//! own series. Images of the other series are ignored even when they could not be slices (a
-//! dose report saved as a secondary capture without a position, a multi-frame image), but every
-//! image of the loaded series must be a usable slice.
+//! **Which series.** Images are grouped by SeriesInstanceUID. A file given alone selects its
+//! own series and, within it, the images of its own orientation and size (a localizer stored
+//! in the same series is left out); every other file of the folder is ignored, however
+//! damaged, and counted in the note. A multi-frame file given alone is a volume by itself, and
+//! so is an image without a position. A
+//! folder holding one series loads it; a folder holding several is
+//! [`VolumeError::DicomSeries`], which lists them (number, description, modality, size, image
+//! count, UID) until one is chosen by SeriesNumber or UID ([`SeriesChoice`]); then every image
+//! of the chosen series must be a usable slice. Copies of one image (the same SOPInstanceUID,
+//! as when a file is stored in several encodings) count once: the file given, else the first
+//! by name.
 //!
 //! **Geometry.** Slices are ordered by their ImagePositionPatient projected on the slice normal,
 //! the cross product of the ImageOrientationPatient row and column directions. The grid's x axis
@@ -21,8 +29,20 @@
 //! PixelSpacing lists the distance between rows first. The origin is the position of the first
 //! slice. Every slice must lie on the line `origin + k * step * normal` to within a tenth of a
 //! step; a gap of about two or more steps is reported as a missing slice, and a stack sheared by
-//! gantry tilt is refused rather than placed wrongly. A lone slice takes its SliceThickness
-//! (1 mm when absent) as the z spacing.
+//! gantry tilt is refused rather than placed wrongly. A lone slice takes its
+//! SpacingBetweenSlices, else its SliceThickness (1 mm when both are absent) as the z spacing. A
+//! lone image with neither ImagePositionPatient nor ImageOrientationPatient (a radiograph, a
+//! secondary capture) is placed as ITK places it, at the origin along the patient axes, with
+//! PixelSpacing, else ImagerPixelSpacing, else 1 mm (said on stderr); in a stack such an image
+//! is refused.
+//!
+//! **Multi-frame objects.** Each frame is a slice. An enhanced image gives each frame's
+//! position, orientation, pixel spacing and rescale in its functional groups (per frame, else
+//! shared: PlanePositionSequence, PlaneOrientationSequence, PixelMeasuresSequence,
+//! PixelValueTransformationSequence). A grid with a GridFrameOffsetVector (RT dose) places
+//! frame k at `ImagePositionPatient + (offset[k] - offset[0]) * normal`, which holds for both
+//! the relative form (first offset 0) and the absolute one (first offset the position's z), and
+//! scales its values by DoseGridScaling (Gy). Multi-frame images with neither are refused.
 //!
 //! **World frame.** DICOM patient coordinates are LPS (+x toward the patient's left, +y
 //! posterior, +z head); this project's world is RAS (+x toward the patient's right, +y anterior,
@@ -30,36 +50,42 @@
 //! Because that flip has determinant +1, the converted normal is still the cross product of the
 //! converted row and column directions.
 //!
-//! **Values.** Pixel data are decoded with `dicom-pixeldata` (native, RLE, JPEG baseline and
-//! lossless, JPEG 2000 via the pure-Rust `openjp2`), then mapped through each slice's own
-//! RescaleSlope and RescaleIntercept: Hounsfield units for CT. No window or VOI LUT is applied.
+//! **Values.** Pixel data are decoded with `dicom-pixeldata` (native, deflate, RLE, JPEG
+//! baseline, extended and lossless, JPEG-LS through CharLS, JPEG 2000 through the pure-Rust
+//! `openjp2`), then mapped through each slice's (or frame's) RescaleSlope and RescaleIntercept:
+//! Hounsfield units for CT. No window or VOI LUT is applied.
 //!
-//! **Not supported:** multi-frame (enhanced) images, colour images, files without the 128-byte
-//! preamble and `DICM` magic, slices of one series with different sizes, orientations or pixel
-//! spacings, and transfer syntaxes this build has no decoder for (JPEG-LS, JPEG XL, deflate).
+//! **Not supported:** colour images, slices of one series with different pixel spacings,
+//! and transfer syntaxes this build has no decoder for (JPEG XL, HTJ2K).
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, HashSet};
 use std::fs::{self, File};
-use std::io::Read;
+use std::io::{BufReader, Read};
 use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::path::{Path, PathBuf};
 
-use dicom_dictionary_std::tags;
-use dicom_object::{DefaultDicomObject, OpenFileOptions, Tag};
+use dicom_core::VR;
+use dicom_dictionary_std::{tags, uids};
+use dicom_object::{
+    DefaultDicomObject, FileMetaTableBuilder, InMemDicomObject, OpenFileOptions, Tag,
+};
 use dicom_pixeldata::{DecodedPixelData, PixelDecoder, PixelRepresentation};
+use dicom_transfer_syntax_registry::{TransferSyntaxIndex, TransferSyntaxRegistry};
 use glam::{DMat3, DVec3};
-
-use super::raw::ScalarType;
 use rayon::prelude::*;
 
 use super::CpuVolume;
-use super::raw::VolumeError;
+pub use super::loader::SeriesChoice;
+use super::loader::{Placement, io_error};
+use super::raw::{ScalarType, VolumeError};
 use crate::grid::voxel_count;
 
 /// Bytes before the `DICM` magic in a DICOM file.
 const PREAMBLE_LEN: usize = 128;
 /// The magic that marks a DICOM file (DICOM PS3.10, section 7.1).
 const MAGIC: &[u8; 4] = b"DICM";
+/// Bytes read from the start of a file to tell whether it is DICOM.
+pub(super) const SNIFF_LEN: usize = 512;
 /// Largest allowed difference between slices' unit orientation components. DS strings carry
 /// about six significant digits, so equal orientations agree far closer than this.
 const ORIENTATION_TOLERANCE: f64 = 1e-4;
@@ -74,18 +100,84 @@ const GAP_FACTOR: f64 = 1.5;
 /// huge image is refused before allocation. Lossless CT compresses about 2-5x, and an `f32` per
 /// 16-bit sample doubles that; 256 leaves room for slices that are mostly padding.
 const MAX_EXPANSION: u64 = 256;
+/// Output always allowed whatever the files' size: lossy JPEG 2000 shrinks an image by far
+/// more than [`MAX_EXPANSION`], and 16 MiB (a 2048 x 2048 slice) costs nothing to allow.
+const ALWAYS_ALLOWED_BYTES: u64 = 16 << 20;
+/// Most frames read from one multi-frame object, far above any CT or dose grid.
+const MAX_FRAMES: u32 = 65_536;
 
-/// Whether `bytes` (the start of a file, at least 132 bytes) carry the DICOM `DICM` magic after
-/// the 128-byte preamble.
+/// Whether `bytes` (the start of a file; [`SNIFF_LEN`] bytes tell every case) look like
+/// DICOM: the `DICM` magic after the 128-byte preamble or at the very start, or a bare data
+/// set (see the [module documentation](self)).
 pub fn is_dicom(bytes: &[u8]) -> bool {
-    bytes.get(PREAMBLE_LEN..PREAMBLE_LEN + MAGIC.len()) == Some(MAGIC.as_slice())
+    let magic_at = |at: usize| bytes.get(at..at + MAGIC.len()) == Some(MAGIC.as_slice());
+    magic_at(PREAMBLE_LEN) || magic_at(0) || bare_data_set(bytes).is_some()
 }
 
-/// A DICOM file with pixel data: its series, and its slice header or why it cannot be a slice.
+/// The value representations whose explicit-VR length takes 4 bytes after 2 reserved ones.
+const LONG_VRS: [&[u8; 2]; 13] = [
+    b"OB", b"OD", b"OF", b"OL", b"OV", b"OW", b"SQ", b"SV", b"UC", b"UN", b"UR", b"UT", b"UV",
+];
+/// The other value representations.
+const SHORT_VRS: [&[u8; 2]; 21] = [
+    b"AE", b"AS", b"AT", b"CS", b"DA", b"DS", b"DT", b"FL", b"FD", b"IS", b"LO", b"LT", b"PN",
+    b"SH", b"SL", b"SS", b"ST", b"TM", b"UI", b"UL", b"US",
+];
+
+/// The transfer syntax of a file that is a bare data set: no preamble, no file meta group,
+/// its first two elements in group 0008 (identifying attributes, which every image has). The
+/// byte order comes from how the group reads, explicit VR from two known VR letters after the
+/// tag; the second element must follow where the first one's length says.
+fn bare_data_set(bytes: &[u8]) -> Option<&'static str> {
+    let big = match bytes.get(0..2)? {
+        [0x08, 0x00] => false,
+        [0x00, 0x08] => true,
+        _ => return None,
+    };
+    let u16_at = |at: usize| -> Option<u16> {
+        let w: [u8; 2] = bytes.get(at..at + 2)?.try_into().ok()?;
+        Some(if big {
+            u16::from_be_bytes(w)
+        } else {
+            u16::from_le_bytes(w)
+        })
+    };
+    let u32_at = |at: usize| -> Option<u32> {
+        let w: [u8; 4] = bytes.get(at..at + 4)?.try_into().ok()?;
+        Some(if big {
+            u32::from_be_bytes(w)
+        } else {
+            u32::from_le_bytes(w)
+        })
+    };
+    let vr: &[u8; 2] = bytes.get(4..6)?.try_into().ok()?;
+    let explicit = |big: bool| match big {
+        // Explicit VR big endian, retired from the standard but still in old files.
+        true => "1.2.840.10008.1.2.2",
+        false => uids::EXPLICIT_VR_LITTLE_ENDIAN,
+    };
+    let (next, ts) = if LONG_VRS.contains(&vr) {
+        (12 + u32_at(8)? as usize, explicit(big))
+    } else if SHORT_VRS.contains(&vr) {
+        (8 + usize::from(u16_at(6)?), explicit(big))
+    } else if !big {
+        (8 + u32_at(4)? as usize, uids::IMPLICIT_VR_LITTLE_ENDIAN)
+    } else {
+        // Implicit VR is always little-endian.
+        return None;
+    };
+    (u16_at(next)? == 0x0008).then_some(ts)
+}
+
+/// A DICOM file with pixel data: its series, and its slices (one per frame) or why they
+/// cannot be slices.
 struct Image {
+    path: PathBuf,
     series: String,
+    /// SOPInstanceUID, to count copies of one image once (empty when absent).
+    instance: String,
     tags: SeriesTags,
-    slice: Result<SliceHeader, VolumeError>,
+    slices: Result<Vec<SliceHeader>, VolumeError>,
 }
 
 /// What a file says about its series, for listing.
@@ -115,14 +207,9 @@ pub struct SeriesSummary {
     pub images: usize,
 }
 
-/// Which series of a folder to load: `NUMBER` (SeriesNumber) or a SeriesInstanceUID.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct SeriesChoice(pub String);
-
-impl SeriesChoice {
-    fn matches(&self, uid: &str, tags: &SeriesTags) -> bool {
-        self.0 == uid || tags.number.as_deref() == Some(self.0.trim())
-    }
+/// Whether `choice` names the series `uid` with these tags.
+fn chosen(choice: &SeriesChoice, uid: &str, tags: &SeriesTags) -> bool {
+    choice.0 == uid || tags.number.as_deref() == Some(choice.0.trim())
 }
 
 /// The series as lines for a message: number, description, modality, size and image count.
@@ -144,10 +231,13 @@ pub fn describe_series(series: &[SeriesSummary]) -> String {
         .join("\n")
 }
 
-/// What one image file says about its slice, read before any pixel is decoded.
+/// What one slice (an image, or one frame of a multi-frame image) says about itself, read
+/// before any pixel is decoded.
 #[derive(Debug, Clone)]
 struct SliceHeader {
     path: PathBuf,
+    /// The frame within a multi-frame file, from 0; `None` for a single-frame image.
+    frame: Option<u32>,
     rows: u16,
     columns: u16,
     /// ImageOrientationPatient row and column directions, unit length, LPS.
@@ -158,16 +248,24 @@ struct SliceHeader {
     /// PixelSpacing as stored: between rows, then between columns.
     pixel_spacing: [f64; 2],
     slice_thickness: Option<f64>,
+    /// The file's length, shared among its frames.
     file_len: u64,
     /// The stored value type (BitsAllocated and PixelRepresentation), when it is one of ours.
     stored: Option<ScalarType>,
+    /// Modality value = stored value x slope + intercept.
+    slope: f64,
+    intercept: f64,
+    /// No ImagePositionPatient nor ImageOrientationPatient: at the origin, along the axes.
+    unplaced: bool,
 }
 
-/// Where the ordered slices sit in the RAS world.
-struct Placement {
-    spacing: [f64; 3],
-    origin: [f64; 3],
-    direction: DMat3,
+impl SliceHeader {
+    fn name(&self) -> String {
+        match self.frame {
+            Some(k) => format!("{} frame {}", name(&self.path), k + 1),
+            None => name(&self.path),
+        }
+    }
 }
 
 /// Loads the DICOM series in `dir` as a volume in RAS millimetres with values in modality units
@@ -196,34 +294,213 @@ pub fn load_dicom_series_choosing(
     dir: &Path,
     choice: Option<&SeriesChoice>,
 ) -> Result<(CpuVolume, Option<ScalarType>), VolumeError> {
-    let paths = dicom_files(dir)?;
-    let read: Vec<_> = paths.par_iter().map(|p| read_image(p)).collect();
-    let (images, unreadable): (Vec<_>, Vec<_>) = read.into_iter().partition(Result::is_ok);
-    let images: Vec<Image> = images
+    let (images, unreadable) = read_folder(dir)?;
+    let mut ignored = Ignored {
+        unreadable: unreadable.len(),
+        ..Ignored::default()
+    };
+    if images.is_empty()
+        && let Some(first) = unreadable.into_iter().next()
+    {
+        return Err(first);
+    }
+    let images = select_series(dir, images, choice)?;
+    let images = without_copies(images, None, &mut ignored);
+    let slices = images
         .into_iter()
-        .filter_map(Result::ok)
+        .map(|image| image.slices)
+        .collect::<Result<Vec<_>, _>>()?
+        .into_iter()
         .flatten()
         .collect();
-    // A file that cannot be parsed belongs to no known series: it fails the load only when
-    // nothing else in the folder is an image.
-    if let Some(Err(first)) = unreadable.into_iter().next() {
-        if images.is_empty() {
-            return Err(first);
-        }
-        eprintln!("note: ignored a file that is not readable DICOM: {first}");
+    ignored.note(dir);
+    build_volume(dir, slices)
+}
+
+/// Loads the series of the DICOM file at `path` from its folder: the file's own series, and
+/// within it the images of the file's orientation and size; every other file is ignored and
+/// counted in a note on stderr. A multi-frame file is a volume by itself.
+pub fn load_dicom_file_series(path: &Path) -> Result<(CpuVolume, Option<ScalarType>), VolumeError> {
+    let own = read_image(path)?
+        .ok_or_else(|| dicom_error(path, "this DICOM file holds no image (no PixelData)"))?;
+    let own_slices = match &own.slices {
+        Ok(slices) => slices.clone(),
+        Err(e) => return Err(dicom_error(path, e.to_string())),
+    };
+    // A multi-frame object is a volume by itself; an image with no place in the patient
+    // cannot stack with others.
+    if own_slices.len() > 1 || own_slices[0].unplaced {
+        return build_volume(path, own_slices);
     }
-    let mut slices = select_series(dir, images, choice)?;
+    let first = &own_slices[0];
+    let dir = match path.parent() {
+        Some(parent) if !parent.as_os_str().is_empty() => parent,
+        _ => Path::new("."),
+    };
+    let (images, unreadable) = read_folder(dir)?;
+    let mut ignored = Ignored {
+        unreadable: unreadable.len(),
+        ..Ignored::default()
+    };
+    let own_path = fs::canonicalize(path).map_err(io_error(path))?;
+    let mut kept = Vec::new();
+    for image in images {
+        if fs::canonicalize(&image.path).is_ok_and(|p| p == own_path) {
+            continue;
+        }
+        if image.series != own.series {
+            ignored.other_series += 1;
+            continue;
+        }
+        match &image.slices {
+            Ok(slices)
+                if slices.len() == 1 && !slices[0].unplaced && same_grid(&slices[0], first) =>
+            {
+                kept.push(image)
+            }
+            _ => ignored.other_grid += 1,
+        }
+    }
+    kept.push(own);
+    let kept = without_copies(kept, Some(&own_path), &mut ignored);
+    let slices = kept
+        .into_iter()
+        .flat_map(|image| image.slices.unwrap_or_default())
+        .collect();
+    ignored.note(dir);
+    build_volume(dir, slices)
+}
+
+/// Whether two single-frame slices share their size and orientation.
+fn same_grid(a: &SliceHeader, b: &SliceHeader) -> bool {
+    (a.rows, a.columns) == (b.rows, b.columns)
+        && a.row_dir.abs_diff_eq(b.row_dir, ORIENTATION_TOLERANCE)
+        && a.col_dir.abs_diff_eq(b.col_dir, ORIENTATION_TOLERANCE)
+}
+
+/// Files of a folder that a load left out, for the note on stderr.
+#[derive(Debug, Default)]
+struct Ignored {
+    unreadable: usize,
+    other_series: usize,
+    other_grid: usize,
+    copies: usize,
+}
+
+impl Ignored {
+    fn note(&self, dir: &Path) {
+        let parts: Vec<String> = [
+            (self.unreadable, "not readable as DICOM"),
+            (self.other_series, "of other series"),
+            (
+                self.other_grid,
+                "of another orientation or size, or not slices",
+            ),
+            (
+                self.copies,
+                "copies of an image already loaded (same SOPInstanceUID)",
+            ),
+        ]
+        .iter()
+        .filter(|(n, _)| *n > 0)
+        .map(|(n, what)| format!("{n} {what}"))
+        .collect();
+        if !parts.is_empty() {
+            eprintln!(
+                "note: {}: ignored {} file(s): {}",
+                dir.display(),
+                self.unreadable + self.other_series + self.other_grid + self.copies,
+                parts.join(", ")
+            );
+        }
+    }
+}
+
+/// The images, one per SOPInstanceUID: `prefer` (the file given) when it is among the copies,
+/// else the first by name.
+fn without_copies(
+    mut images: Vec<Image>,
+    prefer: Option<&Path>,
+    ignored: &mut Ignored,
+) -> Vec<Image> {
+    let preferred =
+        |image: &Image| prefer.is_some_and(|p| fs::canonicalize(&image.path).is_ok_and(|c| c == p));
+    images.sort_by(|a, b| {
+        preferred(b)
+            .cmp(&preferred(a))
+            .then_with(|| a.path.cmp(&b.path))
+    });
+    let mut seen = HashSet::new();
+    let before = images.len();
+    images.retain(|image| image.instance.is_empty() || seen.insert(image.instance.clone()));
+    ignored.copies += before - images.len();
+    images
+}
+
+/// Reads every DICOM-looking file of `dir`: the images, and the errors of files that could
+/// not be parsed (in name order).
+fn read_folder(dir: &Path) -> Result<(Vec<Image>, Vec<VolumeError>), VolumeError> {
+    let paths = dicom_files(dir)?;
+    let read: Vec<_> = paths.par_iter().map(|p| read_image(p)).collect();
+    let mut images = Vec::new();
+    let mut unreadable = Vec::new();
+    for result in read {
+        match result {
+            Ok(Some(image)) => images.push(image),
+            Ok(None) => {}
+            Err(e) => unreadable.push(e),
+        }
+    }
+    Ok((images, unreadable))
+}
+
+/// The volume of `slices` (of one grid), placed and decoded. `at` names the folder or file in
+/// errors about the whole stack.
+fn build_volume(
+    at: &Path,
+    mut slices: Vec<SliceHeader>,
+) -> Result<(CpuVolume, Option<ScalarType>), VolumeError> {
+    if slices.is_empty() {
+        return Err(dicom_error(at, "no DICOM image slices here"));
+    }
+    if let Some(lost) = slices.iter().find(|s| s.unplaced) {
+        if slices.len() > 1 {
+            let message =
+                "no ImagePositionPatient (nor ImageOrientationPatient) in a stack of slices";
+            return Err(dicom_error(&lost.path, message));
+        }
+        eprintln!(
+            "note: {}: no ImagePositionPatient or ImageOrientationPatient; the image is placed \
+             at the origin along the patient axes, as ITK places it",
+            lost.path.display()
+        );
+    }
     check_consistent(&slices)?;
-    let placement = place_slices(dir, &mut slices)?;
+    let placement = place_slices(at, &mut slices)?;
     let first = &slices[0];
-    let count = u32::try_from(slices.len()).map_err(|_| dicom_error(dir, "too many slices"))?;
+    let count = u32::try_from(slices.len()).map_err(|_| dicom_error(at, "too many slices"))?;
     let dims = [u32::from(first.columns), u32::from(first.rows), count];
-    let mut values = allocate(dir, dims, &slices)?;
+    let mut values = allocate(at, dims, &slices)?;
     let plane = values.len() / slices.len();
-    let decoded: Vec<_> = values
-        .par_chunks_mut(plane)
-        .zip(slices.par_iter())
-        .map(|(out, slice)| decode_slice(slice, out))
+    // Each file is decoded once, its frames copied to their places in the stack.
+    let mut by_file: BTreeMap<&Path, Vec<(usize, &SliceHeader)>> = BTreeMap::new();
+    for (k, slice) in slices.iter().enumerate() {
+        by_file.entry(&slice.path).or_default().push((k, slice));
+    }
+    let mut chunks: Vec<Option<&mut [f32]>> = values.chunks_mut(plane).map(Some).collect();
+    let work: Vec<(&Path, Vec<SliceOut>)> = by_file
+        .into_iter()
+        .map(|(path, list)| {
+            let outs = list
+                .into_iter()
+                .map(|(k, slice)| (slice, chunks[k].take().expect("one slice per place")))
+                .collect();
+            (path, outs)
+        })
+        .collect();
+    let decoded: Vec<_> = work
+        .into_par_iter()
+        .map(|(path, outs)| decode_file(path, outs))
         .collect();
     first_error(decoded)?;
     let volume = CpuVolume {
@@ -235,6 +512,9 @@ pub fn load_dicom_series_choosing(
     };
     Ok((volume, slices[0].stored))
 }
+
+/// A slice and the place its values go.
+type SliceOut<'a> = (&'a SliceHeader, &'a mut [f32]);
 
 /// The first error in file order, so that a folder with several bad files always reports the
 /// same one whatever the thread timing.
@@ -249,13 +529,6 @@ fn dicom_error(path: &Path, message: impl Into<String>) -> VolumeError {
     }
 }
 
-fn io_error(path: &Path) -> impl FnOnce(std::io::Error) -> VolumeError + '_ {
-    move |source| VolumeError::Io {
-        path: path.into(),
-        source,
-    }
-}
-
 fn name(path: &Path) -> String {
     path.file_name()
         .unwrap_or(path.as_os_str())
@@ -263,13 +536,13 @@ fn name(path: &Path) -> String {
         .into_owned()
 }
 
-/// The regular files in `dir` with the DICOM magic, sorted by name.
+/// The regular files in `dir` that look like DICOM, sorted by name.
 fn dicom_files(dir: &Path) -> Result<Vec<PathBuf>, VolumeError> {
     let mut paths = Vec::new();
     for entry in fs::read_dir(dir).map_err(io_error(dir))? {
         let path = entry.map_err(io_error(dir))?.path();
         // Follows symlinks, so a linked slice counts like a copied one.
-        if fs::metadata(&path).map_err(io_error(&path))?.is_file() && has_magic(&path)? {
+        if fs::metadata(&path).map_err(io_error(&path))?.is_file() && looks_like_dicom(&path)? {
             paths.push(path);
         }
     }
@@ -277,11 +550,11 @@ fn dicom_files(dir: &Path) -> Result<Vec<PathBuf>, VolumeError> {
     Ok(paths)
 }
 
-/// Reads only the preamble and magic, so large non-DICOM files in the folder cost nothing.
-fn has_magic(path: &Path) -> Result<bool, VolumeError> {
-    let mut start = Vec::with_capacity(PREAMBLE_LEN + MAGIC.len());
+/// Reads only the first bytes, so large non-DICOM files in the folder cost nothing.
+fn looks_like_dicom(path: &Path) -> Result<bool, VolumeError> {
+    let mut start = Vec::with_capacity(SNIFF_LEN);
     File::open(path)
-        .and_then(|f| f.take(start.capacity() as u64).read_to_end(&mut start))
+        .and_then(|f| f.take(SNIFF_LEN as u64).read_to_end(&mut start))
         .map_err(io_error(path))?;
     Ok(is_dicom(&start))
 }
@@ -307,10 +580,34 @@ fn describe(context: &str, error: &dyn std::error::Error) -> String {
     message
 }
 
+/// Opens a DICOM file, with or without its preamble; a bare data set is read with the
+/// transfer syntax its bytes show and given a file meta group.
 fn open(path: &Path) -> Result<DefaultDicomObject, String> {
-    OpenFileOptions::new()
-        .open_file(path)
-        .map_err(|e| describe("cannot parse DICOM", &e))
+    let parsed = OpenFileOptions::new().open_file(path);
+    let error = match parsed {
+        Ok(obj) => return Ok(obj),
+        Err(e) => describe("cannot parse DICOM", &e),
+    };
+    let mut head = Vec::with_capacity(SNIFF_LEN);
+    File::open(path)
+        .and_then(|f| f.take(SNIFF_LEN as u64).read_to_end(&mut head))
+        .map_err(|e| format!("cannot read: {e}"))?;
+    let Some(ts) = bare_data_set(&head) else {
+        return Err(error);
+    };
+    let syntax = TransferSyntaxRegistry
+        .get(ts)
+        .ok_or_else(|| format!("no transfer syntax {ts} in this build"))?;
+    let file = File::open(path).map_err(|e| format!("cannot read: {e}"))?;
+    let data = InMemDicomObject::read_dataset_with_ts(BufReader::new(file), syntax)
+        .map_err(|e| describe("cannot parse a DICOM data set without meta group", &e))?;
+    // The SOP identifiers are the data set's own when it has them (with_meta takes those).
+    let meta = FileMetaTableBuilder::new()
+        .transfer_syntax(ts)
+        .media_storage_sop_class_uid(uids::SECONDARY_CAPTURE_IMAGE_STORAGE)
+        .media_storage_sop_instance_uid("2.25.0");
+    data.with_meta(meta)
+        .map_err(|e| describe("cannot give the data set a meta group", &e))
 }
 
 /// The image in a DICOM file, or `None` for a file without pixel data. A file that cannot be
@@ -323,48 +620,65 @@ fn read_image(path: &Path) -> Result<Option<Image>, VolumeError> {
         if obj.get(tags::PIXEL_DATA).is_none() {
             return Ok(None);
         }
-        let series = optional_text(&obj, tags::SERIES_INSTANCE_UID).unwrap_or_default();
-        let tags = SeriesTags {
-            number: optional_text(&obj, tags::SERIES_NUMBER).filter(|t| !t.is_empty()),
-            description: optional_text(&obj, tags::SERIES_DESCRIPTION).filter(|t| !t.is_empty()),
-            modality: optional_text(&obj, tags::MODALITY).filter(|t| !t.is_empty()),
-        };
-        let slice = slice_header(&obj, path, file_len).map_err(|m| dicom_error(path, m));
+        let text = |tag| optional_text(&obj, tag).filter(|t| !t.is_empty());
+        let slices = slice_headers(&obj, path, file_len).map_err(|m| dicom_error(path, m));
         Ok(Some(Image {
-            series,
-            tags,
-            slice,
+            path: path.into(),
+            series: text(tags::SERIES_INSTANCE_UID).unwrap_or_default(),
+            instance: text(tags::SOP_INSTANCE_UID).unwrap_or_default(),
+            tags: SeriesTags {
+                number: text(tags::SERIES_NUMBER),
+                description: text(tags::SERIES_DESCRIPTION),
+                modality: text(tags::MODALITY),
+            },
+            slices,
         }))
     })
 }
 
-fn slice_header(
+/// The first item of sequence `tag` in `obj`.
+fn first_item(obj: &InMemDicomObject, tag: Tag) -> Option<&InMemDicomObject> {
+    obj.get(tag)?.items()?.first()
+}
+
+/// Where a frame's functional group attributes are: its own item of the per-frame
+/// sequence, then the shared item.
+struct Groups<'a> {
+    own: Option<&'a InMemDicomObject>,
+    shared: Option<&'a InMemDicomObject>,
+}
+
+impl<'a> Groups<'a> {
+    /// The item of macro sequence `sequence` holding this frame's attributes.
+    fn macro_item(&self, sequence: Tag) -> Option<&'a InMemDicomObject> {
+        self.own
+            .and_then(|o| first_item(o, sequence))
+            .or_else(|| self.shared.and_then(|s| first_item(s, sequence)))
+    }
+}
+
+/// The slices of an image: one for a single-frame image, one per frame otherwise.
+fn slice_headers(
     obj: &DefaultDicomObject,
     path: &Path,
     file_len: u64,
-) -> Result<SliceHeader, String> {
-    let frames = optional_text(obj, tags::NUMBER_OF_FRAMES).unwrap_or_default();
-    if !matches!(frames.as_str(), "" | "1") {
-        return Err(format!(
-            "{frames} frames: multi-frame images are not supported"
-        ));
-    }
-    let orientation = floats::<6>(
-        obj,
-        tags::IMAGE_ORIENTATION_PATIENT,
-        "ImageOrientationPatient",
-    )?;
-    let (row_dir, col_dir) = unit_axes(orientation)?;
-    let position = floats::<3>(obj, tags::IMAGE_POSITION_PATIENT, "ImagePositionPatient")?;
-    let pixel_spacing = floats::<2>(obj, tags::PIXEL_SPACING, "PixelSpacing")?;
-    if pixel_spacing.iter().any(|s| !(s.is_finite() && *s > 0.0)) {
-        return Err(format!("PixelSpacing {pixel_spacing:?} is not positive"));
-    }
-    let slice_thickness = floats::<1>(obj, tags::SLICE_THICKNESS, "SliceThickness")
-        .ok()
-        .map(|[t]| t)
-        .filter(|t| t.is_finite() && *t > 0.0);
+) -> Result<Vec<SliceHeader>, String> {
+    let frames = match optional_text(obj, tags::NUMBER_OF_FRAMES).as_deref() {
+        None | Some("") => 1,
+        Some(text) => text
+            .parse::<u32>()
+            .ok()
+            .filter(|n| (1..=MAX_FRAMES).contains(n))
+            .ok_or_else(|| format!("NumberOfFrames {text:?} is not 1 to {MAX_FRAMES}"))?,
+    };
+    let rows = unsigned(obj, tags::ROWS, "Rows")?;
+    let columns = unsigned(obj, tags::COLUMNS, "Columns")?;
     let bits = unsigned(obj, tags::BITS_ALLOCATED, "BitsAllocated").ok();
+    if bits == Some(1) {
+        return Err(
+            "1-bit pixels (a binary segmentation or overlay) are not read as a volume".into(),
+        );
+    }
     let signed = unsigned(obj, tags::PIXEL_REPRESENTATION, "PixelRepresentation").ok() == Some(1);
     let stored = match (bits, signed) {
         (Some(8), false) => Some(ScalarType::U8),
@@ -375,27 +689,180 @@ fn slice_header(
         (Some(32), true) => Some(ScalarType::I32),
         _ => None,
     };
-    Ok(SliceHeader {
-        stored,
+    let (top_slope, top_intercept) = rescale_of(obj)?;
+    let base = SliceHeader {
         path: path.into(),
-        rows: unsigned(obj, tags::ROWS, "Rows")?,
-        columns: unsigned(obj, tags::COLUMNS, "Columns")?,
+        frame: None,
+        rows,
+        columns,
+        row_dir: DVec3::X,
+        col_dir: DVec3::Y,
+        position: DVec3::ZERO,
+        pixel_spacing: [1.0; 2],
+        slice_thickness: None,
+        file_len: file_len / u64::from(frames),
+        stored,
+        slope: top_slope,
+        intercept: top_intercept,
+        unplaced: false,
+    };
+    let per_frame = obj
+        .get(tags::PER_FRAME_FUNCTIONAL_GROUPS_SEQUENCE)
+        .and_then(|e| e.items());
+    let offsets = obj.get(tags::GRID_FRAME_OFFSET_VECTOR);
+    if frames == 1 && per_frame.is_none() {
+        if obj.get(tags::IMAGE_POSITION_PATIENT).is_none()
+            && obj.get(tags::IMAGE_ORIENTATION_PATIENT).is_none()
+        {
+            // A projection or a secondary capture: no place in the patient. Alone it is
+            // placed as ITK places it; in a stack it is refused (see build_volume).
+            let spacing = floats::<2>(obj, tags::PIXEL_SPACING, "PixelSpacing")
+                .or_else(|_| floats::<2>(obj, tags::IMAGER_PIXEL_SPACING, "ImagerPixelSpacing"))
+                .unwrap_or([1.0, 1.0]);
+            if spacing.iter().any(|s| !(s.is_finite() && *s > 0.0)) {
+                return Err(format!("PixelSpacing {spacing:?} is not positive"));
+            }
+            return Ok(vec![SliceHeader {
+                pixel_spacing: spacing,
+                unplaced: true,
+                ..base
+            }]);
+        }
+        return Ok(vec![plane_of(obj, obj, obj, base)?]);
+    }
+    if let Some(items) = per_frame {
+        // Enhanced images: every frame's geometry in its functional groups.
+        if items.len() != frames as usize {
+            return Err(format!(
+                "{} per-frame functional groups for {frames} frames",
+                items.len()
+            ));
+        }
+        let shared = first_item(obj, tags::SHARED_FUNCTIONAL_GROUPS_SEQUENCE);
+        return items
+            .iter()
+            .enumerate()
+            .map(|(k, item)| {
+                let groups = Groups {
+                    own: Some(item),
+                    shared,
+                };
+                let missing = |what: &str| format!("frame {}: no {what}", k + 1);
+                let position = groups
+                    .macro_item(tags::PLANE_POSITION_SEQUENCE)
+                    .ok_or_else(|| missing("PlanePositionSequence"))?;
+                let orientation = groups
+                    .macro_item(tags::PLANE_ORIENTATION_SEQUENCE)
+                    .ok_or_else(|| missing("PlaneOrientationSequence"))?;
+                let measures = groups
+                    .macro_item(tags::PIXEL_MEASURES_SEQUENCE)
+                    .ok_or_else(|| missing("PixelMeasuresSequence"))?;
+                let mut slice = SliceHeader {
+                    frame: Some(k as u32),
+                    ..base.clone()
+                };
+                if let Some(transform) =
+                    groups.macro_item(tags::PIXEL_VALUE_TRANSFORMATION_SEQUENCE)
+                {
+                    (slice.slope, slice.intercept) = rescale_of(transform)?;
+                }
+                plane_of(position, orientation, measures, slice)
+                    .map_err(|m| format!("frame {}: {m}", k + 1))
+            })
+            .collect();
+    }
+    let Some(offsets) = offsets else {
+        return Err(format!(
+            "{frames} frames without per-frame positions (no functional groups or \
+             GridFrameOffsetVector): not a volume"
+        ));
+    };
+    // A grid of frames along the normal (RT dose).
+    let offsets = numbers_of(offsets, "GridFrameOffsetVector")?;
+    if offsets.len() != frames as usize || offsets.iter().any(|o| !o.is_finite()) {
+        return Err(format!(
+            "GridFrameOffsetVector has {} finite values for {frames} frames",
+            offsets.len()
+        ));
+    }
+    let mut first = plane_of(obj, obj, obj, base)?;
+    if let Some(scaling) = obj.get(tags::DOSE_GRID_SCALING) {
+        let [scale] = floats_of::<1>(scaling, "DoseGridScaling")?;
+        first.slope *= scale;
+        first.intercept *= scale;
+    }
+    let normal = first.row_dir.cross(first.col_dir);
+    Ok((0..frames)
+        .map(|k| SliceHeader {
+            frame: Some(k),
+            position: first.position + normal * (offsets[k as usize] - offsets[0]),
+            ..first.clone()
+        })
+        .collect())
+}
+
+/// `slice` with its position, orientation and spacing from the three objects that hold
+/// them (the image itself, or a frame's functional group items).
+fn plane_of(
+    position: &InMemDicomObject,
+    orientation: &InMemDicomObject,
+    measures: &InMemDicomObject,
+    slice: SliceHeader,
+) -> Result<SliceHeader, String> {
+    let iop = floats::<6>(
+        orientation,
+        tags::IMAGE_ORIENTATION_PATIENT,
+        "ImageOrientationPatient",
+    )?;
+    let (row_dir, col_dir) = unit_axes(iop)?;
+    let ipp = floats::<3>(
+        position,
+        tags::IMAGE_POSITION_PATIENT,
+        "ImagePositionPatient",
+    )?;
+    let pixel_spacing = floats::<2>(measures, tags::PIXEL_SPACING, "PixelSpacing")?;
+    if pixel_spacing.iter().any(|s| !(s.is_finite() && *s > 0.0)) {
+        return Err(format!("PixelSpacing {pixel_spacing:?} is not positive"));
+    }
+    // A lone slice's depth: SpacingBetweenSlices, else SliceThickness.
+    let slice_thickness = floats::<1>(
+        measures,
+        tags::SPACING_BETWEEN_SLICES,
+        "SpacingBetweenSlices",
+    )
+    .or_else(|_| floats::<1>(measures, tags::SLICE_THICKNESS, "SliceThickness"))
+    .ok()
+    .map(|[t]| t)
+    .filter(|t| t.is_finite() && *t > 0.0);
+    Ok(SliceHeader {
         row_dir,
         col_dir,
-        position: DVec3::from(position),
+        position: DVec3::from(ipp),
         pixel_spacing,
         slice_thickness,
-        file_len,
+        ..slice
     })
 }
 
+/// RescaleSlope and RescaleIntercept of `obj` (1 and 0 when absent), which must be finite.
+fn rescale_of(obj: &InMemDicomObject) -> Result<(f64, f64), String> {
+    let get = |tag, name, default| match obj.get(tag) {
+        Some(e) => floats_of::<1>(e, name).map(|[v]| v),
+        None => Ok(default),
+    };
+    Ok((
+        get(tags::RESCALE_SLOPE, "RescaleSlope", 1.0)?,
+        get(tags::RESCALE_INTERCEPT, "RescaleIntercept", 0.0)?,
+    ))
+}
+
 /// A text attribute without DICOM's space or NUL padding; `None` when absent or unreadable.
-fn optional_text(obj: &DefaultDicomObject, tag: Tag) -> Option<String> {
+fn optional_text(obj: &InMemDicomObject, tag: Tag) -> Option<String> {
     let value = obj.get(tag)?.to_str().ok()?;
     Some(value.trim_matches(['\0', ' ']).to_owned())
 }
 
-fn unsigned(obj: &DefaultDicomObject, tag: Tag, name: &str) -> Result<u16, String> {
+fn unsigned(obj: &InMemDicomObject, tag: Tag, name: &str) -> Result<u16, String> {
     let element = obj.get(tag).ok_or_else(|| format!("no {name}"))?;
     match element.to_int::<u16>() {
         Ok(0) | Err(_) => Err(format!("{name} is not a positive 16-bit number")),
@@ -405,14 +872,42 @@ fn unsigned(obj: &DefaultDicomObject, tag: Tag, name: &str) -> Result<u16, Strin
 
 /// Exactly `N` finite numbers from a decimal-string attribute.
 fn floats<const N: usize>(
-    obj: &DefaultDicomObject,
+    obj: &InMemDicomObject,
     tag: Tag,
     name: &str,
 ) -> Result<[f64; N], String> {
     let element = obj.get(tag).ok_or_else(|| format!("no {name}"))?;
-    let values = element
-        .to_multi_float64()
+    floats_of(element, name)
+}
+
+/// The numbers of an element. An element whose VR is UN (as some writers store attributes
+/// they do not know) holds its decimal strings as bytes, which are read as text.
+fn numbers_of(element: &dicom_object::mem::InMemElement, name: &str) -> Result<Vec<f64>, String> {
+    if element.vr() != VR::UN {
+        return element
+            .to_multi_float64()
+            .map_err(|e| format!("{name} is not numeric: {e}"));
+    }
+    let bytes = element
+        .to_bytes()
         .map_err(|e| format!("{name} is not numeric: {e}"))?;
+    let text = std::str::from_utf8(&bytes).map_err(|_| format!("{name} is not numeric text"))?;
+    text.trim_matches(['\0', ' '])
+        .split('\\')
+        .map(|word| {
+            word.trim()
+                .parse::<f64>()
+                .map_err(|_| format!("{name} holds {word:?}, not a number"))
+        })
+        .collect()
+}
+
+/// Exactly `N` finite numbers from an element.
+fn floats_of<const N: usize>(
+    element: &dicom_object::mem::InMemElement,
+    name: &str,
+) -> Result<[f64; N], String> {
+    let values = numbers_of(element, name)?;
     let array: [f64; N] = values
         .as_slice()
         .try_into()
@@ -438,13 +933,12 @@ fn unit_axes(orientation: [f64; 6]) -> Result<(DVec3, DVec3), String> {
     Ok((row.normalize(), col.normalize()))
 }
 
-/// The slices of the series with the most usable slices (ties: the UID that sorts first), all
-/// of whose images must be usable slices.
+/// The images of the chosen series: the only one, or the one `choice` names.
 fn select_series(
     dir: &Path,
     images: Vec<Image>,
     choice: Option<&SeriesChoice>,
-) -> Result<Vec<SliceHeader>, VolumeError> {
+) -> Result<Vec<Image>, VolumeError> {
     let groups = group_series(images);
     if groups.is_empty() {
         return Err(dicom_error(dir, "no DICOM image slices in this folder"));
@@ -455,7 +949,7 @@ fn select_series(
     let index = match choice {
         Some(c) => {
             let matching: Vec<usize> = (0..groups.len())
-                .filter(|&i| c.matches(&groups[i].0, &groups[i].1[0].tags))
+                .filter(|&i| chosen(c, &groups[i].0, &groups[i].1[0].tags))
                 .collect();
             match matching.as_slice() {
                 [i] => *i,
@@ -483,12 +977,7 @@ fn select_series(
         }
     };
     let mut groups = groups;
-    groups
-        .swap_remove(index)
-        .1
-        .into_iter()
-        .map(|image| image.slice)
-        .collect()
+    Ok(groups.swap_remove(index).1)
 }
 
 /// Images grouped by SeriesInstanceUID, in UID order.
@@ -511,9 +1000,13 @@ fn summary(folder: &Path, uid: &str, images: &[Image]) -> SeriesSummary {
         number: tags.number.clone(),
         description: tags.description.clone(),
         modality: tags.modality.clone(),
-        size: images
-            .iter()
-            .find_map(|i| i.slice.as_ref().ok().map(|s| [s.columns, s.rows])),
+        size: images.iter().find_map(|i| {
+            i.slices
+                .as_ref()
+                .ok()
+                .and_then(|s| s.first())
+                .map(|s| [s.columns, s.rows])
+        }),
         images: images.len(),
     }
 }
@@ -521,18 +1014,14 @@ fn summary(folder: &Path, uid: &str, images: &[Image]) -> SeriesSummary {
 /// The series of DICOM images in `dir` (not its subfolders), without decoding any pixel data.
 /// Files that cannot be read as DICOM are left out here; loading the folder reports them.
 pub fn list_series(dir: &Path) -> Result<Vec<SeriesSummary>, VolumeError> {
-    let paths = dicom_files(dir)?;
-    let images: Vec<Image> = paths
-        .par_iter()
-        .filter_map(|p| read_image(p).ok().flatten())
-        .collect();
+    let (images, _) = read_folder(dir)?;
     Ok(group_series(images)
         .iter()
         .map(|(uid, g)| summary(dir, uid, g))
         .collect())
 }
 
-/// The SeriesInstanceUID of one DICOM file, so that a file given alone loads its own series.
+/// The SeriesInstanceUID of one DICOM file.
 pub fn series_of(path: &Path) -> Result<String, VolumeError> {
     guarded(path, || {
         let obj = open(path)?;
@@ -564,10 +1053,11 @@ fn check_consistent(slices: &[SliceHeader]) -> Result<(), VolumeError> {
         } else {
             continue;
         };
-        let message = format!(
-            "{problem} differs from {} of the same series",
-            name(&first.path)
-        );
+        let message = format!("{problem} differs from {} of the same series", first.name());
+        let message = match slice.frame {
+            Some(k) => format!("frame {}: {message}", k + 1),
+            None => message,
+        };
         return Err(dicom_error(&slice.path, message));
     }
     Ok(())
@@ -582,6 +1072,7 @@ fn place_slices(dir: &Path, slices: &mut [SliceHeader]) -> Result<Placement, Vol
         depth(a)
             .total_cmp(&depth(b))
             .then_with(|| a.path.cmp(&b.path))
+            .then_with(|| a.frame.cmp(&b.frame))
     });
     let step = match slices {
         [only] => only.slice_thickness.unwrap_or(1.0),
@@ -609,7 +1100,7 @@ fn slice_step(dir: &Path, slices: &[SliceHeader], normal: DVec3) -> Result<f64, 
             let message = format!(
                 "slice {} is {off:.3} mm from its place in an evenly spaced stack of {step:.3} mm \
                  steps (uneven spacing or gantry tilt, not supported)",
-                name(&slice.path)
+                slice.name()
             );
             return Err(dicom_error(dir, message));
         }
@@ -639,9 +1130,9 @@ fn check_gaps(dir: &Path, slices: &[SliceHeader], depths: &[f64]) -> Result<(), 
     };
     let message = format!(
         "{what}, between {} at {:.3} mm and {} at {:.3} mm along the slice normal",
-        name(&slices[i].path),
+        slices[i].name(),
         depths[i],
-        name(&slices[i + 1].path),
+        slices[i + 1].name(),
         depths[i + 1]
     );
     Err(dicom_error(dir, message))
@@ -653,9 +1144,13 @@ fn allocate(dir: &Path, dims: [u32; 3], slices: &[SliceHeader]) -> Result<Vec<f3
         path: dir.into(),
         source,
     })?;
-    let file_bytes: u64 = slices.iter().map(|s| s.file_len).sum();
+    let file_bytes: u64 = slices.iter().map(|s| s.file_len).sum::<u64>().max(1);
     let out_bytes = count.saturating_mul(size_of::<f32>() as u64);
-    if out_bytes > file_bytes.saturating_mul(MAX_EXPANSION) {
+    if out_bytes
+        > file_bytes
+            .saturating_mul(MAX_EXPANSION)
+            .max(ALWAYS_ALLOWED_BYTES)
+    {
         let message = format!(
             "{dims:?} voxels would need {out_bytes} bytes, more than {MAX_EXPANSION} times the \
              {file_bytes} bytes of its files"
@@ -670,95 +1165,266 @@ fn allocate(dir: &Path, dims: [u32; 3], slices: &[SliceHeader]) -> Result<Vec<f3
     Ok(values)
 }
 
-/// Decodes one slice's pixel data into `out` (Rows x Columns values, rows in order).
-fn decode_slice(slice: &SliceHeader, out: &mut [f32]) -> Result<(), VolumeError> {
-    guarded(&slice.path, || {
-        let obj = open(&slice.path)?;
-        let pixels = obj
-            .decode_pixel_data()
-            .map_err(|e| describe("cannot decode pixel data", &e))?;
-        let size = (pixels.rows(), pixels.columns(), pixels.number_of_frames());
-        let expected = (u32::from(slice.rows), u32::from(slice.columns), 1);
-        if size != expected {
-            return Err(format!(
-                "decoded rows, columns, frames {size:?} differ from the header's {expected:?}"
-            ));
+/// Decodes the pixel data of one file and writes each of its slices (frames) into its place
+/// (Rows x Columns values, rows in order).
+fn decode_file(path: &Path, outs: Vec<SliceOut>) -> Result<(), VolumeError> {
+    guarded(path, || {
+        let obj = open(path)?;
+        let first = outs.first().map(|(s, _)| *s).ok_or("no slices")?;
+        let frames = outs
+            .iter()
+            .filter_map(|(s, _)| s.frame)
+            .max()
+            .map_or(1, |k| k + 1);
+        let voxels = usize::from(first.rows) * usize::from(first.columns);
+        let decoded = obj.decode_pixel_data();
+        let samples = match &decoded {
+            Ok(pixels) => Samples::from_decoded(pixels, first, frames)?,
+            Err(e) => {
+                let message = describe("cannot decode pixel data", e);
+                if obj.meta().transfer_syntax().trim_end_matches('\0') == RLE_LOSSLESS
+                    && message.contains("BitsAllocated")
+                {
+                    // dicom-pixeldata's RLE decoder reads 8- and 16-bit samples only; RT dose
+                    // grids store 32.
+                    Samples::from_rle(&obj, voxels, frames)?
+                } else if message.contains("SamplePrecision(12)") {
+                    // jpeg-decoder reads 8-bit JPEG only.
+                    return Err(
+                        "cannot decode pixel data: 12-bit JPEG (extended, lossy) is not \
+                         decoded by this build; transcode the file (for example with dcmdjpeg \
+                         or gdcmconv --raw)"
+                            .into(),
+                    );
+                } else {
+                    return Err(message);
+                }
+            }
+        };
+        for (slice, out) in outs {
+            samples.modality_values(slice, out)?;
         }
-        if pixels.samples_per_pixel() != 1 || !pixels.photometric_interpretation().is_monochrome() {
-            return Err("colour images are not supported".into());
-        }
-        modality_values(&pixels, out)
+        Ok(())
     })
 }
 
-/// How to read one slice's decoded samples.
-struct SampleFormat {
+/// The RLE Lossless transfer syntax.
+const RLE_LOSSLESS: &str = "1.2.840.10008.1.2.5";
+
+/// One file's decoded samples, little-endian, frame after frame.
+struct Samples<'a> {
+    data: std::borrow::Cow<'a, [u8]>,
     /// Bytes per sample.
     width: usize,
     /// Bits per sample that carry the value, from bit 0.
     stored: u32,
     signed: bool,
-    slope: f64,
-    intercept: f64,
 }
 
-/// The sample format of a decoded single-sample slice, checked against its `voxels` count.
-fn sample_format(pixels: &DecodedPixelData, voxels: usize) -> Result<SampleFormat, String> {
-    let allocated = u32::from(pixels.bits_allocated());
-    let stored = u32::from(pixels.bits_stored());
-    if !matches!(allocated, 8 | 16 | 32) || stored == 0 || stored > allocated {
-        return Err(format!(
-            "{stored} of {allocated} bits per sample is not supported"
-        ));
+impl<'a> Samples<'a> {
+    /// The samples `dicom-pixeldata` decoded, checked to hold at least `frames` frames of the
+    /// slice's size with one grey sample per pixel.
+    fn from_decoded(
+        pixels: &'a DecodedPixelData,
+        slice: &SliceHeader,
+        frames: u32,
+    ) -> Result<Self, String> {
+        let size = (pixels.rows(), pixels.columns());
+        let expected = (u32::from(slice.rows), u32::from(slice.columns));
+        if size != expected || pixels.number_of_frames() < frames {
+            return Err(format!(
+                "decoded rows, columns {size:?} and {} frames differ from the header's \
+                 {expected:?} and {frames}",
+                pixels.number_of_frames()
+            ));
+        }
+        if pixels.samples_per_pixel() != 1 || !pixels.photometric_interpretation().is_monochrome() {
+            return Err("colour images are not supported".into());
+        }
+        let samples = Self::checked(
+            pixels.data(),
+            u32::from(pixels.bits_allocated()),
+            u32::from(pixels.bits_stored()),
+            u32::from(pixels.high_bit()),
+            pixels.pixel_representation() == PixelRepresentation::Signed,
+        )?;
+        samples.check_len(size.0 as usize * size.1 as usize, frames)?;
+        Ok(samples)
     }
-    if u32::from(pixels.high_bit()) + 1 != stored {
-        return Err("samples not aligned to bit 0 (HighBit != BitsStored - 1)".into());
+
+    /// Samples from bytes and the bit layout, which must be one this loader reads.
+    fn checked(
+        data: impl Into<std::borrow::Cow<'a, [u8]>>,
+        allocated: u32,
+        stored: u32,
+        high_bit: u32,
+        signed: bool,
+    ) -> Result<Self, String> {
+        if !matches!(allocated, 8 | 16 | 32) || stored == 0 || stored > allocated {
+            return Err(format!(
+                "{stored} of {allocated} bits per sample is not supported"
+            ));
+        }
+        if high_bit + 1 != stored {
+            return Err("samples not aligned to bit 0 (HighBit != BitsStored - 1)".into());
+        }
+        Ok(Self {
+            data: data.into(),
+            width: allocated as usize / 8,
+            stored,
+            signed,
+        })
     }
-    let width = allocated as usize / 8;
-    let size = pixels.data().len();
-    if Some(size) != voxels.checked_mul(width) {
-        return Err(format!(
-            "decoded {size} bytes, but Rows x Columns x 1 sample x {width} bytes is {}",
-            voxels.saturating_mul(width)
-        ));
+
+    /// The data must hold `frames` frames of `voxels` samples; more is padding (to an even
+    /// length, or by the writer), which readers ignore.
+    fn check_len(&self, voxels: usize, frames: u32) -> Result<(), String> {
+        let size = self.data.len();
+        let expected = voxels
+            .checked_mul(self.width)
+            .and_then(|b| b.checked_mul(frames as usize));
+        if expected.is_none_or(|e| size < e) {
+            return Err(format!(
+                "decoded {size} bytes, but Rows x Columns x {frames} frame(s) x {} bytes is {}",
+                self.width,
+                voxels
+                    .saturating_mul(self.width)
+                    .saturating_mul(frames as usize)
+            ));
+        }
+        Ok(())
     }
-    let rescale = pixels.rescale().map_err(|e| describe("bad rescale", &e))?;
-    let (slope, intercept) = rescale
-        .first()
-        .map_or((1.0, 0.0), |r| (r.slope, r.intercept));
-    if !(slope.is_finite() && intercept.is_finite()) {
-        return Err(format!(
-            "rescale slope {slope} or intercept {intercept} is not finite"
-        ));
+
+    /// Decodes RLE Lossless pixel data (DICOM PS3.5 annex G) of any sample width: each
+    /// frame's fragment holds one PackBits segment per byte of the sample, most significant
+    /// first. Written here for the 32-bit samples `dicom-pixeldata`'s decoder leaves out.
+    fn from_rle(obj: &DefaultDicomObject, voxels: usize, frames: u32) -> Result<Self, String> {
+        let allocated = u32::from(unsigned(obj, tags::BITS_ALLOCATED, "BitsAllocated")?);
+        let stored = u32::from(unsigned(obj, tags::BITS_STORED, "BitsStored")?);
+        let high_bit = obj
+            .get(tags::HIGH_BIT)
+            .and_then(|e| e.to_int::<u32>().ok())
+            .unwrap_or(stored.saturating_sub(1));
+        let samples_per_pixel = obj
+            .get(tags::SAMPLES_PER_PIXEL)
+            .and_then(|e| e.to_int::<u16>().ok())
+            .unwrap_or(1);
+        if samples_per_pixel != 1 {
+            return Err("colour images are not supported".into());
+        }
+        let signed =
+            unsigned(obj, tags::PIXEL_REPRESENTATION, "PixelRepresentation").ok() == Some(1);
+        let width = allocated as usize / 8;
+        let fragments = obj
+            .get(tags::PIXEL_DATA)
+            .and_then(|e| e.value().fragments())
+            .ok_or("RLE pixel data without fragments")?;
+        if fragments.len() < frames as usize {
+            return Err(format!(
+                "{} RLE fragments for {frames} frames",
+                fragments.len()
+            ));
+        }
+        let frame_bytes = voxels
+            .checked_mul(width)
+            .ok_or("the frame size overflows")?;
+        let mut data = vec![0u8; frame_bytes * frames as usize];
+        for (k, fragment) in fragments.iter().take(frames as usize).enumerate() {
+            let frame = &mut data[k * frame_bytes..(k + 1) * frame_bytes];
+            rle_frame(fragment, width, voxels, frame)
+                .map_err(|m| format!("frame {}: {m}", k + 1))?;
+        }
+        Self::checked(data, allocated, stored, high_bit, signed)
     }
-    let signed = pixels.pixel_representation() == PixelRepresentation::Signed;
-    Ok(SampleFormat {
-        width,
-        stored,
-        signed,
-        slope,
-        intercept,
-    })
+
+    /// Converts one slice's samples to modality values (HU for CT) with its rescale. Samples
+    /// are read little-endian: the codecs write them so, and native pixel data come in the
+    /// machine's order, which is little-endian on the x86-64 and aarch64 targets of this
+    /// project.
+    fn modality_values(&self, slice: &SliceHeader, out: &mut [f32]) -> Result<(), String> {
+        if !(slice.slope.is_finite() && slice.intercept.is_finite()) {
+            return Err(format!(
+                "rescale slope {} or intercept {} is not finite",
+                slice.slope, slice.intercept
+            ));
+        }
+        let frame_bytes = out.len() * self.width;
+        let start = slice.frame.unwrap_or(0) as usize * frame_bytes;
+        let data = self
+            .data
+            .get(start..start + frame_bytes)
+            .ok_or("the decoded data end before this frame")?;
+        // Shifting the stored bits to the top and back drops any bits above them (old overlay
+        // planes) and, for signed samples, extends the sign.
+        let shift = 32 - self.stored;
+        for (value, bytes) in out.iter_mut().zip(data.chunks_exact(self.width)) {
+            let mut word = [0u8; 4];
+            word[..self.width].copy_from_slice(bytes);
+            let top = u32::from_le_bytes(word) << shift;
+            let sample = if self.signed {
+                f64::from((top as i32) >> shift)
+            } else {
+                f64::from(top >> shift)
+            };
+            *value = (sample * slice.slope + slice.intercept) as f32;
+        }
+        Ok(())
+    }
 }
 
-/// Converts decoded samples to modality values (HU for CT) with the slice's rescale. Samples
-/// are read little-endian: the codecs write them so, and native pixel data come in the
-/// machine's order, which is little-endian on the x86-64 and aarch64 targets of this project.
-fn modality_values(pixels: &DecodedPixelData, out: &mut [f32]) -> Result<(), String> {
-    let format = sample_format(pixels, out.len())?;
-    // Shifting the stored bits to the top and back drops any bits above them (old overlay
-    // planes) and, for signed samples, extends the sign.
-    let shift = 32 - format.stored;
-    for (value, bytes) in out.iter_mut().zip(pixels.data().chunks_exact(format.width)) {
-        let mut word = [0u8; 4];
-        word[..format.width].copy_from_slice(bytes);
-        let top = u32::from_le_bytes(word) << shift;
-        let sample = if format.signed {
-            f64::from((top as i32) >> shift)
-        } else {
-            f64::from(top >> shift)
+/// Decodes one RLE frame into `out` (`voxels` little-endian samples of `width` bytes).
+fn rle_frame(fragment: &[u8], width: usize, voxels: usize, out: &mut [u8]) -> Result<(), String> {
+    let word = |i: usize| -> Option<usize> {
+        let b: [u8; 4] = fragment.get(4 * i..4 * i + 4)?.try_into().ok()?;
+        Some(u32::from_le_bytes(b) as usize)
+    };
+    let segments = word(0).ok_or("no RLE header")?;
+    if segments != width {
+        return Err(format!("{segments} RLE segments for {width}-byte samples"));
+    }
+    for segment in 0..segments {
+        let start = word(1 + segment).ok_or("short RLE header")?;
+        let end = match segment + 1 < segments {
+            true => word(2 + segment).ok_or("short RLE header")?,
+            false => fragment.len(),
         };
-        *value = (sample * format.slope + format.intercept) as f32;
+        let coded = fragment
+            .get(start..end)
+            .ok_or("an RLE segment runs past its fragment")?;
+        // Segment 0 holds the most significant bytes; little-endian puts them last.
+        let byte = width - 1 - segment;
+        let mut written = 0usize;
+        let mut at = 0usize;
+        let mut put = |value: u8, written: &mut usize| {
+            if *written < voxels {
+                out[*written * width + byte] = value;
+            }
+            *written += 1;
+        };
+        while at < coded.len() && written < voxels {
+            let n = coded[at] as i8;
+            at += 1;
+            if n >= 0 {
+                let run = coded
+                    .get(at..at + n as usize + 1)
+                    .ok_or("an RLE literal run past the segment")?;
+                for &b in run {
+                    put(b, &mut written);
+                }
+                at += n as usize + 1;
+            } else if n != -128 {
+                let b = *coded.get(at).ok_or("an RLE repeat past the segment")?;
+                at += 1;
+                for _ in 0..(1 - n as isize) {
+                    put(b, &mut written);
+                }
+            }
+        }
+        if written < voxels {
+            return Err(format!(
+                "RLE segment {segment} decodes to {written} of {voxels} bytes"
+            ));
+        }
     }
     Ok(())
 }

@@ -9,14 +9,16 @@
 //! writes them; `BinaryDataByteOrderMSB` (or `ElementByteOrderMSB`); `CompressedData` (a zlib
 //! stream that must inflate to exactly the declared values); `ElementNumberOfChannels` (1
 //! only); `HeaderSize` (bytes to skip in a data file, `-1`: the data end the file);
-//! `ElementDataFile` = `LOCAL` or one file name (relative to the header's folder).
+//! `ElementDataFile` = `LOCAL`, one file name (relative to the header's folder), `LIST` (or
+//! `LIST 2D`) with one slice file per line after it, or a file pattern `name%03d.raw min max
+//! step`, one slice file per number; slice files hold `HeaderSize` bytes then one z slice.
 //!
 //! **World frame.** ITK's physical space, which MetaImage files hold, is LPS (as DICOM's): the
 //! x and y components of the origin and of the axis directions change sign on the way to this
 //! project's RAS. `AnatomicalOrientation` only describes the axes and is not used, as in ITK.
 //!
 //! Not read (a typed [`VolumeError::Unsupported`]): other dimensions than 3, vector pixels,
-//! 64-bit integers, `ElementDataFile = LIST` and file patterns, and ASCII data
+//! 64-bit integers, lists of 3-D files, compressed slice files, and ASCII data
 //! (`BinaryData = False`).
 
 use std::fs::File;
@@ -26,11 +28,13 @@ use std::path::{Path, PathBuf};
 use flate2::read::ZlibDecoder;
 use glam::DVec3;
 
-use super::detect::{
-    LoadedVolume, Placement, VolumeFormat, expect_end, header_error, inflate_values, io_error,
-    read_head, unsupported,
+use super::loader::{
+    LoadedVolume, Placement, VolumeFormat, expect_end, format_pattern, header_error,
+    inflate_values, io_error, read_head, unsupported,
 };
-use super::{ByteOrder, CpuVolume, RawSpec, ScalarFormat, ScalarType, VolumeError, load_raw};
+use super::{
+    ByteOrder, CpuVolume, RawSpec, ScalarFormat, ScalarType, VolumeError, load_raw, load_raw_slices,
+};
 use crate::grid::voxel_count;
 
 /// Longest header read; real ones are well under a kilobyte.
@@ -69,8 +73,29 @@ pub fn load_metaimage(path: &Path) -> Result<LoadedVolume, VolumeError> {
         .checked_mul(header.scalar.size() as u64)
         .ok_or_else(|| header_error(path, "declared size overflows"))?;
     let (file, start) = match &header.data {
-        None => (path.to_path_buf(), Some(header.data_offset)),
-        Some(file) => {
+        Data::Local => (path.to_path_buf(), Some(header.data_offset)),
+        Data::Slices(files) => {
+            let missing = files.iter().find(|f| !f.is_file());
+            if let Some(missing) = missing {
+                return Err(VolumeError::MissingDataFile {
+                    path: path.into(),
+                    data_file: missing.clone(),
+                });
+            }
+            if header.compressed {
+                return Err(unsupported(path, "compressed slice files"));
+            }
+            let Some(skip) = header.header_size else {
+                return Err(unsupported(path, "HeaderSize = -1 with slice files"));
+            };
+            let spec = RawSpec {
+                header_bytes: skip,
+                ..RawSpec::new(header.dims, header.scalar, header.order)
+            };
+            let values = load_raw_slices(files, &spec)?.values;
+            return finish(path, &header, values);
+        }
+        Data::File(file) => {
             if !file.is_file() {
                 return Err(VolumeError::MissingDataFile {
                     path: path.into(),
@@ -109,6 +134,11 @@ pub fn load_metaimage(path: &Path) -> Result<LoadedVolume, VolumeError> {
         };
         load_raw(&file, &spec)?.values
     };
+    finish(path, &header, values)
+}
+
+/// The volume of `values`, placed as the header says.
+fn finish(path: &Path, header: &Header, values: Vec<f32>) -> Result<LoadedVolume, VolumeError> {
     // LPS to RAS: x and y change sign.
     let flip = DVec3::new(-1.0, -1.0, 1.0);
     let columns = [0, 1, 2].map(|i| header.axes[i] * flip * header.spacing[i]);
@@ -124,7 +154,18 @@ pub fn load_metaimage(path: &Path) -> Result<LoadedVolume, VolumeError> {
         volume: placement.apply(volume),
         format: VolumeFormat::MetaImage,
         scalar_type: Some(header.scalar),
+        patient_frame: true,
     })
+}
+
+/// Where a MetaImage's data are.
+enum Data {
+    /// After the header (`LOCAL`).
+    Local,
+    /// In one file.
+    File(PathBuf),
+    /// One file per z slice (`LIST` or a file pattern), in order.
+    Slices(Vec<PathBuf>),
 }
 
 /// What the header says.
@@ -137,8 +178,8 @@ struct Header {
     /// Each index axis's direction (LPS), unit length not required.
     axes: [DVec3; 3],
     compressed: bool,
-    /// The data file; `None` for `LOCAL`.
-    data: Option<PathBuf>,
+    /// Where the data are.
+    data: Data,
     /// Where `LOCAL` data start.
     data_offset: u64,
     /// Bytes to skip in a data file; `None` for `-1`.
@@ -297,21 +338,56 @@ impl Header {
         };
         let (_, file, line) =
             get(&["ElementDataFile"]).ok_or_else(|| header_error(path, "no ElementDataFile"))?;
-        let data = match file {
-            "LOCAL" | "Local" | "local" => None,
-            f if f.starts_with("LIST") || f.split_whitespace().count() > 1 => {
-                return Err(unsupported(
-                    path,
-                    format!("ElementDataFile {f:?} (lists and file patterns)"),
-                ));
+        let folder = path.parent().unwrap_or(Path::new(""));
+        let words: Vec<&str> = file.split_whitespace().collect();
+        let data = match words.as_slice() {
+            [local] if local.eq_ignore_ascii_case("local") => Data::Local,
+            [list, rest @ ..] if *list == "LIST" => {
+                if !matches!(rest, [] | ["2D" | "2d"]) {
+                    return Err(unsupported(
+                        path,
+                        format!("ElementDataFile {file:?}: lists of 2-D slices are read"),
+                    ));
+                }
+                Data::Slices(list_files(path, folder, data_offset, dims[2])?)
             }
-            "" => {
+            [pattern, min, max, step] => {
+                let range: Option<Vec<i64>> =
+                    [min, max, step].iter().map(|w| w.parse().ok()).collect();
+                let bad = |why: &str| {
+                    header_error(path, format!("line {line}: file pattern {file:?}: {why}"))
+                };
+                let range = range.ok_or_else(|| bad("min, max and step must be whole numbers"))?;
+                let (min, max, step) = (range[0], range[1], range[2]);
+                let count = max
+                    .checked_sub(min)
+                    .and_then(|span| span.checked_div(step))
+                    .and_then(|n| n.checked_add(1))
+                    .filter(|&n| n >= 1);
+                if count != Some(i64::from(dims[2])) {
+                    let named = count.map_or("no whole number of".into(), |n| n.to_string());
+                    return Err(bad(&format!(
+                        "names {named} files for the {} slices of DimSize",
+                        dims[2]
+                    )));
+                }
+                (0..i64::from(dims[2]))
+                    .map(|k| {
+                        format_pattern(pattern, min + k * step)
+                            .map(|name| folder.join(name))
+                            .ok_or_else(|| bad("it needs one %d conversion"))
+                    })
+                    .collect::<Result<_, _>>()
+                    .map(Data::Slices)?
+            }
+            [] => {
                 return Err(header_error(
                     path,
                     format!("line {line}: ElementDataFile is empty"),
                 ));
             }
-            f => Some(path.parent().unwrap_or(Path::new("")).join(f)),
+            // A single name, which may hold spaces.
+            _ => Data::File(folder.join(file)),
         };
         Ok(Self {
             dims,
@@ -328,10 +404,45 @@ impl Header {
     }
 }
 
+/// Longest header read for a `LIST` of slice files: thousands of names.
+const LIST_CAP: u64 = 4 << 20;
+
+/// The `count` file names listed after the header's last line (which ends at byte `after`),
+/// one per line, relative to `folder`.
+fn list_files(
+    path: &Path,
+    folder: &Path,
+    after: u64,
+    count: u32,
+) -> Result<Vec<PathBuf>, VolumeError> {
+    let text = read_head(path, LIST_CAP)?;
+    let rest = text.get(after as usize..).unwrap_or_default();
+    let rest = std::str::from_utf8(rest)
+        .map_err(|_| header_error(path, "the LIST of slice files is not text"))?;
+    let names: Vec<&str> = rest
+        .lines()
+        .map(str::trim)
+        .filter(|l| !l.is_empty())
+        .take(count as usize + 1)
+        .collect();
+    if names.len() != count as usize {
+        let got = if names.len() > count as usize {
+            format!("more than {count}")
+        } else {
+            names.len().to_string()
+        };
+        return Err(header_error(
+            path,
+            format!("ElementDataFile LIST names {got} files for the {count} slices of DimSize"),
+        ));
+    }
+    Ok(names.iter().map(|n| folder.join(n)).collect())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::volume::detect::tests::scratch;
+    use crate::volume::loader::tests::scratch;
 
     const HEAD: &str = "ObjectType = Image\nNDims = 3\nDimSize = 2 2 1\nElementType = MET_UCHAR\n";
 
@@ -392,7 +503,27 @@ mod tests {
             (
                 "list.mhd",
                 format!("{HEAD}ElementDataFile = LIST\n").into_bytes(),
-                "lists and file patterns",
+                "LIST names 0 files for the 1 slices",
+            ),
+            (
+                "list3d.mhd",
+                format!("{HEAD}ElementDataFile = LIST 3D\na.raw\n").into_bytes(),
+                "lists of 2-D slices",
+            ),
+            (
+                "listgone.mhd",
+                format!("{HEAD}ElementDataFile = LIST\nmissing-slice.raw\n").into_bytes(),
+                "missing-slice.raw",
+            ),
+            (
+                "pattern.mhd",
+                format!("{HEAD}ElementDataFile = s%d.raw 1 5 1\n").into_bytes(),
+                "names 5 files for the 1 slices",
+            ),
+            (
+                "pattern2.mhd",
+                format!("{HEAD}ElementDataFile = s%s.raw 1 1 1\n").into_bytes(),
+                "one %d",
             ),
             (
                 "gone.mhd",

@@ -7,6 +7,7 @@ use crate::order::{OrderError, VolumeGeometry};
 pub mod dat;
 pub mod detect;
 pub mod dicom;
+pub mod loader;
 pub mod metaimage;
 pub mod nifti;
 pub mod nrrd;

@@ -1,64 +1,154 @@
-//! NIfTI-1 volumes (`.nii`, and `.nii.gz` told by its gzip magic), through the `nifti` crate's
-//! header parser; the voxel data are read here so that their size is checked first.
+//! NIfTI-1 and NIfTI-2 volumes (`.nii`, `.nii.gz` told by its gzip magic, and `.hdr`/`.img`
+//! pairs), and Analyze 7.5 (`.hdr`/`.img`), whose 348-byte header NIfTI-1 extends.
+//!
+//! The headers are read here, field by field at the offsets the standards give, rather than
+//! through the `nifti` crate: that crate reads NIfTI-1 only, and the three layouts share every
+//! step after the fields are known.
 //!
 //! **Values.** Every integer type up to 32 bits, `float32` and `float64`, in the header's byte
-//! order, converted to `f32` and then rescaled as `value * scl_slope + scl_inter` when
-//! `scl_slope` is finite and not 0 (0 means "no scaling", as the standard says): Hounsfield
-//! units for CT.
+//! order (told by the header size, 348 or 540, read in either order), converted to `f32` and
+//! then rescaled as `value * scl_slope + scl_inter` when `scl_slope` is finite and not 0 (0
+//! means "no scaling", as the standard says): Hounsfield units for CT. Analyze has no scaling
+//! fields (SPM's use of `funused1` is not read, as ITK does not).
 //!
 //! **Placement.** NIfTI's world is RAS+ (+x right, +y anterior, +z superior), the same as this
-//! project's, so coordinates are used as they are. With `sform_code > 0` the sform rows give the
-//! voxel-to-world matrix: its columns' lengths are the spacing (equal to `pixdim` in consistent
-//! files) and their unit vectors the direction, its last column the origin. Otherwise, with
-//! `qform_code > 0`, the quaternion (`quatern_b/c/d`), `pixdim` and `qfac` (`pixdim[0]`) give
-//! the rotation, spacing and a z flip, and `quatern_x/y/z` the origin. Otherwise `pixdim` alone
-//! gives the spacing, with the identity orientation and the origin at 0. Lengths are in the
-//! header's spatial unit (`xyzt_units`): metres and micrometres are turned to millimetres,
-//! an unknown unit is taken as millimetres (as ITK does; nibabel leaves lengths as they are).
+//! project's, so coordinates are used as they are. By default ([`NiftiTransform::Sform`], as
+//! nibabel does), with `sform_code > 0` the sform rows give the voxel-to-world matrix: its
+//! columns' lengths are the spacing (equal to `pixdim` in consistent files) and their unit
+//! vectors the direction, its last column the origin. Otherwise, with `qform_code > 0`, the
+//! quaternion (`quatern_b/c/d`), `pixdim` and `qfac` (`pixdim[0]`) give the rotation, spacing
+//! and a z flip, and `quatern_x/y/z` the origin. Otherwise `pixdim` alone gives the spacing,
+//! with the identity orientation and the origin at 0. [`NiftiTransform::Qform`] tries the
+//! qform first; [`NiftiTransform::Itk`] takes the sform only when its code is 1 (scanner
+//! anatomical) or there is no qform, as ITK 5 (SimpleITK, 3D Slicer) does. Lengths are in the header's spatial unit (`xyzt_units`): metres
+//! and micrometres are turned to millimetres, an unknown unit is taken as millimetres (as ITK
+//! does; nibabel leaves lengths as they are).
+//!
+//! **Analyze 7.5** has no orientation: the grid is placed as nibabel places it, the x axis
+//! flipped (Analyze's radiological storage: +i toward the patient's left) and the origin
+//! at minus the grid's centre, `-(dim - 1) / 2 * pixdim` per axis with x's sign reversed, so
+//! that the grid's centre sits at the world origin.
 //!
 //! **Sizes.** `dim` is checked against the grid limit ([`voxel_count`]: at most 2^32 voxels)
-//! before anything is read. A plain `.nii` must hold `vox_offset` plus the declared values
-//! (checked against its length, by [`load_raw`], before allocating); a `.nii.gz` stream must
-//! inflate to exactly that many bytes, the output growing only as the data actually inflate.
+//! before anything is read. A plain file must hold `vox_offset` plus every declared frame
+//! (checked against its length before allocating); a `.nii.gz` stream must inflate to exactly
+//! that many bytes, the output growing only as the data actually inflate.
 //!
-//! Not read (a typed [`VolumeError::Unsupported`]): NIfTI-2, `.hdr`/`.img` pairs, 4-D and
-//! higher volumes with more than one 3-D frame, complex, RGB, 64-bit integer and 128-bit types.
+//! Not read (a typed [`VolumeError::Unsupported`]): volumes with more dimensions than 3-D
+//! frames (`dim[4]`), complex, RGB, 64-bit integer and 128-bit types, and compressed pairs
+//! (`.hdr.gz`/`.img.gz`).
 
 use std::fs::File;
 use std::io::{BufReader, Read};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use flate2::read::MultiGzDecoder;
 use glam::{DMat3, DQuat, DVec3};
-use nifti::{Endianness, NiftiHeader, NiftiType};
 
-use super::detect::{
-    GZIP_MAGIC, LoadedVolume, Placement, VolumeFormat, expect_end, header_error, inflate_values,
-    io_error, read_head, skip_inflated, unsupported,
+use super::loader::{
+    GZIP_MAGIC, LoadedVolume, NiftiTransform, Placement, VolumeFormat, expect_end, header_error,
+    inflate_values, io_error, read_head, skip_inflated, unsupported,
 };
 use super::{ByteOrder, CpuVolume, RawSpec, ScalarFormat, ScalarType, VolumeError, load_raw};
 use crate::grid::voxel_count;
 
-/// Bytes of a NIfTI-1 header.
-const HEADER_BYTES: u64 = 348;
+/// Bytes of a NIfTI-1 (and Analyze 7.5) header.
+const NIFTI1_BYTES: usize = 348;
+/// Bytes of a NIfTI-2 header.
+const NIFTI2_BYTES: usize = 540;
 
-/// Loads a NIfTI-1 volume, plain or gzip-compressed; of a 4-D file, its first frame (said on
-/// stderr).
+/// Whether `head` (a file's first bytes) starts with a NIfTI-1 or NIfTI-2 header.
+pub(super) fn is_nifti(head: &[u8]) -> bool {
+    let nifti1 = matches!(head.get(344..348), Some(b"n+1\0" | b"ni1\0"));
+    nifti1 || matches!(head.get(4..8), Some(b"n+2\0" | b"ni2\0"))
+}
+
+/// Whether `head` is an Analyze 7.5 header: 348 bytes declared in either byte order, no NIfTI
+/// magic, 1 to 7 dimensions and a data type Analyze defines.
+pub(super) fn is_analyze(head: &[u8]) -> bool {
+    if head.len() < NIFTI1_BYTES || is_nifti(head) {
+        return false;
+    }
+    let Some(order) = order_from_size(head, NIFTI1_BYTES as i32) else {
+        return false;
+    };
+    let fields = Fields { bytes: head, order };
+    (1..=7).contains(&fields.i16(40)) && matches!(fields.i16(70), 2 | 4 | 8 | 16 | 64)
+}
+
+/// The byte order in which the header size at the start of `bytes` reads `size`.
+fn order_from_size(bytes: &[u8], size: i32) -> Option<ByteOrder> {
+    let word: [u8; 4] = bytes.get(..4)?.try_into().ok()?;
+    if i32::from_le_bytes(word) == size {
+        Some(ByteOrder::Little)
+    } else if i32::from_be_bytes(word) == size {
+        Some(ByteOrder::Big)
+    } else {
+        None
+    }
+}
+
+/// Loads a NIfTI volume, plain or gzip-compressed; of a 4-D file, its first frame (said on
+/// stderr); placed by the sform first.
 pub fn load_nifti(path: &Path) -> Result<LoadedVolume, VolumeError> {
-    load_nifti_frame(path, None)
+    load_nifti_with(path, None, NiftiTransform::Sform)
 }
 
 /// Loads frame `frame` (from 0) of a 4-D NIfTI-1 volume (`dim[4]` frames); `None` takes the
 /// first and says so when there are others. A 3-D file has one frame, 0.
 pub fn load_nifti_frame(path: &Path, frame: Option<u32>) -> Result<LoadedVolume, VolumeError> {
+    load_nifti_with(path, frame, NiftiTransform::Sform)
+}
+
+/// [`load_nifti_frame`], placed by the `transform` chosen.
+pub fn load_nifti_with(
+    path: &Path,
+    frame: Option<u32>,
+    transform: NiftiTransform,
+) -> Result<LoadedVolume, VolumeError> {
     let gz = read_head(path, 2)?.starts_with(&GZIP_MAGIC);
     let file = File::open(path).map_err(io_error(path))?;
     let mut reader: Box<dyn Read> = match gz {
         true => Box::new(MultiGzDecoder::new(BufReader::new(file))),
         false => Box::new(BufReader::new(file)),
     };
-    let header = read_header(path, &mut reader)?;
-    let mut layout = Layout::from_header(path, &header)?;
+    let header = Header::read(path, &mut reader, false)?;
+    let placement = header.placement(path, transform)?;
+    load_with_header(
+        path,
+        &header,
+        reader,
+        gz,
+        frame,
+        placement,
+        VolumeFormat::Nifti,
+    )
+}
+
+/// Loads an Analyze 7.5 volume from its `.hdr` (the data in the `.img` beside it).
+pub fn load_analyze(path: &Path) -> Result<LoadedVolume, VolumeError> {
+    let file = File::open(path).map_err(io_error(path))?;
+    let mut reader: Box<dyn Read> = Box::new(BufReader::new(file));
+    let header = Header::read(path, &mut reader, true)?;
+    let placement = header.placement(path, NiftiTransform::Sform)?;
+    let format = match header.kind {
+        Kind::Analyze => VolumeFormat::Analyze,
+        _ => VolumeFormat::Nifti,
+    };
+    load_with_header(path, &header, reader, false, None, placement, format)
+}
+
+/// The values of the chosen frame, placed, after the header has been read from `reader`.
+fn load_with_header(
+    path: &Path,
+    header: &Header,
+    mut reader: Box<dyn Read>,
+    gz: bool,
+    frame: Option<u32>,
+    placement: Placement,
+    format: VolumeFormat,
+) -> Result<LoadedVolume, VolumeError> {
+    let mut layout = Layout::from_header(path, header)?;
     let chosen = frame.unwrap_or(0);
     if chosen >= layout.frames {
         return Err(header_error(
@@ -78,33 +168,279 @@ pub fn load_nifti_frame(path: &Path, frame: Option<u32>) -> Result<LoadedVolume,
         );
     }
     layout.frame = chosen;
-    let placement = placement(path, &header)?;
-    let mut volume = match gz {
-        true => layout.inflate(path, &mut reader)?,
-        false => {
-            // Every frame must be there, not only the one drawn.
-            let expected = layout
-                .frame_bytes(path)?
-                .checked_mul(u64::from(layout.frames))
-                .and_then(|b| b.checked_add(layout.vox_offset))
-                .ok_or_else(|| header_error(path, "declared size overflows"))?;
-            let actual = std::fs::metadata(path).map_err(io_error(path))?.len();
-            if actual < expected {
-                return Err(VolumeError::TooShort {
-                    path: path.into(),
-                    expected,
-                    actual,
-                });
-            }
-            load_raw(path, &layout.raw_spec(path)?)?
+    let data = match &header.data_file {
+        Some(img) => img.clone(),
+        None => path.to_path_buf(),
+    };
+    let mut volume = if gz && header.data_file.is_none() {
+        layout.inflate(path, &mut reader, header.bytes as u64)?
+    } else {
+        drop(reader);
+        if read_head(&data, 2)?.starts_with(&GZIP_MAGIC) {
+            return Err(unsupported(
+                &data,
+                "a gzip-compressed .img; decompress the pair first",
+            ));
         }
+        // Every frame must be there, not only the one drawn.
+        let expected = layout
+            .frame_bytes(path)?
+            .checked_mul(u64::from(layout.frames))
+            .and_then(|b| b.checked_add(layout.vox_offset))
+            .ok_or_else(|| header_error(path, "declared size overflows"))?;
+        let actual = std::fs::metadata(&data).map_err(io_error(&data))?.len();
+        if actual < expected {
+            return Err(VolumeError::TooShort {
+                path: data,
+                expected,
+                actual,
+            });
+        }
+        load_raw(&data, &layout.raw_spec(path)?)?
     };
     rescale(&mut volume.values, header.scl_slope, header.scl_inter);
     Ok(LoadedVolume {
         volume: placement.apply(volume),
-        format: VolumeFormat::Nifti,
+        format,
         scalar_type: Some(layout.format.scalar),
+        patient_frame: true,
     })
+}
+
+/// Which header layout a file has.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Kind {
+    Nifti1,
+    Nifti2,
+    Analyze,
+}
+
+/// Reads numbers at byte offsets of a header in its byte order.
+struct Fields<'a> {
+    bytes: &'a [u8],
+    order: ByteOrder,
+}
+
+impl Fields<'_> {
+    fn array<const N: usize>(&self, at: usize) -> [u8; N] {
+        let mut word: [u8; N] = self.bytes[at..at + N]
+            .try_into()
+            .expect("within the header");
+        if self.order == ByteOrder::Big {
+            word.reverse();
+        }
+        word
+    }
+    fn i16(&self, at: usize) -> i16 {
+        i16::from_le_bytes(self.array(at))
+    }
+    fn i32(&self, at: usize) -> i32 {
+        i32::from_le_bytes(self.array(at))
+    }
+    fn i64(&self, at: usize) -> i64 {
+        i64::from_le_bytes(self.array(at))
+    }
+    fn f32(&self, at: usize) -> f64 {
+        f64::from(f32::from_le_bytes(self.array(at)))
+    }
+    fn f64(&self, at: usize) -> f64 {
+        f64::from_le_bytes(self.array(at))
+    }
+}
+
+/// The header fields this loader uses, widened to NIfTI-2's types.
+struct Header {
+    kind: Kind,
+    /// Bytes of the header (348 or 540).
+    bytes: usize,
+    order: ByteOrder,
+    dim: [i64; 8],
+    datatype: i16,
+    pixdim: [f64; 8],
+    vox_offset: f64,
+    scl_slope: f64,
+    scl_inter: f64,
+    xyzt_units: i32,
+    qform_code: i32,
+    sform_code: i32,
+    /// quatern_b, c, d and qoffset_x, y, z.
+    quatern: [f64; 6],
+    srow: [[f64; 4]; 3],
+    /// The `.img` of a pair; `None` when the data follow the header in the same file.
+    data_file: Option<PathBuf>,
+}
+
+impl Header {
+    /// The header at the start of `reader`, which is left just after it; a 348-byte header
+    /// without NIfTI's magic is Analyze 7.5 where `analyze` allows it, else an error.
+    fn read(path: &Path, reader: &mut dyn Read, analyze: bool) -> Result<Self, VolumeError> {
+        let mut bytes = vec![0u8; NIFTI1_BYTES];
+        reader.read_exact(&mut bytes).map_err(|e| {
+            header_error(
+                path,
+                format!("cannot read a {NIFTI1_BYTES}-byte NIfTI-1 or Analyze header: {e}"),
+            )
+        })?;
+        if let Some(order) = order_from_size(&bytes, NIFTI2_BYTES as i32) {
+            bytes.resize(NIFTI2_BYTES, 0);
+            reader.read_exact(&mut bytes[NIFTI1_BYTES..]).map_err(|e| {
+                header_error(
+                    path,
+                    format!("cannot read a {NIFTI2_BYTES}-byte NIfTI-2 header: {e}"),
+                )
+            })?;
+            return Self::nifti2(path, &bytes, order);
+        }
+        let Some(order) = order_from_size(&bytes, NIFTI1_BYTES as i32) else {
+            let size = i32::from_le_bytes([bytes[0], bytes[1], bytes[2], bytes[3]]);
+            return Err(header_error(
+                path,
+                format!("header size {size} is neither {NIFTI1_BYTES} nor {NIFTI2_BYTES}"),
+            ));
+        };
+        if !analyze && !is_nifti(&bytes) {
+            return Err(header_error(
+                path,
+                format!(
+                    "not a NIfTI-1 header: magic {:?} is not n+1 or ni1",
+                    &bytes[344..348]
+                ),
+            ));
+        }
+        Self::nifti1(path, &bytes, order)
+    }
+
+    /// A NIfTI-1 or Analyze 7.5 header (the offsets of the NIfTI-1 standard, `nifti1.h`).
+    fn nifti1(path: &Path, bytes: &[u8], order: ByteOrder) -> Result<Self, VolumeError> {
+        let f = Fields { bytes, order };
+        let (kind, pair) = match &bytes[344..348] {
+            b"n+1\0" => (Kind::Nifti1, false),
+            b"ni1\0" => (Kind::Nifti1, true),
+            _ => (Kind::Analyze, true),
+        };
+        let analyze = kind == Kind::Analyze;
+        let row = |at: usize| [0, 1, 2, 3].map(|i| f.f32(at + 4 * i));
+        Ok(Self {
+            kind,
+            bytes: NIFTI1_BYTES,
+            order,
+            dim: [0, 1, 2, 3, 4, 5, 6, 7].map(|i| i64::from(f.i16(40 + 2 * i))),
+            datatype: f.i16(70),
+            pixdim: [0, 1, 2, 3, 4, 5, 6, 7].map(|i| f.f32(76 + 4 * i)),
+            vox_offset: f.f32(108),
+            scl_slope: if analyze { 0.0 } else { f.f32(112) },
+            scl_inter: if analyze { 0.0 } else { f.f32(116) },
+            xyzt_units: if analyze { 0 } else { i32::from(bytes[123]) },
+            qform_code: if analyze { 0 } else { i32::from(f.i16(252)) },
+            sform_code: if analyze { 0 } else { i32::from(f.i16(254)) },
+            quatern: [0, 1, 2, 3, 4, 5].map(|i| f.f32(256 + 4 * i)),
+            srow: [row(280), row(296), row(312)],
+            data_file: if pair { Some(image_file(path)?) } else { None },
+        })
+    }
+
+    /// A NIfTI-2 header (the offsets of `nifti2.h`).
+    fn nifti2(path: &Path, bytes: &[u8], order: ByteOrder) -> Result<Self, VolumeError> {
+        let f = Fields { bytes, order };
+        let pair = match &bytes[4..8] {
+            b"n+2\0" => false,
+            b"ni2\0" => true,
+            other => {
+                return Err(header_error(
+                    path,
+                    format!("NIfTI-2 header size with the magic {other:?}, not n+2 or ni2"),
+                ));
+            }
+        };
+        let row = |at: usize| [0, 1, 2, 3].map(|i| f.f64(at + 8 * i));
+        let vox_offset = f.i64(168);
+        Ok(Self {
+            kind: Kind::Nifti2,
+            bytes: NIFTI2_BYTES,
+            order,
+            dim: [0, 1, 2, 3, 4, 5, 6, 7].map(|i| f.i64(16 + 8 * i)),
+            datatype: f.i16(12),
+            pixdim: [0, 1, 2, 3, 4, 5, 6, 7].map(|i| f.f64(104 + 8 * i)),
+            // Exact for every offset a file can have (below 2^53).
+            vox_offset: vox_offset as f64,
+            scl_slope: f.f64(176),
+            scl_inter: f.f64(184),
+            xyzt_units: f.i32(500),
+            qform_code: f.i32(344),
+            sform_code: f.i32(348),
+            quatern: [0, 1, 2, 3, 4, 5].map(|i| f.f64(352 + 8 * i)),
+            srow: [row(400), row(432), row(464)],
+            data_file: if pair { Some(image_file(path)?) } else { None },
+        })
+    }
+
+    /// The voxel-to-world placement (see the module docs), in millimetres whatever the
+    /// header's spatial unit.
+    fn placement(&self, path: &Path, transform: NiftiTransform) -> Result<Placement, VolumeError> {
+        let mm = millimetres_per_unit(path, self.xyzt_units)?;
+        let pixdim = [1, 2, 3].map(|i| self.pixdim[i] * mm);
+        if self.kind == Kind::Analyze {
+            let dims = [1, 2, 3].map(|i| self.dim[i].max(1) as f64);
+            let steps = [-pixdim[0], pixdim[1], pixdim[2]];
+            let origin = DVec3::from([0, 1, 2].map(|i| -(dims[i] - 1.0) / 2.0 * steps[i]));
+            let columns = [
+                DVec3::X * steps[0],
+                DVec3::Y * steps[1],
+                DVec3::Z * steps[2],
+            ];
+            return Placement::from_columns(path, columns, origin);
+        }
+        let sform = || {
+            let rows = self.srow.map(|r| r.map(|x| x * mm));
+            let column = |j: usize| DVec3::new(rows[0][j], rows[1][j], rows[2][j]);
+            Placement::from_columns(path, [column(0), column(1), column(2)], column(3))
+        };
+        let qform = || {
+            let rotation = DMat3::from_quat(qform_quaternion(self.quatern));
+            let qfac = if self.pixdim[0] < 0.0 { -1.0 } else { 1.0 };
+            let steps = [pixdim[0], pixdim[1], pixdim[2] * qfac];
+            let columns = [0, 1, 2].map(|i| rotation.col(i) * steps[i]);
+            let [_, _, _, x, y, z] = self.quatern;
+            Placement::from_columns(path, columns, DVec3::new(x, y, z) * mm)
+        };
+        let (s, q) = (self.sform_code > 0, self.qform_code > 0);
+        let use_sform = match transform {
+            NiftiTransform::Sform => s,
+            NiftiTransform::Qform => s && !q,
+            NiftiTransform::Itk => self.sform_code == 1 || (s && !q),
+        };
+        if use_sform {
+            sform()
+        } else if q {
+            qform()
+        } else {
+            Placement::axis_aligned(path, pixdim, [0.0; 3])
+        }
+    }
+}
+
+/// The `.img` beside a `.hdr` (`.IMG` beside `.HDR`), which must exist.
+fn image_file(path: &Path) -> Result<PathBuf, VolumeError> {
+    let upper = path
+        .extension()
+        .is_some_and(|e| e.to_string_lossy().chars().all(|c| c.is_ascii_uppercase()));
+    let img = path.with_extension(if upper { "IMG" } else { "img" });
+    if img == path {
+        return Err(header_error(
+            path,
+            "a header of a .hdr/.img pair named .img; give the .hdr",
+        ));
+    }
+    if !img.is_file() {
+        return Err(header_error(
+            path,
+            format!(
+                "the header of a .hdr/.img pair, but its data file {} is missing",
+                img.display()
+            ),
+        ));
+    }
+    Ok(img)
 }
 
 /// Where and how the voxel data are stored.
@@ -119,31 +455,28 @@ struct Layout {
 }
 
 impl Layout {
-    fn from_header(path: &Path, header: &NiftiHeader) -> Result<Self, VolumeError> {
-        if &header.magic != b"n+1\0" {
-            return Err(unsupported(
-                path,
-                "a .hdr/.img pair; only single-file .nii is read",
-            ));
-        }
+    fn from_header(path: &Path, header: &Header) -> Result<Self, VolumeError> {
         let (dims, frames) = dims(path, &header.dim)?;
         let count = voxel_count(dims).map_err(|source| VolumeError::Grid {
             path: path.into(),
             source,
         })?;
-        let order = match header.endianness {
-            Endianness::Little => ByteOrder::Little,
-            Endianness::Big => ByteOrder::Big,
-        };
         let format = ScalarFormat {
-            scalar: scalar_type(path, header)?,
-            order,
+            scalar: scalar_type(path, header.datatype)?,
+            order: header.order,
+        };
+        // A pair's data start at vox_offset in the .img (usually 0); a single file's past
+        // the header.
+        let least = if header.data_file.is_some() {
+            0
+        } else {
+            header.bytes as u64
         };
         Ok(Self {
             dims,
             count,
             format,
-            vox_offset: vox_offset(path, header.vox_offset)?,
+            vox_offset: vox_offset(path, header.vox_offset, least)?,
             frames,
             frame: 0,
         })
@@ -156,7 +489,7 @@ impl Layout {
             .ok_or_else(|| header_error(path, "declared size overflows"))
     }
 
-    /// Where the chosen frame starts in the (inflated) file.
+    /// Where the chosen frame starts in the (inflated) data file.
     fn frame_start(&self, path: &Path) -> Result<u64, VolumeError> {
         self.frame_bytes(path)?
             .checked_mul(u64::from(self.frame))
@@ -171,16 +504,19 @@ impl Layout {
         })
     }
 
-    /// Reads the values from a decompressing reader positioned just after the header.
-    fn inflate(&self, path: &Path, reader: &mut dyn Read) -> Result<CpuVolume, VolumeError> {
-        let bytes = self
-            .count
-            .checked_mul(self.format.scalar.size() as u64)
-            .ok_or_else(|| header_error(path, "declared size overflows"))?;
+    /// Reads the values from a decompressing reader positioned just after the header of
+    /// `header_bytes` bytes.
+    fn inflate(
+        &self,
+        path: &Path,
+        reader: &mut dyn Read,
+        header_bytes: u64,
+    ) -> Result<CpuVolume, VolumeError> {
+        let bytes = self.frame_bytes(path)?;
         let count = usize::try_from(self.count)
             .map_err(|_| header_error(path, "declared size overflows"))?;
         let start = self.frame_start(path)?;
-        skip_inflated(path, reader, start - HEADER_BYTES, bytes)?;
+        skip_inflated(path, reader, start - header_bytes, bytes)?;
         let mut values = Vec::new();
         inflate_values(path, reader, bytes, self.format, count, &mut values)?;
         // The frames after this one must be there too, and nothing past them.
@@ -200,60 +536,26 @@ impl Layout {
     }
 }
 
-/// `vox_offset`, a float for Analyze compatibility, as the whole byte count it must be.
-fn vox_offset(path: &Path, offset: f32) -> Result<u64, VolumeError> {
+/// `vox_offset` as the whole byte count it must be, at least `least`.
+fn vox_offset(path: &Path, offset: f64, least: u64) -> Result<u64, VolumeError> {
     // The upper bound only keeps the conversion exact; no real file comes near it.
-    if offset >= HEADER_BYTES as f32 && offset.fract() == 0.0 && offset < 1e15 {
+    if offset >= least as f64 && offset.fract() == 0.0 && offset < 1e15 {
         Ok(offset as u64)
     } else {
-        let message = format!("vox_offset {offset} is not a byte offset past the header");
+        let message = format!("vox_offset {offset} is not a byte offset at or past {least}");
         Err(header_error(path, message))
     }
 }
 
-/// The NIfTI-1 header at the start of `reader`, which is left just after it.
-fn read_header(path: &Path, reader: &mut dyn Read) -> Result<NiftiHeader, VolumeError> {
-    let mut bytes = [0u8; HEADER_BYTES as usize];
-    reader.read_exact(&mut bytes).map_err(|e| {
-        header_error(
-            path,
-            format!("cannot read a {HEADER_BYTES}-byte NIfTI-1 header: {e}"),
-        )
-    })?;
-    // The header size comes first, in the file's byte order.
-    let size = i32::from_le_bytes([bytes[0], bytes[1], bytes[2], bytes[3]]);
-    if size == 540 || size.swap_bytes() == 540 {
-        return Err(unsupported(path, "NIfTI-2; only NIfTI-1 is read"));
-    }
-    if size != HEADER_BYTES as i32 && size.swap_bytes() != HEADER_BYTES as i32 {
-        return Err(header_error(
-            path,
-            format!("header size {size} is not {HEADER_BYTES}"),
-        ));
-    }
-    NiftiHeader::from_reader(&bytes[..])
-        .map_err(|e| header_error(path, format!("not a NIfTI-1 header: {e}")))
-}
-
-/// The grid size from `dim`: `dim[0]` axes, missing ones of size 1, any past the third of
-/// size 1 (a 4-D file with one frame is a 3-D volume).
-/// The 3-D size and the number of 3-D frames (`dim[4]`).
-fn dims(path: &Path, dim: &[u16; 8]) -> Result<([u32; 3], u32), VolumeError> {
-    let rank = usize::from(dim[0]);
+/// The 3-D size and the number of 3-D frames (`dim[4]`), from `dim`: `dim[0]` axes, missing
+/// ones of size 1.
+fn dims(path: &Path, dim: &[i64; 8]) -> Result<([u32; 3], u32), VolumeError> {
+    let rank = dim[0];
     if !(1..=7).contains(&rank) {
-        return Err(header_error(
-            path,
-            format!("dim[0] = {} is not 1 to 7", dim[0] as i16),
-        ));
+        return Err(header_error(path, format!("dim[0] = {rank} is not 1 to 7")));
     }
-    // The standard stores dim as signed 16-bit numbers.
-    let size = |i: usize| {
-        if i <= rank {
-            i32::from(dim[i] as i16)
-        } else {
-            1
-        }
-    };
+    let rank = rank as usize;
+    let size = |i: usize| if i <= rank { dim[i] } else { 1 };
     if let Some(i) = (1..=rank).find(|&i| size(i) <= 0) {
         return Err(header_error(
             path,
@@ -269,37 +571,48 @@ fn dims(path: &Path, dim: &[u16; 8]) -> Result<([u32; 3], u32), VolumeError> {
             ),
         ));
     }
-    Ok(([1, 2, 3].map(|i| size(i) as u32), size(4) as u32))
+    let narrow = |i: usize| {
+        u32::try_from(size(i))
+            .map_err(|_| header_error(path, format!("dim[{i}] = {} is past 2^32", size(i))))
+    };
+    Ok(([narrow(1)?, narrow(2)?, narrow(3)?], narrow(4)?))
 }
 
-fn scalar_type(path: &Path, header: &NiftiHeader) -> Result<ScalarType, VolumeError> {
-    let datatype = header
-        .data_type()
-        .map_err(|_| header_error(path, format!("unknown datatype {}", header.datatype)))?;
+/// The stored type of NIfTI's (and Analyze's) `datatype` code.
+fn scalar_type(path: &Path, datatype: i16) -> Result<ScalarType, VolumeError> {
     Ok(match datatype {
-        NiftiType::Uint8 => ScalarType::U8,
-        NiftiType::Int8 => ScalarType::I8,
-        NiftiType::Uint16 => ScalarType::U16,
-        NiftiType::Int16 => ScalarType::I16,
-        NiftiType::Uint32 => ScalarType::U32,
-        NiftiType::Int32 => ScalarType::I32,
-        NiftiType::Float32 => ScalarType::F32,
-        NiftiType::Float64 => ScalarType::F64,
-        other => return Err(unsupported(path, format!("datatype {other:?}"))),
+        2 => ScalarType::U8,
+        256 => ScalarType::I8,
+        512 => ScalarType::U16,
+        4 => ScalarType::I16,
+        768 => ScalarType::U32,
+        8 => ScalarType::I32,
+        16 => ScalarType::F32,
+        64 => ScalarType::F64,
+        1 | 32 | 128 | 1024 | 1280 | 1536 | 1792 | 2048 | 2304 => {
+            let name = match datatype {
+                1 => "binary",
+                32 => "complex64",
+                128 => "RGB24",
+                1024 => "int64",
+                1280 => "uint64",
+                1536 => "float128",
+                1792 => "complex128",
+                2048 => "complex256",
+                _ => "RGBA32",
+            };
+            return Err(unsupported(path, format!("datatype {datatype} ({name})")));
+        }
+        other => return Err(header_error(path, format!("unknown datatype {other}"))),
     })
 }
 
 /// Applies `scl_slope` and `scl_inter`; a slope of 0 (or not finite) means none.
-fn rescale(values: &mut [f32], slope: f32, inter: f32) {
-    let inter = if inter.is_finite() {
-        f64::from(inter)
-    } else {
-        0.0
-    };
+fn rescale(values: &mut [f32], slope: f64, inter: f64) {
+    let inter = if inter.is_finite() { inter } else { 0.0 };
     if slope == 0.0 || !slope.is_finite() || (slope == 1.0 && inter == 0.0) {
         return;
     }
-    let slope = f64::from(slope);
     for v in values {
         *v = (f64::from(*v) * slope + inter) as f32;
     }
@@ -307,8 +620,8 @@ fn rescale(values: &mut [f32], slope: f32, inter: f32) {
 
 /// Millimetres per unit of the header's spatial unit (`xyzt_units & 7`): metres 1000,
 /// millimetres and unknown 1 (as ITK takes it), micrometres 0.001.
-fn millimetres_per_unit(path: &Path, h: &NiftiHeader) -> Result<f64, VolumeError> {
-    match h.xyzt_units & 0x07 {
+fn millimetres_per_unit(path: &Path, xyzt_units: i32) -> Result<f64, VolumeError> {
+    match xyzt_units & 0x07 {
         0 | 2 => Ok(1.0),
         1 => Ok(1000.0),
         3 => Ok(0.001),
@@ -321,31 +634,11 @@ fn millimetres_per_unit(path: &Path, h: &NiftiHeader) -> Result<f64, VolumeError
     }
 }
 
-/// The voxel-to-world placement: sform, else qform, else pixdim alone (see the module docs),
-/// in millimetres whatever the header's spatial unit.
-fn placement(path: &Path, h: &NiftiHeader) -> Result<Placement, VolumeError> {
-    let mm = millimetres_per_unit(path, h)?;
-    let pixdim = [1, 2, 3].map(|i| f64::from(h.pixdim[i]) * mm);
-    if h.sform_code > 0 {
-        let rows = [h.srow_x, h.srow_y, h.srow_z].map(|r| r.map(|x| f64::from(x) * mm));
-        let column = |j: usize| DVec3::new(rows[0][j], rows[1][j], rows[2][j]);
-        Placement::from_columns(path, [column(0), column(1), column(2)], column(3))
-    } else if h.qform_code > 0 {
-        let rotation = DMat3::from_quat(qform_quaternion(h));
-        let qfac = if h.pixdim[0] < 0.0 { -1.0 } else { 1.0 };
-        let steps = [pixdim[0], pixdim[1], pixdim[2] * qfac];
-        let columns = [0, 1, 2].map(|i| rotation.col(i) * steps[i]);
-        let origin = DVec3::new(h.quatern_x.into(), h.quatern_y.into(), h.quatern_z.into()) * mm;
-        Placement::from_columns(path, columns, origin)
-    } else {
-        Placement::axis_aligned(path, pixdim, [0.0; 3])
-    }
-}
-
-/// The qform rotation: `a` is implied by unit length; rounding that pushes `b² + c² + d²` past
-/// 1 leaves `a = 0` and the rest normalised, as the NIfTI reference code does.
-fn qform_quaternion(h: &NiftiHeader) -> DQuat {
-    let [b, c, d] = [h.quatern_b, h.quatern_c, h.quatern_d].map(f64::from);
+/// The qform rotation from `quatern_b/c/d`: `a` is implied by unit length; rounding that
+/// pushes `b² + c² + d²` past 1 leaves `a = 0` and the rest normalised, as the NIfTI
+/// reference code does.
+fn qform_quaternion(quatern: [f64; 6]) -> DQuat {
+    let [b, c, d, ..] = quatern;
     let a = (1.0 - (b * b + c * c + d * d)).max(0.0).sqrt();
     let q = DQuat::from_xyzw(b, c, d, a);
     if q.is_finite() && q.length() > 0.0 {
@@ -358,7 +651,7 @@ fn qform_quaternion(h: &NiftiHeader) -> DQuat {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::volume::detect::tests::{gzip, scratch};
+    use crate::volume::loader::tests::{gzip, scratch};
 
     /// A little-endian NIfTI-1 header (352 bytes with the extension flag) for `dims` of
     /// `datatype`, unit pixdim, no transforms.

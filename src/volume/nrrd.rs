@@ -1,8 +1,8 @@
 //! NRRD volumes (teem's "nearly raw raster data"), with the header attached (`.nrrd`) or
 //! detached (`.nhdr`).
 //!
-//! Read: 3-D arrays of 8- to 32-bit integers, `float` and `double`; encodings `raw` and
-//! `gzip`; `endian`; `byte skip` (including `-1`, data at the end of a raw file) and
+//! Read: 3-D arrays of 8- to 32-bit integers, `float` and `double`; encodings `raw`,
+//! `gzip` and `bzip2`; `endian`; `byte skip` (including `-1`, data at the end of a raw file) and
 //! `line skip`; `data file` as a single name, a `LIST` of names on the following lines, or a
 //! printf-style pattern (`quarter.%d 1 93 1`, `slice%03d.raw 0 9 1`), each file holding an
 //! equal run of whole z slices; placement from `space directions` and `space origin`, or from
@@ -19,7 +19,7 @@
 //! `node`-centred axes, half a step past it for `cell`-centred ones (teem's default).
 //!
 //! Not read (a typed [`VolumeError::Unsupported`]): other dimensions than 3 (vectors, time
-//! series, images), 64-bit integers and `block`, the `hex` and `bzip2` encodings, `none` axes in `space directions`, spaces with a time axis, and data files that
+//! series, images), 64-bit integers and `block`, the `hex` encoding, `none` axes in `space directions`, spaces with a time axis, and data files that
 //! do not each hold whole z slices.
 //!
 //! Every declared size is checked before voxel memory is allocated: raw data against the data
@@ -30,12 +30,13 @@ use std::fs::File;
 use std::io::{BufRead, BufReader, Read, Seek, SeekFrom};
 use std::path::{Path, PathBuf};
 
+use bzip2::read::MultiBzDecoder;
 use flate2::read::MultiGzDecoder;
 use glam::DVec3;
 
-use super::detect::{
-    HeaderLines, LoadedVolume, Placement, VolumeFormat, expect_end, header_error, inflate_values,
-    io_error, skip_inflated, unsupported,
+use super::loader::{
+    HeaderLines, LoadedVolume, Placement, VolumeFormat, expect_end, format_pattern, header_error,
+    inflate_values, io_error, skip_inflated, text_values, unsupported,
 };
 use super::{
     ByteOrder, CpuVolume, RawSpec, ScalarFormat, ScalarType, VolumeError, load_raw, load_raw_slices,
@@ -48,13 +49,14 @@ pub fn load_nrrd(path: &Path) -> Result<LoadedVolume, VolumeError> {
     let placement = Placement::from_columns(path, header.columns, header.origin)?;
     let volume = match header.encoding {
         Encoding::Raw => read_raw(path, &header)?,
-        Encoding::Gzip => read_gzip(path, &header)?,
+        Encoding::Gzip | Encoding::Bzip2 => read_compressed(path, &header)?,
         Encoding::Ascii => read_ascii(path, &header)?,
     };
     Ok(LoadedVolume {
         volume: placement.apply(volume),
         format: VolumeFormat::Nrrd,
         scalar_type: Some(header.format.scalar),
+        patient_frame: header.anatomical,
     })
 }
 
@@ -63,6 +65,7 @@ pub fn load_nrrd(path: &Path) -> Result<LoadedVolume, VolumeError> {
 enum Encoding {
     Raw,
     Gzip,
+    Bzip2,
     /// Numbers written as text, separated by white space.
     Ascii,
 }
@@ -89,6 +92,8 @@ struct Header {
     data: Data,
     /// The step between neighbouring voxels along each axis, in RAS.
     columns: [DVec3; 3],
+    /// Whether `space` names an anatomical frame (RAS, LAS, LPS).
+    anatomical: bool,
     /// The position of the first voxel, in RAS.
     origin: DVec3,
 }
@@ -224,7 +229,19 @@ impl Header {
             Some(field) => Data::Files(data_files(&fields, field, dims[2])?),
         };
         let (columns, origin) = placement(&fields)?;
+        let anatomical = fields.get("space").is_some_and(|f| {
+            matches!(
+                f.value.to_ascii_lowercase().as_str(),
+                "right-anterior-superior"
+                    | "ras"
+                    | "left-anterior-superior"
+                    | "las"
+                    | "left-posterior-superior"
+                    | "lps"
+            )
+        });
         Ok(Self {
+            anatomical,
             dims,
             format,
             encoding,
@@ -374,10 +391,11 @@ fn encoding(fields: &Fields) -> Result<Encoding, VolumeError> {
         "raw" => Ok(Encoding::Raw),
         "gzip" | "gz" => Ok(Encoding::Gzip),
         "txt" | "text" | "ascii" => Ok(Encoding::Ascii),
-        "hex" | "bzip2" | "bz2" => Err(unsupported(
+        "bzip2" | "bz2" => Ok(Encoding::Bzip2),
+        "hex" => Err(unsupported(
             &fields.path,
             format!(
-                "encoding {}; only raw, gzip and ascii are read",
+                "encoding {}; only raw, gzip, bzip2 and ascii are read",
                 field.value
             ),
         )),
@@ -468,46 +486,6 @@ fn expand_pattern(
             })
         })
         .collect()
-}
-
-/// `pattern` with its one integer conversion (`%d`, `%i`, `%u`, optionally `%0Nd` or `%Nd`)
-/// replaced by `n`; `%%` is a percent sign. `None` for any other conversion or count of them.
-fn format_pattern(pattern: &str, n: i64) -> Option<String> {
-    let mut out = String::new();
-    let mut used = false;
-    let mut rest = pattern;
-    while let Some(at) = rest.find('%') {
-        out.push_str(&rest[..at]);
-        let spec = &rest[at + 1..];
-        if let Some(after) = spec.strip_prefix('%') {
-            out.push('%');
-            rest = after;
-            continue;
-        }
-        let digits = spec.bytes().take_while(u8::is_ascii_digit).count();
-        let (flags, after) = spec.split_at(digits);
-        let after = after.strip_prefix(['d', 'i', 'u'])?;
-        if used {
-            return None;
-        }
-        let width: usize = if flags.is_empty() {
-            0
-        } else {
-            flags.parse().ok()?
-        };
-        // A width past any file name's would only build a huge string.
-        if width > 32 {
-            return None;
-        }
-        match flags.starts_with('0') {
-            true => out.push_str(&format!("{n:0width$}")),
-            false => out.push_str(&format!("{n:width$}")),
-        }
-        used = true;
-        rest = after;
-    }
-    out.push_str(rest);
-    used.then_some(out)
 }
 
 /// The voxel steps and the origin in RAS, from `space directions` (else `spacings`, else unit
@@ -732,7 +710,8 @@ fn data_at_end(file: &Path, bytes: u64) -> Result<u64, VolumeError> {
 }
 
 /// Gzip data: each file's stream must inflate to exactly its share of the declared size.
-fn read_gzip(path: &Path, header: &Header) -> Result<CpuVolume, VolumeError> {
+/// Reads gzip- or bzip2-compressed data, inflating at most the declared bytes of each file.
+fn read_compressed(path: &Path, header: &Header) -> Result<CpuVolume, VolumeError> {
     let sources = header.sources(path)?;
     let (count, bytes) = bytes_per_file(path, header, sources.len())?;
     let skip = header.byte_skip.unwrap_or(0);
@@ -740,7 +719,10 @@ fn read_gzip(path: &Path, header: &Header) -> Result<CpuVolume, VolumeError> {
     for (file, start) in &sources {
         let mut f = File::open(file).map_err(io_error(file))?;
         f.seek(SeekFrom::Start(*start)).map_err(io_error(file))?;
-        let mut reader = MultiGzDecoder::new(BufReader::new(f));
+        let mut reader: Box<dyn Read> = match header.encoding {
+            Encoding::Bzip2 => Box::new(MultiBzDecoder::new(BufReader::new(f))),
+            _ => Box::new(MultiGzDecoder::new(BufReader::new(f))),
+        };
         skip_inflated(file, &mut reader, skip, bytes)?;
         inflate_values(file, &mut reader, bytes, header.format, count, &mut values)?;
         expect_end(file, &mut reader, skip.saturating_add(bytes))?;
@@ -773,27 +755,7 @@ fn read_ascii(path: &Path, header: &Header) -> Result<CpuVolume, VolumeError> {
         f.take(len)
             .read_to_string(&mut text)
             .map_err(|e| header_error(file, format!("the text data are not UTF-8 text: {e}")))?;
-        let before = values.len();
-        for word in text.split_whitespace().take(count + 1) {
-            let value: f64 = word.parse().map_err(|_| {
-                header_error(file, format!("{word:?} in the text data is not a number"))
-            })?;
-            values.push(value as f32);
-        }
-        let got = values.len() - before;
-        if got != count {
-            return Err(header_error(
-                file,
-                format!(
-                    "the text data hold {} values where {count} are declared",
-                    if got > count {
-                        format!("more than {count}")
-                    } else {
-                        got.to_string()
-                    }
-                ),
-            ));
-        }
+        text_values(file, &text, count, &mut values)?;
     }
     Ok(CpuVolume {
         dims: header.dims,
@@ -807,7 +769,7 @@ fn read_ascii(path: &Path, header: &Header) -> Result<CpuVolume, VolumeError> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::volume::detect::tests::{gzip, scratch};
+    use crate::volume::loader::tests::{gzip, scratch};
 
     fn header(body: &str) -> String {
         format!("NRRD0004\n# a comment\n{body}")
@@ -1044,8 +1006,8 @@ mod tests {
             ),
             (
                 "enc.nrrd",
-                "dimension: 3\nsizes: 2 2 2\ntype: uchar\nencoding: bzip2\n".into(),
-                "bzip2",
+                "dimension: 3\nsizes: 2 2 2\ntype: uchar\nencoding: hex\n".into(),
+                "encoding hex",
             ),
             (
                 "none.nrrd",

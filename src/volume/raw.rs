@@ -141,7 +141,7 @@ pub enum VolumeError {
     },
     /// No volume header was recognised: headerless data needs its layout stated.
     #[error(
-        "{}: no volume header recognised (NRRD, VTK, NIfTI, .dat or DICOM); a headerless raw \
+        "{}: no volume header recognised (DICOM, NIfTI, Analyze, NRRD, MetaImage, VTK or .dat); a headerless raw \
          file or slice stack needs the raw options (size, scalar type, byte order, spacing)",
         path.display()
     )]

@@ -7,18 +7,21 @@
 //! values. The file's length is checked against the declared size before allocating.
 //!
 //! **XML** (`<VTKFile type="ImageData">`): one `Piece` covering the `WholeExtent`; the point-data
-//! array named by `PointData Scalars` (else the first), one component; `format="binary"`
-//! (inline base64) or `format="appended"` (`AppendedData` base64 or raw); no compression or
-//! `vtkZLibDataCompressor`, with `header_type` `UInt32` or `UInt64`; `byte_order` little or big;
+//! array named by `PointData Scalars` (else the first), one component; `format="ascii"`,
+//! `format="binary"` (inline base64) or `format="appended"` (`AppendedData` base64 or raw); no
+//! compression, `vtkZLibDataCompressor` or `vtkLZ4DataCompressor`, with `header_type` `UInt32`
+//! or `UInt64`; `byte_order` little or big;
 //! `Origin`, `Spacing` and `Direction` (row-major, columns the axes). A `WholeExtent` that does
 //! not start at 0 moves the origin to the first voxel. The whole file is read into memory
 //! (never more than its length); compressed blocks inflate to exactly their declared sizes.
 //!
 //! Not read (a typed [`VolumeError::Unsupported`]): `ASCII` legacy data, other dataset types,
-//! cell data, vectors and multi-component arrays, 64-bit integers, `ascii` XML arrays, LZ4 and
-//! LZMA compression, and multi-piece files.
+//! cell data, vectors and multi-component arrays, 64-bit integers, LZMA compression, and
+//! multi-piece files.
 //!
-//! VTK has no anatomical frame: coordinates are taken as they are in the project's RAS world.
+//! VTK has no anatomical frame: coordinates are taken as they are in the project's RAS world,
+//! unless the caller says they are LPS ([`super::loader::LoadOptions::coordinate_frame`]), as
+//! in files ITK-based tools write.
 
 use std::path::Path;
 
@@ -27,9 +30,9 @@ use base64::engine::general_purpose::STANDARD as BASE64;
 use flate2::read::ZlibDecoder;
 use glam::{DMat3, DVec3};
 
-use super::detect::{
+use super::loader::{
     HeaderLines, LoadedVolume, Placement, VolumeFormat, expect_end, header_error, inflate_values,
-    io_error, unsupported,
+    io_error, text_values, unsupported,
 };
 use super::raw::decode;
 use super::{ByteOrder, CpuVolume, RawSpec, ScalarFormat, ScalarType, VolumeError, load_raw};
@@ -47,6 +50,7 @@ pub fn load_vtk_legacy(path: &Path) -> Result<LoadedVolume, VolumeError> {
         volume: placement.apply(load_raw(path, &spec)?),
         format: VolumeFormat::VtkLegacy,
         scalar_type: Some(header.scalar),
+        patient_frame: false,
     })
 }
 
@@ -217,6 +221,7 @@ pub fn load_vti(path: &Path) -> Result<LoadedVolume, VolumeError> {
         volume: grid.placement.apply(volume),
         format: VolumeFormat::VtkXml,
         scalar_type: Some(format.scalar),
+        patient_frame: false,
     })
 }
 
@@ -338,10 +343,15 @@ impl<'a> Xml<'a> {
                     &self.text.as_bytes()[array.end..array.end + end],
                 ))
             }
+            Some("ascii") => {
+                let end = self.text[array.end..].find("</DataArray>");
+                let end = end.ok_or_else(|| header_error(self.path, "DataArray not closed"))?;
+                Ok(Blob::Ascii(&self.text[array.end..array.end + end]))
+            }
             Some("appended") => self.appended_data(array),
             other => {
                 let feature = format!(
-                    "DataArray format {}; only binary and appended are read",
+                    "DataArray format {}; only ascii, binary and appended are read",
                     other.unwrap_or("(none)")
                 );
                 Err(unsupported(self.path, feature))
@@ -398,6 +408,8 @@ fn parse_tag(text: &str, mut at: usize) -> Option<Tag<'_>> {
 enum Blob<'a> {
     Base64(&'a [u8]),
     Raw(&'a [u8]),
+    /// `format="ascii"`: numbers as text.
+    Ascii(&'a str),
 }
 
 /// The value type of a `DataArray`, which must have one component.
@@ -517,7 +529,16 @@ struct Encoding {
     order: ByteOrder,
     /// Bytes per header word (4 for `UInt32`, 8 for `UInt64`).
     word: usize,
-    zlib: bool,
+    compressor: Option<Compressor>,
+}
+
+/// How the blocks of a compressed array are compressed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Compressor {
+    /// `vtkZLibDataCompressor`.
+    Zlib,
+    /// `vtkLZ4DataCompressor`: LZ4 block format, each block's size known from the header.
+    Lz4,
 }
 
 impl Encoding {
@@ -550,17 +571,24 @@ impl Encoding {
                 ));
             }
         };
-        let zlib = match file.attr("compressor") {
-            None | Some("") => false,
-            Some("vtkZLibDataCompressor") => true,
+        let compressor = match file.attr("compressor") {
+            None | Some("") => None,
+            Some("vtkZLibDataCompressor") => Some(Compressor::Zlib),
+            Some("vtkLZ4DataCompressor") => Some(Compressor::Lz4),
             Some(other) => {
                 return Err(unsupported(
                     path,
-                    format!("compressor {other}; only vtkZLibDataCompressor is read"),
+                    format!(
+                        "compressor {other}; vtkZLibDataCompressor and vtkLZ4DataCompressor are read"
+                    ),
                 ));
             }
         };
-        Ok(Self { order, word, zlib })
+        Ok(Self {
+            order,
+            word,
+            compressor,
+        })
     }
 
     /// Header word `index` of `bytes`, if there.
@@ -593,7 +621,13 @@ impl Encoding {
             .checked_mul(format.scalar.size() as u64)
             .ok_or_else(overflow)?;
         let count = usize::try_from(count).map_err(|_| overflow())?;
-        if self.zlib {
+        if let Blob::Ascii(text) = blob {
+            // VTK never compresses text arrays.
+            let mut out = Vec::with_capacity(count.min(1 << 24));
+            text_values(path, text, count, &mut out)?;
+            return Ok(out);
+        }
+        if self.compressor.is_some() {
             let (header, data) = self.split_compressed(path, blob)?;
             return self.inflate_blocks(path, &header, &data, format, (count, bytes));
         }
@@ -610,6 +644,7 @@ impl Encoding {
                 base64(path, text.get(..want).unwrap_or(&text))?
             }
             Blob::Raw(data) => data.to_vec(),
+            Blob::Ascii(_) => unreachable!("text arrays are read above"),
         };
         let stated = self
             .word_at(&data, 0)
@@ -649,6 +684,7 @@ impl Encoding {
                     .ok_or_else(short)?;
                 Ok((data[..len].to_vec(), data[len..].to_vec()))
             }
+            Blob::Ascii(_) => Err(header_error(path, "a compressed array written as text")),
             Blob::Base64(text) => {
                 let text = without_whitespace(text);
                 // The first base64 groups covering one header word give the block count.
@@ -715,9 +751,37 @@ impl Encoding {
             } else {
                 block
             };
-            let mut reader = ZlibDecoder::new(&data[at..end]);
-            inflate_values(path, &mut reader, inflated, format, count, &mut out)?;
-            expect_end(path, &mut reader, inflated)?;
+            let block = &data[at..end];
+            if self.compressor == Some(Compressor::Lz4) {
+                // LZ4 expands a byte to at most 255 (a run of matches), so a block that claims
+                // more is refused before its output is allocated.
+                if inflated > (block.len() as u64).saturating_mul(255).saturating_add(16) {
+                    let message = format!(
+                        "block {i}: {} LZ4 bytes cannot inflate to the {inflated} declared",
+                        block.len()
+                    );
+                    return Err(header_error(path, message));
+                }
+                let mut bytes = vec![0u8; inflated as usize];
+                match lz4_flex::block::decompress_into(block, &mut bytes) {
+                    Ok(n) if n as u64 == inflated => {}
+                    Ok(n) => {
+                        return Err(VolumeError::InflatesShort {
+                            path: path.into(),
+                            expected: inflated,
+                            actual: n as u64,
+                        });
+                    }
+                    Err(e) => {
+                        return Err(header_error(path, format!("block {i}: bad LZ4 data: {e}")));
+                    }
+                }
+                decode(&bytes, format.scalar, format.order, &mut out);
+            } else {
+                let mut reader = ZlibDecoder::new(block);
+                inflate_values(path, &mut reader, inflated, format, count, &mut out)?;
+                expect_end(path, &mut reader, inflated)?;
+            }
             at = end;
         }
         Ok(out)
@@ -784,7 +848,7 @@ fn base64(path: &Path, text: &[u8]) -> Result<Vec<u8>, VolumeError> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::volume::detect::tests::scratch;
+    use crate::volume::loader::tests::scratch;
     use std::io::Write;
 
     fn write(dir: &Path, name: &str, bytes: &[u8]) -> std::path::PathBuf {
@@ -1039,9 +1103,9 @@ mod tests {
                 "byte_order",
             ),
             (
-                "lz4.vti",
-                vti("compressor=\"vtkLZ4DataCompressor\"", &array(""), &data),
-                "vtkLZ4DataCompressor",
+                "lzma.vti",
+                vti("compressor=\"vtkLZMADataCompressor\"", &array(""), &data),
+                "vtkLZMADataCompressor",
             ),
             (
                 "type.vti",
@@ -1055,8 +1119,12 @@ mod tests {
             ),
             (
                 "ascii.vti",
-                vti("", &array("").replace("appended", "ascii"), &data),
-                "ascii",
+                vti(
+                    "",
+                    "<DataArray type=\"UInt16\" Name=\"s\" format=\"ascii\">1 2 x</DataArray>",
+                    &[],
+                ),
+                "\"x\" in the text data is not a number",
             ),
             (
                 "poly.vti",
