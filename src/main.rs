@@ -63,6 +63,42 @@ struct InfoArgs {
     /// Volume files (or DICOM series folders).
     #[arg(required = true)]
     files: Vec<PathBuf>,
+    /// DICOM: the series of a folder holding several, by its number or UID.
+    #[arg(long)]
+    series: Option<String>,
+    /// 4-D NIfTI: the 3-D frame described, from 0.
+    #[arg(long)]
+    frame: Option<u32>,
+    /// NIfTI: the transform that places the grid: sform (default, as nibabel), qform, or itk
+    /// (ITK's and 3D Slicer's rule).
+    #[arg(long, value_parser = ["sform", "qform", "itk"])]
+    nifti_transform: Option<String>,
+    /// VTK, .dat, or NRRD without an anatomical space: the frame of the file's coordinates,
+    /// RAS (default) or LPS.
+    #[arg(long, value_parser = ["RAS", "LPS"])]
+    coordinate_frame: Option<String>,
+}
+
+impl InfoArgs {
+    /// The loading choices the flags make.
+    fn options(&self) -> Result<splatscene::volume::detect::LoadOptions> {
+        fn parse<T: std::str::FromStr<Err = String>>(value: &Option<String>) -> Result<Option<T>> {
+            value
+                .as_deref()
+                .map(str::parse)
+                .transpose()
+                .map_err(anyhow::Error::msg)
+        }
+        Ok(splatscene::volume::detect::LoadOptions {
+            series: self
+                .series
+                .clone()
+                .map(splatscene::volume::detect::SeriesChoice),
+            frame: self.frame,
+            nifti_transform: parse(&self.nifti_transform)?,
+            coordinate_frame: parse(&self.coordinate_frame)?,
+        })
+    }
 }
 
 #[derive(clap::Args)]
@@ -168,9 +204,10 @@ fn quiet_device_select() {
 }
 
 fn run_info(args: InfoArgs) -> Result<()> {
+    let options = args.options()?;
     let mut infos = Vec::with_capacity(args.files.len());
     for file in &args.files {
-        infos.push(info_of(file)?);
+        infos.push(info_of(file, &options)?);
     }
     let out = match infos.len() {
         1 => infos.remove(0),
@@ -185,9 +222,16 @@ const MAX_INFO_FOLDERS: usize = 10_000;
 
 /// A volume's description; for a folder tree holding anything but one series in the folder
 /// itself, the list of every DICOM series found below it.
-fn info_of(path: &Path) -> Result<serde_json::Value> {
-    if !path.is_dir() {
-        return Ok(splatscene::volume::detect::volume_info(path)?);
+fn info_of(
+    path: &Path,
+    options: &splatscene::volume::detect::LoadOptions,
+) -> Result<serde_json::Value> {
+    let describe = |path: &Path| -> Result<serde_json::Value> {
+        let loaded = splatscene::volume::detect::load_volume_with(path, options)?;
+        Ok(loaded.info(path))
+    };
+    if !path.is_dir() || options.series.is_some() {
+        return describe(path);
     }
     let mut series = Vec::new();
     let mut folders = vec![path.to_path_buf()];
@@ -214,7 +258,7 @@ fn info_of(path: &Path) -> Result<serde_json::Value> {
     if let [only] = series.as_slice()
         && only.folder == path
     {
-        return Ok(splatscene::volume::detect::volume_info(path)?);
+        return describe(path);
     }
     if series.is_empty() {
         bail!(

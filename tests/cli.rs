@@ -666,3 +666,86 @@ fn orderings_composite_on_the_gpu_when_asked() {
     assert_eq!(said.matches("replaced the existing").count(), 1, "{said}");
     std::fs::remove_dir_all(&out).ok();
 }
+
+#[test]
+fn info_and_scene_files_take_the_nifti_transform_and_the_coordinate_frame() {
+    let data = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data");
+    let nifti = data.join("nifti2/sform-qform.nii");
+    let nifti = nifti.to_str().unwrap();
+    let origin = |args: &[&str]| -> Vec<f64> {
+        let out = splatscene(args);
+        assert!(
+            out.status.success(),
+            "{args:?}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let info = json(&out);
+        info["origin"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_f64().unwrap())
+            .collect()
+    };
+    let near = |a: &[f64], b: [f64; 3]| a.iter().zip(b).all(|(x, y)| (x - y).abs() < 1e-4);
+    // The sform (nibabel's choice), and ITK's rule, which takes the qform beside sform code 2.
+    assert!(near(&origin(&["info", nifti]), [10.0, -20.0, 30.0]));
+    let itk = origin(&["info", "--nifti-transform", "itk", nifti]);
+    assert!(near(&itk, [-5.0, 12.0, 7.0]), "{itk:?}");
+    // A VTK file read as LPS lands mirrored in x and y.
+    let vti = data.join("vtk/vtk-appended-zlib.vti");
+    let vti = vti.to_str().unwrap();
+    let ras = origin(&["info", vti]);
+    let lps = origin(&["info", "--coordinate-frame", "LPS", vti]);
+    assert!(near(&lps, [-ras[0], -ras[1], ras[2]]), "{ras:?} {lps:?}");
+    // Choices that cannot apply are refused, naming the file.
+    let out = splatscene(&["info", "--coordinate-frame", "LPS", nifti]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success()
+            && err.contains("coordinate frame")
+            && err.contains("sform-qform.nii"),
+        "{err}"
+    );
+    // Scene files: the same keys, checked where they are read.
+    let dir = temp_path("scene-keys");
+    std::fs::create_dir_all(&dir).unwrap();
+    let scene = |name: &str, volume: &str| {
+        let path = dir.join(name);
+        std::fs::write(&path, format!("[[volume]]\n{volume}\n")).unwrap();
+        let out = splatscene(&[
+            "render",
+            path.to_str().unwrap(),
+            "--size",
+            "32x32",
+            "--out",
+            dir.join("x.png").to_str().unwrap(),
+        ]);
+        (
+            out.status.success(),
+            String::from_utf8_lossy(&out.stderr).into_owned(),
+        )
+    };
+    let (ok, err) = scene(
+        "bogus.toml",
+        &format!("path = {nifti:?}\nnifti_transform = \"best\""),
+    );
+    assert!(
+        !ok && err.contains("nifti_transform") && err.contains("none of sform, qform, itk"),
+        "{err}"
+    );
+    let (ok, err) = scene(
+        "raw.toml",
+        &format!("path = {vti:?}\ndims = [4, 3, 2]\nscalar = \"u8\"\nframe = 1"),
+    );
+    assert!(
+        !ok && err.contains("frame applies to 4-D NIfTI, not to a raw volume"),
+        "{err}"
+    );
+    let (ok, err) = scene(
+        "lps.toml",
+        &format!("path = {nifti:?}\ncoordinate_frame = \"LPS\""),
+    );
+    assert!(!ok && err.contains("states its own patient frame"), "{err}");
+    std::fs::remove_dir_all(&dir).ok();
+}

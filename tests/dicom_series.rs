@@ -477,3 +477,46 @@ fn info_reports_the_stored_type_of_the_series() {
         "{info}"
     );
 }
+
+#[test]
+fn a_file_picks_its_own_series_and_grid_and_the_rest_of_the_folder_is_ignored() {
+    let Some(shared) = series_dir() else { return };
+    let dir = copy_series(&shared, "own-series", |_| false);
+    let files = series_files(&dir);
+    let vr = |name: &str| name.parse().expect("a VR name");
+    // A localizer in the same series (another orientation), a copy of a slice under
+    // another name (the same SOPInstanceUID), a truncated file and a foreign one.
+    let mut scout = open_file(&files[3]).expect("open slice");
+    scout.put_str(
+        tags::IMAGE_ORIENTATION_PATIENT,
+        vr("DS"),
+        "0\\1\\0\\0\\0\\-1",
+    );
+    scout.put_str(tags::SOP_INSTANCE_UID, vr("UI"), "2.25.5005");
+    scout
+        .write_to_file(dir.join("scout.dcm"))
+        .expect("write scout");
+    fs::copy(&files[5], dir.join("zz-copy.dcm")).expect("copy a slice");
+    let bytes = fs::read(&files[6]).expect("read slice");
+    fs::write(dir.join("truncated.dcm"), &bytes[..bytes.len() / 3]).expect("write truncated");
+    fs::write(
+        dir.join("foreign.dcm"),
+        [&[0u8; 128][..], b"DICM", &[7u8; 50]].concat(),
+    )
+    .expect("write foreign");
+    let original = load_dicom_series(&shared).expect("load the shared series");
+    // Given a slice, the series loads as it does alone: the scout, the copy and the broken
+    // files are left out (and counted on stderr).
+    let own = splatscene::volume::detect::load_volume(&files[0]).expect("a file's own series");
+    assert_eq!(own, original);
+    // Given the copy, the copy stands for its original.
+    let copy = splatscene::volume::detect::load_volume(&dir.join("zz-copy.dcm")).expect("copy");
+    assert_eq!(copy, original);
+    // Given the scout, the scout alone.
+    let scout = splatscene::volume::detect::load_volume(&dir.join("scout.dcm")).expect("scout");
+    assert_eq!(scout.dims, [512, 512, 1]);
+    // The folder itself holds one series whose images disagree: refused, naming one.
+    let err = load_dicom_series(&dir).expect_err("mixed orientations in a series");
+    assert!(err.to_string().contains("ImageOrientationPatient"), "{err}");
+    fs::remove_dir_all(&dir).expect("clean up");
+}

@@ -544,3 +544,39 @@ fn check_spot_values(v: &CpuVolume, values: &Value, lossy: bool, what: &str) {
         );
     }
 }
+
+/// A fresh folder for files a test writes.
+fn scratch(tag: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!(
+        "splatscene-reader-references-{tag}-{}",
+        std::process::id()
+    ));
+    std::fs::remove_dir_all(&dir).ok();
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+#[test]
+fn dicom_without_preamble_or_meta_group_loads_the_same() {
+    let original = data_dir("dicom-multiframe").join("rtdose.dcm");
+    let bytes = std::fs::read(&original).unwrap();
+    assert_eq!(&bytes[128..132], b"DICM");
+    // The file meta group: explicit VR little endian, its length in (0002,0000).
+    let meta_len = u32::from_le_bytes(bytes[140..144].try_into().unwrap()) as usize;
+    let data_set = &bytes[144 + meta_len..];
+    assert_eq!(
+        &data_set[..2],
+        &[0x08, 0x00],
+        "the data set starts in group 0008"
+    );
+    let dir = scratch("no-preamble");
+    let want = load(&original, &LoadOptions::default());
+    for (name, content) in [("no-preamble.dcm", &bytes[128..]), ("bare.dcm", data_set)] {
+        let path = dir.join(name);
+        std::fs::write(&path, content).unwrap();
+        let loaded = load(&path, &LoadOptions::default());
+        assert_eq!(loaded.format, VolumeFormat::Dicom, "{name}");
+        assert_eq!(loaded.volume, want.volume, "{name}");
+    }
+    std::fs::remove_dir_all(dir).ok();
+}

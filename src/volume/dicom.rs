@@ -19,8 +19,9 @@
 //! [`VolumeError::DicomSeries`], which lists them (number, description, modality, size, image
 //! count, UID) until one is chosen by SeriesNumber or UID ([`SeriesChoice`]); then every image
 //! of the chosen series must be a usable slice. Copies of one image (the same SOPInstanceUID,
-//! as when a file is stored in several encodings) count once: the file given, else the first
-//! by name.
+//! as when a file is stored in several encodings, or the same bytes when it has none) count
+//! once: the file given, else the first by name. Given a file, of other slices at one position
+//! (a damaged copy, a second version) the first by name that decodes is kept.
 //!
 //! **Geometry.** Slices are ordered by their ImagePositionPatient projected on the slice normal,
 //! the cross product of the ImageOrientationPatient row and column directions. The grid's x axis
@@ -295,10 +296,7 @@ pub fn load_dicom_series_choosing(
     choice: Option<&SeriesChoice>,
 ) -> Result<(CpuVolume, Option<ScalarType>), VolumeError> {
     let (images, unreadable) = read_folder(dir)?;
-    let mut ignored = Ignored {
-        unreadable: unreadable.len(),
-        ..Ignored::default()
-    };
+    let mut ignored = Ignored::unreadable(&unreadable);
     if images.is_empty()
         && let Some(first) = unreadable.into_iter().next()
     {
@@ -338,10 +336,7 @@ pub fn load_dicom_file_series(path: &Path) -> Result<(CpuVolume, Option<ScalarTy
         _ => Path::new("."),
     };
     let (images, unreadable) = read_folder(dir)?;
-    let mut ignored = Ignored {
-        unreadable: unreadable.len(),
-        ..Ignored::default()
-    };
+    let mut ignored = Ignored::unreadable(&unreadable);
     let own_path = fs::canonicalize(path).map_err(io_error(path))?;
     let mut kept = Vec::new();
     for image in images {
@@ -363,12 +358,50 @@ pub fn load_dicom_file_series(path: &Path) -> Result<(CpuVolume, Option<ScalarTy
     }
     kept.push(own);
     let kept = without_copies(kept, Some(&own_path), &mut ignored);
-    let slices = kept
+    let slices: Vec<SliceHeader> = kept
         .into_iter()
         .flat_map(|image| image.slices.unwrap_or_default())
         .collect();
+    let slices = one_per_position(slices, &own_path, &mut ignored);
     ignored.note(dir);
     build_volume(dir, slices)
+}
+
+/// Of single-frame slices at one position (within a micrometre), the file given when it is one
+/// of them, else the first by name whose pixel data decode: a damaged or second copy of a
+/// slice beside the file given must not stop its series from loading.
+fn one_per_position(
+    mut slices: Vec<SliceHeader>,
+    own: &Path,
+    ignored: &mut Ignored,
+) -> Vec<SliceHeader> {
+    let key = |s: &SliceHeader| (s.position * 1e3).round().to_array().map(|x| x as i64);
+    slices.sort_by(|a, b| key(a).cmp(&key(b)).then_with(|| a.path.cmp(&b.path)));
+    let mut kept: Vec<SliceHeader> = Vec::with_capacity(slices.len());
+    let mut start = 0;
+    while start < slices.len() {
+        let end = start
+            + slices[start..]
+                .iter()
+                .take_while(|s| key(s) == key(&slices[start]))
+                .count();
+        let group = &slices[start..end];
+        let decodes = |s: &SliceHeader| {
+            let mut values = vec![0.0f32; usize::from(s.rows) * usize::from(s.columns)];
+            decode_file(&s.path, vec![(s, values.as_mut_slice())]).is_ok()
+        };
+        let chosen = match group {
+            [only] => Some(only),
+            _ => group
+                .iter()
+                .find(|s| fs::canonicalize(&s.path).is_ok_and(|p| p == own))
+                .or_else(|| group.iter().find(|s| decodes(s))),
+        };
+        ignored.same_position += group.len() - usize::from(chosen.is_some());
+        kept.extend(chosen.cloned());
+        start = end;
+    }
+    kept
 }
 
 /// Whether two single-frame slices share their size and orientation.
@@ -382,15 +415,44 @@ fn same_grid(a: &SliceHeader, b: &SliceHeader) -> bool {
 #[derive(Debug, Default)]
 struct Ignored {
     unreadable: usize,
+    /// The first few unreadable files, named in the note.
+    unreadable_names: Vec<String>,
     other_series: usize,
     other_grid: usize,
     copies: usize,
+    same_position: usize,
 }
 
 impl Ignored {
+    /// Counts the files that could not be read, naming the first three.
+    fn unreadable(errors: &[VolumeError]) -> Self {
+        let names = errors
+            .iter()
+            .take(3)
+            .map(|e| match e {
+                VolumeError::Dicom { path, .. } | VolumeError::Io { path, .. } => name(path),
+                other => other.to_string(),
+            })
+            .collect();
+        Self {
+            unreadable: errors.len(),
+            unreadable_names: names,
+            ..Self::default()
+        }
+    }
+
     fn note(&self, dir: &Path) {
+        let more = if self.unreadable > self.unreadable_names.len() {
+            ", ..."
+        } else {
+            ""
+        };
+        let unreadable = format!(
+            "not readable as DICOM ({}{more})",
+            self.unreadable_names.join(", ")
+        );
         let parts: Vec<String> = [
-            (self.unreadable, "not readable as DICOM"),
+            (self.unreadable, &unreadable as &str),
             (self.other_series, "of other series"),
             (
                 self.other_grid,
@@ -398,7 +460,11 @@ impl Ignored {
             ),
             (
                 self.copies,
-                "copies of an image already loaded (same SOPInstanceUID)",
+                "copies of an image already loaded (same SOPInstanceUID or bytes)",
+            ),
+            (
+                self.same_position,
+                "at the position of another slice (damaged, or a second version)",
             ),
         ]
         .iter()
@@ -409,15 +475,19 @@ impl Ignored {
             eprintln!(
                 "note: {}: ignored {} file(s): {}",
                 dir.display(),
-                self.unreadable + self.other_series + self.other_grid + self.copies,
+                self.unreadable
+                    + self.other_series
+                    + self.other_grid
+                    + self.copies
+                    + self.same_position,
                 parts.join(", ")
             );
         }
     }
 }
 
-/// The images, one per SOPInstanceUID: `prefer` (the file given) when it is among the copies,
-/// else the first by name.
+/// The images, one per SOPInstanceUID (or per content, for images without one): `prefer` (the
+/// file given) when it is among the copies, else the first by name.
 fn without_copies(
     mut images: Vec<Image>,
     prefer: Option<&Path>,
@@ -432,7 +502,14 @@ fn without_copies(
     });
     let mut seen = HashSet::new();
     let before = images.len();
-    images.retain(|image| image.instance.is_empty() || seen.insert(image.instance.clone()));
+    // An image without a SOPInstanceUID is known by its bytes: a copied file is a copy.
+    let key = |image: &Image| match image.instance.is_empty() {
+        false => Some(format!("uid {}", image.instance)),
+        true => fs::read(&image.path)
+            .ok()
+            .map(|bytes| format!("content {}", blake3::hash(&bytes))),
+    };
+    images.retain(|image| key(image).is_none_or(|k| seen.insert(k)));
     ignored.copies += before - images.len();
     images
 }
@@ -1114,8 +1191,12 @@ fn slice_step(dir: &Path, slices: &[SliceHeader], normal: DVec3) -> Result<f64, 
 fn check_gaps(dir: &Path, slices: &[SliceHeader], depths: &[f64]) -> Result<(), VolumeError> {
     let steps: Vec<f64> = depths.windows(2).map(|w| w[1] - w[0]).collect();
     let smallest = steps.iter().copied().fold(f64::INFINITY, f64::min);
-    let bad = |step: f64| step <= 1e-6 || step > GAP_FACTOR * smallest;
-    let Some(i) = steps.iter().position(|&step| bad(step)) else {
+    // Two slices at one position first: with a zero step, every other step looks like a gap.
+    let Some(i) = steps
+        .iter()
+        .position(|&step| step <= 1e-6)
+        .or_else(|| steps.iter().position(|&step| step > GAP_FACTOR * smallest))
+    else {
         return Ok(());
     };
     let what = if steps[i] <= 1e-6 {
@@ -1427,4 +1508,72 @@ fn rle_frame(fragment: &[u8], width: usize, voxels: usize, out: &mut [u8]) -> Re
         }
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bare_data_sets_are_told_by_their_first_two_elements() {
+        // (0008,0005) CS "ISO_IR 100" then (0008,0008): explicit VR little endian.
+        let mut explicit = vec![0x08, 0x00, 0x05, 0x00, b'C', b'S', 10, 0];
+        explicit.extend(b"ISO_IR 100");
+        explicit.extend([0x08, 0x00, 0x08, 0x00]);
+        assert_eq!(
+            bare_data_set(&explicit),
+            Some(uids::EXPLICIT_VR_LITTLE_ENDIAN)
+        );
+        // The same implicit: a 4-byte length after the tag.
+        let mut implicit = vec![0x08, 0x00, 0x05, 0x00, 10, 0, 0, 0];
+        implicit.extend(b"ISO_IR 100");
+        implicit.extend([0x08, 0x00, 0x08, 0x00]);
+        assert_eq!(
+            bare_data_set(&implicit),
+            Some(uids::IMPLICIT_VR_LITTLE_ENDIAN)
+        );
+        // Big endian, explicit VR.
+        let mut big = vec![0x00, 0x08, 0x00, 0x05, b'C', b'S', 0, 10];
+        big.extend(b"ISO_IR 100");
+        big.extend([0x00, 0x08, 0x00, 0x08]);
+        assert_eq!(bare_data_set(&big), Some("1.2.840.10008.1.2.2"));
+        assert!(is_dicom(&big));
+        // Raw samples that happen to start with 8 do not pass: the second element is not
+        // where the first one's length puts it.
+        let raw: Vec<u8> = [8u16, 0, 5, 0, 300, 301, 302, 303, 304]
+            .iter()
+            .flat_map(|v| v.to_le_bytes())
+            .collect();
+        assert_eq!(bare_data_set(&raw), None);
+        assert!(!is_dicom(&raw));
+        assert!(!is_dicom(&explicit[..12]));
+    }
+
+    #[test]
+    fn rle_segments_decode_to_little_endian_samples() {
+        // Two 32-bit samples, 0x01020304 and 0x0A0B0C0D: four segments, most significant
+        // byte first, each a literal run of 2 (or a repeat run).
+        let segments: [&[u8]; 4] = [
+            &[1, 0x01, 0x0A],
+            &[1, 0x02, 0x0B],
+            &[1, 0x03, 0x0C],
+            &[0xff, 0x04],
+        ];
+        let mut fragment = vec![0u8; 64];
+        fragment[..4].copy_from_slice(&4u32.to_le_bytes());
+        for (i, segment) in segments.iter().enumerate() {
+            let at = fragment.len() as u32;
+            fragment[4 + 4 * i..8 + 4 * i].copy_from_slice(&at.to_le_bytes());
+            fragment.extend(*segment);
+        }
+        let mut out = [0u8; 8];
+        rle_frame(&fragment, 4, 2, &mut out).unwrap();
+        // The last segment repeats 0x04 twice.
+        assert_eq!(u32::from_le_bytes(out[..4].try_into().unwrap()), 0x01020304);
+        assert_eq!(u32::from_le_bytes(out[4..].try_into().unwrap()), 0x0A0B0C04);
+        let err = rle_frame(&fragment[..66], 4, 2, &mut out).unwrap_err();
+        assert!(err.contains("RLE"), "{err}");
+        let err = rle_frame(&fragment, 2, 2, &mut [0u8; 4]).unwrap_err();
+        assert!(err.contains("4 RLE segments for 2-byte samples"), "{err}");
+    }
 }

@@ -915,4 +915,79 @@ mod tests {
         );
         std::fs::remove_dir_all(dir).ok();
     }
+
+    /// A little-endian NIfTI-2 header for `dim` of int16, unit pixdim, vox_offset 544, and
+    /// the sform `rows` (code 1).
+    fn nifti2_bytes(dim: [i64; 4], rows: [[f64; 4]; 3]) -> Vec<u8> {
+        let mut h = vec![0u8; 544];
+        h[0..4].copy_from_slice(&540i32.to_le_bytes());
+        h[4..12].copy_from_slice(b"n+2\0\r\n\x1a\n");
+        h[12..14].copy_from_slice(&4i16.to_le_bytes());
+        h[14..16].copy_from_slice(&16i16.to_le_bytes());
+        for (i, d) in [dim[0], dim[1], dim[2], dim[3], 1, 1, 1, 1]
+            .iter()
+            .enumerate()
+        {
+            h[16 + 8 * i..24 + 8 * i].copy_from_slice(&d.to_le_bytes());
+        }
+        for i in 0..8 {
+            h[104 + 8 * i..112 + 8 * i].copy_from_slice(&1f64.to_le_bytes());
+        }
+        h[168..176].copy_from_slice(&544i64.to_le_bytes());
+        h[348..352].copy_from_slice(&1i32.to_le_bytes());
+        for (r, row) in rows.iter().enumerate() {
+            for (c, v) in row.iter().enumerate() {
+                let at = 400 + 32 * r + 8 * c;
+                h[at..at + 8].copy_from_slice(&v.to_le_bytes());
+            }
+        }
+        h
+    }
+
+    #[test]
+    fn nifti2_reads_its_wide_fields_and_refuses_impossible_sizes() {
+        let dir = scratch("nifti2");
+        // A non-symmetric sform: x along +y (2 mm), y along -x (3 mm), z along +z (4 mm).
+        let rows = [
+            [0.0, -3.0, 0.0, 5.0],
+            [2.0, 0.0, 0.0, 6.0],
+            [0.0, 0.0, 4.0, 7.0],
+        ];
+        let mut bytes = nifti2_bytes([3, 2, 1, 2], rows);
+        bytes.extend([1i16, 2, 3, 4].iter().flat_map(|v| v.to_le_bytes()));
+        let v = load_nifti(&write(&dir, "good.nii", &bytes)).unwrap().volume;
+        assert_eq!(
+            (v.dims, v.values.clone()),
+            ([2, 1, 2], vec![1.0, 2.0, 3.0, 4.0])
+        );
+        assert_eq!((v.spacing, v.origin), ([2.0, 3.0, 4.0], [5.0, 6.0, 7.0]));
+        assert_eq!(v.direction, DMat3::from_cols(DVec3::Y, -DVec3::X, DVec3::Z));
+        let huge = nifti2_bytes([3, 1 << 40, 1, 1], rows);
+        let e = load_nifti(&write(&dir, "huge.nii", &huge))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("huge.nii") && e.contains("dim[1]"), "{e}");
+        let mut negative = nifti2_bytes([3, 2, -1, 2], rows);
+        negative.extend([0u8; 8]);
+        let e = load_nifti(&write(&dir, "neg.nii", &negative))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("neg.nii") && e.contains("dim[2] = -1"), "{e}");
+        let mut early = nifti2_bytes([3, 2, 1, 2], rows);
+        early[168..176].copy_from_slice(&100i64.to_le_bytes());
+        let e = load_nifti(&write(&dir, "early.nii", &early))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("early.nii") && e.contains("vox_offset 100"),
+            "{e}"
+        );
+        // The declared data must be there.
+        let short = nifti2_bytes([3, 2, 1, 2], rows);
+        let e = load_nifti(&write(&dir, "short.nii", &short))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("short.nii") && e.contains("552"), "{e}");
+        std::fs::remove_dir_all(dir).ok();
+    }
 }
