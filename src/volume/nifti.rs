@@ -990,4 +990,31 @@ mod tests {
         assert!(e.contains("short.nii") && e.contains("552"), "{e}");
         std::fs::remove_dir_all(dir).ok();
     }
+
+    #[test]
+    fn a_nifti_pair_reads_its_data_from_the_img_beside_it() {
+        let dir = scratch("nifti-pair");
+        let mut header = header_bytes([2, 1, 2], 4, 16);
+        header[344..348].copy_from_slice(b"ni1\0");
+        put_f32(&mut header, 108, &[0.0]);
+        put_f32(&mut header, 80, &[0.5, 0.25, 3.0]);
+        write(&dir, "pair.hdr", &header[..348]);
+        let data: Vec<u8> = [1i16, -2, 3, 400]
+            .iter()
+            .flat_map(|v| v.to_le_bytes())
+            .collect();
+        write(&dir, "pair.img", &data);
+        let loaded = crate::volume::detect::load_volume_with_info(&dir.join("pair.hdr")).unwrap();
+        assert_eq!(loaded.format, VolumeFormat::Nifti);
+        assert_eq!(loaded.volume.values, [1.0, -2.0, 3.0, 400.0]);
+        assert_eq!(loaded.volume.spacing, [0.5, 0.25, 3.0]);
+        // Short data, and a missing .img, are errors naming the file.
+        write(&dir, "pair.img", &data[..6]);
+        let e = load_nifti(&dir.join("pair.hdr")).unwrap_err().to_string();
+        assert!(e.contains("pair.img") && e.contains("8 bytes"), "{e}");
+        std::fs::remove_file(dir.join("pair.img")).unwrap();
+        let e = load_nifti(&dir.join("pair.hdr")).unwrap_err().to_string();
+        assert!(e.contains("pair.img") && e.contains("missing"), "{e}");
+        std::fs::remove_dir_all(dir).ok();
+    }
 }
