@@ -63,42 +63,8 @@ struct InfoArgs {
     /// Volume files (or DICOM series folders).
     #[arg(required = true)]
     files: Vec<PathBuf>,
-    /// DICOM: the series of a folder holding several, by its number or UID.
-    #[arg(long)]
-    series: Option<String>,
-    /// 4-D NIfTI: the 3-D frame described, from 0.
-    #[arg(long)]
-    frame: Option<u32>,
-    /// NIfTI: the transform that places the grid: sform (default, as nibabel), qform, or itk
-    /// (ITK's and 3D Slicer's rule).
-    #[arg(long, value_parser = ["sform", "qform", "itk"])]
-    nifti_transform: Option<String>,
-    /// VTK, .dat, or NRRD without an anatomical space: the frame of the file's coordinates,
-    /// RAS (default) or LPS.
-    #[arg(long, value_parser = ["RAS", "LPS"])]
-    coordinate_frame: Option<String>,
-}
-
-impl InfoArgs {
-    /// The loading choices the flags make.
-    fn options(&self) -> Result<splatscene::volume::detect::LoadOptions> {
-        fn parse<T: std::str::FromStr<Err = String>>(value: &Option<String>) -> Result<Option<T>> {
-            value
-                .as_deref()
-                .map(str::parse)
-                .transpose()
-                .map_err(anyhow::Error::msg)
-        }
-        Ok(splatscene::volume::detect::LoadOptions {
-            series: self
-                .series
-                .clone()
-                .map(splatscene::volume::detect::SeriesChoice),
-            frame: self.frame,
-            nifti_transform: parse(&self.nifti_transform)?,
-            coordinate_frame: parse(&self.coordinate_frame)?,
-        })
-    }
+    #[command(flatten)]
+    choices: cli::input::VolumeChoices,
 }
 
 #[derive(clap::Args)]
@@ -204,7 +170,7 @@ fn quiet_device_select() {
 }
 
 fn run_info(args: InfoArgs) -> Result<()> {
-    let options = args.options()?;
+    let options = args.choices.options()?;
     let mut infos = Vec::with_capacity(args.files.len());
     for file in &args.files {
         infos.push(info_of(file, &options)?);

@@ -20,6 +20,51 @@ use splatscene::volume::detect::detect_format;
 
 use crate::{parse_f32x2, parse_f64x2, parse_f64x3, parse_finite_f32, parse_size, parse_u32x3};
 
+/// How a volume file is read where its format leaves a choice: the DICOM series, the 4-D
+/// NIfTI frame, the NIfTI transform, the frame of a format that states none. `render`,
+/// `view`, `info` and the others that read a volume take them alike.
+#[derive(clap::Args, Clone, Default)]
+pub struct VolumeChoices {
+    /// DICOM: the series to load from a folder holding several, by its number or its UID
+    /// (without it, such a folder lists its series).
+    #[arg(long)]
+    pub series: Option<String>,
+    /// 4-D NIfTI: the 3-D frame, from 0 (default 0, said on stderr).
+    #[arg(long)]
+    pub frame: Option<u32>,
+    /// NIfTI: the transform that places the grid when both are set: sform (default, as
+    /// nibabel), qform, or itk (ITK's and 3D Slicer's rule: the sform only when its code is
+    /// 1, scanner, else the qform).
+    #[arg(long, value_parser = ["sform", "qform", "itk"])]
+    pub nifti_transform: Option<String>,
+    /// VTK, .dat, or NRRD without an anatomical space: the patient frame of the file's
+    /// coordinates, RAS (default) or LPS (as ITK-based tools write them).
+    #[arg(long, value_parser = ["RAS", "LPS"])]
+    pub coordinate_frame: Option<String>,
+}
+
+impl VolumeChoices {
+    /// The loading options these flags make.
+    pub fn options(&self) -> Result<splatscene::volume::detect::LoadOptions> {
+        fn parse<T: std::str::FromStr<Err = String>>(value: &Option<String>) -> Result<Option<T>> {
+            value
+                .as_deref()
+                .map(str::parse)
+                .transpose()
+                .map_err(anyhow::Error::msg)
+        }
+        Ok(splatscene::volume::detect::LoadOptions {
+            series: self
+                .series
+                .clone()
+                .map(splatscene::volume::detect::SeriesChoice),
+            frame: self.frame,
+            nifti_transform: parse(&self.nifti_transform)?,
+            coordinate_frame: parse(&self.coordinate_frame)?,
+        })
+    }
+}
+
 /// The input: a scene file or a volume, meshes added to it, and its transfer function.
 #[derive(clap::Args)]
 pub struct InputArgs {
@@ -53,22 +98,8 @@ pub struct InputArgs {
     /// Move the transfer function along the value axis (in the volume's units, HU for CT).
     #[arg(long, value_parser = parse_finite_f32, allow_hyphen_values = true)]
     shift: Option<f32>,
-    /// DICOM: the series to load from a folder holding several, by its number or its UID
-    /// (without it, such a folder lists its series).
-    #[arg(long)]
-    series: Option<String>,
-    /// 4-D NIfTI: the 3-D frame to draw, from 0 (default 0, said on stderr).
-    #[arg(long)]
-    frame: Option<u32>,
-    /// NIfTI: the transform that places the grid when both are set: sform (default, as
-    /// nibabel), qform, or itk (ITK's and 3D Slicer's rule: the sform only when its code is
-    /// 1, scanner, else the qform).
-    #[arg(long, value_parser = ["sform", "qform", "itk"])]
-    nifti_transform: Option<String>,
-    /// VTK, .dat, or NRRD without an anatomical space: the patient frame of the file's
-    /// coordinates, RAS (default) or LPS (as ITK-based tools write them).
-    #[arg(long, value_parser = ["RAS", "LPS"])]
-    coordinate_frame: Option<String>,
+    #[command(flatten)]
+    choices: VolumeChoices,
     /// Raw volume: size NX,NY,NZ.
     #[arg(long, value_parser = parse_u32x3)]
     dims: Option<[u32; 3]>,
@@ -139,10 +170,13 @@ impl InputArgs {
             ("--spacing", self.spacing.is_some()),
             ("--origin", self.origin.is_some()),
             ("--orientation", self.orientation.is_some()),
-            ("--series", self.series.is_some()),
-            ("--frame", self.frame.is_some()),
-            ("--nifti-transform", self.nifti_transform.is_some()),
-            ("--coordinate-frame", self.coordinate_frame.is_some()),
+            ("--series", self.choices.series.is_some()),
+            ("--frame", self.choices.frame.is_some()),
+            ("--nifti-transform", self.choices.nifti_transform.is_some()),
+            (
+                "--coordinate-frame",
+                self.choices.coordinate_frame.is_some(),
+            ),
         ];
         let (mut file, path, base) = match input {
             Input::Builtin | Input::Scene(_) => {
@@ -188,10 +222,10 @@ impl InputArgs {
             spacing: self.spacing,
             origin: self.origin,
             orientation: self.orientation.clone(),
-            series: self.series.clone(),
-            frame: self.frame,
-            nifti_transform: self.nifti_transform.clone(),
-            coordinate_frame: self.coordinate_frame.clone(),
+            series: self.choices.series.clone(),
+            frame: self.choices.frame,
+            nifti_transform: self.choices.nifti_transform.clone(),
+            coordinate_frame: self.choices.coordinate_frame.clone(),
             ..VolumeSpec::default()
         };
         Ok(SceneFile {
