@@ -16,7 +16,10 @@ pub enum GridError {
     #[error("grid {0:?} has an axis without voxels")]
     EmptyAxis([u32; 3]),
     /// The grid has more voxels than `u32` ids address.
-    #[error("grid {dims:?} has {count} voxels; u32 voxel ids address at most 4294967296")]
+    #[error(
+        "grid {}x{}x{} has {} voxels; u32 voxel ids address at most 4294967296",
+        dims[0], dims[1], dims[2], voxel_words(*count)
+    )]
     TooLarge {
         /// The grid size.
         dims: [u32; 3],
@@ -80,12 +83,24 @@ pub fn other_axes(axis: usize) -> (usize, usize) {
     }
 }
 
+/// A voxel count for a message; [`u64::MAX`] stands for one past what `u64` holds.
+fn voxel_words(count: u64) -> String {
+    match count {
+        u64::MAX => "more than 2^64".into(),
+        n => n.to_string(),
+    }
+}
+
 /// Checks a grid size and returns its voxel count.
 pub fn voxel_count(dims: [u32; 3]) -> Result<u64, GridError> {
     if dims.contains(&0) {
         return Err(GridError::EmptyAxis(dims));
     }
-    let count = dims.iter().map(|&n| u64::from(n)).product::<u64>();
+    // Checked: three u32 sizes can multiply past u64 (2^31 x 2^31 x 4 wraps to 0).
+    let count = dims
+        .iter()
+        .try_fold(1u64, |acc, &n| acc.checked_mul(u64::from(n)))
+        .unwrap_or(u64::MAX);
     if count > 1 << 32 {
         return Err(GridError::TooLarge { dims, count });
     }

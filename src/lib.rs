@@ -32,6 +32,7 @@ pub mod camera;
 pub mod classify;
 pub mod composite;
 pub mod grid;
+pub mod input;
 pub mod mesh;
 pub mod order;
 pub mod pick;

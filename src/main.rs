@@ -31,6 +31,11 @@ mod cli;
 struct Cli {
     #[command(subcommand)]
     command: Command,
+    /// Let files named inside mesh files (glTF buffers, OBJ material libraries) lie outside
+    /// the mesh file's folder; refused by default, so that a mesh from elsewhere cannot read
+    /// any file of this machine.
+    #[arg(long, global = true)]
+    allow_outside_paths: bool,
 }
 
 #[derive(Subcommand)]
@@ -147,7 +152,9 @@ struct OrderingsArgs {
 
 fn main() -> Result<()> {
     quiet_device_select();
-    match Cli::parse().command {
+    let cli = Cli::parse();
+    splatscene::mesh::allow_outside_paths(cli.allow_outside_paths);
+    match cli.command {
         Command::Order(args) => run_order(args),
         Command::Orderings(args) => run_orderings(args),
         Command::Render(args) => cli::scenes::run_render(args),
@@ -708,6 +715,14 @@ pub(crate) fn parse_size(s: &str) -> Result<(u32, u32), String> {
     let (w, h) = (parse(w)?, parse(h)?);
     if w == 0 || h == 0 {
         return Err("the image needs at least one pixel each way".into());
+    }
+    // The renderer's textures and the compositor's buffers bound an image.
+    const MAX_SIDE: u32 = 16384;
+    const MAX_PIXELS: u64 = 1 << 26;
+    if w > MAX_SIDE || h > MAX_SIDE || u64::from(w) * u64::from(h) > MAX_PIXELS {
+        return Err(format!(
+            "{w}x{h}: an image is at most {MAX_SIDE} pixels a side and {MAX_PIXELS} in all"
+        ));
     }
     Ok((w, h))
 }

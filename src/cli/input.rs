@@ -369,7 +369,7 @@ pub struct ViewArgs {
     #[arg(long, value_parser = parse_finite_f32)]
     fov: Option<f32>,
     /// Orthographic projection showing this height in world millimetres.
-    #[arg(long, value_parser = parse_finite_f32)]
+    #[arg(long, value_parser = parse_finite_f32, allow_hyphen_values = true)]
     orthographic: Option<f32>,
 }
 

@@ -576,18 +576,18 @@ impl<'a> Buffers<'a> {
                 format!("{what}: URI {uri:?} names a file; in-memory glTF may only use data URIs");
             return Err(self.origin.unsupported(detail));
         };
-        let scheme = uri.split_once(':').is_some_and(|(s, _)| !s.contains('/'));
-        if scheme || uri.starts_with(['/', '\\']) {
-            let detail = format!("{what}: URI {uri:?} is neither a data URI nor a relative file");
-            return Err(self.origin.unsupported(detail));
-        }
+        // Decoded before any check, so that an encoded `/` or `..` is seen for what it is.
         let relative = percent_decode(uri).ok_or_else(|| {
             self.origin.malformed(
                 "glTF",
                 format!("{what}: bad percent-encoding in URI {uri:?}"),
             )
         })?;
-        super::read_file(&dir.join(relative))
+        let path = super::resolve_beside(dir, &relative).map_err(|why| {
+            self.origin
+                .unsupported(format!("{what}: URI {uri:?} decodes to {why}"))
+        })?;
+        super::read_file(&path)
     }
 }
 

@@ -216,6 +216,55 @@ fn sniff(bytes: &[u8], name: &Path) -> Option<Format> {
     }
 }
 
+/// Whether files named inside a mesh file (glTF buffers and images, OBJ material libraries)
+/// may lie outside that file's folder; off by default (see [`resolve_beside`]).
+static OUTSIDE_PATHS: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
+/// Lets files named inside mesh files lie outside their folders (`--allow-outside-paths`).
+pub fn allow_outside_paths(allow: bool) {
+    OUTSIDE_PATHS.store(allow, std::sync::atomic::Ordering::Relaxed);
+}
+
+/// The file a path written inside a mesh file names, relative to that file's folder `dir`.
+/// The policy: an absolute path, a drive or a URI scheme is refused; `.` and `..` are
+/// followed, and a path that then leaves `dir` is refused unless [`allow_outside_paths`] said
+/// otherwise. A percent-encoded URI must be decoded first, so that `%2F` and `%2E%2E` are
+/// seen for what they are. Links inside the folder are followed by the reading itself.
+pub(crate) fn resolve_beside(dir: &Path, relative: &str) -> Result<std::path::PathBuf, String> {
+    use std::path::Component;
+    let has_scheme = relative
+        .split_once(':')
+        .is_some_and(|(s, _)| !s.is_empty() && !s.contains(['/', '\\']));
+    if has_scheme || relative.starts_with(['/', '\\']) || Path::new(relative).is_absolute() {
+        return Err(format!(
+            "{relative:?} is not a path relative to the file's folder"
+        ));
+    }
+    let mut inside = Vec::new();
+    let mut escapes = false;
+    for part in Path::new(&relative.replace('\\', "/")).components() {
+        match part {
+            Component::Normal(name) => inside.push(name.to_owned()),
+            Component::CurDir => {}
+            Component::ParentDir => escapes |= inside.pop().is_none(),
+            Component::RootDir | Component::Prefix(_) => {
+                return Err(format!("{relative:?} is not a relative path"));
+            }
+        }
+    }
+    if escapes && !OUTSIDE_PATHS.load(std::sync::atomic::Ordering::Relaxed) {
+        return Err(format!(
+            "{relative:?} leads outside the file's folder (allowed with --allow-outside-paths)"
+        ));
+    }
+    if escapes {
+        return Ok(dir.join(relative));
+    }
+    Ok(inside
+        .iter()
+        .fold(dir.to_path_buf(), |path, name| path.join(name)))
+}
+
 fn check_size(len: u64, origin: &Origin) -> Result<(), MeshError> {
     if len > MAX_FILE_BYTES {
         return Err(origin.too_large("the file", len, MAX_FILE_BYTES));
@@ -229,7 +278,7 @@ fn read_file(path: &Path) -> Result<Vec<u8>, MeshError> {
         file: path.to_path_buf(),
         source,
     };
-    let file = std::fs::File::open(path).map_err(io)?;
+    let file = crate::input::open_regular(path).map_err(io)?;
     let len = file.metadata().map_err(io)?.len();
     let origin = Origin::file(path);
     check_size(len, &origin)?;

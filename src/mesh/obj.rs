@@ -75,9 +75,8 @@ fn load_mtl(lib: &Path, origin: &Origin, warnings: &RefCell<Vec<String>>) -> tob
     };
     let mut merged = None;
     for name in names {
-        let path = dir.join(name);
-        let parsed = super::read_file(&path)
-            .map_err(|e| e.to_string())
+        let parsed = super::resolve_beside(dir, name)
+            .and_then(|path| super::read_file(&path).map_err(|e| e.to_string()))
             .and_then(|bytes| tobj::load_mtl_buf(&mut bytes.as_slice()).map_err(|e| e.to_string()));
         match (parsed, &mut merged) {
             (Ok(lib), None) => merged = Some(lib),

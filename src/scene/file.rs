@@ -40,6 +40,8 @@
 //!
 //! `examples/scenes/` holds complete scene files.
 
+mod validate;
+
 use std::ffi::OsStr;
 use std::path::{Component, Path, PathBuf};
 use std::sync::Arc;
@@ -412,6 +414,8 @@ impl SceneFile {
             path: path.into(),
             source,
         };
+        // At most 1 MiB: scene files are a few kilobytes of TOML. The length comes from the
+        // file's metadata, which a named pipe or a device cannot hold up.
         let len = std::fs::metadata(path).map_err(io)?.len();
         if len > 1 << 20 {
             return Err(SceneFileError::Invalid {
@@ -419,16 +423,26 @@ impl SceneFile {
                 message: format!("{len} bytes is too large for a scene file (1 MiB at most)"),
             });
         }
-        let text = std::fs::read_to_string(path).map_err(io)?;
+        let text = crate::input::read_regular_text(path, 1 << 20).map_err(io)?;
         Self::parse(&text, path)
     }
 
     /// Parses scene TOML; `path` names it in errors.
     pub fn parse(text: &str, path: &Path) -> Result<Self, SceneFileError> {
-        toml::from_str(text).map_err(|e| SceneFileError::Parse {
+        let error = |message: String| SceneFileError::Parse {
             path: path.into(),
-            message: e.to_string(),
-        })
+            message,
+        };
+        let file: Self = toml::from_str(text).map_err(|e| error(e.to_string()))?;
+        // serde fills a fixed-size array from the first elements of a longer one and drops the
+        // rest without a word (`size = [160, 120, 999]`): the lengths are compared with what
+        // the file reads as.
+        let written: toml::Value = toml::from_str(text).map_err(|e| error(e.to_string()))?;
+        let read = toml::Value::try_from(&file).map_err(|e| error(e.to_string()))?;
+        if let Some(message) = validate::extra_elements(&written, &read, "") {
+            return Err(error(message));
+        }
+        Ok(file)
     }
 
     /// Loads everything the file names; relative paths are taken from `base`.
@@ -438,12 +452,8 @@ impl SceneFile {
             message,
         };
         // The cheap checks come first, so that a typo is reported before volumes are read.
+        validate::check(self).map_err(&invalid)?;
         let size = self.output.size.map(|[w, h]| (w, h));
-        if size.is_some_and(|(w, h)| w == 0 || h == 0 || w > 16384 || h > 16384) {
-            return Err(invalid(format!(
-                "output size {size:?} is not between 1 and 16384"
-            )));
-        }
         let ordering = match &self.output.ordering {
             Some(name) => Some(
                 name.parse::<Ordering>()
@@ -1207,7 +1217,7 @@ fn looks_like_scene_file(path: &Path) -> bool {
         return true;
     }
     let mut head = Vec::new();
-    let read = std::fs::File::open(path).and_then(|f| {
+    let read = crate::input::open_regular(path).and_then(|f| {
         use std::io::Read;
         f.take(4096).read_to_end(&mut head)
     });
@@ -1270,7 +1280,7 @@ fn transform(spec: &TransformSpec) -> Result<DMat4, String> {
         }
     };
     if !m.is_finite() || !m.determinant().is_normal() {
-        return Err(format!("transform {spec:?} is not finite and invertible"));
+        return Err("transform: its matrix is not finite and invertible".into());
     }
     Ok(m)
 }

@@ -19,7 +19,6 @@
 //! What the loaders share (the loaded volume, errors, placement, bounded decompression, header
 //! lines) lives in [`super::loader`]; this module only sniffs and dispatches.
 
-use std::fs::File;
 use std::io::{BufReader, Read};
 use std::path::Path;
 
@@ -163,7 +162,7 @@ pub fn detect_format(path: &Path) -> Result<VolumeFormat, VolumeError> {
 /// start is unreadable, so that the NIfTI loader can report what is wrong with it.
 fn detect_gzip(path: &Path) -> Result<VolumeFormat, VolumeError> {
     let mut head = Vec::new();
-    let file = File::open(path).map_err(io_error(path))?;
+    let file = crate::input::open_regular(path).map_err(io_error(path))?;
     // Errors are ignored: a damaged stream is reported by the loader, not here.
     let _ = MultiGzDecoder::new(BufReader::new(file))
         .take(348)

@@ -60,7 +60,7 @@
 //! and transfer syntaxes this build has no decoder for (JPEG XL, HTJ2K).
 
 use std::collections::{BTreeMap, HashSet};
-use std::fs::{self, File};
+use std::fs;
 use std::io::{BufReader, Read};
 use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::path::{Path, PathBuf};
@@ -630,7 +630,7 @@ fn dicom_files(dir: &Path) -> Result<Vec<PathBuf>, VolumeError> {
 /// Reads only the first bytes, so large non-DICOM files in the folder cost nothing.
 fn looks_like_dicom(path: &Path) -> Result<bool, VolumeError> {
     let mut start = Vec::with_capacity(SNIFF_LEN);
-    File::open(path)
+    crate::input::open_regular(path)
         .and_then(|f| f.take(SNIFF_LEN as u64).read_to_end(&mut start))
         .map_err(io_error(path))?;
     Ok(is_dicom(&start))
@@ -666,7 +666,7 @@ fn open(path: &Path) -> Result<DefaultDicomObject, String> {
         Err(e) => describe("cannot parse DICOM", &e),
     };
     let mut head = Vec::with_capacity(SNIFF_LEN);
-    File::open(path)
+    crate::input::open_regular(path)
         .and_then(|f| f.take(SNIFF_LEN as u64).read_to_end(&mut head))
         .map_err(|e| format!("cannot read: {e}"))?;
     let Some(ts) = bare_data_set(&head) else {
@@ -675,7 +675,7 @@ fn open(path: &Path) -> Result<DefaultDicomObject, String> {
     let syntax = TransferSyntaxRegistry
         .get(ts)
         .ok_or_else(|| format!("no transfer syntax {ts} in this build"))?;
-    let file = File::open(path).map_err(|e| format!("cannot read: {e}"))?;
+    let file = crate::input::open_regular(path).map_err(|e| format!("cannot read: {e}"))?;
     let data = InMemDicomObject::read_dataset_with_ts(BufReader::new(file), syntax)
         .map_err(|e| describe("cannot parse a DICOM data set without meta group", &e))?;
     // The SOP identifiers are the data set's own when it has them (with_meta takes those).

@@ -219,7 +219,7 @@ pub(super) fn unsupported(path: &Path, feature: impl Into<String>) -> VolumeErro
 /// Up to `max` bytes from the start of the file.
 pub(super) fn read_head(path: &Path, max: u64) -> Result<Vec<u8>, VolumeError> {
     let mut head = Vec::new();
-    File::open(path)
+    crate::input::open_regular(path)
         .and_then(|f| f.take(max).read_to_end(&mut head))
         .map_err(io_error(path))?;
     Ok(head)
@@ -488,7 +488,7 @@ pub(super) struct HeaderLines {
 impl HeaderLines {
     /// Starts reading `path` at its first line.
     pub fn open(path: &Path) -> Result<Self, VolumeError> {
-        let file = File::open(path).map_err(io_error(path))?;
+        let file = crate::input::open_regular(path).map_err(io_error(path))?;
         Ok(Self {
             path: path.into(),
             reader: BufReader::new(file.take(HEADER_CAP)),

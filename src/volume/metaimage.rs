@@ -21,7 +21,6 @@
 //! 64-bit integers, lists of 3-D files, compressed slice files, and ASCII data
 //! (`BinaryData = False`).
 
-use std::fs::File;
 use std::io::{BufReader, Seek, SeekFrom};
 use std::path::{Path, PathBuf};
 
@@ -106,7 +105,7 @@ pub fn load_metaimage(path: &Path) -> Result<LoadedVolume, VolumeError> {
         }
     };
     let values = if header.compressed {
-        let mut f = File::open(&file).map_err(io_error(&file))?;
+        let mut f = crate::input::open_regular(&file).map_err(io_error(&file))?;
         f.seek(SeekFrom::Start(start.unwrap_or(0)))
             .map_err(io_error(&file))?;
         let mut reader = ZlibDecoder::new(BufReader::new(f));
@@ -207,6 +206,16 @@ impl Header {
                 )
             })?;
             let key = key.trim().to_owned();
+            if let Some((_, _, first)) = keys.iter().find(|(k, _, _)| k.eq_ignore_ascii_case(&key))
+            {
+                return Err(header_error(
+                    path,
+                    format!(
+                        "line {}: {key} given twice (first on line {first})",
+                        number + 1
+                    ),
+                ));
+            }
             let last = key == "ElementDataFile";
             keys.push((key, value.trim().to_owned(), number + 1));
             if last {

@@ -38,7 +38,6 @@
 //! frames (`dim[4]`), complex, RGB, 64-bit integer and 128-bit types, and compressed pairs
 //! (`.hdr.gz`/`.img.gz`).
 
-use std::fs::File;
 use std::io::{BufReader, Read};
 use std::path::{Path, PathBuf};
 
@@ -107,7 +106,7 @@ pub fn load_nifti_with(
     transform: NiftiTransform,
 ) -> Result<LoadedVolume, VolumeError> {
     let gz = read_head(path, 2)?.starts_with(&GZIP_MAGIC);
-    let file = File::open(path).map_err(io_error(path))?;
+    let file = crate::input::open_regular(path).map_err(io_error(path))?;
     let mut reader: Box<dyn Read> = match gz {
         true => Box::new(MultiGzDecoder::new(BufReader::new(file))),
         false => Box::new(BufReader::new(file)),
@@ -127,7 +126,7 @@ pub fn load_nifti_with(
 
 /// Loads an Analyze 7.5 volume from its `.hdr` (the data in the `.img` beside it).
 pub fn load_analyze(path: &Path) -> Result<LoadedVolume, VolumeError> {
-    let file = File::open(path).map_err(io_error(path))?;
+    let file = crate::input::open_regular(path).map_err(io_error(path))?;
     let mut reader: Box<dyn Read> = Box::new(BufReader::new(file));
     let header = Header::read(path, &mut reader, true)?;
     let placement = header.placement(path, NiftiTransform::Sform)?;
@@ -198,7 +197,7 @@ fn load_with_header(
         }
         load_raw(&data, &layout.raw_spec(path)?)?
     };
-    rescale(&mut volume.values, header.scl_slope, header.scl_inter);
+    rescale(path, &mut volume.values, header.scl_slope, header.scl_inter)?;
     Ok(LoadedVolume {
         volume: placement.apply(volume),
         format,
@@ -275,11 +274,16 @@ impl Header {
     /// without NIfTI's magic is Analyze 7.5 where `analyze` allows it, else an error.
     fn read(path: &Path, reader: &mut dyn Read, analyze: bool) -> Result<Self, VolumeError> {
         let mut bytes = vec![0u8; NIFTI1_BYTES];
-        reader.read_exact(&mut bytes).map_err(|e| {
-            header_error(
-                path,
-                format!("cannot read a {NIFTI1_BYTES}-byte NIfTI-1 or Analyze header: {e}"),
-            )
+        reader
+            .read_exact(&mut bytes[..4])
+            .map_err(|e| header_error(path, format!("cannot read the header size: {e}")))?;
+        let nifti2 = order_from_size(&bytes, NIFTI2_BYTES as i32).is_some();
+        reader.read_exact(&mut bytes[4..]).map_err(|e| {
+            let what = match nifti2 {
+                true => format!("{NIFTI2_BYTES}-byte NIfTI-2"),
+                false => format!("{NIFTI1_BYTES}-byte NIfTI-1 or Analyze"),
+            };
+            header_error(path, format!("cannot read a {what} header: {e}"))
         })?;
         if let Some(order) = order_from_size(&bytes, NIFTI2_BYTES as i32) {
             bytes.resize(NIFTI2_BYTES, 0);
@@ -396,7 +400,7 @@ impl Header {
             Placement::from_columns(path, [column(0), column(1), column(2)], column(3))
         };
         let qform = || {
-            let rotation = DMat3::from_quat(qform_quaternion(self.quatern));
+            let rotation = DMat3::from_quat(qform_quaternion(path, self.quatern)?);
             let qfac = if self.pixdim[0] < 0.0 { -1.0 } else { 1.0 };
             let steps = [pixdim[0], pixdim[1], pixdim[2] * qfac];
             let columns = [0, 1, 2].map(|i| rotation.col(i) * steps[i]);
@@ -607,15 +611,31 @@ fn scalar_type(path: &Path, datatype: i16) -> Result<ScalarType, VolumeError> {
     })
 }
 
-/// Applies `scl_slope` and `scl_inter`; a slope of 0 (or not finite) means none.
-fn rescale(values: &mut [f32], slope: f64, inter: f64) {
-    let inter = if inter.is_finite() { inter } else { 0.0 };
-    if slope == 0.0 || !slope.is_finite() || (slope == 1.0 && inter == 0.0) {
-        return;
+/// Applies `scl_slope` and `scl_inter`; a slope of 0 or NaN means none (as the standard and
+/// nibabel say). An infinite slope or intercept, or a rescale that takes a value past `f32`,
+/// means nothing and is a header error.
+fn rescale(path: &Path, values: &mut [f32], slope: f64, inter: f64) -> Result<(), VolumeError> {
+    if slope == 0.0 || slope.is_nan() {
+        return Ok(());
     }
-    for v in values {
+    let inter = if inter.is_nan() { 0.0 } else { inter };
+    if !slope.is_finite() || !inter.is_finite() {
+        let message = format!("scl_slope {slope} and scl_inter {inter} are not finite");
+        return Err(header_error(path, message));
+    }
+    if slope == 1.0 && inter == 0.0 {
+        return Ok(());
+    }
+    for v in values.iter_mut() {
         *v = (f64::from(*v) * slope + inter) as f32;
     }
+    if let Some(v) = values.iter().find(|v| v.is_infinite()) {
+        let message = format!(
+            "scl_slope {slope} and scl_inter {inter} take a value to {v}, past 32-bit floats"
+        );
+        return Err(header_error(path, message));
+    }
+    Ok(())
 }
 
 /// Millimetres per unit of the header's spatial unit (`xyzt_units & 7`): metres 1000,
@@ -636,16 +656,20 @@ fn millimetres_per_unit(path: &Path, xyzt_units: i32) -> Result<f64, VolumeError
 
 /// The qform rotation from `quatern_b/c/d`: `a` is implied by unit length; rounding that
 /// pushes `b² + c² + d²` past 1 leaves `a = 0` and the rest normalised, as the NIfTI
-/// reference code does.
-fn qform_quaternion(quatern: [f64; 6]) -> DQuat {
+/// reference code does. Components that are not finite are a header error.
+fn qform_quaternion(path: &Path, quatern: [f64; 6]) -> Result<DQuat, VolumeError> {
     let [b, c, d, ..] = quatern;
+    if ![b, c, d].iter().all(|x| x.is_finite()) {
+        let message = format!("quatern_b, c, d [{b}, {c}, {d}] are not finite");
+        return Err(header_error(path, message));
+    }
     let a = (1.0 - (b * b + c * c + d * d)).max(0.0).sqrt();
     let q = DQuat::from_xyzw(b, c, d, a);
-    if q.is_finite() && q.length() > 0.0 {
+    Ok(if q.length() > 0.0 {
         q.normalize()
     } else {
         DQuat::IDENTITY
-    }
+    })
 }
 
 #[cfg(test)]

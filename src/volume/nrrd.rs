@@ -26,7 +26,6 @@
 //! files' lengths (through [`load_raw`] and [`load_raw_slices`]), gzip data by inflating at
 //! most the declared bytes, with output memory growing only as the data actually inflate.
 
-use std::fs::File;
 use std::io::{BufRead, BufReader, Read, Seek, SeekFrom};
 use std::path::{Path, PathBuf};
 
@@ -103,6 +102,8 @@ struct Header {
 struct Field {
     /// The field name, lower case and without spaces (`data file` and `datafile` alike).
     key: String,
+    /// The field name as written, for messages.
+    name: String,
     value: String,
     line: usize,
 }
@@ -166,6 +167,7 @@ impl Fields {
         }
         self.fields.push(Field {
             key,
+            name: line[..at].trim().to_owned(),
             value: line.get(at + 2..).unwrap_or_default().trim().to_owned(),
             line: number,
         });
@@ -198,7 +200,10 @@ impl Fields {
         parsed.and_then(|v| v.try_into().ok()).ok_or_else(|| {
             self.error(
                 field.line,
-                format!("expected {N} numbers, got {:?}", field.value),
+                format!(
+                    "{}: expected {N} numbers, got {:?}",
+                    field.name, field.value
+                ),
             )
         })
     }
@@ -279,7 +284,7 @@ impl Header {
         if self.line_skip == 0 {
             return Ok(start);
         }
-        let mut f = File::open(file).map_err(io_error(file))?;
+        let mut f = crate::input::open_regular(file).map_err(io_error(file))?;
         let len = f.metadata().map_err(io_error(file))?.len();
         f.seek(SeekFrom::Start(start)).map_err(io_error(file))?;
         let mut reader = BufReader::new(f.take(len.saturating_sub(start)));
@@ -604,7 +609,10 @@ fn vectors(fields: &Fields, field: &Field) -> Result<Vec<Option<DVec3>>, VolumeE
     let bad = || {
         fields.error(
             field.line,
-            format!("{:?} is not a list of (x,y,z) vectors", field.value),
+            format!(
+                "{}: {:?} is not a list of (x,y,z) vectors",
+                field.name, field.value
+            ),
         )
     };
     let mut out = Vec::new();
@@ -717,7 +725,7 @@ fn read_compressed(path: &Path, header: &Header) -> Result<CpuVolume, VolumeErro
     let skip = header.byte_skip.unwrap_or(0);
     let mut values = Vec::new();
     for (file, start) in &sources {
-        let mut f = File::open(file).map_err(io_error(file))?;
+        let mut f = crate::input::open_regular(file).map_err(io_error(file))?;
         f.seek(SeekFrom::Start(*start)).map_err(io_error(file))?;
         let mut reader: Box<dyn Read> = match header.encoding {
             Encoding::Bzip2 => Box::new(MultiBzDecoder::new(BufReader::new(f))),
@@ -744,7 +752,7 @@ fn read_ascii(path: &Path, header: &Header) -> Result<CpuVolume, VolumeError> {
     let count = total / sources.len().max(1);
     let mut values = Vec::with_capacity(total.min(1 << 24));
     for (file, start) in &sources {
-        let mut f = File::open(file).map_err(io_error(file))?;
+        let mut f = crate::input::open_regular(file).map_err(io_error(file))?;
         let len = f.metadata().map_err(io_error(file))?.len();
         f.seek(SeekFrom::Start(
             start.saturating_add(header.byte_skip.unwrap_or(0)),

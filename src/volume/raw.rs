@@ -7,7 +7,6 @@
 //! they are, without rescaling (32-bit integers and `f64` round to the nearest `f32`).
 
 use std::fmt;
-use std::fs::File;
 use std::io::{Read, Seek, SeekFrom};
 use std::path::{Path, PathBuf};
 use std::str::FromStr;
@@ -542,7 +541,7 @@ fn read_values(
         path: path.into(),
         source,
     };
-    let mut file = File::open(path).map_err(io)?;
+    let mut file = crate::input::open_regular(path).map_err(io)?;
     file.seek(SeekFrom::Start(spec.header_bytes)).map_err(io)?;
     let size = spec.scalar.size();
     let mut buffer = vec![0u8; CHUNK_BYTES];

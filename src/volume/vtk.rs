@@ -202,7 +202,7 @@ fn legacy_type(name: &str) -> Option<Option<ScalarType>> {
 
 /// Loads a VTK XML `ImageData` (`.vti`) file.
 pub fn load_vti(path: &Path) -> Result<LoadedVolume, VolumeError> {
-    let bytes = std::fs::read(path).map_err(io_error(path))?;
+    let bytes = crate::input::read_regular(path, u64::MAX).map_err(io_error(path))?;
     let xml = Xml::split(path, &bytes)?;
     let encoding = Encoding::from_file_tag(path, &xml.tag("VTKFile")?)?;
     let grid = Grid::read(path, &xml)?;

@@ -303,7 +303,7 @@ pub fn read(path: &Path) -> anyhow::Result<Manifest> {
             path.display()
         );
     }
-    let text = std::fs::read_to_string(path)
+    let text = splatscene::input::read_regular_text(path, 4 << 20)
         .with_context(|| format!("{}: cannot read", path.display()))?;
     parse(&text).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))
 }

@@ -141,7 +141,7 @@ pub fn run_batch(args: BatchArgs) -> Result<()> {
     } else {
         index::finished_jobs(out)?
     };
-    let manifest_bytes = std::fs::read(manifest_path)
+    let manifest_bytes = splatscene::input::read_regular(manifest_path, 4 << 20)
         .with_context(|| format!("{}: cannot read", manifest_path.display()))?;
     let ctx = match GpuContext::headless() {
         Ok(ctx) => Some(ctx),
