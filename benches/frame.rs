@@ -45,7 +45,13 @@ fn scene(volume: CpuVolume, tf: TransferFunction) -> Scene {
         .unwrap();
     let (lo, hi) = scene.bounds().unwrap();
     let at = DMat4::from_translation(0.5 * (lo + hi) + DVec3::new(0.0, 0.0, 0.2 * (hi.z - lo.z)));
-    add_model(&mut scene, "prosthesis", at, &prosthesis_model().unwrap());
+    add_model(
+        &mut scene,
+        "prosthesis",
+        at,
+        &prosthesis_model().unwrap(),
+        None,
+    );
     let bounds = scene.bounds().unwrap();
     scene.camera = Some(SceneCamera::fit(
         bounds,

@@ -150,6 +150,7 @@ fn bvh_equals_brute_force_on_the_shoulder_bones_and_the_prosthesis() {
         "prosthesis",
         DMat4::from_translation(DVec3::new(0.0, 0.0, -150.0)),
         &prosthesis_model().unwrap(),
+        None,
     );
     let hits = check_against_brute_force(&scene, 12_000, 7);
     assert!(hits > 3_000, "{hits} of 12000 rays hit");

@@ -475,8 +475,11 @@ impl SceneFile {
                 .map_err(|e| invalid(e.to_string()))?;
         }
         let mut meshes = Vec::with_capacity(self.meshes.len());
+        // Each mesh file is read once; nodes that name it again share its triangles.
+        let mut loaded_files = MeshFiles::default();
         for (i, spec) in self.meshes.iter().enumerate() {
-            let id = load_mesh_spec(&mut scene, spec, i, path, base, &data, &invalid)?;
+            let files = &mut loaded_files;
+            let id = load_mesh_spec(&mut scene, spec, i, (path, base, &data), files, &invalid)?;
             meshes.push((
                 scene
                     .node(id)
@@ -1004,25 +1007,76 @@ fn load_raw_volume(
     Ok(volume)
 }
 
+/// The mesh files a scene file's load has read, by resolved path: their parts, with triangles
+/// shared by every node drawn from them.
+#[derive(Default)]
+struct MeshFiles {
+    models: std::collections::HashMap<PathBuf, Arc<SharedModel>>,
+}
+
+/// A mesh file's parts, its triangles behind shared pointers.
+struct SharedModel {
+    parts: Vec<crate::mesh::MeshPart>,
+    meshes: Vec<Arc<crate::mesh::CpuMesh>>,
+}
+
+impl MeshFiles {
+    /// The model of the file at `key` (a resolved path, or the built-in prosthesis's name),
+    /// read by `load` the first time; its warnings are printed then.
+    fn get(
+        &mut self,
+        key: PathBuf,
+        load: impl FnOnce() -> Result<crate::mesh::Model, SceneFileError>,
+    ) -> Result<Arc<SharedModel>, SceneFileError> {
+        if let Some(model) = self.models.get(&key) {
+            return Ok(Arc::clone(model));
+        }
+        let mut model = load()?;
+        for warning in &model.warnings {
+            eprintln!("warning: {warning}");
+        }
+        let meshes = model
+            .parts
+            .iter_mut()
+            .map(|part| Arc::new(std::mem::take(&mut part.mesh)))
+            .collect();
+        let shared = Arc::new(SharedModel {
+            parts: model.parts,
+            meshes,
+        });
+        self.models.insert(key, Arc::clone(&shared));
+        Ok(shared)
+    }
+}
+
 fn load_mesh_spec(
     scene: &mut Scene,
     spec: &MeshSpec,
     index: usize,
-    scene_file: &Path,
-    base: &Path,
-    data: &DataRoot,
+    (scene_file, base, data): (&Path, &Path, &DataRoot),
+    files: &mut MeshFiles,
     invalid: &dyn Fn(String) -> SceneFileError,
 ) -> Result<NodeId, SceneFileError> {
-    let mut model = if spec.path == "builtin:prosthesis" {
-        prosthesis_model()?
+    let shared = if spec.path == "builtin:prosthesis" {
+        files.get(spec.path.clone().into(), || Ok(prosthesis_model()?))?
     } else {
-        load_mesh(&resolve_spec_path(
-            &spec.path, scene_file, base, data, invalid,
-        )?)?
+        let path = resolve_spec_path(&spec.path, scene_file, base, data, invalid)?;
+        let key = std::fs::canonicalize(&path).unwrap_or_else(|_| path.clone());
+        files.get(key, || Ok(load_mesh(&path)?))?
     };
-    for warning in &model.warnings {
-        eprintln!("warning: {warning}");
-    }
+    let mut model = crate::mesh::Model {
+        parts: shared
+            .parts
+            .iter()
+            .map(|p| crate::mesh::MeshPart {
+                name: p.name.clone(),
+                transform: p.transform,
+                mesh: crate::mesh::CpuMesh::default(),
+                material: p.material,
+            })
+            .collect(),
+        warnings: Vec::new(),
+    };
     for part in &mut model.parts {
         if let Some(c) = &spec.color {
             match c.as_slice() {
@@ -1062,7 +1116,7 @@ fn load_mesh_spec(
         .name
         .clone()
         .unwrap_or_else(|| format!("mesh {}", index + 1));
-    add_model(scene, &name, local, &model)
+    add_model(scene, &name, local, &model, Some(&shared.meshes))
         .ok_or_else(|| invalid(format!("mesh {name}: transform is singular")))
 }
 
@@ -2028,5 +2082,43 @@ mod tests {
         // Orientation LAI: index x runs to the patient's left (-x), z inferior (-z).
         let expected = DVec3::new(-25.71 * 1.40625, 116.19 * 1.40625, -7.82 * 2.5);
         assert!(head.distance(expected) < 0.05, "{head} vs {expected}");
+    }
+
+    #[test]
+    fn a_mesh_file_named_by_several_nodes_is_read_once_and_shared() {
+        let dir = TempDir::new("instanced");
+        let mut stl = vec![0u8; 80];
+        stl.extend(1u32.to_le_bytes());
+        for v in [0f32, 0., 1., 0., 0., 0., 10., 0., 0., 0., 10., 0.] {
+            stl.extend(v.to_le_bytes());
+        }
+        stl.extend([0u8; 2]);
+        std::fs::write(dir.0.join("bone.stl"), &stl).unwrap();
+        let mut text = String::new();
+        for x in 0..30 {
+            text.push_str(&format!(
+                "[[mesh]]\npath = \"bone.stl\"\ntransform = {{ translate = [{x}, 0, 0] }}\n"
+            ));
+        }
+        text.push_str("[[mesh]]\npath = \"./bone.stl\"\ncolor = [1, 0, 0]\n");
+        let path = dir.write("many.toml", &text);
+        let scene = load_scene_file(&path).unwrap().scene;
+        let meshes: Vec<&crate::scene::MeshNode> = scene
+            .nodes()
+            .iter()
+            .filter_map(|n| match &n.content {
+                NodeContent::Mesh(m) => Some(m),
+                _ => None,
+            })
+            .collect();
+        assert_eq!(meshes.len(), 31);
+        assert!(meshes.iter().all(|m| Arc::ptr_eq(&m.mesh, &meshes[0].mesh)));
+        assert_eq!(meshes[0].mesh.indices.len(), 3);
+        // Materials stay each node's own.
+        assert_eq!(meshes[30].material.base_color, [1.0, 0.0, 0.0, 1.0]);
+        assert_ne!(
+            meshes[0].material.base_color,
+            meshes[30].material.base_color
+        );
     }
 }

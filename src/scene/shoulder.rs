@@ -88,6 +88,7 @@ pub fn shoulder_scene() -> Result<Scene, MeshError> {
         "prosthesis",
         seat_in_phantom(&marks),
         &prosthesis_model()?,
+        None,
     );
     let bounds = scene.bounds().unwrap_or((DVec3::ZERO, DVec3::ONE));
     let direction = DVec3::new(-0.3, -1.0, -0.35);
@@ -102,17 +103,24 @@ pub fn shoulder_scene() -> Result<Scene, MeshError> {
     Ok(scene)
 }
 
-/// Adds a model as a group node placed by `transform`, one mesh node per part.
+/// Adds a model as a group node placed by `transform`, one mesh node per part; the part's
+/// triangles are `shared[i]` when given (a file drawn by several nodes is held once), else a
+/// copy of the part's own.
 pub fn add_model(
     scene: &mut Scene,
     name: &str,
     transform: DMat4,
     model: &Model,
+    shared: Option<&[Arc<crate::mesh::CpuMesh>]>,
 ) -> Option<super::NodeId> {
     let group = scene.add(name, transform, None, NodeContent::Empty).ok()?;
-    for part in &model.parts {
+    for (i, part) in model.parts.iter().enumerate() {
+        let mesh = match shared.and_then(|meshes| meshes.get(i)) {
+            Some(mesh) => Arc::clone(mesh),
+            None => Arc::new(part.mesh.clone()),
+        };
         let node = MeshNode {
-            mesh: Arc::new(part.mesh.clone()),
+            mesh,
             material: part.material,
         };
         // A part whose transform is singular is left out rather than failing the scene.
