@@ -381,7 +381,7 @@ pub(crate) fn write_atomic(path: &Path, bytes: &[u8]) -> Result<bool> {
 }
 
 /// `path`, or the file its chain of symbolic links names (which need not exist yet).
-fn follow_links(path: &Path) -> Result<PathBuf> {
+pub(crate) fn follow_links(path: &Path) -> Result<PathBuf> {
     let mut path = path.to_path_buf();
     for _ in 0..40 {
         match std::fs::symlink_metadata(&path) {

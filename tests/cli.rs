@@ -746,3 +746,27 @@ fn info_and_scene_files_take_the_nifti_transform_and_the_coordinate_frame() {
     assert!(!ok && err.contains("states its own patient frame"), "{err}");
     std::fs::remove_dir_all(&dir).ok();
 }
+
+#[test]
+fn a_depth_path_that_links_to_the_colour_output_is_refused_even_before_it_exists() {
+    let dir = temp_path("dangling");
+    std::fs::create_dir_all(&dir).unwrap();
+    let link = dir.join("link.png");
+    std::fs::remove_file(&link).ok();
+    std::os::unix::fs::symlink("c.png", &link).unwrap();
+    let out = dir.join("c.png");
+    let result = splatscene(&[
+        "render",
+        "--size",
+        "16x16",
+        "--out",
+        out.to_str().unwrap(),
+        "--depth",
+        link.to_str().unwrap(),
+    ]);
+    let said = String::from_utf8_lossy(&result.stderr);
+    assert!(!result.status.success(), "{said}");
+    assert!(said.contains("the same file as --out"), "{said}");
+    assert!(!out.exists(), "nothing is written");
+    std::fs::remove_dir_all(&dir).ok();
+}

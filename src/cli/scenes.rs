@@ -533,10 +533,13 @@ fn measurement_label(m: &Measurement) -> Label {
     }
 }
 
-/// Whether two output paths name one file, also when reached two ways (`./`, `..`, links).
+/// Whether two output paths name one file, also when reached two ways (`./`, `..`, links,
+/// and links whose target does not exist yet, which writing would create).
 fn same_file(a: &Path, b: &Path) -> bool {
-    // The file itself where it exists, else its folder's real path and its name.
+    // Links followed as writing follows them; then the file itself where it exists, else its
+    // folder's real path and its name.
     let resolve = |p: &Path| {
+        let p = &crate::follow_links(p).ok()?;
         std::fs::canonicalize(p).ok().or_else(|| {
             let dir = match p.parent() {
                 Some(d) if !d.as_os_str().is_empty() => d,
