@@ -65,7 +65,7 @@ pub enum CompositeError {
 }
 
 /// The most pixels the CPU compositor draws in one frame (8192 x 8192: 1 GiB of f32 RGBA).
-pub const MAX_PIXELS: u64 = 1 << 26;
+pub const MAX_PIXELS: u64 = crate::budget::MAX_PIXELS;
 
 /// Checks that a `width` x `height` frame is within [`MAX_PIXELS`].
 pub fn check_frame_size(width: u32, height: u32) -> Result<(), CompositeError> {

@@ -28,6 +28,7 @@
 //! ```
 
 pub mod annotate;
+pub mod budget;
 pub mod camera;
 pub mod classify;
 pub mod composite;

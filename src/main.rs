@@ -251,9 +251,8 @@ fn run_order(args: OrderArgs) -> Result<()> {
     let target = args.target.map_or(geometry.centre_world(), to_world);
     let view = ViewCase::new(&geometry, to_world(args.eye), target)?;
     let needed = dense_order_bytes(args.dims, args.ordering);
-    if let Some(available) = available_memory()
-        && needed > available
-    {
+    let available = splatscene::budget::memory_budget();
+    if needed > available {
         let gib = |b: u64| b as f64 / f64::from(1u32 << 30);
         bail!(
             "--dims {},{},{}: the {} order of this dense grid needs about {:.1} GiB of memory; {:.1} GiB is available",
@@ -312,14 +311,6 @@ fn dense_order_bytes(dims: [u32; 3], ordering: Ordering) -> u64 {
     n / 8 + 12 * rows + 8 * n + keys
 }
 
-/// Memory the system can give without swapping (Linux's MemAvailable), if it says.
-fn available_memory() -> Option<u64> {
-    let info = std::fs::read_to_string("/proc/meminfo").ok()?;
-    let line = info.lines().find(|l| l.starts_with("MemAvailable:"))?;
-    let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
-    Some(kib * 1024)
-}
-
 /// Writes `bytes` to `path` through a temporary file and a rename, so that a failed write
 /// leaves any earlier file whole; says so when an existing file is replaced. A symbolic link
 /// is followed and the file it names written; a device, pipe or socket (`/dev/null`, a FIFO)
@@ -344,7 +335,7 @@ pub(crate) fn write_atomic(path: &Path, bytes: &[u8]) -> Result<bool> {
         && !meta.is_file()
         && !meta.is_dir()
     {
-        std::fs::write(path, bytes).with_context(|| format!("writing {}", path.display()))?;
+        write_special(path, bytes).with_context(|| format!("writing {}", path.display()))?;
         return Ok(false);
     }
     let existed = path.exists();
@@ -378,6 +369,34 @@ pub(crate) fn write_atomic(path: &Path, bytes: &[u8]) -> Result<bool> {
         return Err(e).with_context(|| format!("renaming {} to {}", tmp.display(), path.display()));
     }
     Ok(existed)
+}
+
+/// Writes into a device, pipe or socket as it is. A named pipe that no process reads would
+/// block the write for ever: it is opened without blocking, which fails at once with no reader,
+/// and then written to as usual.
+#[allow(unsafe_code)]
+fn write_special(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
+    use std::io::Write;
+    use std::os::unix::fs::OpenOptionsExt;
+    use std::os::unix::io::AsRawFd;
+    let mut file = std::fs::OpenOptions::new()
+        .write(true)
+        .custom_flags(libc::O_NONBLOCK)
+        .open(path)
+        .map_err(|e| match e.raw_os_error() {
+            Some(libc::ENXIO) => std::io::Error::other("no process is reading this named pipe"),
+            _ => e,
+        })?;
+    // Back to blocking writes, so that a pipe whose reader is slower than us is waited for.
+    // SAFETY: fcntl on a descriptor this function owns, with flags it read from it.
+    unsafe {
+        let fd = file.as_raw_fd();
+        let flags = libc::fcntl(fd, libc::F_GETFL);
+        if flags >= 0 {
+            libc::fcntl(fd, libc::F_SETFL, flags & !libc::O_NONBLOCK);
+        }
+    }
+    file.write_all(bytes)
 }
 
 /// `path`, or the file its chain of symbolic links names (which need not exist yet).
@@ -418,6 +437,11 @@ fn run_orderings(args: OrderingsArgs) -> Result<()> {
         if views > MAX_VIEWS {
             bail!("{flag}: {views} views; the report takes at most {MAX_VIEWS} of each");
         }
+    }
+    if args.orbit_views + args.fly_in_views == 0 {
+        bail!(
+            "--orbit-views and --fly-in-views are both 0: the report's camera path needs at least one view"
+        );
     }
     report::register_font()?;
     std::fs::create_dir_all(&args.out_dir)
@@ -717,12 +741,6 @@ pub(crate) fn parse_size(s: &str) -> Result<(u32, u32), String> {
         return Err("the image needs at least one pixel each way".into());
     }
     // The renderer's textures and the compositor's buffers bound an image.
-    const MAX_SIDE: u32 = 16384;
-    const MAX_PIXELS: u64 = 1 << 26;
-    if w > MAX_SIDE || h > MAX_SIDE || u64::from(w) * u64::from(h) > MAX_PIXELS {
-        return Err(format!(
-            "{w}x{h}: an image is at most {MAX_SIDE} pixels a side and {MAX_PIXELS} in all"
-        ));
-    }
+    splatscene::budget::check_image(w.into(), h.into()).map_err(|e| e.to_string())?;
     Ok((w, h))
 }

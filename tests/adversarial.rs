@@ -1,8 +1,13 @@
 //! Crafted inputs, as an attacker or a careless user would give them, each run through the
-//! real command line under a time limit (10 s) and an address-space limit (8 GiB, far below
-//! what the wrapped sizes and oversized buffers these cases declare would take): every one
-//! must end in a clear error that names the file or key and the problem, with no panic and no
-//! hang, or in a correct result. The inputs are generated here; nothing large is stored.
+//! real command line under a time limit (10 s, a hang detector: each case takes well under a
+//! second here) and an address-space limit (8 GiB, far below what the wrapped sizes and
+//! oversized buffers these cases declare would take), with a memory budget of 2 GiB
+//! (`SPLATSCENE_MEMORY_LIMIT`, so that what is refused does not depend on the machine): every
+//! one must end in a clear error that names the file or key and the problem, in words meant for
+//! people (no Rust debug text), with no panic and no hang, or in a correct result; and the
+//! files the user had must be as they were unless the command names them as its output. The
+//! inputs are generated here (a named pipe `fifo` and a link `zero` to `/dev/zero` in every
+//! case's folder); nothing large is stored.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -23,6 +28,8 @@ struct Case {
     files: Vec<(String, Vec<u8>)>,
     args: Vec<String>,
     expect: Expect,
+    /// What must hold of the case's folder afterwards.
+    after: Option<fn(&Path) -> Result<(), String>>,
 }
 
 fn case(name: &str, files: Vec<(&str, Vec<u8>)>, args: &[&str], words: &[&str]) -> Case {
@@ -31,6 +38,7 @@ fn case(name: &str, files: Vec<(&str, Vec<u8>)>, args: &[&str], words: &[&str]) 
         files: files.into_iter().map(|(n, b)| (n.into(), b)).collect(),
         args: args.iter().map(|a| a.to_string()).collect(),
         expect: Expect::Error(words.iter().map(|w| w.to_string()).collect()),
+        after: None,
     }
 }
 
@@ -1266,6 +1274,11 @@ fn argument_cases() -> Vec<Case> {
     ]
 }
 
+/// Pieces of Rust debug formatting that a message for people never holds.
+const DEBUG_TEXT: &[&str] = &[
+    "Some(", "None)", "DVec3(", "Vec3(", "Spec {", "Error {", "Os {", "kind: ",
+];
+
 /// The `splatscene` binary, run in `dir` under the time and memory limits.
 fn run(dir: &Path, args: &[String]) -> (Option<i32>, String, Duration) {
     let start = Instant::now();
@@ -1281,6 +1294,7 @@ fn run(dir: &Path, args: &[String]) -> (Option<i32>, String, Duration) {
         .current_dir(dir)
         .env("NODEVICE_SELECT", "1")
         .env("RUST_BACKTRACE", "0")
+        .env("SPLATSCENE_MEMORY_LIMIT", "2G")
         .output()
         .expect("run splatscene");
     let text = String::from_utf8_lossy(&output.stderr).into_owned();
@@ -1296,6 +1310,8 @@ fn all_cases() -> Vec<Case> {
         mesh_cases(),
         special_file_cases(),
         argument_cases(),
+        limit_cases(),
+        output_cases(),
     ]
     .into_iter()
     .flatten()
@@ -1316,9 +1332,13 @@ fn crafted_inputs_end_in_clear_errors_or_correct_results() {
             std::fs::create_dir_all(path.parent().unwrap()).unwrap();
             std::fs::write(path, bytes).unwrap();
         }
-        // A device file named inside some inputs.
+        // A device file and a named pipe for inputs to name.
         if !dir.join("zero").exists() {
             std::os::unix::fs::symlink("/dev/zero", dir.join("zero")).ok();
+        }
+        if !dir.join("fifo").exists() {
+            let made = Command::new("mkfifo").arg(dir.join("fifo")).status();
+            assert!(made.is_ok_and(|s| s.success()), "mkfifo failed");
         }
         let args: Vec<String> = case
             .args
@@ -1343,6 +1363,11 @@ fn crafted_inputs_end_in_clear_errors_or_correct_results() {
                     .then(|| format!("message lacks {missing:?}"))
             }
         };
+        // Rust's debug text is not for people.
+        let debug = DEBUG_TEXT.iter().find(|d| stderr.contains(*d));
+        let problem = problem
+            .or_else(|| debug.map(|d| format!("debug text {d:?} in the message")))
+            .or_else(|| case.after.and_then(|check| check(&dir).err()));
         if let Some(problem) = problem {
             failures.push(format!(
                 "{}: {problem}\n    {}",
@@ -1359,4 +1384,275 @@ fn crafted_inputs_end_in_clear_errors_or_correct_results() {
         cases.len(),
         failures.join("\n")
     );
+}
+
+// ---- Sizes against the memory budget, special data files, values, outputs -----------------
+
+/// `bytes` compressed with gzip (fast: the cases below compress runs of zeros).
+fn gzip(bytes: &[u8]) -> Vec<u8> {
+    use std::io::Write;
+    let mut encoder = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::fast());
+    encoder.write_all(bytes).unwrap();
+    encoder.finish().unwrap()
+}
+
+/// A NIfTI-1 header (and the 4 bytes after it) for a `dims` grid of u8.
+fn nifti_header_u8(dims: [i16; 3]) -> Vec<u8> {
+    nifti1(&|h| {
+        h.truncate(352);
+        for (i, d) in dims.iter().enumerate() {
+            put_i16(h, 42 + 2 * i, *d);
+        }
+        put_i16(h, 70, 2);
+        put_i16(h, 72, 8);
+    })
+}
+
+fn limit_cases() -> Vec<Case> {
+    // A real bomb: 3 MB of gzip that inflates to the 128 MiB of a 1024x1024x128 grid, which
+    // drawing would take 3 GiB for, past the 2 GiB budget: refused from the header.
+    let grid = 1024 * 1024 * 128;
+    let mut bomb = nifti_header_u8([1024, 1024, 128]);
+    bomb.extend(std::iter::repeat_n(0u8, grid));
+    let bomb = gzip(&bomb);
+    assert!(bomb.len() < 1 << 20, "the bomb is {} bytes", bomb.len());
+    // A stream that inflates to far more than its header declares.
+    let mut long = nifti_header_u8([2, 2, 2]);
+    long.extend(std::iter::repeat_n(0u8, 64 << 20));
+    let long = gzip(&long);
+    let nrrd_bomb = nrrd(
+        &[
+            ("type", "uchar"),
+            ("sizes", "1024 1024 128"),
+            ("encoding", "gzip"),
+        ],
+        &gzip(&vec![0u8; grid]),
+    );
+    let bz2_bomb = {
+        use std::io::Write;
+        let mut e = bzip2::write::BzEncoder::new(Vec::new(), bzip2::Compression::fast());
+        e.write_all(&[0u8; 1 << 20]).unwrap();
+        nrrd(
+            &[
+                ("type", "uchar"),
+                ("sizes", "1024 1024 128"),
+                ("encoding", "bzip2"),
+            ],
+            &e.finish().unwrap(),
+        )
+    };
+    let mha_bomb = {
+        let mut b = b"ObjectType = Image\nNDims = 3\nDimSize = 1024 1024 128\nElementType = MET_UCHAR\nCompressedData = True\nElementDataFile = LOCAL\n".to_vec();
+        let mut z = flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::fast());
+        std::io::Write::write_all(&mut z, &[0u8; 1 << 20]).unwrap();
+        b.extend(z.finish().unwrap());
+        b
+    };
+    let budget = ["memory", "SPLATSCENE_MEMORY_LIMIT"];
+    let words = |file: &'static str| -> Vec<&'static str> {
+        let mut w = vec![file];
+        w.extend(budget);
+        w
+    };
+    let stl_far = b"solid far\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1e38 0 0\nvertex 0 1 0\nendloop\nendfacet\nendsolid far\n".to_vec();
+    let obj_far = b"v 0 0 0\nv 1 0 0\nv 0 -3e37 0\nf 1 2 3\n".to_vec();
+    let render_mesh = |mesh: &'static str| -> Vec<&'static str> {
+        vec![
+            "render", "--mesh", mesh, "--size", "32x32", "--out", "o.png",
+        ]
+    };
+    vec![
+        case("nii-gz-bomb", vec![("b.nii.gz", bomb)], &["info", "b.nii.gz"], &words("b.nii.gz")),
+        case(
+            "nii-gz-inflates-past-its-header",
+            vec![("l.nii.gz", long)],
+            &["info", "l.nii.gz"],
+            &["l.nii.gz"],
+        ),
+        case("nrrd-gzip-bomb", vec![("b.nrrd", nrrd_bomb)], &["info", "b.nrrd"], &words("b.nrrd")),
+        case("nrrd-bzip2-bomb", vec![("b.nrrd", bz2_bomb)], &["info", "b.nrrd"], &words("b.nrrd")),
+        case("mha-zlib-bomb", vec![("b.mha", mha_bomb)], &["info", "b.mha"], &words("b.mha")),
+        case(
+            "nrrd-pattern-billions",
+            vec![(
+                "p.nhdr",
+                nrrd(
+                    &[
+                        ("type", "uchar"),
+                        ("sizes", "1 1 4294967295"),
+                        ("data file", "s%d.raw 1 4294967295 1"),
+                    ],
+                    &[],
+                ),
+            )],
+            &["info", "p.nhdr"],
+            &["p.nhdr"],
+        ),
+        case(
+            "raw-over-budget",
+            vec![("v.raw", vec![0u8; 8])],
+            &[
+                "render", "v.raw", "--dims", "2048,2048,1024", "--scalar", "u8", "--out", "o.png",
+            ],
+            &words("v.raw"),
+        ),
+        case("fifo-volume", vec![], &["info", "fifo"], &["fifo", "named pipe"]),
+        case(
+            "fifo-scene",
+            vec![],
+            &["render", "fifo", "--out", "o.png"],
+            &["fifo", "named pipe"],
+        ),
+        case("fifo-mesh", vec![], &render_mesh("fifo"), &["fifo", "named pipe"]),
+        case(
+            "fifo-nrrd-data-file",
+            vec![("f.nhdr", nrrd(&[("data file", "fifo")], &[]))],
+            &["info", "f.nhdr"],
+            &["f.nhdr", "fifo", "named pipe"],
+        ),
+        case(
+            "device-nrrd-data-file",
+            vec![("z.nhdr", nrrd(&[("data file", "zero")], &[]))],
+            &["info", "z.nhdr"],
+            &["z.nhdr", "character device"],
+        ),
+        case(
+            "fifo-mha-data-file",
+            vec![("f.mhd", meta("", "fifo"))],
+            &["info", "f.mhd"],
+            &["f.mhd", "fifo", "named pipe"],
+        ),
+        case(
+            "fifo-gltf-buffer",
+            vec![(
+                "m.gltf",
+                b"{\"asset\":{\"version\":\"2.0\"},\"buffers\":[{\"uri\":\"fifo\",\"byteLength\":36}],\"bufferViews\":[{\"buffer\":0,\"byteLength\":36}],\"accessors\":[{\"bufferView\":0,\"componentType\":5126,\"count\":3,\"type\":\"VEC3\",\"min\":[0,0,0],\"max\":[1,1,0]}],\"meshes\":[{\"primitives\":[{\"attributes\":{\"POSITION\":0}}]}],\"nodes\":[{\"mesh\":0}],\"scenes\":[{\"nodes\":[0]}]}".to_vec(),
+            )],
+            &render_mesh("m.gltf"),
+            &["fifo", "named pipe"],
+        ),
+        // A material library that cannot be read leaves default materials, with a warning.
+        works(
+            "fifo-obj-mtllib",
+            vec![("m.obj", b"mtllib fifo\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n".to_vec())],
+            &render_mesh("m.obj"),
+        ),
+        case("stl-far-coordinate", vec![("far.stl", stl_far)], &render_mesh("far.stl"), &["far.stl", "coordinate"]),
+        case("obj-far-coordinate", vec![("far.obj", obj_far)], &render_mesh("far.obj"), &["far.obj", "coordinate"]),
+        case(
+            "measure-far-point",
+            vec![],
+            &["measure", "--point", "1e300,0,0", "--point", "0,0,0"],
+            &["point", "from the origin"],
+        ),
+        case(
+            "orderings-no-views",
+            vec![],
+            &["orderings", "--orbit-views", "0", "--fly-in-views", "0", "--out-dir", "r"],
+            &["--orbit-views", "--fly-in-views"],
+        ),
+        case("fov-tiny", vec![], &["render", "--fov", "1e-30", "--out", "o.png"], &["--fov"]),
+        case(
+            "fov-with-orthographic",
+            vec![],
+            &["render", "--fov", "30", "--orthographic", "200", "--out", "o.png"],
+            &["--fov", "--orthographic"],
+        ),
+        case(
+            "spacings-inf-shown",
+            vec![("s.nrrd", nrrd(&[("spacings", "1 inf 1")], &[0u8; 16]))],
+            &["info", "s.nrrd"],
+            &["s.nrrd", "inf"],
+        ),
+        case(
+            "manifest-size-three",
+            vec![("m.toml", b"[[job]]\nname = \"a\"\nsizes = [[64, 64, 3]]\n".to_vec())],
+            &["batch", "m.toml", "--check"],
+            &["m.toml", "sizes", "3 values"],
+        ),
+    ]
+}
+
+/// The case's folder holds `keep.txt` and `.o.png.partial` as they were written, and no
+/// temporary of the tool's.
+fn files_kept(dir: &Path) -> Result<(), String> {
+    for (name, bytes) in [
+        ("keep.txt", &b"mine"[..]),
+        (".o.png.partial", &b"also mine"[..]),
+    ] {
+        match std::fs::read(dir.join(name)) {
+            Ok(b) if b == bytes => {}
+            _ => return Err(format!("{name} was changed or removed")),
+        }
+    }
+    let mut names = Vec::new();
+    for entry in walk(dir) {
+        let name = entry.file_name().unwrap().to_string_lossy().into_owned();
+        if name.ends_with(".partial") && name != ".o.png.partial" {
+            names.push(name);
+        }
+    }
+    match names.is_empty() {
+        true => Ok(()),
+        false => Err(format!("temporaries left behind: {names:?}")),
+    }
+}
+
+/// Every file below `dir`.
+fn walk(dir: &Path) -> Vec<PathBuf> {
+    let mut out = Vec::new();
+    for entry in std::fs::read_dir(dir).into_iter().flatten().flatten() {
+        let path = entry.path();
+        if entry.file_type().is_ok_and(|t| t.is_dir()) {
+            out.extend(walk(&path));
+        } else {
+            out.push(path);
+        }
+    }
+    out
+}
+
+fn output_cases() -> Vec<Case> {
+    let mine = || {
+        vec![
+            ("keep.txt", b"mine".to_vec()),
+            (".o.png.partial", b"also mine".to_vec()),
+            ("sub/keep.txt", b"mine".to_vec()),
+        ]
+    };
+    let with_check = |mut c: Case| {
+        c.after = Some(files_kept);
+        c
+    };
+    let small = |out: &'static str| -> Vec<&'static str> {
+        vec!["render", "--size", "32x24", "--out", out]
+    };
+    vec![
+        // The named output is written; a user's file at the old fixed temporary name is not.
+        with_check(Case {
+            expect: Expect::Ok,
+            ..case("out-beside-a-partial-file", mine(), &small("o.png"), &[])
+        }),
+        with_check(case("out-is-a-folder", mine(), &small("sub"), &["sub"])),
+        with_check(case(
+            "out-in-a-missing-folder",
+            mine(),
+            &small("gone/o.png"),
+            &["gone"],
+        )),
+        with_check(case(
+            "out-is-a-fifo-without-reader",
+            mine(),
+            &small("fifo"),
+            &["fifo", "no process is reading"],
+        )),
+        with_check(case(
+            "depth-is-out",
+            mine(),
+            &[
+                "render", "--size", "32x24", "--out", "o.png", "--depth", "./o.png",
+            ],
+            &["o.png"],
+        )),
+    ]
 }

@@ -396,15 +396,19 @@ impl ViewArgs {
         if !views.is_empty() && self.eye.is_some() {
             bail!("--view and --eye both place the camera: give one");
         }
+        // The ranges scene files take (camera.fov, camera.orthographic_height).
         if let Some(fov) = self.fov
-            && !(fov > 0.0 && fov < 180.0)
+            && !(fov.is_finite() && (0.1..=170.0).contains(&fov))
         {
-            bail!("--fov {fov} is not between 0 and 180 degrees");
+            bail!("--fov {fov} is not an angle from 0.1 to 170 degrees");
         }
         if let Some(h) = self.orthographic
-            && h <= 0.0
+            && !(h.is_finite() && h > 0.0)
         {
-            bail!("--orthographic {h}: the visible height must be positive");
+            bail!("--orthographic {h}: the visible height must be a positive number of mm");
+        }
+        if self.fov.is_some() && self.orthographic.is_some() {
+            bail!("--fov has no effect with --orthographic: give one");
         }
         let (loaded, file) = self.input.load()?;
         let size = self.size.or(loaded.size).unwrap_or((800, 600));

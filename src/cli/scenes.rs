@@ -9,7 +9,7 @@ use serde_json::{Value, json};
 use splatscene::annotate::{Annotations, Label, annotate_image};
 use splatscene::order::Ordering;
 use splatscene::pick::measure::{
-    MarkerStyle, Measurement, annotate, draw_scene_measurements, label_text,
+    MarkerStyle, MeasureKind, Measurement, annotate, draw_scene_measurements, label_text,
 };
 use splatscene::pick::{PickOptions, Picker, surface_distances};
 use splatscene::render::{
@@ -485,15 +485,14 @@ pub fn run_measure(args: MeasureArgs) -> Result<()> {
     } else {
         points.extend(args.points.iter().map(|p| DVec3::from(*p)));
     }
-    let measurement = match points.as_slice() {
-        [a, b] => Measurement::distance(*a, *b),
-        [a, v, b] => {
-            Measurement::angle(*a, *v, *b).context("an angle needs points apart from its vertex")?
-        }
-        [a0, a1, b0, b1] => Measurement::line_angle(*a0, *a1, *b0, *b1)
-            .context("a line needs two distinct points")?,
-        _ => bail!("give two, three or four points (got {})", points.len()),
+    let kind = match points.len() {
+        2 => MeasureKind::Distance,
+        3 => MeasureKind::Angle,
+        4 => MeasureKind::LineAngle,
+        n => bail!("give two, three or four points (got {n})"),
     };
+    // Checked as every measurement is: finite, within reach, and making an angle.
+    let measurement = Measurement::new(kind, &points).map_err(anyhow::Error::msg)?;
     let mut out = serde_json::to_value(&measurement)?;
     if let Some(object) = out.as_object_mut() {
         object.insert("frame".into(), "RAS".into());

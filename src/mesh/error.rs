@@ -68,6 +68,20 @@ pub enum MeshError {
         /// Which data.
         what: String,
     },
+    /// A coordinate lies farther from the origin than [`super::MAX_COORDINATE`].
+    #[error(
+        "{}: {what} has a coordinate of {value:e}, beyond the {limit:e} that can be drawn and picked alike",
+        file.display(),
+        limit = super::MAX_COORDINATE
+    )]
+    FarCoordinate {
+        /// The file.
+        file: PathBuf,
+        /// Which part.
+        what: String,
+        /// The coordinate.
+        value: f32,
+    },
     /// The file uses something this loader does not do (a buffer URI that is neither a data URI
     /// nor a relative file, a required glTF extension that changes geometry, GLB version 1...).
     #[error("{}: unsupported: {detail}", file.display())]
@@ -120,6 +134,7 @@ impl MeshError {
             | Self::BufferTooShort { file, .. }
             | Self::IndexOutOfRange { file, .. }
             | Self::NonFinite { file, .. }
+            | Self::FarCoordinate { file, .. }
             | Self::Unsupported { file, .. }
             | Self::TooLarge { file, .. }
             | Self::NodeCycle { file, .. }

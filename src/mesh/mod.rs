@@ -175,7 +175,34 @@ pub fn read_gltf_accessor(path: &Path, index: usize) -> Result<Vec<f32>, MeshErr
     gltf::read_accessor(&bytes, &origin, index)
 }
 
+/// The largest coordinate a mesh file may hold, in its own units. Far past any planning scene
+/// (a kilometre in millimetres), and where f32 positions still resolve well under a metre: a
+/// triangle at 1e38 would be picked by the BVH's f64 rays while the depth buffer draws it
+/// blank, so such a file is refused rather than drawn wrongly.
+pub const MAX_COORDINATE: f32 = 1e9;
+
 fn load_with_origin(bytes: &[u8], name: &Path, origin: &Origin) -> Result<Model, MeshError> {
+    let model = load_format(bytes, name, origin)?;
+    for part in &model.parts {
+        let far = part
+            .mesh
+            .positions
+            .iter()
+            .flatten()
+            .copied()
+            .find(|c| c.abs() > MAX_COORDINATE);
+        if let Some(value) = far {
+            return Err(MeshError::FarCoordinate {
+                file: origin.label.clone(),
+                what: format!("part {:?}", part.name),
+                value,
+            });
+        }
+    }
+    Ok(model)
+}
+
+fn load_format(bytes: &[u8], name: &Path, origin: &Origin) -> Result<Model, MeshError> {
     match sniff(bytes, name) {
         Some(Format::Glb) => gltf::load(bytes, origin, true),
         Some(Format::GltfJson) => gltf::load(bytes, origin, false),

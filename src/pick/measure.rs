@@ -10,6 +10,10 @@ use serde::{Deserialize, Serialize};
 use crate::mesh::{CpuMesh, Material};
 use crate::scene::{MeshNode, NodeContent, NodeId, Scene, SceneError};
 
+/// The farthest a measured point may lie from the origin, in millimetres (a thousand
+/// kilometres).
+pub const MAX_POINT_MM: f64 = 1e9;
+
 /// What was measured.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
@@ -85,6 +89,13 @@ impl Measurement {
         }
         if let Some(bad) = points.iter().find(|p| !p.is_finite()) {
             return Err(format!("point {bad} is not finite"));
+        }
+        // Past this the differences of two points overflow or lose every millimetre; no
+        // scene is that large.
+        if let Some(bad) = points.iter().find(|p| p.abs().max_element() > MAX_POINT_MM) {
+            return Err(format!(
+                "point {bad} lies more than {MAX_POINT_MM:e} mm from the origin"
+            ));
         }
         match (kind, points) {
             (MeasureKind::Distance, [a, b]) => Ok(Self::distance(*a, *b)),

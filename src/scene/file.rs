@@ -41,6 +41,7 @@
 //! `examples/scenes/` holds complete scene files.
 
 mod validate;
+pub use validate::extra_elements;
 
 use std::ffi::OsStr;
 use std::path::{Component, Path, PathBuf};

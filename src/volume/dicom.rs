@@ -78,8 +78,8 @@ use rayon::prelude::*;
 use super::CpuVolume;
 pub use super::loader::SeriesChoice;
 use super::loader::{Placement, io_error};
+use super::raw::checked_voxels;
 use super::raw::{ScalarType, VolumeError};
-use crate::grid::voxel_count;
 
 /// Bytes before the `DICM` magic in a DICOM file.
 const PREAMBLE_LEN: usize = 128;
@@ -495,19 +495,26 @@ fn without_copies(
 ) -> Vec<Image> {
     let preferred =
         |image: &Image| prefer.is_some_and(|p| fs::canonicalize(&image.path).is_ok_and(|c| c == p));
-    images.sort_by(|a, b| {
-        preferred(b)
-            .cmp(&preferred(a))
-            .then_with(|| a.path.cmp(&b.path))
-    });
+    images.sort_by_cached_key(|image| (!preferred(image), image.path.clone()));
+    // Where an image sits (its first slice, to a micrometre), and how many images sit there.
+    let position = |image: &Image| {
+        let slice = image.slices.as_ref().ok()?.first()?;
+        Some((slice.position * 1e3).round().to_array().map(|x| x as i64))
+    };
+    let mut at = std::collections::HashMap::new();
+    for p in images.iter().filter_map(position) {
+        *at.entry(p).or_insert(0usize) += 1;
+    }
     let mut seen = HashSet::new();
     let before = images.len();
-    // An image without a SOPInstanceUID is known by its bytes: a copied file is a copy.
+    // An image without a SOPInstanceUID is known by its bytes where another image shares its
+    // position (a copied file is a copy); elsewhere it cannot be one, and is not read again.
     let key = |image: &Image| match image.instance.is_empty() {
         false => Some(format!("uid {}", image.instance)),
-        true => fs::read(&image.path)
+        true if position(image).is_some_and(|p| at.get(&p) > Some(&1)) => fs::read(&image.path)
             .ok()
             .map(|bytes| format!("content {}", blake3::hash(&bytes))),
+        true => None,
     };
     images.retain(|image| key(image).is_none_or(|k| seen.insert(k)));
     ignored.copies += before - images.len();
@@ -1221,10 +1228,7 @@ fn check_gaps(dir: &Path, slices: &[SliceHeader], depths: &[f64]) -> Result<(), 
 
 /// The zeroed output, after checking its size against the grid limit and the files' bytes.
 fn allocate(dir: &Path, dims: [u32; 3], slices: &[SliceHeader]) -> Result<Vec<f32>, VolumeError> {
-    let count = voxel_count(dims).map_err(|source| VolumeError::Grid {
-        path: dir.into(),
-        source,
-    })?;
+    let count = checked_voxels(dir, dims)?;
     let file_bytes: u64 = slices.iter().map(|s| s.file_len).sum::<u64>().max(1);
     let out_bytes = count.saturating_mul(size_of::<f32>() as u64);
     if out_bytes
@@ -1428,6 +1432,25 @@ impl<'a> Samples<'a> {
                 "rescale slope {} or intercept {} is not finite",
                 slice.slope, slice.intercept
             ));
+        }
+        // The stored range's ends, rescaled, must be f32 numbers: a slope that takes a sample
+        // to infinity is refused here, not drawn as infinite values.
+        let (lo, hi) = if self.signed {
+            (
+                -(2f64.powi(self.stored as i32 - 1)),
+                2f64.powi(self.stored as i32 - 1) - 1.0,
+            )
+        } else {
+            (0.0, 2f64.powi(self.stored as i32) - 1.0)
+        };
+        for end in [lo, hi] {
+            let v = end * slice.slope + slice.intercept;
+            if !(v.is_finite() && v.abs() <= f64::from(f32::MAX)) {
+                return Err(format!(
+                    "rescale slope {} and intercept {} take the stored value {end} to {v:e}, past what a 32-bit float holds",
+                    slice.slope, slice.intercept
+                ));
+            }
         }
         let frame_bytes = out.len() * self.width;
         let start = slice.frame.unwrap_or(0) as usize * frame_bytes;

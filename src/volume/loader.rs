@@ -259,7 +259,12 @@ impl Placement {
         if direction.determinant().abs() < 1e-6 {
             return Err(header_error(
                 path,
-                format!("axis directions {columns:?} do not span 3-D space"),
+                format!(
+                    "axis directions {}, {} and {} do not span 3-D space",
+                    super::raw::triple(&columns[0].to_array()),
+                    super::raw::triple(&columns[1].to_array()),
+                    super::raw::triple(&columns[2].to_array())
+                ),
             ));
         }
         Ok(Self {
@@ -275,6 +280,15 @@ impl Placement {
         spacing: [f64; 3],
         origin: [f64; 3],
     ) -> Result<Self, VolumeError> {
+        // Checked before the columns are made: an infinite step times a zero is NaN, and the
+        // message should show the spacing given.
+        if !DVec3::from(origin).is_finite() || spacing.iter().any(|s| !s.is_finite() || *s <= 0.0) {
+            return Err(VolumeError::BadPlacement {
+                path: path.into(),
+                spacing,
+                origin,
+            });
+        }
         let [sx, sy, sz] = spacing;
         let columns = [DVec3::X * sx, DVec3::Y * sy, DVec3::Z * sz];
         Self::from_columns(path, columns, DVec3::from(origin))

@@ -31,10 +31,10 @@ use super::loader::{
     LoadedVolume, Placement, VolumeFormat, expect_end, format_pattern, header_error,
     inflate_values, io_error, read_head, unsupported,
 };
+use super::raw::{checked_voxels, data_file_problem};
 use super::{
     ByteOrder, CpuVolume, RawSpec, ScalarFormat, ScalarType, VolumeError, load_raw, load_raw_slices,
 };
-use crate::grid::voxel_count;
 
 /// Longest header read; real ones are well under a kilobyte.
 const HEADER_CAP: u64 = 64 << 10;
@@ -64,22 +64,21 @@ pub fn load_metaimage(path: &Path) -> Result<LoadedVolume, VolumeError> {
         scalar: header.scalar,
         order: header.order,
     };
-    let count = voxel_count(header.dims).map_err(|source| VolumeError::Grid {
-        path: path.into(),
-        source,
-    })?;
+    let count = checked_voxels(path, header.dims)?;
     let bytes = count
         .checked_mul(header.scalar.size() as u64)
         .ok_or_else(|| header_error(path, "declared size overflows"))?;
     let (file, start) = match &header.data {
         Data::Local => (path.to_path_buf(), Some(header.data_offset)),
         Data::Slices(files) => {
-            let missing = files.iter().find(|f| !f.is_file());
-            if let Some(missing) = missing {
-                return Err(VolumeError::MissingDataFile {
-                    path: path.into(),
-                    data_file: missing.clone(),
-                });
+            for file in files {
+                if let Some(problem) = data_file_problem(file) {
+                    return Err(VolumeError::MissingDataFile {
+                        path: path.into(),
+                        data_file: file.clone(),
+                        problem,
+                    });
+                }
             }
             if header.compressed {
                 return Err(unsupported(path, "compressed slice files"));
@@ -95,10 +94,11 @@ pub fn load_metaimage(path: &Path) -> Result<LoadedVolume, VolumeError> {
             return finish(path, &header, values);
         }
         Data::File(file) => {
-            if !file.is_file() {
+            if let Some(problem) = data_file_problem(file) {
                 return Err(VolumeError::MissingDataFile {
                     path: path.into(),
                     data_file: file.clone(),
+                    problem,
                 });
             }
             (file.clone(), header.header_size)
@@ -348,6 +348,9 @@ impl Header {
         let (_, file, line) =
             get(&["ElementDataFile"]).ok_or_else(|| header_error(path, "no ElementDataFile"))?;
         let folder = path.parent().unwrap_or(Path::new(""));
+        // The grid's size and memory first: no list is read and no name built for a grid
+        // that would be refused.
+        checked_voxels(path, dims)?;
         let words: Vec<&str> = file.split_whitespace().collect();
         let data = match words.as_slice() {
             [local] if local.eq_ignore_ascii_case("local") => Data::Local,

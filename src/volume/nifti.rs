@@ -29,7 +29,7 @@
 //! at minus the grid's centre, `-(dim - 1) / 2 * pixdim` per axis with x's sign reversed, so
 //! that the grid's centre sits at the world origin.
 //!
-//! **Sizes.** `dim` is checked against the grid limit ([`voxel_count`]: at most 2^32 voxels)
+//! **Sizes.** `dim` is checked against the grid limit (at most 2^32 voxels) and the memory budget
 //! before anything is read. A plain file must hold `vox_offset` plus every declared frame
 //! (checked against its length before allocating); a `.nii.gz` stream must inflate to exactly
 //! that many bytes, the output growing only as the data actually inflate.
@@ -48,8 +48,8 @@ use super::loader::{
     GZIP_MAGIC, LoadedVolume, NiftiTransform, Placement, VolumeFormat, expect_end, header_error,
     inflate_values, io_error, read_head, skip_inflated, unsupported,
 };
+use super::raw::checked_voxels;
 use super::{ByteOrder, CpuVolume, RawSpec, ScalarFormat, ScalarType, VolumeError, load_raw};
-use crate::grid::voxel_count;
 
 /// Bytes of a NIfTI-1 (and Analyze 7.5) header.
 const NIFTI1_BYTES: usize = 348;
@@ -461,10 +461,7 @@ struct Layout {
 impl Layout {
     fn from_header(path: &Path, header: &Header) -> Result<Self, VolumeError> {
         let (dims, frames) = dims(path, &header.dim)?;
-        let count = voxel_count(dims).map_err(|source| VolumeError::Grid {
-            path: path.into(),
-            source,
-        })?;
+        let count = checked_voxels(path, dims)?;
         let format = ScalarFormat {
             scalar: scalar_type(path, header.datatype)?,
             order: header.order,

@@ -37,10 +37,10 @@ use super::loader::{
     HeaderLines, LoadedVolume, Placement, VolumeFormat, expect_end, format_pattern, header_error,
     inflate_values, io_error, skip_inflated, text_values, unsupported,
 };
+use super::raw::{checked_voxels, data_file_problem};
 use super::{
     ByteOrder, CpuVolume, RawSpec, ScalarFormat, ScalarType, VolumeError, load_raw, load_raw_slices,
 };
-use crate::grid::voxel_count;
 
 /// Loads an NRRD volume from its attached (`.nrrd`) or detached (`.nhdr`) header.
 pub fn load_nrrd(path: &Path) -> Result<LoadedVolume, VolumeError> {
@@ -229,6 +229,9 @@ impl Header {
         let encoding = encoding(&fields)?;
         let format = scalar_format(&fields, encoding)?;
         let (byte_skip, line_skip) = skips(&fields, encoding)?;
+        // The grid's size and memory first: a file list or pattern is never built for a grid
+        // that would be refused.
+        checked_voxels(&fields.path, dims)?;
         let data = match fields.get("datafile") {
             None => Data::Attached(offset),
             Some(field) => Data::Files(data_files(&fields, field, dims[2])?),
@@ -266,11 +269,14 @@ impl Header {
             }
             Data::Files(files) => files,
         };
-        if let Some(missing) = files.iter().find(|f| !f.is_file()) {
-            return Err(VolumeError::MissingDataFile {
-                path: path.into(),
-                data_file: missing.clone(),
-            });
+        for file in files {
+            if let Some(problem) = data_file_problem(file) {
+                return Err(VolumeError::MissingDataFile {
+                    path: path.into(),
+                    data_file: file.clone(),
+                    problem,
+                });
+            }
         }
         files
             .iter()
@@ -515,6 +521,15 @@ fn placement(fields: &Fields) -> Result<([DVec3; 3], DVec3), VolumeError> {
             // `nan` marks an unknown spacing: a unit step keeps the volume usable.
             let s: [f64; 3] = fields.numbers(f)?;
             let s = s.map(|v| if v.is_nan() { 1.0 } else { v });
+            if s.iter().any(|v| !v.is_finite() || *v == 0.0) {
+                return Err(fields.error(
+                    f.line,
+                    format!(
+                        "spacings ({}, {}, {}) must be finite and non-zero",
+                        s[0], s[1], s[2]
+                    ),
+                ));
+            }
             [DVec3::X * s[0], DVec3::Y * s[1], DVec3::Z * s[2]]
         }
         (None, None) => [DVec3::X, DVec3::Y, DVec3::Z],
@@ -635,10 +650,7 @@ fn vectors(fields: &Fields, field: &Field) -> Result<Vec<Option<DVec3>>, VolumeE
 
 /// Bytes of values in each data file.
 fn bytes_per_file(path: &Path, header: &Header, files: usize) -> Result<(usize, u64), VolumeError> {
-    let count = voxel_count(header.dims).map_err(|source| VolumeError::Grid {
-        path: path.into(),
-        source,
-    })?;
+    let count = checked_voxels(path, header.dims)?;
     let per_file = count / files as u64;
     let bytes = per_file
         .checked_mul(header.format.scalar.size() as u64)

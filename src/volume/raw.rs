@@ -17,6 +17,43 @@ use thiserror::Error;
 use super::CpuVolume;
 use crate::grid::{GridError, voxel_count};
 
+/// Three numbers as people write them: `(0.5, 0.5, inf)`.
+pub(crate) fn triple(v: &[f64; 3]) -> String {
+    format!("({}, {}, {})", v[0], v[1], v[2])
+}
+
+/// What keeps the data file at `path` from being read, in words, or `None` for a regular
+/// file: a header may name a device or a pipe, which is refused before it is opened.
+pub(crate) fn data_file_problem(path: &Path) -> Option<String> {
+    match std::fs::metadata(path) {
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Some("does not exist".into()),
+        Err(e) => Some(format!("cannot be read: {e}")),
+        Ok(meta) if !meta.is_file() => Some(format!(
+            "is {}, not a regular file",
+            crate::input::kind(&meta)
+        )),
+        Ok(_) => None,
+    }
+}
+
+/// The voxel count of a grid of `dims` that the file at `path` declares, checked against the
+/// grid limit and against the memory that drawing it takes
+/// ([`crate::budget::DRAW_BYTES_PER_VOXEL`] a voxel), before anything is allocated.
+pub(crate) fn checked_voxels(path: &Path, dims: [u32; 3]) -> Result<u64, VolumeError> {
+    let count = voxel_count(dims).map_err(|source| VolumeError::Grid {
+        path: path.into(),
+        source,
+    })?;
+    let what = format!("a {}x{}x{} grid", dims[0], dims[1], dims[2]);
+    crate::budget::check_memory(what, count, crate::budget::DRAW_BYTES_PER_VOXEL).map_err(
+        |source| VolumeError::OverBudget {
+            path: path.into(),
+            source,
+        },
+    )?;
+    Ok(count)
+}
+
 /// Problems loading a volume; each names the file concerned.
 #[derive(Debug, Error)]
 pub enum VolumeError {
@@ -59,6 +96,14 @@ pub enum VolumeError {
         /// Why the size was refused.
         source: GridError,
     },
+    /// The declared grid needs more memory than the budget (see [`crate::budget`]).
+    #[error("{}: declared grid size refused: {source}", path.display())]
+    OverBudget {
+        /// The file.
+        path: PathBuf,
+        /// The size and the budget.
+        source: crate::budget::SizeError,
+    },
     /// The declared sizes do not fit in 64-bit byte counts.
     #[error("{}: {values} {scalar} values after {header_bytes} bytes overflow", path.display())]
     SizeOverflow {
@@ -82,7 +127,12 @@ pub enum VolumeError {
         actual: u64,
     },
     /// Spacing is not finite and positive, or the origin is not finite.
-    #[error("{}: bad spacing {spacing:?} or origin {origin:?}", path.display())]
+    #[error(
+        "{}: voxel spacing {} mm must be finite and positive and origin {} mm finite",
+        path.display(),
+        triple(spacing),
+        triple(origin)
+    )]
     BadPlacement {
         /// The file.
         path: PathBuf,
@@ -148,9 +198,12 @@ pub enum VolumeError {
         /// The file.
         path: PathBuf,
     },
-    /// A data file that a header names does not exist.
-    #[error("{}: data file {} does not exist", path.display(), data_file.display())]
+    /// A data file that a header names does not exist or is not a regular file.
+    #[error("{}: data file {} {problem}", path.display(), data_file.display())]
     MissingDataFile {
+        /// What is wrong with it: "does not exist", "is a named pipe (FIFO), not a regular
+        /// file", ...
+        problem: String,
         /// The header naming it.
         path: PathBuf,
         /// The missing data file.
@@ -342,10 +395,7 @@ impl RawSpec {
 
     /// Checks what does not depend on the file contents; returns the voxel count.
     fn check(&self, path: &Path) -> Result<usize, VolumeError> {
-        let count = voxel_count(self.dims).map_err(|source| VolumeError::Grid {
-            path: path.into(),
-            source,
-        })?;
+        let count = checked_voxels(path, self.dims)?;
         let finite = self
             .spacing
             .iter()

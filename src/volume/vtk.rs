@@ -34,9 +34,9 @@ use super::loader::{
     HeaderLines, LoadedVolume, Placement, VolumeFormat, expect_end, header_error, inflate_values,
     io_error, text_values, unsupported,
 };
+use super::raw::checked_voxels;
 use super::raw::decode;
 use super::{ByteOrder, CpuVolume, RawSpec, ScalarFormat, ScalarType, VolumeError, load_raw};
-use crate::grid::voxel_count;
 
 /// Loads a legacy VTK `STRUCTURED_POINTS` file with binary scalars.
 pub fn load_vtk_legacy(path: &Path) -> Result<LoadedVolume, VolumeError> {
@@ -176,10 +176,7 @@ fn numbers<T: std::str::FromStr>(words: &[&str]) -> Option<[T; 3]> {
 }
 
 fn grid_count(path: &Path, dims: [u32; 3]) -> Result<u64, VolumeError> {
-    voxel_count(dims).map_err(|source| VolumeError::Grid {
-        path: path.into(),
-        source,
-    })
+    checked_voxels(path, dims)
 }
 
 /// A legacy scalar type name: `Some(None)` for a known type that is not read, `None` for an

@@ -31,7 +31,7 @@ use splatscene::scene::patient::NamedView;
 use crate::cli::input::apply_transfer;
 
 /// A manifest as written.
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct Manifest {
     /// Keys every job takes unless it sets them itself.
@@ -287,9 +287,9 @@ pub fn is_index_name(name: &str) -> bool {
 }
 
 /// Largest image side, as in scene files.
-const MAX_SIDE: u32 = 16384;
+const MAX_SIDE: u32 = splatscene::budget::MAX_SIDE;
 /// Largest image, in pixels: 64 megapixels, about 1 GiB of frame and depth buffers.
-const MAX_PIXELS: u64 = 1 << 26;
+const MAX_PIXELS: u64 = splatscene::budget::MAX_PIXELS;
 
 /// Reads a manifest file (at most 4 MiB).
 pub fn read(path: &Path) -> anyhow::Result<Manifest> {
@@ -310,6 +310,19 @@ pub fn read(path: &Path) -> anyhow::Result<Manifest> {
 
 /// Parses manifest TOML.
 pub fn parse(text: &str) -> Result<Manifest, String> {
+    let manifest = parse_only(text)?;
+    // serde fills a fixed-size array from the first elements of a longer one and drops the
+    // rest (`sizes = [[64, 64, 3]]`): the lengths are compared with what the file reads as,
+    // as scene files do.
+    let written: toml::Value = toml::from_str(text).map_err(|e| e.to_string())?;
+    let read = toml::Value::try_from(&manifest).map_err(|e| e.to_string())?;
+    if let Some(message) = splatscene::scene::file::extra_elements(&written, &read, "") {
+        return Err(message);
+    }
+    Ok(manifest)
+}
+
+fn parse_only(text: &str) -> Result<Manifest, String> {
     toml::from_str(text).map_err(|e| {
         let message = e.to_string();
         if message.contains("did not match any variant") {

@@ -5,9 +5,9 @@
 use super::{CameraSpec, LightsSpec, MeshSpec, OutputSpec, SceneFile, TransformSpec, VolumeSpec};
 
 /// Largest image side, as the renderer's textures allow.
-pub const MAX_SIDE: u32 = 16384;
+pub const MAX_SIDE: u32 = crate::budget::MAX_SIDE;
 /// Largest image, in pixels: 64 megapixels, about 1 GiB of frame and depth buffers.
-pub const MAX_PIXELS: u64 = 1 << 26;
+pub const MAX_PIXELS: u64 = crate::budget::MAX_PIXELS;
 /// Directional lights the shaders take.
 pub const MAX_DIRECTIONAL_LIGHTS: usize = 4;
 

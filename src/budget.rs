@@ -1,0 +1,208 @@
+//! Sizes that a file or an argument controls, checked before anything is allocated: image
+//! sizes, volume sizes against the machine's memory, and checked products for both.
+//!
+//! Every loader, the scene-file and batch-manifest readers, the command line and the CPU
+//! compositor take their limits from here, so that a header claiming a huge grid or an
+//! argument asking for a huge image is refused at once with a message that names the size,
+//! instead of wrapping, aborting on an allocation, or swapping for minutes.
+//!
+//! The memory budget is what Linux says it can give without swapping (`MemAvailable`), or the
+//! number of bytes in `SPLATSCENE_MEMORY_LIMIT` (a plain count, or with a `K`, `M`, `G` or `T`
+//! suffix, powers of 1024) where that is set. A volume is loaded only when drawing it fits:
+//! [`DRAW_BYTES_PER_VOXEL`] bytes a voxel, so that a small compressed file declaring billions of
+//! voxels is refused from its header rather than inflated first and refused later.
+
+use std::fmt;
+
+use thiserror::Error;
+
+/// The longest side of an image, in pixels (wgpu's texture limit on the adapters we use).
+pub const MAX_SIDE: u32 = 16384;
+
+/// The most pixels in one image (8192 x 8192: 1 GiB of f32 RGBA in the CPU compositors).
+pub const MAX_PIXELS: u64 = 1 << 26;
+
+/// Bytes a voxel costs from loading to drawing, at most: its value as f32 (4), its colour and
+/// gradient texels for the GPU (8), the CPU compositor's bricked copy of them (8) and its place
+/// in the draw order (4). Classified colours (16 bytes) come on top for significant voxels
+/// only; they are left out so that a dense volume that is mostly empty is not refused.
+pub const DRAW_BYTES_PER_VOXEL: u64 = 24;
+
+/// The environment variable that sets the memory budget in bytes.
+pub const MEMORY_LIMIT_VAR: &str = "SPLATSCENE_MEMORY_LIMIT";
+
+/// A size refused before any allocation.
+#[derive(Debug, Error, Clone, PartialEq, Eq)]
+pub enum SizeError {
+    /// An image with no pixels on a side.
+    #[error("a {width}x{height} image has no pixels")]
+    EmptyImage {
+        /// Width asked for.
+        width: u64,
+        /// Height asked for.
+        height: u64,
+    },
+    /// An image past [`MAX_SIDE`] or [`MAX_PIXELS`].
+    #[error(
+        "a {width}x{height} image is too large: at most {MAX_SIDE} pixels a side and {MAX_PIXELS} pixels in all (8192x8192)"
+    )]
+    ImageTooLarge {
+        /// Width asked for.
+        width: u64,
+        /// Height asked for.
+        height: u64,
+    },
+    /// More memory than the budget.
+    #[error(
+        "{what} needs {} of memory and {} is available (set {MEMORY_LIMIT_VAR} to a byte count to allow more)",
+        bytes_words(*needed),
+        bytes_words(*budget)
+    )]
+    OverBudget {
+        /// What needs it, in words.
+        what: String,
+        /// Bytes needed ([`u64::MAX`] where the product overflows).
+        needed: u64,
+        /// The budget.
+        budget: u64,
+    },
+}
+
+/// Bytes in words: `1.5 GiB`, `312.0 MiB`, `17 bytes`; [`u64::MAX`] is "more than 16 EiB".
+pub fn bytes_words(bytes: u64) -> String {
+    if bytes == u64::MAX {
+        return "more than 16 EiB".into();
+    }
+    let units = ["KiB", "MiB", "GiB", "TiB", "PiB", "EiB"];
+    let mut value = bytes as f64;
+    let mut unit = None;
+    for u in units {
+        if value < 1024.0 {
+            break;
+        }
+        value /= 1024.0;
+        unit = Some(u);
+    }
+    match unit {
+        None => format!("{bytes} bytes"),
+        Some(u) => format!("{value:.1} {u}"),
+    }
+}
+
+/// The product of `factors`, or `None` where it overflows `u64`.
+pub fn product(factors: &[u64]) -> Option<u64> {
+    factors.iter().try_fold(1u64, |acc, &f| acc.checked_mul(f))
+}
+
+/// Checks an image size against [`MAX_SIDE`] and [`MAX_PIXELS`]; returns its pixel count.
+pub fn check_image(width: u64, height: u64) -> Result<u64, SizeError> {
+    if width == 0 || height == 0 {
+        return Err(SizeError::EmptyImage { width, height });
+    }
+    if width > u64::from(MAX_SIDE) || height > u64::from(MAX_SIDE) || width * height > MAX_PIXELS {
+        return Err(SizeError::ImageTooLarge { width, height });
+    }
+    Ok(width * height)
+}
+
+/// Memory Linux can give without swapping (`MemAvailable` in `/proc/meminfo`), if it says.
+pub fn available_memory() -> Option<u64> {
+    let info = std::fs::read_to_string("/proc/meminfo").ok()?;
+    let line = info.lines().find(|l| l.starts_with("MemAvailable:"))?;
+    let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    kib.checked_mul(1024)
+}
+
+/// The memory budget: [`MEMORY_LIMIT_VAR`] where set and valid, else the available memory,
+/// else 8 GiB where the system does not say.
+pub fn memory_budget() -> u64 {
+    std::env::var(MEMORY_LIMIT_VAR)
+        .ok()
+        .and_then(|v| parse_bytes(&v))
+        .or_else(available_memory)
+        .unwrap_or(8 << 30)
+}
+
+/// A byte count as [`MEMORY_LIMIT_VAR`] takes it: digits with an optional `K`, `M`, `G` or `T`
+/// (powers of 1024, an optional `iB` or `B` after it).
+pub fn parse_bytes(text: &str) -> Option<u64> {
+    let t = text.trim();
+    let t = t
+        .strip_suffix("iB")
+        .or_else(|| t.strip_suffix('B'))
+        .unwrap_or(t);
+    let (digits, shift) = match t.char_indices().last()? {
+        (i, 'K' | 'k') => (&t[..i], 10),
+        (i, 'M' | 'm') => (&t[..i], 20),
+        (i, 'G' | 'g') => (&t[..i], 30),
+        (i, 'T' | 't') => (&t[..i], 40),
+        _ => (t, 0),
+    };
+    let n: u64 = digits.trim().parse().ok()?;
+    n.checked_mul(1u64 << shift)
+}
+
+/// Checks that `count` items of `each` bytes fit the memory budget; `what` names them in the
+/// error ("the volume file.nii.gz's 4294967296 voxels").
+pub fn check_memory(what: impl fmt::Display, count: u64, each: u64) -> Result<u64, SizeError> {
+    let needed = count.checked_mul(each).unwrap_or(u64::MAX);
+    let budget = memory_budget();
+    if needed > budget {
+        return Err(SizeError::OverBudget {
+            what: what.to_string(),
+            needed,
+            budget,
+        });
+    }
+    Ok(needed)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn images_are_bounded_on_each_side_and_in_all() {
+        assert_eq!(check_image(8192, 8192), Ok(1 << 26));
+        assert_eq!(check_image(16384, 4096), Ok(1 << 26));
+        assert!(matches!(
+            check_image(16385, 1),
+            Err(SizeError::ImageTooLarge { .. })
+        ));
+        assert!(matches!(
+            check_image(8192, 8193),
+            Err(SizeError::ImageTooLarge { .. })
+        ));
+        assert!(matches!(
+            check_image(0, 5),
+            Err(SizeError::EmptyImage { .. })
+        ));
+        // No overflow on absurd sizes.
+        assert!(check_image(u64::MAX, u64::MAX).is_err());
+    }
+
+    #[test]
+    fn products_and_byte_counts() {
+        assert_eq!(product(&[1 << 31, 1 << 31, 4]), None);
+        assert_eq!(product(&[3, 4, 5]), Some(60));
+        assert_eq!(product(&[]), Some(1));
+        assert_eq!(parse_bytes("1024"), Some(1024));
+        assert_eq!(parse_bytes("2G"), Some(2 << 30));
+        assert_eq!(parse_bytes("3 MiB"), Some(3 << 20));
+        assert_eq!(parse_bytes("5KB"), Some(5 << 10));
+        assert_eq!(parse_bytes("lots"), None);
+        assert_eq!(parse_bytes("99999999999T"), None);
+        assert_eq!(bytes_words(17), "17 bytes");
+        assert_eq!(bytes_words(3 << 29), "1.5 GiB");
+        assert_eq!(bytes_words(u64::MAX), "more than 16 EiB");
+    }
+
+    #[test]
+    fn memory_past_the_budget_is_refused_with_both_figures() {
+        let err = check_memory("the test's voxels", u64::MAX / 2, 4).unwrap_err();
+        let text = err.to_string();
+        assert!(text.contains("the test's voxels"), "{text}");
+        assert!(text.contains(MEMORY_LIMIT_VAR), "{text}");
+        assert!(check_memory("a few voxels", 10, 4).is_ok());
+    }
+}
