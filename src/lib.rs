@@ -36,6 +36,7 @@ pub mod grid;
 pub mod input;
 pub mod mesh;
 pub mod order;
+pub mod output;
 pub mod pick;
 pub mod render;
 pub mod report;

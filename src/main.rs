@@ -311,6 +311,8 @@ fn dense_order_bytes(dims: [u32; 3], ordering: Ordering) -> u64 {
     n / 8 + 12 * rows + 8 * n + keys
 }
 
+pub(crate) use splatscene::output::{follow_links, write_atomic};
+
 /// Writes `bytes` to `path` through a temporary file and a rename, so that a failed write
 /// leaves any earlier file whole; says so when an existing file is replaced. A symbolic link
 /// is followed and the file it names written; a device, pipe or socket (`/dev/null`, a FIFO)
@@ -318,104 +320,10 @@ fn dense_order_bytes(dims: [u32; 3], ordering: Ordering) -> u64 {
 pub(crate) fn write_replacing(path: &Path, bytes: &[u8]) -> Result<()> {
     // The file a link names is the one written, and the one to name.
     let target = follow_links(path)?;
-    if write_atomic(&target, bytes)? {
+    if splatscene::output::write_atomic(&target, bytes)? {
         eprintln!("replaced the existing {}", target.display());
     }
     Ok(())
-}
-
-/// [`write_replacing`] without a word: writes `bytes` to `path` through a temporary file of
-/// this process's own beside it and a rename, so that neither a failed write nor another
-/// process writing the same file at once leaves a partial file. Returns whether a file was
-/// replaced.
-pub(crate) fn write_atomic(path: &Path, bytes: &[u8]) -> Result<bool> {
-    static TEMPORARIES: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
-    let path = &follow_links(path)?;
-    if let Ok(meta) = std::fs::metadata(path)
-        && !meta.is_file()
-        && !meta.is_dir()
-    {
-        write_special(path, bytes).with_context(|| format!("writing {}", path.display()))?;
-        return Ok(false);
-    }
-    let existed = path.exists();
-    let name = path
-        .file_name()
-        .context("the output path has no file name")?;
-    let n = TEMPORARIES.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-    let tmp = path.with_file_name(format!(
-        ".{}.{}-{n}.partial",
-        name.to_string_lossy(),
-        std::process::id()
-    ));
-    // Created exclusively: a file or a link already at the temporary's name is never
-    // written through or replaced.
-    let written = std::fs::OpenOptions::new()
-        .write(true)
-        .create_new(true)
-        .open(&tmp)
-        .and_then(|mut f| {
-            use std::io::Write;
-            f.write_all(bytes)
-        });
-    if let Err(e) = written {
-        if e.kind() != std::io::ErrorKind::AlreadyExists {
-            let _ = std::fs::remove_file(&tmp);
-        }
-        return Err(e).with_context(|| format!("writing {}", tmp.display()));
-    }
-    if let Err(e) = std::fs::rename(&tmp, path) {
-        let _ = std::fs::remove_file(&tmp);
-        return Err(e).with_context(|| format!("renaming {} to {}", tmp.display(), path.display()));
-    }
-    Ok(existed)
-}
-
-/// Writes into a device, pipe or socket as it is. A named pipe that no process reads would
-/// block the write for ever: it is opened without blocking, which fails at once with no reader,
-/// and then written to as usual.
-#[allow(unsafe_code)]
-fn write_special(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
-    use std::io::Write;
-    use std::os::unix::fs::OpenOptionsExt;
-    use std::os::unix::io::AsRawFd;
-    let mut file = std::fs::OpenOptions::new()
-        .write(true)
-        .custom_flags(libc::O_NONBLOCK)
-        .open(path)
-        .map_err(|e| match e.raw_os_error() {
-            Some(libc::ENXIO) => std::io::Error::other("no process is reading this named pipe"),
-            _ => e,
-        })?;
-    // Back to blocking writes, so that a pipe whose reader is slower than us is waited for.
-    // SAFETY: fcntl on a descriptor this function owns, with flags it read from it.
-    unsafe {
-        let fd = file.as_raw_fd();
-        let flags = libc::fcntl(fd, libc::F_GETFL);
-        if flags >= 0 {
-            libc::fcntl(fd, libc::F_SETFL, flags & !libc::O_NONBLOCK);
-        }
-    }
-    file.write_all(bytes)
-}
-
-/// `path`, or the file its chain of symbolic links names (which need not exist yet).
-pub(crate) fn follow_links(path: &Path) -> Result<PathBuf> {
-    let mut path = path.to_path_buf();
-    for _ in 0..40 {
-        match std::fs::symlink_metadata(&path) {
-            Ok(meta) if meta.file_type().is_symlink() => {
-                let target = std::fs::read_link(&path)
-                    .with_context(|| format!("reading the link {}", path.display()))?;
-                path = match path.parent() {
-                    Some(dir) if target.is_relative() => dir.join(target),
-                    _ => target,
-                };
-            }
-            _ => return Ok(path),
-        }
-    }
-    bail!("{}: too many levels of symbolic links", path.display())
 }
 
 /// Views on each of the report's paths at most (each costs every ordering and a composite).

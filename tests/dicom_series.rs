@@ -520,3 +520,40 @@ fn a_file_picks_its_own_series_and_grid_and_the_rest_of_the_folder_is_ignored() 
     assert!(err.to_string().contains("ImageOrientationPatient"), "{err}");
     fs::remove_dir_all(&dir).expect("clean up");
 }
+
+#[test]
+fn a_dangling_link_in_the_folder_is_counted_not_fatal() {
+    let Some(shared) = series_dir() else { return };
+    let dir = copy_series(&shared, "dangling", |_| false);
+    std::os::unix::fs::symlink(dir.join("nowhere.dcm"), dir.join("dangling.dcm"))
+        .expect("make a dangling link");
+    let original = load_dicom_series(&shared).expect("load the shared series");
+    let loaded = load_dicom_series(&dir).expect("the series beside a dangling link");
+    assert_eq!(loaded, original);
+    fs::remove_dir_all(&dir).expect("clean up");
+}
+
+#[test]
+fn a_gantry_tilted_stack_is_refused() {
+    let Some(shared) = series_dir() else { return };
+    let dir = copy_series(&shared, "tilt", |_| false);
+    // Each slice moved along the column direction by its depth times tan(5 degrees): the
+    // stack of a CT whose gantry was tilted 5 degrees, which no regular grid holds.
+    let headers = headers_in_order(&dir);
+    let normal = headers[0].row.cross(headers[0].col);
+    let first = headers[0].position.dot(normal);
+    let vr = "DS".parse().expect("a VR name");
+    for h in &headers {
+        let depth = h.position.dot(normal) - first;
+        let p = h.position + h.col * depth * 5f64.to_radians().tan();
+        let mut obj = open_file(&h.path).expect("open slice");
+        obj.put_str(
+            tags::IMAGE_POSITION_PATIENT,
+            vr,
+            format!("{:.4}\\{:.4}\\{:.4}", p.x, p.y, p.z),
+        );
+        obj.write_to_file(&h.path).expect("write slice");
+    }
+    expect_dicom_error(load_dicom_series(&dir), &dir, "gantry tilt");
+    fs::remove_dir_all(&dir).expect("clean up");
+}

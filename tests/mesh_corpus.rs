@@ -26,6 +26,12 @@ fn data_dir() -> Option<PathBuf> {
     if dir.is_dir() {
         Some(dir)
     } else {
+        // Under CI the data must be there: a skipped corpus would pass without testing.
+        assert!(
+            std::env::var_os("CI").is_none(),
+            "{} is missing under CI: set SPLATSCENE_DATA",
+            dir.display()
+        );
         eprintln!(
             "note: data directory {} not found; mesh corpus test skipped",
             dir.display()

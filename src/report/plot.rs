@@ -40,18 +40,40 @@ pub fn plot_error_against_time(
     svg: &Path,
 ) -> Result<(), PlotError> {
     register_font()?;
+    // Drawn in memory and written through a temporary and a rename, as every output is.
+    let (w, h) = (900u32, 600u32);
+    let mut rgb = vec![0u8; (w * h * 3) as usize];
     draw(
-        BitMapBackend::new(png, (900, 600)).into_drawing_area(),
+        BitMapBackend::with_buffer(&mut rgb, (w, h)).into_drawing_area(),
         summaries,
         title,
         png,
     )?;
+    let mut svg_text = String::new();
     draw(
-        SVGBackend::new(svg, (900, 600)).into_drawing_area(),
+        SVGBackend::with_string(&mut svg_text, (w, h)).into_drawing_area(),
         summaries,
         title,
         svg,
-    )
+    )?;
+    let image = image::RgbImage::from_raw(w, h, rgb).expect("the buffer holds the whole plot");
+    let mut png_bytes = Vec::new();
+    image
+        .write_to(
+            &mut std::io::Cursor::new(&mut png_bytes),
+            image::ImageFormat::Png,
+        )
+        .map_err(|e| PlotError::Draw {
+            path: png.to_owned(),
+            message: e.to_string(),
+        })?;
+    for (path, bytes) in [(png, png_bytes.as_slice()), (svg, svg_text.as_bytes())] {
+        crate::output::write_atomic(path, bytes).map_err(|e| PlotError::Draw {
+            path: path.to_owned(),
+            message: e.to_string(),
+        })?;
+    }
+    Ok(())
 }
 
 fn draw<DB: DrawingBackend>(

@@ -2067,6 +2067,11 @@ mod tests {
         assert_eq!(file.output.size, Some([512, 512]));
         let ct = "volumes/lidc2/lidc2_256x256x133_uint8.raw";
         if !data_dir().join(ct).exists() {
+            assert!(
+                std::env::var_os("CI").is_none(),
+                "{} has no {ct} under CI: set SPLATSCENE_DATA",
+                data_dir().display()
+            );
             eprintln!("skipped loading: {} has no {ct}", data_dir().display());
             return;
         }

@@ -1121,25 +1121,39 @@ impl App {
         let size = image.dimensions();
         let png = encode_png(&image).map_err(|e| ViewerError::Window(e.to_string()))?;
         let dir = &self.options.screenshot_dir;
-        // The first number whose picture and scene file are both free: nothing is replaced.
-        let path = (1..)
-            .map(|n| dir.join(format!("splatscene-view-{n}.png")))
-            .find(|p| !p.exists() && !p.with_extension("toml").exists())
-            .unwrap_or_else(|| dir.join("splatscene-view.png"));
-        match std::fs::write(&path, png) {
-            Ok(()) => println!("screenshot {}", path.display()),
-            Err(e) => {
-                eprintln!("screenshot {}: {e}", path.display());
-                return Ok(());
+        // The first number whose picture and scene file are both free, each created
+        // exclusively: nothing is replaced or written through a link.
+        let mut saved = None;
+        for n in 1..=100_000 {
+            let path = dir.join(format!("splatscene-view-{n}.png"));
+            if std::fs::symlink_metadata(path.with_extension("toml")).is_ok() {
+                continue;
+            }
+            match crate::output::write_new(&path, &png) {
+                Ok(true) => {
+                    saved = Some(path);
+                    break;
+                }
+                Ok(false) => continue,
+                Err(e) => {
+                    eprintln!("screenshot: {e}");
+                    return Ok(());
+                }
             }
         }
+        let Some(path) = saved else {
+            eprintln!("screenshot: no free name in {}", dir.display());
+            return Ok(());
+        };
+        println!("screenshot {}", path.display());
         match self.plan_file(size) {
             Err(e) => eprintln!("view: no scene file: {e}"),
             Ok(text) => {
                 let toml = path.with_extension("toml");
-                match std::fs::write(&toml, text) {
-                    Ok(()) => println!("view {}", toml.display()),
-                    Err(e) => eprintln!("view {}: {e}", toml.display()),
+                match crate::output::write_new(&toml, text.as_bytes()) {
+                    Ok(true) => println!("view {}", toml.display()),
+                    Ok(false) => eprintln!("view {}: taken meanwhile; not written", toml.display()),
+                    Err(e) => eprintln!("view: {e}"),
                 }
             }
         }

@@ -524,10 +524,9 @@ fn without_copies(
 /// Reads every DICOM-looking file of `dir`: the images, and the errors of files that could
 /// not be parsed (in name order).
 fn read_folder(dir: &Path) -> Result<(Vec<Image>, Vec<VolumeError>), VolumeError> {
-    let paths = dicom_files(dir)?;
+    let (paths, mut unreadable) = dicom_files(dir)?;
     let read: Vec<_> = paths.par_iter().map(|p| read_image(p)).collect();
     let mut images = Vec::new();
-    let mut unreadable = Vec::new();
     for result in read {
         match result {
             Ok(Some(image)) => images.push(image),
@@ -620,18 +619,27 @@ fn name(path: &Path) -> String {
         .into_owned()
 }
 
-/// The regular files in `dir` that look like DICOM, sorted by name.
-fn dicom_files(dir: &Path) -> Result<Vec<PathBuf>, VolumeError> {
+/// The regular files of `dir` that start like DICOM, in name order, and the errors of the
+/// entries that could not be looked at (a dangling link, a file without read permission):
+/// those are counted among the unreadable files, never fatal to the series beside them.
+fn dicom_files(dir: &Path) -> Result<(Vec<PathBuf>, Vec<VolumeError>), VolumeError> {
     let mut paths = Vec::new();
+    let mut unreadable = Vec::new();
     for entry in fs::read_dir(dir).map_err(io_error(dir))? {
         let path = entry.map_err(io_error(dir))?.path();
         // Follows symlinks, so a linked slice counts like a copied one.
-        if fs::metadata(&path).map_err(io_error(&path))?.is_file() && looks_like_dicom(&path)? {
-            paths.push(path);
+        let looked = fs::metadata(&path)
+            .map_err(io_error(&path))
+            .and_then(|meta| Ok(meta.is_file() && looks_like_dicom(&path)?));
+        match looked {
+            Ok(true) => paths.push(path),
+            Ok(false) => {}
+            Err(e) => unreadable.push(e),
         }
     }
     paths.sort();
-    Ok(paths)
+    unreadable.sort_by_key(|e| e.to_string());
+    Ok((paths, unreadable))
 }
 
 /// Reads only the first bytes, so large non-DICOM files in the folder cost nothing.
