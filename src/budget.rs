@@ -145,7 +145,7 @@ pub fn parse_bytes(text: &str) -> Option<u64> {
 /// Checks that `count` items of `each` bytes fit the memory budget; `what` names them in the
 /// error ("the volume file.nii.gz's 4294967296 voxels").
 pub fn check_memory(what: impl fmt::Display, count: u64, each: u64) -> Result<u64, SizeError> {
-    let needed = count.checked_mul(each).unwrap_or(u64::MAX);
+    let needed = count.saturating_mul(each);
     let budget = memory_budget();
     if needed > budget {
         return Err(SizeError::OverBudget {

@@ -21,6 +21,9 @@ enum Expect {
     Ok,
 }
 
+/// A check of a case's folder after the run: what must hold, or what went wrong.
+type AfterCheck = fn(&Path) -> Result<(), String>;
+
 /// One crafted input: files written into its own folder, the command line run there
 /// (`{dir}` stands for that folder), and what must come of it.
 struct Case {
@@ -29,7 +32,7 @@ struct Case {
     args: Vec<String>,
     expect: Expect,
     /// What must hold of the case's folder afterwards.
-    after: Option<fn(&Path) -> Result<(), String>>,
+    after: Option<AfterCheck>,
 }
 
 fn case(name: &str, files: Vec<(&str, Vec<u8>)>, args: &[&str], words: &[&str]) -> Case {

@@ -140,8 +140,47 @@ impl MeshPass {
         }
     }
 
-    /// Uploads a mesh once.
-    pub(crate) fn upload(&self, ctx: &GpuContext, mesh: &Arc<CpuMesh>) -> GpuMesh {
+    /// A node's mesh on the GPU. Where `shared` was made from the same mesh, its vertex and
+    /// index buffers are used again (wgpu buffers are shared handles): a file named by
+    /// thousands of nodes is uploaded once, each node keeping only its own transform.
+    pub(crate) fn upload_sharing(
+        &self,
+        ctx: &GpuContext,
+        mesh: &Arc<CpuMesh>,
+        shared: Option<&GpuMesh>,
+    ) -> GpuMesh {
+        let device = &ctx.device;
+        let buffers = shared
+            .filter(|g| Arc::ptr_eq(&g.source, mesh))
+            .map(|g| (g.vertices.clone(), g.indices.clone()))
+            .unwrap_or_else(|| self.buffers(ctx, mesh));
+        let (vertices, indices) = buffers;
+        let uniforms = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("mesh object"),
+            size: size_of::<ObjectUniforms>() as u64,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("mesh object"),
+            layout: &self.object_layout,
+            entries: &[wgpu::BindGroupEntry {
+                binding: 0,
+                resource: uniforms.as_entire_binding(),
+            }],
+        });
+        GpuMesh {
+            source: Arc::clone(mesh),
+            vertices,
+            indices,
+            index_count: (mesh.indices.len() / 3 * 3) as u32,
+            uniforms,
+            group,
+        }
+    }
+
+    /// The vertex and index buffers of `mesh`.
+    fn buffers(&self, ctx: &GpuContext, mesh: &CpuMesh) -> (wgpu::Buffer, wgpu::Buffer) {
         let device = &ctx.device;
         let vertices: Vec<Vertex> = mesh
             .positions
@@ -166,28 +205,7 @@ impl MeshPass {
             contents: bytemuck::cast_slice(&mesh.indices),
             usage: wgpu::BufferUsages::INDEX,
         });
-        let uniforms = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("mesh object"),
-            size: size_of::<ObjectUniforms>() as u64,
-            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
-        let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("mesh object"),
-            layout: &self.object_layout,
-            entries: &[wgpu::BindGroupEntry {
-                binding: 0,
-                resource: uniforms.as_entire_binding(),
-            }],
-        });
-        GpuMesh {
-            source: Arc::clone(mesh),
-            vertices,
-            indices,
-            index_count: (mesh.indices.len() / 3 * 3) as u32,
-            uniforms,
-            group,
-        }
+        (vertices, indices)
     }
 
     /// Writes the camera and lights of this frame.

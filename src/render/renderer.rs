@@ -460,7 +460,9 @@ impl Renderer {
     }
 
     fn sync_meshes(&mut self, ctx: &GpuContext, scene: &Scene) {
-        let mut live = Vec::new();
+        let mut live = std::collections::HashSet::new();
+        // The node that holds each mesh's buffers, so that nodes drawing one mesh share them.
+        let mut uploaded: HashMap<*const crate::mesh::CpuMesh, NodeId> = HashMap::new();
         if scene.overlays().next().is_some() {
             let pass = self.mesh_pass.get_or_insert_with(|| MeshPass::new(ctx));
             pass.prepare_overlay(ctx);
@@ -473,16 +475,22 @@ impl Renderer {
             if node.mesh.indices.len() < 3 {
                 continue;
             }
-            live.push(id);
+            live.insert(id);
             let fresh = self
                 .meshes
                 .get(&id)
                 .is_some_and(|m| Arc::ptr_eq(&m.source, &node.mesh));
             if !fresh {
                 let pass = self.mesh_pass.get_or_insert_with(|| MeshPass::new(ctx));
-                let gpu = pass.upload(ctx, &node.mesh);
+                let gpu = {
+                    let shared = uploaded
+                        .get(&Arc::as_ptr(&node.mesh))
+                        .and_then(|other| self.meshes.get(other));
+                    pass.upload_sharing(ctx, &node.mesh, shared)
+                };
                 self.meshes.insert(id, gpu);
             }
+            uploaded.entry(Arc::as_ptr(&node.mesh)).or_insert(id);
         }
         self.meshes.retain(|id, _| live.contains(id));
     }

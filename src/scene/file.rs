@@ -408,23 +408,27 @@ pub struct LoadedScene {
     pub ordering: Option<Ordering>,
 }
 
+/// The longest scene file read: most are a few kilobytes of TOML, and a scene that places one
+/// mesh file tens of thousands of times (screws, beads, a lattice) takes about 50 bytes a node.
+pub const MAX_SCENE_BYTES: u64 = 16 << 20;
+
 impl SceneFile {
-    /// Reads and parses a scene file (at most 1 MiB).
+    /// Reads and parses a scene file (at most [`MAX_SCENE_BYTES`]).
     pub fn read(path: &Path) -> Result<Self, SceneFileError> {
         let io = |source| SceneFileError::Io {
             path: path.into(),
             source,
         };
-        // At most 1 MiB: scene files are a few kilobytes of TOML. The length comes from the
-        // file's metadata, which a named pipe or a device cannot hold up.
+        // The length comes from the file's metadata, which a named pipe or a device cannot
+        // hold up.
         let len = std::fs::metadata(path).map_err(io)?.len();
-        if len > 1 << 20 {
+        if len > MAX_SCENE_BYTES {
             return Err(SceneFileError::Invalid {
                 path: path.into(),
-                message: format!("{len} bytes is too large for a scene file (1 MiB at most)"),
+                message: format!("{len} bytes is too large for a scene file (16 MiB at most)"),
             });
         }
-        let text = crate::input::read_regular_text(path, 1 << 20).map_err(io)?;
+        let text = crate::input::read_regular_text(path, MAX_SCENE_BYTES).map_err(io)?;
         Self::parse(&text, path)
     }
 
@@ -1832,16 +1836,17 @@ mod tests {
     }
 
     #[test]
-    fn a_scene_file_over_one_mebibyte_is_refused() {
+    fn a_scene_file_over_the_limit_is_refused() {
         let dir = TempDir::new("large");
-        let comment = format!("#{}\n", "x".repeat(1 << 20));
+        let comment = format!("#{}\n", "x".repeat(MAX_SCENE_BYTES as usize));
         let path = dir.write("large.toml", &comment);
         let err = SceneFile::read(&path).unwrap_err();
         assert!(matches!(err, SceneFileError::Invalid { .. }), "{err:?}");
         assert!(err.to_string().contains("too large"), "{err}");
         // Exactly at the limit a file is read (an empty scene, all comment).
-        let path = dir.write("limit.toml", &format!("#{}\n", "x".repeat((1 << 20) - 2)));
-        assert_eq!(std::fs::metadata(&path).unwrap().len(), 1 << 20);
+        let at_limit = MAX_SCENE_BYTES as usize - 2;
+        let path = dir.write("limit.toml", &format!("#{}\n", "x".repeat(at_limit)));
+        assert_eq!(std::fs::metadata(&path).unwrap().len(), MAX_SCENE_BYTES);
         // `is_ok` rather than `unwrap`: a failure would print a mebibyte of parser context.
         assert!(SceneFile::read(&path).is_ok());
     }

@@ -210,7 +210,18 @@ impl Scene {
         if let Some(p) = parent {
             self.nodes[p.0].children.push(id);
         }
-        self.edited();
+        // The bounds grow by the new node alone: recomputing them over every node made adding
+        // n nodes cost n^2.
+        self.generation += 1;
+        if let Some((lo, hi)) = self.local_bounds[id.0] {
+            for c in box_corners(lo, hi) {
+                let p = world.transform_point3(c);
+                self.bounds = Some(match self.bounds {
+                    None => (p, p),
+                    Some((lo, hi)) => (lo.min(p), hi.max(p)),
+                });
+            }
+        }
         Ok(id)
     }
 
@@ -456,6 +467,31 @@ mod tests {
             mesh: Arc::new(mesh),
             material: Material::default(),
         })
+    }
+
+    #[test]
+    fn bounds_grown_node_by_node_equal_bounds_recomputed() {
+        let mut scene = Scene::new();
+        let group = scene
+            .add("g", DMat4::from_rotation_z(0.7), None, NodeContent::Empty)
+            .unwrap();
+        for i in 0..50 {
+            let local = DMat4::from_translation(DVec3::new(i as f64, -2.0 * i as f64, 0.5))
+                * DMat4::from_rotation_x(0.1 * i as f64);
+            let parent = (i % 2 == 0).then_some(group);
+            scene.add(format!("m{i}"), local, parent, cube()).unwrap();
+        }
+        let grown = scene.bounds().unwrap();
+        scene.edited();
+        let recomputed = scene.bounds().unwrap();
+        assert!(
+            grown.0.abs_diff_eq(recomputed.0, 1e-12),
+            "{grown:?} {recomputed:?}"
+        );
+        assert!(
+            grown.1.abs_diff_eq(recomputed.1, 1e-12),
+            "{grown:?} {recomputed:?}"
+        );
     }
 
     #[test]
