@@ -1282,13 +1282,9 @@ fn decode_file(path: &Path, outs: Vec<SliceOut>) -> Result<(), VolumeError> {
                     // grids store 32.
                     Samples::from_rle(&obj, voxels, frames)?
                 } else if message.contains("SamplePrecision(12)") {
-                    // jpeg-decoder reads 8-bit JPEG only.
-                    return Err(
-                        "cannot decode pixel data: 12-bit JPEG (extended, lossy) is not \
-                         decoded by this build; transcode the file (for example with dcmdjpeg \
-                         or gdcmconv --raw)"
-                            .into(),
-                    );
+                    // jpeg-decoder reads 8-bit DCT data only; 12-bit goes to libjpeg-turbo.
+                    let size = (usize::from(first.columns), usize::from(first.rows));
+                    Samples::from_jpeg12(&obj, size, frames)?
                 } else {
                     return Err(message);
                 }
@@ -1428,6 +1424,43 @@ impl<'a> Samples<'a> {
                 .map_err(|m| format!("frame {}: {m}", k + 1))?;
         }
         Self::checked(data, allocated, stored, high_bit, signed)
+    }
+
+    /// The samples of 12-bit JPEG frames (see `volume::jpeg12`): one fragment a frame, or
+    /// every fragment together for a file of one frame.
+    fn from_jpeg12(
+        obj: &DefaultDicomObject,
+        (columns, rows): (usize, usize),
+        frames: u32,
+    ) -> Result<Self, String> {
+        let stored = u32::from(unsigned(obj, tags::BITS_STORED, "BitsStored")?);
+        if !(9..=12).contains(&stored) {
+            return Err(format!(
+                "BitsStored {stored} in a 12-bit JPEG (Extended) file"
+            ));
+        }
+        let signed =
+            unsigned(obj, tags::PIXEL_REPRESENTATION, "PixelRepresentation").ok() == Some(1);
+        let fragments = obj
+            .get(tags::PIXEL_DATA)
+            .and_then(|e| e.value().fragments())
+            .ok_or("JPEG pixel data without fragments")?;
+        let frames_data: Vec<std::borrow::Cow<'_, [u8]>> = if fragments.len() == frames as usize {
+            fragments.iter().map(|f| f.as_slice().into()).collect()
+        } else if frames == 1 {
+            vec![fragments.concat().into()]
+        } else {
+            return Err(format!(
+                "{} JPEG fragments for {frames} frames",
+                fragments.len()
+            ));
+        };
+        let mut data = Vec::new();
+        for (k, frame) in frames_data.iter().enumerate() {
+            super::jpeg12::decode_frame(frame, columns, rows, &mut data)
+                .map_err(|m| format!("frame {}: {m}", k + 1))?;
+        }
+        Self::checked(data, 16, stored, stored - 1, signed)
     }
 
     /// Converts one slice's samples to modality values (HU for CT) with its rescale. Samples

@@ -7,6 +7,7 @@ use crate::order::{OrderError, VolumeGeometry};
 pub mod dat;
 pub mod detect;
 pub mod dicom;
+mod jpeg12;
 pub mod loader;
 pub mod metaimage;
 pub mod nifti;

@@ -1121,12 +1121,20 @@ mod tests {
         let corrupt = attached(&fields, b"\x1f\x8bnot really gzip");
         let err = load(&dir, "corrupt.nrrd", &corrupt).unwrap_err();
         assert!(matches!(err, VolumeError::Decompress { .. }), "{err}");
-        // A tiny stream claiming 2^32 voxels fails after inflating what it holds.
+        // A tiny stream claiming 2^32 voxels is refused from its header: drawing them would
+        // take more memory than any machine here has.
         let bomb = attached(
             "dimension: 3\nsizes: 65536 65536 1\ntype: uchar\nencoding: gzip\n",
             &gzip(&[0; 1000]),
         );
         let err = load(&dir, "bomb.nrrd", &bomb).unwrap_err();
+        assert!(matches!(err, VolumeError::OverBudget { .. }), "{err}");
+        // One claiming a million fails after inflating what it holds.
+        let short = attached(
+            "dimension: 3\nsizes: 1024 1024 1\ntype: uchar\nencoding: gzip\n",
+            &gzip(&[0; 1000]),
+        );
+        let err = load(&dir, "short.nrrd", &short).unwrap_err();
         assert!(
             matches!(err, VolumeError::InflatesShort { actual: 1000, .. }),
             "{err}"
