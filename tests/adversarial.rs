@@ -1457,6 +1457,11 @@ fn limit_cases() -> Vec<Case> {
         w.extend(budget);
         w
     };
+    let outside_gltf = b"{\"asset\":{\"version\":\"2.0\"},\"buffers\":[{\"uri\":\"../buf.bin\",\"byteLength\":36}],\"bufferViews\":[{\"buffer\":0,\"byteLength\":36}],\"accessors\":[{\"bufferView\":0,\"componentType\":5126,\"count\":3,\"type\":\"VEC3\",\"min\":[0,0,0],\"max\":[1,1,0]}],\"meshes\":[{\"primitives\":[{\"attributes\":{\"POSITION\":0}}]}],\"nodes\":[{\"mesh\":0}],\"scenes\":[{\"nodes\":[0]}]}".to_vec();
+    let triangle: Vec<u8> = [0f32, 0., 0., 1., 0., 0., 0., 1., 0.]
+        .iter()
+        .flat_map(|v| v.to_le_bytes())
+        .collect();
     let stl_far = b"solid far\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1e38 0 0\nvertex 0 1 0\nendloop\nendfacet\nendsolid far\n".to_vec();
     let obj_far = b"v 0 0 0\nv 1 0 0\nv 0 -3e37 0\nf 1 2 3\n".to_vec();
     let render_mesh = |mesh: &'static str| -> Vec<&'static str> {
@@ -1539,6 +1544,30 @@ fn limit_cases() -> Vec<Case> {
             "fifo-obj-mtllib",
             vec![("m.obj", b"mtllib fifo\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n".to_vec())],
             &render_mesh("m.obj"),
+        ),
+        // The same buffer outside the glTF's folder: refused, and drawn when allowed.
+        case(
+            "gltf-outside-refused",
+            vec![
+                ("sub/m.gltf", outside_gltf.clone()),
+                ("buf.bin", triangle.clone()),
+            ],
+            &render_mesh("sub/m.gltf"),
+            &["outside", "--allow-outside-paths"],
+        ),
+        works(
+            "gltf-outside-allowed",
+            vec![("sub/m.gltf", outside_gltf), ("buf.bin", triangle)],
+            &[
+                "render",
+                "--mesh",
+                "sub/m.gltf",
+                "--allow-outside-paths",
+                "--size",
+                "32x32",
+                "--out",
+                "o.png",
+            ],
         ),
         case("stl-far-coordinate", vec![("far.stl", stl_far)], &render_mesh("far.stl"), &["far.stl", "coordinate"]),
         case("obj-far-coordinate", vec![("far.obj", obj_far)], &render_mesh("far.obj"), &["far.obj", "coordinate"]),

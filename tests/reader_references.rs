@@ -446,6 +446,23 @@ fn shared_pydicom_and_nibabel_files_load_as_the_references_read_them() {
     };
     let reference = read_json(&data_dir("reference").join("reader_tests.json"));
     let reference = reference["files"].as_object().expect("files");
+    // Every volume file of the shared folders has its reference: a file added there is
+    // checked, not passed over.
+    for folder in ["pydicom_test_files", "nibabel_test_data"] {
+        for entry in std::fs::read_dir(dir.join(folder)).expect("shared folder") {
+            let name = entry.expect("folder entry").file_name();
+            let name = name.to_string_lossy();
+            let text = [".txt", ".rst"].iter().any(|e| name.ends_with(e));
+            if text || ["LICENSE", "COPYING"].contains(&name.as_ref()) {
+                continue;
+            }
+            let key = format!("{folder}/{name}");
+            assert!(
+                reference.contains_key(&key),
+                "{key} has no reference in reader_tests.json (see tests/data/reference/)"
+            );
+        }
+    }
     let mut checked = 0;
     for (file, entry) in reference {
         let path = dir.join(file);

@@ -587,9 +587,14 @@ fn the_orderings_report_measures_alike_on_gpu_images() {
         for (i, (oc, og)) in c.per_ordering.iter().zip(&g.per_ordering).enumerate() {
             let (a, b) = (oc.difference.rmse, og.difference.rmse);
             eprintln!("{} {}: CPU {a:.5} GPU {b:.5}", c.name, oc.entry);
-            // Lavapipe: at most 0.001 apart here, 0.0006 on the built-in phantom's views.
+            // The GPU's floor: its 16-bit blending and f32 footprints leave about 1e-4 of
+            // RMSE against the exact order where the CPU measures 1e-5 (lavapipe: 0.00005 to
+            // 0.00014 over IP-PBTF and rows here), and PBTF's larger errors agree within
+            // 10%. The allowance sits just above that floor, so that an IP-PBTF or rows
+            // image off by a few times its error fails (a fixed 1e-3 let a GPU error 90
+            // times the CPU's pass).
             assert!(
-                (a - b).abs() < 1e-3 + 0.1 * a,
+                (a - b).abs() < 2.5e-4 + 0.1 * a,
                 "{} {}: CPU {a} against GPU {b}",
                 c.name,
                 oc.entry
