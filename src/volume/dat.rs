@@ -27,7 +27,7 @@ pub fn load_dat(path: &Path) -> Result<LoadedVolume, VolumeError> {
     let header = DatHeader::read(path)?;
     let placement = Placement::axis_aligned(path, header.spacing, [0.0; 3])?;
     let data = path.parent().unwrap_or(Path::new("")).join(&header.object);
-    if let Some(problem) = super::raw::data_file_problem(&data) {
+    if let Some(problem) = super::loader::data_file_problem(&data) {
         return Err(VolumeError::MissingDataFile {
             path: path.into(),
             data_file: data,

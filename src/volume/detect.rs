@@ -29,9 +29,8 @@ pub use super::loader::{
     CoordinateFrame, LoadOptions, LoadedVolume, NiftiTransform, SeriesChoice, VolumeFormat,
     scalar_type_name,
 };
-use super::loader::{GZIP_MAGIC, io_error, read_head, unsupported};
+use super::loader::{GZIP_MAGIC, io_error, read_head};
 use super::{CpuVolume, VolumeError, dat, dicom, metaimage, nifti, nrrd, vtk};
-use glam::{DMat3, DVec3};
 
 /// Loads the volume at `path` in whatever supported format it is (see the module docs).
 pub fn load_volume(path: &Path) -> Result<CpuVolume, VolumeError> {
@@ -48,25 +47,8 @@ pub fn load_volume_with_info(path: &Path) -> Result<LoadedVolume, VolumeError> {
 /// apply to the file's format is [`VolumeError::Unsupported`], naming it.
 pub fn load_volume_with(path: &Path, options: &LoadOptions) -> Result<LoadedVolume, VolumeError> {
     let format = detect_format(path)?;
-    let refuse = |option: &str, applies: &str| {
-        Err(unsupported(
-            path,
-            format!(
-                "{option} for a {} file; it applies to {applies}",
-                format.name()
-            ),
-        ))
-    };
-    if options.frame.is_some() && format != VolumeFormat::Nifti {
-        return refuse("a frame", "4-D NIfTI");
-    }
-    if options.nifti_transform.is_some() && format != VolumeFormat::Nifti {
-        return refuse("a NIfTI transform choice", "NIfTI");
-    }
-    if options.series.is_some() && format != VolumeFormat::Dicom {
-        return refuse("a series", "DICOM");
-    }
-    let mut loaded = match format {
+    options.check_applies(path, format)?;
+    let loaded = match format {
         VolumeFormat::Dicom => {
             // The DICOM loader reads a whole folder; a single file picks its own series.
             let (volume, scalar_type) = if path.is_dir() {
@@ -93,26 +75,7 @@ pub fn load_volume_with(path: &Path, options: &LoadOptions) -> Result<LoadedVolu
         VolumeFormat::Dat => dat::load_dat(path)?,
         VolumeFormat::MetaImage => metaimage::load_metaimage(path)?,
     };
-    match options.coordinate_frame {
-        Some(_) if loaded.patient_frame => {
-            return Err(unsupported(
-                path,
-                format!(
-                    "a coordinate frame for a {} file, which states its own patient frame",
-                    format.name()
-                ),
-            ));
-        }
-        Some(CoordinateFrame::Lps) => {
-            // LPS to RAS: x and y change sign, for positions and for axis directions alike.
-            let flip = DMat3::from_diagonal(DVec3::new(-1.0, -1.0, 1.0));
-            let v = &mut loaded.volume;
-            v.origin = (flip * DVec3::from(v.origin)).to_array();
-            v.direction = flip * v.direction;
-        }
-        Some(CoordinateFrame::Ras) | None => {}
-    }
-    Ok(loaded)
+    loaded.in_frame(path, options.coordinate_frame)
 }
 
 /// Loads the volume at `path` and describes it as JSON: `file`, `format` (see

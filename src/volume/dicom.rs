@@ -78,8 +78,8 @@ use rayon::prelude::*;
 use super::CpuVolume;
 pub use super::loader::SeriesChoice;
 use super::loader::{Placement, io_error};
-use super::raw::checked_voxels;
-use super::raw::{ScalarType, VolumeError};
+use super::loader::{ScalarType, VolumeError, checked_voxels};
+pub use super::loader::{SeriesSummary, describe_series};
 
 /// Bytes before the `DICM` magic in a DICOM file.
 const PREAMBLE_LEN: usize = 128;
@@ -189,47 +189,9 @@ struct SeriesTags {
     modality: Option<String>,
 }
 
-/// One series of a folder, as [`list_series`] finds it.
-#[derive(Debug, Clone, PartialEq, serde::Serialize)]
-pub struct SeriesSummary {
-    /// The folder holding it.
-    pub folder: PathBuf,
-    /// SeriesInstanceUID (empty when the files have none).
-    pub uid: String,
-    /// SeriesNumber.
-    pub number: Option<String>,
-    /// SeriesDescription.
-    pub description: Option<String>,
-    /// Modality (CT, MR...).
-    pub modality: Option<String>,
-    /// Columns and rows of its first usable slice.
-    pub size: Option<[u16; 2]>,
-    /// Image files in it.
-    pub images: usize,
-}
-
 /// Whether `choice` names the series `uid` with these tags.
 fn chosen(choice: &SeriesChoice, uid: &str, tags: &SeriesTags) -> bool {
     choice.0 == uid || tags.number.as_deref() == Some(choice.0.trim())
-}
-
-/// The series as lines for a message: number, description, modality, size and image count.
-pub fn describe_series(series: &[SeriesSummary]) -> String {
-    series
-        .iter()
-        .map(|s| {
-            let size = s.size.map_or("?".into(), |[c, r]| format!("{c}x{r}"));
-            format!(
-                "  series {} {:?} {} {size}, {} images, UID {}",
-                s.number.as_deref().unwrap_or("-"),
-                s.description.as_deref().unwrap_or(""),
-                s.modality.as_deref().unwrap_or("?"),
-                s.images,
-                s.uid
-            )
-        })
-        .collect::<Vec<_>>()
-        .join("\n")
 }
 
 /// What one slice (an image, or one frame of a multi-frame image) says about itself, read

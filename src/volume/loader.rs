@@ -10,8 +10,14 @@ use std::path::{Path, PathBuf};
 use glam::{DMat3, DVec3};
 use serde_json::{Value, json};
 
-use super::raw::decode;
-use super::{CpuVolume, ScalarFormat, ScalarType, VolumeError};
+use super::CpuVolume;
+
+mod error;
+mod values;
+
+pub use error::{SeriesSummary, VolumeError, describe_series};
+pub use values::{ByteOrder, ParseScalarError, ScalarFormat, ScalarType};
+pub(crate) use values::{checked_voxels, data_file_problem, decode, triple};
 
 /// The volume file formats [`super::detect::load_volume`] recognises.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -67,6 +73,33 @@ pub struct LoadedVolume {
 }
 
 impl LoadedVolume {
+    /// The volume read in `frame` where its file states no patient frame: LPS turns to RAS
+    /// (x and y change sign, for positions and axis directions alike). A file that states its
+    /// own frame refuses the choice.
+    pub fn in_frame(
+        mut self,
+        path: &Path,
+        frame: Option<CoordinateFrame>,
+    ) -> Result<Self, VolumeError> {
+        match frame {
+            Some(_) if self.patient_frame => Err(unsupported(
+                path,
+                format!(
+                    "a coordinate frame for a {} file, which states its own patient frame",
+                    self.format.name()
+                ),
+            )),
+            Some(CoordinateFrame::Lps) => {
+                let flip = DMat3::from_diagonal(DVec3::new(-1.0, -1.0, 1.0));
+                let v = &mut self.volume;
+                v.origin = (flip * DVec3::from(v.origin)).to_array();
+                v.direction = flip * v.direction;
+                Ok(self)
+            }
+            Some(CoordinateFrame::Ras) | None => Ok(self),
+        }
+    }
+
     /// The description [`super::detect::volume_info`] gives, with `file` as the file name shown.
     pub fn info(&self, file: &Path) -> Value {
         let v = &self.volume;
@@ -189,6 +222,31 @@ pub struct LoadOptions {
     pub nifti_transform: Option<NiftiTransform>,
 }
 
+impl LoadOptions {
+    /// Refuses an option that cannot apply to a file of `format` at `path`, naming it.
+    pub fn check_applies(&self, path: &Path, format: VolumeFormat) -> Result<(), VolumeError> {
+        let refuse = |option: &str, applies: &str| {
+            Err(unsupported(
+                path,
+                format!(
+                    "{option} for a {} file; it applies to {applies}",
+                    format.name()
+                ),
+            ))
+        };
+        if self.frame.is_some() && format != VolumeFormat::Nifti {
+            return refuse("a frame", "4-D NIfTI");
+        }
+        if self.nifti_transform.is_some() && format != VolumeFormat::Nifti {
+            return refuse("a NIfTI transform choice", "NIfTI");
+        }
+        if self.series.is_some() && format != VolumeFormat::Dicom {
+            return refuse("a series", "DICOM");
+        }
+        Ok(())
+    }
+}
+
 /// The two bytes every gzip stream starts with.
 pub(super) const GZIP_MAGIC: [u8; 2] = [0x1f, 0x8b];
 
@@ -261,9 +319,9 @@ impl Placement {
                 path,
                 format!(
                     "axis directions {}, {} and {} do not span 3-D space",
-                    super::raw::triple(&columns[0].to_array()),
-                    super::raw::triple(&columns[1].to_array()),
-                    super::raw::triple(&columns[2].to_array())
+                    triple(&columns[0].to_array()),
+                    triple(&columns[1].to_array()),
+                    triple(&columns[2].to_array())
                 ),
             ));
         }

@@ -31,7 +31,7 @@ use super::loader::{
     LoadedVolume, Placement, VolumeFormat, expect_end, format_pattern, header_error,
     inflate_values, io_error, read_head, unsupported,
 };
-use super::raw::{checked_voxels, data_file_problem};
+use super::loader::{checked_voxels, data_file_problem};
 use super::{
     ByteOrder, CpuVolume, RawSpec, ScalarFormat, ScalarType, VolumeError, load_raw, load_raw_slices,
 };

@@ -16,13 +16,11 @@ pub mod phantom;
 pub mod raw;
 pub mod vtk;
 
+pub use loader::{ByteOrder, ParseScalarError, ScalarFormat, ScalarType, VolumeError};
 pub use phantom::{
     ShoulderLandmarks, shoulder_landmarks, shoulder_phantom, shoulder_phantom_default,
 };
-pub use raw::{
-    ByteOrder, ParseScalarError, RawSpec, ScalarFormat, ScalarType, VolumeError, load_raw,
-    load_raw_slices, slice_stack,
-};
+pub use raw::{RawSpec, load_raw, load_raw_slices, slice_stack};
 
 /// Scalar values on an `nx x ny x nz` grid (x fastest), with their placement in the world:
 /// voxel `k` sits at `origin + direction * (spacing * k)`.

@@ -44,11 +44,11 @@ use std::path::{Path, PathBuf};
 use flate2::read::MultiGzDecoder;
 use glam::{DMat3, DQuat, DVec3};
 
+use super::loader::checked_voxels;
 use super::loader::{
     GZIP_MAGIC, LoadedVolume, NiftiTransform, Placement, VolumeFormat, expect_end, header_error,
     inflate_values, io_error, read_head, skip_inflated, unsupported,
 };
-use super::raw::checked_voxels;
 use super::{ByteOrder, CpuVolume, RawSpec, ScalarFormat, ScalarType, VolumeError, load_raw};
 
 /// Bytes of a NIfTI-1 (and Analyze 7.5) header.

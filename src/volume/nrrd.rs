@@ -37,7 +37,7 @@ use super::loader::{
     HeaderLines, LoadedVolume, Placement, VolumeFormat, expect_end, format_pattern, header_error,
     inflate_values, io_error, skip_inflated, text_values, unsupported,
 };
-use super::raw::{checked_voxels, data_file_problem};
+use super::loader::{checked_voxels, data_file_problem};
 use super::{
     ByteOrder, CpuVolume, RawSpec, ScalarFormat, ScalarType, VolumeError, load_raw, load_raw_slices,
 };

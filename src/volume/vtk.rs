@@ -34,8 +34,7 @@ use super::loader::{
     HeaderLines, LoadedVolume, Placement, VolumeFormat, expect_end, header_error, inflate_values,
     io_error, text_values, unsupported,
 };
-use super::raw::checked_voxels;
-use super::raw::decode;
+use super::loader::{checked_voxels, decode};
 use super::{ByteOrder, CpuVolume, RawSpec, ScalarFormat, ScalarType, VolumeError, load_raw};
 
 /// Loads a legacy VTK `STRUCTURED_POINTS` file with binary scalars.
