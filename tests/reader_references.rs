@@ -228,6 +228,25 @@ fn nifti_transform_choice_matches_nibabel_and_itk() {
     check_file("nifti2", file, file, &itk, "sform", nifti);
 }
 
+/// NIfTI files in micrometres and metres written by nibabel: placed in millimetres as
+/// nibabel's affine (times the unit) and SimpleITK place them.
+#[test]
+fn nifti_lengths_in_other_units_become_millimetres() {
+    for file in ["micrometres.nii", "metres.nii"] {
+        for geometry in ["nibabel_mm", "simpleitk"] {
+            let options = LoadOptions::default();
+            check_file(
+                "nifti-units",
+                file,
+                file,
+                &options,
+                geometry,
+                VolumeFormat::Nifti,
+            );
+        }
+    }
+}
+
 #[test]
 fn analyze_is_placed_as_nibabel_places_it() {
     for (key, file) in [("little", "little.hdr"), ("big", "big.hdr")] {
@@ -354,6 +373,7 @@ fn metaimage_lists_patterns_and_orientation_match_itk() {
         "oblique.mhd",
         "oblique.mha",
         "oblique-zlib.mha",
+        "oblique-zraw.mhd",
     ] {
         check_file(
             "metaimage",
