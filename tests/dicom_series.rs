@@ -643,3 +643,32 @@ fn images_without_instance_uids_keep_their_slices_and_drop_their_copies() {
     assert_eq!(copy, original);
     fs::remove_dir_all(&dir).expect("clean up");
 }
+
+/// An image of the same series with another size (a reformat or a thumbnail saved with it)
+/// is of another grid: a file of the main stack loads the stack without it.
+#[test]
+fn an_image_of_another_size_in_the_series_is_left_out() {
+    let Some(shared) = series_dir() else { return };
+    let dir = copy_series(&shared, "other_size", |_| false);
+    let files = series_files(&dir);
+    let vr = |name: &str| name.parse().expect("a VR name");
+    let mut small = open_file(&files[2]).expect("open slice");
+    small.put(dicom_object::mem::InMemElement::new(
+        tags::ROWS,
+        vr("US"),
+        dicom_core::PrimitiveValue::from(256u16),
+    ));
+    small.put(dicom_object::mem::InMemElement::new(
+        tags::COLUMNS,
+        vr("US"),
+        dicom_core::PrimitiveValue::from(256u16),
+    ));
+    small.put_str(tags::SOP_INSTANCE_UID, vr("UI"), "2.25.7007");
+    small
+        .write_to_file(dir.join("small.dcm"))
+        .expect("write the small image");
+    let original = load_dicom_series(&shared).expect("the shared series");
+    let own = splatscene::volume::detect::load_volume(&files[0]).expect("a file's own series");
+    assert_eq!(own, original);
+    fs::remove_dir_all(&dir).expect("clean up");
+}
