@@ -672,3 +672,20 @@ fn an_image_of_another_size_in_the_series_is_left_out() {
     assert_eq!(own, original);
     fs::remove_dir_all(&dir).expect("clean up");
 }
+
+/// A series holding two time points (every position twice, each image its own instance) is
+/// refused with a message that says so, not only that two slices share a position.
+#[test]
+fn two_time_points_in_one_series_are_named_as_such() {
+    let Some(shared) = series_dir() else { return };
+    let dir = copy_series(&shared, "time_points", |_| false);
+    let vr = |name: &str| name.parse().expect("a VR name");
+    for (k, file) in series_files(&dir).iter().enumerate() {
+        let mut obj = open_file(file).expect("open slice");
+        obj.put_str(tags::SOP_INSTANCE_UID, vr("UI"), format!("2.25.9{k:04}"));
+        obj.write_to_file(dir.join(format!("t2-{k:02}.dcm")))
+            .expect("write the second time point");
+    }
+    expect_dicom_error(load_dicom_series(&dir), &dir, "several time points");
+    fs::remove_dir_all(&dir).expect("clean up");
+}

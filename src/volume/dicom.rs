@@ -1177,7 +1177,17 @@ fn check_gaps(dir: &Path, slices: &[SliceHeader], depths: &[f64]) -> Result<(), 
         return Ok(());
     };
     let what = if steps[i] <= 1e-6 {
-        "two slices at the same position".to_owned()
+        // Every position held the same number of times: time points or repeated stacks.
+        let positions = 1 + steps.iter().filter(|&&step| step > 1e-6).count();
+        let each = slices.len() / positions;
+        if positions > 1 && each > 1 && each * positions == slices.len() {
+            format!(
+                "{} slices at {positions} positions, {each} at each: several time points or                  stacks in one series, which one 3-D volume cannot hold (split the series,                  for example by acquisition or temporal position, first); two slices at the                  same position",
+                slices.len()
+            )
+        } else {
+            "two slices at the same position".to_owned()
+        }
     } else {
         let missing = (steps[i] / smallest).round() - 1.0;
         format!(
