@@ -35,6 +35,9 @@ pub enum RenderError {
     /// The adapter refused to make a device, or the device failed.
     #[error("GPU device error: {0}")]
     Device(String),
+    /// The image is past the size any output takes (see [`crate::budget`]).
+    #[error("{0}")]
+    ImageSize(#[from] crate::budget::SizeError),
     /// The image size is zero or beyond the adapter's limit.
     #[error("image size {width}x{height} is not between 1x1 and {max}x{max}")]
     BadSize {

@@ -258,6 +258,7 @@ impl Renderer {
         size: (u32, u32),
         options: &FrameOptions,
     ) -> Result<Screenshot, RenderError> {
+        crate::budget::check_image(size.0.into(), size.1.into())?;
         if self.composites_on_cpu(ctx) {
             return self.screenshot_tiled(Some(ctx), scene, camera, size, options);
         }
@@ -293,6 +294,7 @@ impl Renderer {
         size: (u32, u32),
         options: &FrameOptions,
     ) -> Result<Screenshot, RenderError> {
+        crate::budget::check_image(size.0.into(), size.1.into())?;
         self.screenshot_tiled(None, scene, camera, size, options)
     }
 
