@@ -268,6 +268,11 @@ pub fn corrected_opacity(alpha: f32, length: f64, reference: f64) -> f32 {
     if !(length > 0.0 && reference > 0.0) || alpha >= 1.0 {
         return alpha;
     }
+    // Transparent stays transparent, without the power: most voxels of a CT are air or
+    // tissue the transfer function hides, and `powf` was most of their classification.
+    if alpha <= 0.0 {
+        return 0.0;
+    }
     let exponent = (length / reference) as f32;
     1.0 - (1.0 - alpha.max(0.0)).powf(exponent)
 }

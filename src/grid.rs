@@ -207,10 +207,8 @@ impl SparseGrid {
         let stride = strides[axis];
         let mut offsets = vec![0u32; n_rows + 1];
         let row_of = |k: [u32; 3]| k[b] as usize + self.dims[b] as usize * k[c] as usize;
-        let is_start = |id: u32, k: [u32; 3]| {
-            self.contains(id) && (k[axis] == 0 || !self.contains(id - stride))
-        };
-        self.for_each_coord(|id, k| {
+        let is_start = |id: u32, k: [u32; 3]| k[axis] == 0 || !self.contains(id - stride);
+        self.for_each_significant(|id, k| {
             if is_start(id, k) {
                 offsets[row_of(k) + 1] += 1;
             }
@@ -221,7 +219,7 @@ impl SparseGrid {
         let mut fill = offsets.clone();
         let mut runs = vec![Run { start: 0, len: 0 }; offsets[n_rows] as usize];
         let n = self.dims[axis];
-        self.for_each_coord(|id, k| {
+        self.for_each_significant(|id, k| {
             if is_start(id, k) {
                 let mut len = 1;
                 while k[axis] + len < n && self.contains(id + len * stride) {
@@ -238,16 +236,36 @@ impl SparseGrid {
         AxisRows { offsets, runs }
     }
 
-    fn for_each_coord(&self, mut f: impl FnMut(u32, [u32; 3])) {
-        let [nx, ny, nz] = self.dims;
-        let mut id = 0u32;
-        for z in 0..nz {
-            for y in 0..ny {
-                for x in 0..nx {
-                    f(id, [x, y, z]);
-                    id = id.wrapping_add(1);
+    /// Calls `f` with the id and coordinates of every significant voxel, in id order. The
+    /// bitmap is walked a word at a time: an empty word (64 voxels of air) costs one test, and
+    /// coordinates advance by addition rather than division. (Walking every voxel and testing
+    /// its bit made the run tables most of a 67M-voxel classification.)
+    fn for_each_significant(&self, mut f: impl FnMut(u32, [u32; 3])) {
+        let [nx, ny, _] = self.dims;
+        // Coordinates of the first voxel of the current word.
+        let (mut x0, mut y0, mut z0) = (0u32, 0u32, 0u32);
+        let advance = |x: &mut u32, y: &mut u32, z: &mut u32, by: u32| {
+            *x += by;
+            while *x >= nx {
+                *x -= nx;
+                *y += 1;
+                if *y == ny {
+                    *y = 0;
+                    *z += 1;
                 }
             }
+        };
+        for (w, &word) in self.bits.iter().enumerate() {
+            let mut bits = word;
+            let (mut x, mut y, mut z, mut at) = (x0, y0, z0, 0u32);
+            while bits != 0 {
+                let bit = bits.trailing_zeros();
+                bits &= bits - 1;
+                advance(&mut x, &mut y, &mut z, bit - at);
+                at = bit;
+                f((w as u32).wrapping_mul(64).wrapping_add(bit), [x, y, z]);
+            }
+            advance(&mut x0, &mut y0, &mut z0, 64);
         }
     }
 
@@ -334,8 +352,25 @@ mod tests {
 
     #[test]
     fn rows_match_the_bitmap_on_every_axis() {
-        let dims = [5, 4, 3];
-        let ids: Vec<u32> = (0..60).filter(|i| (i * 7 + i / 5) % 3 != 0).collect();
+        // Rows shorter than a bitmap word, longer than one, crossing words, one voxel wide;
+        // masks sparse and dense.
+        for (dims, keep) in [
+            ([5, 4, 3], 3),
+            ([70, 3, 2], 2),
+            ([1, 9, 20], 4),
+            ([130, 1, 3], 5),
+            ([64, 2, 2], 2),
+            ([3, 65, 2], 7),
+        ] {
+            rows_match_the_bitmap(dims, keep);
+        }
+    }
+
+    fn rows_match_the_bitmap(dims: [u32; 3], keep: u32) {
+        let count = dims.iter().product::<u32>();
+        let ids: Vec<u32> = (0..count)
+            .filter(|i| (i * 7 + i / 5 + i / 13) % keep != 0)
+            .collect();
         let grid = SparseGrid::from_sorted_ids(dims, &ids).unwrap();
         assert_eq!(grid.len(), ids.len());
         let strides = grid.strides();
@@ -361,12 +396,11 @@ mod tests {
                 }
             }
             seen.sort_unstable();
-            assert_eq!(seen, ids, "axis {axis}");
+            assert_eq!(seen, ids, "{dims:?} axis {axis}");
         }
         for (rank, id) in grid.ids().enumerate() {
             assert_eq!(grid.rank(id), Some(rank as u32));
         }
-        assert_eq!(grid.rank(0), None);
     }
 
     #[test]
