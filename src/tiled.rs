@@ -94,19 +94,32 @@ impl SplatTexels {
             bricks,
             texels: vec![[0; 8]; count],
         };
-        for z in 0..nz {
-            for y in 0..ny {
-                for x in 0..nx {
-                    let id = 4 * (x + nx * (y + ny * z));
-                    let (Some(c), Some(n)) = (colors.get(id..id + 4), normals.get(id..id + 4))
-                    else {
-                        continue;
-                    };
-                    let slot = out.slot(x, y, z);
-                    out.texels[slot] = [c[0], c[1], c[2], c[3], n[0], n[1], n[2], n[3]];
+        // One layer of bricks (four z-slices, a contiguous stretch of the texels) a task.
+        let layer = bricks[0] * bricks[1] * BRICK.pow(3);
+        let at = Self {
+            dims,
+            bricks,
+            texels: Vec::new(),
+        };
+        out.texels
+            .par_chunks_mut(layer.max(1))
+            .enumerate()
+            .for_each(|(bz, texels)| {
+                for z in bz * BRICK..((bz + 1) * BRICK).min(nz) {
+                    for y in 0..ny {
+                        for x in 0..nx {
+                            let id = 4 * (x + nx * (y + ny * z));
+                            let (Some(c), Some(n)) =
+                                (colors.get(id..id + 4), normals.get(id..id + 4))
+                            else {
+                                continue;
+                            };
+                            let slot = at.slot(x, y, z) - bz * layer;
+                            texels[slot] = [c[0], c[1], c[2], c[3], n[0], n[1], n[2], n[3]];
+                        }
+                    }
                 }
-            }
-        }
+            });
         out
     }
 

@@ -8,6 +8,7 @@
 
 use bytemuck::{Pod, Zeroable};
 use glam::DVec3;
+use rayon::prelude::*;
 
 use super::target::{COLOR_FORMAT, DEPTH_FORMAT};
 use super::view::ViewSetup;
@@ -129,22 +130,32 @@ fn texture_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
 /// Straight RGBA8 per voxel of the whole grid (zero where not significant): the colour
 /// texture of the splat pass, and the colours of the CPU tile compositor.
 pub(crate) fn color_texels(classified: &Classified) -> Vec<u8> {
-    let voxels = classified
-        .grid
-        .dims()
-        .iter()
-        .map(|&n| n as usize)
-        .product::<usize>();
-    let mut texels = vec![0u8; voxels * 4];
-    for (id, color) in classified.grid.ids().zip(&classified.colors) {
-        let i = id as usize * 4;
-        texels[i..i + 4].copy_from_slice(&straight_rgba8(*color));
-    }
+    let grid = &classified.grid;
+    let [nx, ny, nz] = grid.dims().map(|n| n as usize);
+    let mut texels = vec![0u8; nx * ny * nz * 4];
+    // One z-slice a task, walking the slice's x rows: only significant voxels are visited,
+    // their colours found by rank.
+    texels
+        .par_chunks_mut((nx * ny * 4).max(1))
+        .enumerate()
+        .for_each(|(z, slice)| {
+            for y in 0..ny {
+                for run in grid.row(0, y as u32, z as u32) {
+                    for x in run.start..run.end() {
+                        let id = (x as usize + nx * (y + ny * z)) as u32;
+                        let Some(rank) = grid.rank(id) else { continue };
+                        let i = (x as usize + nx * y) * 4;
+                        let color = classified.colors[rank as usize];
+                        slice[i..i + 4].copy_from_slice(&straight_rgba8(color));
+                    }
+                }
+            }
+        });
     texels
 }
 
 /// The unit index-space gradient per voxel as snorm8 (w = 127 where defined): the normal
-/// texture of the splat pass, and the normals of the CPU tile compositor.
+/// texture of the splat pass, and the normals of the CPU tile compositor. One z-slice a task.
 pub(crate) fn gradient_texels(volume: &CpuVolume, classified: &Classified) -> Vec<u8> {
     let [nx, ny, nz] = volume.dims.map(|n| n as usize);
     let value = |x: usize, y: usize, z: usize| {
@@ -162,22 +173,31 @@ pub(crate) fn gradient_texels(volume: &CpuVolume, classified: &Classified) -> Ve
             (at(hi) - at(lo)) / (hi - lo) as f32
         }
     };
+    let grid = &classified.grid;
     let mut texels = vec![0u8; nx * ny * nz * 4];
-    for id in classified.grid.ids() {
-        let [x, y, z] = classified.grid.coords(id).map(|c| c as usize);
-        let g = glam::Vec3::new(
-            diff(x, nx, &|i| value(i, y, z)),
-            diff(y, ny, &|i| value(x, i, z)),
-            diff(z, nz, &|i| value(x, y, i)),
-        );
-        // Pointing from dense to less dense: outward on bone surfaces.
-        let Some(n) = (-g).try_normalize() else {
-            continue;
-        };
-        let q = |v: f32| (v * 127.0).round() as i8 as u8;
-        let i = id as usize * 4;
-        texels[i..i + 4].copy_from_slice(&[q(n.x), q(n.y), q(n.z), 127]);
-    }
+    texels
+        .par_chunks_mut((nx * ny * 4).max(1))
+        .enumerate()
+        .for_each(|(z, slice)| {
+            for y in 0..ny {
+                for run in grid.row(0, y as u32, z as u32) {
+                    for x in (run.start..run.end()).map(|x| x as usize) {
+                        let g = glam::Vec3::new(
+                            diff(x, nx, &|i| value(i, y, z)),
+                            diff(y, ny, &|i| value(x, i, z)),
+                            diff(z, nz, &|i| value(x, y, i)),
+                        );
+                        // Pointing from dense to less dense: outward on bone surfaces.
+                        let Some(n) = (-g).try_normalize() else {
+                            continue;
+                        };
+                        let q = |v: f32| (v * 127.0).round() as i8 as u8;
+                        let i = (x + nx * y) * 4;
+                        slice[i..i + 4].copy_from_slice(&[q(n.x), q(n.y), q(n.z), 127]);
+                    }
+                }
+            }
+        });
     texels
 }
 
