@@ -1327,6 +1327,7 @@ fn crafted_inputs_end_in_clear_errors_or_correct_results() {
     assert!(cases.len() >= 150, "only {} cases", cases.len());
     let root = std::env::temp_dir().join(format!("splatscene-adversarial-{}", std::process::id()));
     let mut failures = Vec::new();
+    let mut slowest = (Duration::ZERO, "");
     for case in &cases {
         let dir: PathBuf = root.join(&case.name);
         std::fs::create_dir_all(&dir).unwrap();
@@ -1349,6 +1350,9 @@ fn crafted_inputs_end_in_clear_errors_or_correct_results() {
             .map(|a| a.replace("{dir}", dir.to_str().unwrap()))
             .collect();
         let (code, stderr, took) = run(&dir, &args);
+        if took > slowest.0 {
+            slowest = (took, &case.name);
+        }
         let problem = match (&case.expect, code) {
             (_, None) | (_, Some(137)) => {
                 Some(format!("killed after {took:?} (time or memory limit)"))
@@ -1380,6 +1384,12 @@ fn crafted_inputs_end_in_clear_errors_or_correct_results() {
         }
     }
     std::fs::remove_dir_all(&root).ok();
+    eprintln!(
+        "{} cases; the slowest, {}, took {:?}",
+        cases.len(),
+        slowest.1,
+        slowest.0
+    );
     assert!(
         failures.is_empty(),
         "{} of {} cases failed:\n{}",
@@ -1451,6 +1461,23 @@ fn limit_cases() -> Vec<Case> {
         b.extend(z.finish().unwrap());
         b
     };
+    // A deflated DICOM data set of 128 MiB of zeros in a file of some 128 KiB (1000 times
+    // smaller): dicom-rs would inflate it whole; it is refused while counting.
+    let deflated_bomb = {
+        use std::io::Write;
+        let uid = b"1.2.840.10008.1.2.1.99";
+        let mut b = vec![0u8; 128];
+        b.extend(b"DICM");
+        b.extend([2, 0, 0, 0, b'U', b'L', 4, 0]);
+        b.extend((8 + uid.len() as u32).to_le_bytes());
+        b.extend([2, 0, 0x10, 0, b'U', b'I']);
+        b.extend((uid.len() as u16).to_le_bytes());
+        b.extend(uid);
+        let mut e = flate2::write::DeflateEncoder::new(Vec::new(), flate2::Compression::best());
+        e.write_all(&vec![0u8; 128 << 20]).unwrap();
+        b.extend(e.finish().unwrap());
+        b
+    };
     let budget = ["memory", "SPLATSCENE_MEMORY_LIMIT"];
     let words = |file: &'static str| -> Vec<&'static str> {
         let mut w = vec![file];
@@ -1480,6 +1507,12 @@ fn limit_cases() -> Vec<Case> {
         case("nrrd-gzip-bomb", vec![("b.nrrd", nrrd_bomb)], &["info", "b.nrrd"], &words("b.nrrd")),
         case("nrrd-bzip2-bomb", vec![("b.nrrd", bz2_bomb)], &["info", "b.nrrd"], &words("b.nrrd")),
         case("mha-zlib-bomb", vec![("b.mha", mha_bomb)], &["info", "b.mha"], &words("b.mha")),
+        case(
+            "dicom-deflate-bomb",
+            vec![("d.dcm", deflated_bomb)],
+            &["info", "d.dcm"],
+            &["d.dcm", "inflates to more than"],
+        ),
         case(
             "nrrd-pattern-billions",
             vec![(

@@ -637,6 +637,7 @@ fn describe(context: &str, error: &dyn std::error::Error) -> String {
 /// Opens a DICOM file, with or without its preamble; a bare data set is read with the
 /// transfer syntax its bytes show and given a file meta group.
 fn open(path: &Path) -> Result<DefaultDicomObject, String> {
+    check_deflated_size(path)?;
     let parsed = OpenFileOptions::new().open_file(path);
     let error = match parsed {
         Ok(obj) => return Ok(obj),
@@ -662,6 +663,70 @@ fn open(path: &Path) -> Result<DefaultDicomObject, String> {
         .media_storage_sop_instance_uid("2.25.0");
     data.with_meta(meta)
         .map_err(|e| describe("cannot give the data set a meta group", &e))
+}
+
+/// The Deflated Explicit VR Little Endian transfer syntax.
+const DEFLATED: &str = "1.2.840.10008.1.2.1.99";
+
+/// Refuses a deflated data set that inflates to more than [`MAX_EXPANSION`] times its file
+/// (or [`ALWAYS_ALLOWED_BYTES`]), counted while inflating into nothing: the DICOM reader
+/// inflates a deflated data set whole into memory, so a small file could otherwise take
+/// gigabytes before any size is checked. No slice of such a file could be loaded anyway
+/// ([`allocate`] applies the same bound to the volume).
+fn check_deflated_size(path: &Path) -> Result<(), String> {
+    let mut file = crate::input::open_regular(path).map_err(|e| format!("cannot read: {e}"))?;
+    let file_len = file
+        .metadata()
+        .map_err(|e| format!("cannot read: {e}"))?
+        .len();
+    let mut head = Vec::with_capacity(SNIFF_LEN);
+    (&mut file)
+        .take(SNIFF_LEN as u64)
+        .read_to_end(&mut head)
+        .map_err(|e| format!("cannot read: {e}"))?;
+    // The meta group: its length (0002,0000) right after the magic, then its elements,
+    // explicit VR little endian; the transfer syntax UID is (0002,0010).
+    let group = PREAMBLE_LEN + 4;
+    let Some(len) = head
+        .get(group..group + 12)
+        .filter(|e| e[..6] == [2, 0, 0, 0, b'U', b'L'])
+        .map(|e| u64::from(u32::from_le_bytes([e[8], e[9], e[10], e[11]])))
+    else {
+        return Ok(());
+    };
+    let start = group as u64 + 12;
+    let meta = head.get(start as usize..(start + len).min(head.len() as u64) as usize);
+    let deflated = meta.is_some_and(|m| {
+        m.windows(6)
+            .position(|w| w == [2, 0, 0x10, 0, b'U', b'I'])
+            .and_then(|at| {
+                let n = usize::from(u16::from_le_bytes([*m.get(at + 6)?, *m.get(at + 7)?]));
+                m.get(at + 8..at + 8 + n)
+            })
+            .is_some_and(|uid| {
+                // UIDs are padded to an even length with a NUL.
+                let uid = uid.strip_suffix(&[0]).unwrap_or(uid);
+                uid.trim_ascii() == DEFLATED.as_bytes()
+            })
+    });
+    if !deflated {
+        return Ok(());
+    }
+    let cap = file_len
+        .saturating_mul(MAX_EXPANSION)
+        .max(ALWAYS_ALLOWED_BYTES);
+    std::io::Seek::seek(&mut file, std::io::SeekFrom::Start(start + len))
+        .map_err(|e| format!("cannot read: {e}"))?;
+    let mut inflated = flate2::read::DeflateDecoder::new(BufReader::new(file)).take(cap + 1);
+    let n = std::io::copy(&mut inflated, &mut std::io::sink())
+        .map_err(|e| format!("the deflated data set cannot be inflated: {e}"))?;
+    if n > cap {
+        return Err(format!(
+            "the deflated data set inflates to more than {cap} bytes, {MAX_EXPANSION} times \
+             its {file_len}-byte file: refused before reading it"
+        ));
+    }
+    Ok(())
 }
 
 /// The image in a DICOM file, or `None` for a file without pixel data. A file that cannot be
