@@ -131,10 +131,22 @@ fn texture_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
 /// texture of the splat pass, and the colours of the CPU tile compositor.
 pub(crate) fn color_texels(classified: &Classified) -> Vec<u8> {
     let grid = &classified.grid;
+    significant_texels(grid, |[x, y, z]| {
+        let [nx, ny, _] = grid.dims();
+        let rank = grid.rank(x + nx * (y + ny * z))?;
+        Some(straight_rgba8(classified.colors[rank as usize]))
+    })
+}
+
+/// Four bytes per voxel of `grid`'s whole box, zero except where `texel` gives the bytes of a
+/// significant voxel (its index coordinates). One z-slice a task, walking the slice's x rows,
+/// so only significant voxels are visited.
+fn significant_texels(
+    grid: &crate::grid::SparseGrid,
+    texel: impl Fn([u32; 3]) -> Option<[u8; 4]> + Sync,
+) -> Vec<u8> {
     let [nx, ny, nz] = grid.dims().map(|n| n as usize);
     let mut texels = vec![0u8; nx * ny * nz * 4];
-    // One z-slice a task, walking the slice's x rows: only significant voxels are visited,
-    // their colours found by rank.
     texels
         .par_chunks_mut((nx * ny * 4).max(1))
         .enumerate()
@@ -142,11 +154,10 @@ pub(crate) fn color_texels(classified: &Classified) -> Vec<u8> {
             for y in 0..ny {
                 for run in grid.row(0, y as u32, z as u32) {
                     for x in run.start..run.end() {
-                        let id = (x as usize + nx * (y + ny * z)) as u32;
-                        let Some(rank) = grid.rank(id) else { continue };
-                        let i = (x as usize + nx * y) * 4;
-                        let color = classified.colors[rank as usize];
-                        slice[i..i + 4].copy_from_slice(&straight_rgba8(color));
+                        if let Some(bytes) = texel([x, y as u32, z as u32]) {
+                            let i = (x as usize + nx * y) * 4;
+                            slice[i..i + 4].copy_from_slice(&bytes);
+                        }
                     }
                 }
             }
@@ -155,7 +166,7 @@ pub(crate) fn color_texels(classified: &Classified) -> Vec<u8> {
 }
 
 /// The unit index-space gradient per voxel as snorm8 (w = 127 where defined): the normal
-/// texture of the splat pass, and the normals of the CPU tile compositor. One z-slice a task.
+/// texture of the splat pass, and the normals of the CPU tile compositor.
 pub(crate) fn gradient_texels(volume: &CpuVolume, classified: &Classified) -> Vec<u8> {
     let [nx, ny, nz] = volume.dims.map(|n| n as usize);
     let value = |x: usize, y: usize, z: usize| {
@@ -173,32 +184,18 @@ pub(crate) fn gradient_texels(volume: &CpuVolume, classified: &Classified) -> Ve
             (at(hi) - at(lo)) / (hi - lo) as f32
         }
     };
-    let grid = &classified.grid;
-    let mut texels = vec![0u8; nx * ny * nz * 4];
-    texels
-        .par_chunks_mut((nx * ny * 4).max(1))
-        .enumerate()
-        .for_each(|(z, slice)| {
-            for y in 0..ny {
-                for run in grid.row(0, y as u32, z as u32) {
-                    for x in (run.start..run.end()).map(|x| x as usize) {
-                        let g = glam::Vec3::new(
-                            diff(x, nx, &|i| value(i, y, z)),
-                            diff(y, ny, &|i| value(x, i, z)),
-                            diff(z, nz, &|i| value(x, y, i)),
-                        );
-                        // Pointing from dense to less dense: outward on bone surfaces.
-                        let Some(n) = (-g).try_normalize() else {
-                            continue;
-                        };
-                        let q = |v: f32| (v * 127.0).round() as i8 as u8;
-                        let i = (x + nx * y) * 4;
-                        slice[i..i + 4].copy_from_slice(&[q(n.x), q(n.y), q(n.z), 127]);
-                    }
-                }
-            }
-        });
-    texels
+    significant_texels(&classified.grid, |[x, y, z]| {
+        let [x, y, z] = [x, y, z].map(|c| c as usize);
+        let g = glam::Vec3::new(
+            diff(x, nx, &|i| value(i, y, z)),
+            diff(y, ny, &|i| value(x, i, z)),
+            diff(z, nz, &|i| value(x, y, i)),
+        );
+        // Pointing from dense to less dense: outward on bone surfaces.
+        let n = (-g).try_normalize()?;
+        let q = |v: f32| (v * 127.0).round() as i8 as u8;
+        Some([q(n.x), q(n.y), q(n.z), 127])
+    })
 }
 
 impl SplatPass {

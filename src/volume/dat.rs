@@ -27,13 +27,7 @@ pub fn load_dat(path: &Path) -> Result<LoadedVolume, VolumeError> {
     let header = DatHeader::read(path)?;
     let placement = Placement::axis_aligned(path, header.spacing, [0.0; 3])?;
     let data = path.parent().unwrap_or(Path::new("")).join(&header.object);
-    if let Some(problem) = super::loader::data_file_problem(&data) {
-        return Err(VolumeError::MissingDataFile {
-            path: path.into(),
-            data_file: data,
-            problem,
-        });
-    }
+    super::loader::check_data_files(path, std::slice::from_ref(&data))?;
     let spec = RawSpec::new(header.dims, header.scalar, ByteOrder::Little);
     Ok(LoadedVolume {
         volume: placement.apply(load_raw(&data, &spec)?),

@@ -17,7 +17,7 @@ mod values;
 
 pub use error::{SeriesSummary, VolumeError, describe_series};
 pub use values::{ByteOrder, ParseScalarError, ScalarFormat, ScalarType};
-pub(crate) use values::{checked_voxels, data_file_problem, decode, triple};
+pub(crate) use values::{check_data_files, checked_voxels, decode, triple};
 
 /// The volume file formats [`super::detect::load_volume`] recognises.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]

@@ -31,7 +31,7 @@ use super::loader::{
     LoadedVolume, Placement, VolumeFormat, expect_end, format_pattern, header_error,
     inflate_values, io_error, read_head, unsupported,
 };
-use super::loader::{checked_voxels, data_file_problem};
+use super::loader::{check_data_files, checked_voxels};
 use super::{
     ByteOrder, CpuVolume, RawSpec, ScalarFormat, ScalarType, VolumeError, load_raw, load_raw_slices,
 };
@@ -71,15 +71,7 @@ pub fn load_metaimage(path: &Path) -> Result<LoadedVolume, VolumeError> {
     let (file, start) = match &header.data {
         Data::Local => (path.to_path_buf(), Some(header.data_offset)),
         Data::Slices(files) => {
-            for file in files {
-                if let Some(problem) = data_file_problem(file) {
-                    return Err(VolumeError::MissingDataFile {
-                        path: path.into(),
-                        data_file: file.clone(),
-                        problem,
-                    });
-                }
-            }
+            check_data_files(path, files)?;
             if header.compressed {
                 return Err(unsupported(path, "compressed slice files"));
             }
@@ -94,13 +86,7 @@ pub fn load_metaimage(path: &Path) -> Result<LoadedVolume, VolumeError> {
             return finish(path, &header, values);
         }
         Data::File(file) => {
-            if let Some(problem) = data_file_problem(file) {
-                return Err(VolumeError::MissingDataFile {
-                    path: path.into(),
-                    data_file: file.clone(),
-                    problem,
-                });
-            }
+            check_data_files(path, std::slice::from_ref(file))?;
             (file.clone(), header.header_size)
         }
     };

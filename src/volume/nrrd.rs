@@ -37,7 +37,7 @@ use super::loader::{
     HeaderLines, LoadedVolume, Placement, VolumeFormat, expect_end, format_pattern, header_error,
     inflate_values, io_error, skip_inflated, text_values, unsupported,
 };
-use super::loader::{checked_voxels, data_file_problem};
+use super::loader::{check_data_files, checked_voxels};
 use super::{
     ByteOrder, CpuVolume, RawSpec, ScalarFormat, ScalarType, VolumeError, load_raw, load_raw_slices,
 };
@@ -269,15 +269,7 @@ impl Header {
             }
             Data::Files(files) => files,
         };
-        for file in files {
-            if let Some(problem) = data_file_problem(file) {
-                return Err(VolumeError::MissingDataFile {
-                    path: path.into(),
-                    data_file: file.clone(),
-                    problem,
-                });
-            }
-        }
+        check_data_files(path, files)?;
         files
             .iter()
             .map(|f| Ok((f.clone(), self.after_lines(f, 0)?)))

@@ -17,7 +17,7 @@ pub(crate) fn triple(v: &[f64; 3]) -> String {
 
 /// What keeps the data file at `path` from being read, in words, or `None` for a regular
 /// file: a header may name a device or a pipe, which is refused before it is opened.
-pub(crate) fn data_file_problem(path: &Path) -> Option<String> {
+fn data_file_problem(path: &Path) -> Option<String> {
     match std::fs::metadata(path) {
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => Some("does not exist".into()),
         Err(e) => Some(format!("cannot be read: {e}")),
@@ -27,6 +27,24 @@ pub(crate) fn data_file_problem(path: &Path) -> Option<String> {
         )),
         Ok(_) => None,
     }
+}
+
+/// Refuses the first of the data `files` a header at `path` names that does not exist or is
+/// not a regular file, saying which and what it is.
+pub(crate) fn check_data_files(
+    path: &Path,
+    files: &[std::path::PathBuf],
+) -> Result<(), VolumeError> {
+    for file in files {
+        if let Some(problem) = data_file_problem(file) {
+            return Err(VolumeError::MissingDataFile {
+                path: path.into(),
+                data_file: file.clone(),
+                problem,
+            });
+        }
+    }
+    Ok(())
 }
 
 /// The voxel count of a grid of `dims` that the file at `path` declares, checked against the
