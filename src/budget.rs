@@ -1,5 +1,5 @@
 //! Sizes that a file or an argument controls, checked before anything is allocated: image
-//! sizes, volume sizes against the machine's memory, and checked products for both.
+//! sizes, and volume sizes against the machine's memory.
 //!
 //! Every loader, the scene-file and batch-manifest readers, the command line and the CPU
 //! compositor take their limits from here, so that a header claiming a huge grid or an
@@ -87,11 +87,6 @@ pub fn bytes_words(bytes: u64) -> String {
         None => format!("{bytes} bytes"),
         Some(u) => format!("{value:.1} {u}"),
     }
-}
-
-/// The product of `factors`, or `None` where it overflows `u64`.
-pub fn product(factors: &[u64]) -> Option<u64> {
-    factors.iter().try_fold(1u64, |acc, &f| acc.checked_mul(f))
 }
 
 /// Checks an image size against [`MAX_SIDE`] and [`MAX_PIXELS`]; returns its pixel count.
@@ -182,10 +177,7 @@ mod tests {
     }
 
     #[test]
-    fn products_and_byte_counts() {
-        assert_eq!(product(&[1 << 31, 1 << 31, 4]), None);
-        assert_eq!(product(&[3, 4, 5]), Some(60));
-        assert_eq!(product(&[]), Some(1));
+    fn byte_counts_read_and_written() {
         assert_eq!(parse_bytes("1024"), Some(1024));
         assert_eq!(parse_bytes("2G"), Some(2 << 30));
         assert_eq!(parse_bytes("3 MiB"), Some(3 << 20));

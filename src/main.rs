@@ -320,7 +320,7 @@ pub(crate) use splatscene::output::{follow_links, write_atomic};
 pub(crate) fn write_replacing(path: &Path, bytes: &[u8]) -> Result<()> {
     // The file a link names is the one written, and the one to name.
     let target = follow_links(path)?;
-    if splatscene::output::write_atomic(&target, bytes)? {
+    if write_atomic(&target, bytes)? {
         eprintln!("replaced the existing {}", target.display());
     }
     Ok(())

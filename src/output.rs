@@ -11,10 +11,9 @@ fn context(e: io::Error, what: &str, path: &Path) -> io::Error {
     io::Error::new(e.kind(), format!("{what} {}: {e}", path.display()))
 }
 
-/// Writes `bytes` to `path` through a temporary file of
-/// this process's own beside it and a rename, so that neither a failed write nor another
-/// process writing the same file at once leaves a partial file. Returns whether a file was
-/// replaced.
+/// Writes `bytes` to `path` through a temporary file of this process's own beside it and a
+/// rename, so that neither a failed write nor another process writing the same file at once
+/// leaves a partial file. Returns whether a file was replaced.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> io::Result<bool> {
     static TEMPORARIES: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
     let path = &follow_links(path)?;
@@ -40,19 +39,14 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> io::Result<bool> {
     ));
     // Created exclusively: a file or a link already at the temporary's name is never
     // written through or replaced.
-    let written = std::fs::OpenOptions::new()
-        .write(true)
-        .create_new(true)
-        .open(&tmp)
-        .and_then(|mut f| {
-            use std::io::Write;
-            f.write_all(bytes)
-        });
-    if let Err(e) = written {
-        if e.kind() != std::io::ErrorKind::AlreadyExists {
-            let _ = std::fs::remove_file(&tmp);
-        }
-        return Err(context(e, "writing", &tmp));
+    if !write_new(&tmp, bytes)? {
+        return Err(io::Error::new(
+            io::ErrorKind::AlreadyExists,
+            format!(
+                "{}: something is already at this temporary's name",
+                tmp.display()
+            ),
+        ));
     }
     if let Err(e) = std::fs::rename(&tmp, path) {
         let _ = std::fs::remove_file(&tmp);

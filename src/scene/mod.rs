@@ -214,13 +214,8 @@ impl Scene {
         // n nodes cost n^2.
         self.generation += 1;
         if let Some((lo, hi)) = self.local_bounds[id.0] {
-            for c in box_corners(lo, hi) {
-                let p = world.transform_point3(c);
-                self.bounds = Some(match self.bounds {
-                    None => (p, p),
-                    Some((lo, hi)) => (lo.min(p), hi.max(p)),
-                });
-            }
+            let corners = box_corners(lo, hi).map(|c| world.transform_point3(c));
+            self.bounds = corners.into_iter().fold(self.bounds, grow);
         }
         Ok(id)
     }
@@ -380,11 +375,16 @@ impl Scene {
                 b.map(|(lo, hi)| box_corners(lo, hi).map(|c| world.transform_point3(c)))
             })
             .flatten();
-        self.bounds = corners.fold(None, |acc, p| match acc {
-            None => Some((p, p)),
-            Some((lo, hi)) => Some((lo.min(p), hi.max(p))),
-        });
+        self.bounds = corners.fold(None, grow);
     }
+}
+
+/// `bounds` grown to hold `p`.
+fn grow(bounds: Option<(DVec3, DVec3)>, p: DVec3) -> Option<(DVec3, DVec3)> {
+    Some(match bounds {
+        None => (p, p),
+        Some((lo, hi)) => (lo.min(p), hi.max(p)),
+    })
 }
 
 /// Bounds of a node's content in its own frame.
