@@ -96,11 +96,6 @@ impl SplatTexels {
         };
         // One layer of bricks (four z-slices, a contiguous stretch of the texels) a task.
         let layer = bricks[0] * bricks[1] * BRICK.pow(3);
-        let at = Self {
-            dims,
-            bricks,
-            texels: Vec::new(),
-        };
         out.texels
             .par_chunks_mut(layer.max(1))
             .enumerate()
@@ -114,18 +109,13 @@ impl SplatTexels {
                             else {
                                 continue;
                             };
-                            let slot = at.slot(x, y, z) - bz * layer;
+                            let slot = brick_slot(bricks, x, y, z) - bz * layer;
                             texels[slot] = [c[0], c[1], c[2], c[3], n[0], n[1], n[2], n[3]];
                         }
                     }
                 }
             });
         out
-    }
-
-    fn slot(&self, x: usize, y: usize, z: usize) -> usize {
-        let brick = ((z / BRICK) * self.bricks[1] + y / BRICK) * self.bricks[0] + x / BRICK;
-        brick * BRICK.pow(3) + ((z % BRICK) * BRICK + y % BRICK) * BRICK + x % BRICK
     }
 
     /// The texel of voxel `(x, y, z)`: straight RGBA8, then the gradient as snorm8.
@@ -135,8 +125,14 @@ impl SplatTexels {
             return None;
         }
         self.texels
-            .get(self.slot(x as usize, y as usize, z as usize))
+            .get(brick_slot(self.bricks, x as usize, y as usize, z as usize))
     }
+}
+
+/// Where voxel `(x, y, z)` sits in texels laid out as `bricks` (bricks along x and y).
+fn brick_slot(bricks: [usize; 2], x: usize, y: usize, z: usize) -> usize {
+    let brick = ((z / BRICK) * bricks[1] + y / BRICK) * bricks[0] + x / BRICK;
+    brick * BRICK.pow(3) + ((z % BRICK) * BRICK + y % BRICK) * BRICK + x % BRICK
 }
 
 /// A splat projected to the screen.
