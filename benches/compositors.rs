@@ -10,7 +10,8 @@
 //! engine halved, as is, and doubled along every axis) and with the image size.
 //!
 //! `cargo bench --bench compositors` (data from `SPLATSCENE_DATA`, default `../shared/data`);
-//! `-- quick` runs 3 frames a case instead of 9; `-- peers` only the first table.
+//! `-- quick` runs 3 frames a case instead of 9; `-- peers` only the first table; `-- cpu` only
+//! the CPU compositor's frames of the first table (for profiling it alone).
 
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -102,12 +103,13 @@ fn alternate(
             {
                 let ms = |d: Duration| d.as_secs_f64() * 1e3;
                 eprintln!(
-                    "    {} splats: {} projected, {} splat-tile pairs composited, {} skipped behind opaque pixels, {} tiles stopped; project {:.1} ms, bin {:.1} ms, tiles {:.1} ms, order {:.1} ms",
+                    "    {} splats: {} projected, {} left out unprojected, {} splat-tile pairs composited, {} skipped behind opaque pixels, {} tiles opaque; project {:.1} ms, bin {:.1} ms, tiles {:.1} ms, order {:.1} ms",
                     t.splats,
                     t.projected,
+                    t.culled,
                     t.composited,
                     t.skipped_opaque,
-                    t.tiles_stopped,
+                    t.tiles_opaque,
                     ms(t.project),
                     ms(t.bin),
                     ms(t.tiles),
@@ -148,7 +150,14 @@ fn main() {
     println!(
         "\n| volume, 512x512 | GPU splat pass frame | CPU tiles frame | ratio |\n|---|---|---|---|"
     );
+    let cpu_only = std::env::args().any(|a| a == "cpu");
     for (name, scene) in &cases {
+        if cpu_only {
+            let mut renderers = [("cpu", Renderer::with_compositor(Compositor::Cpu))];
+            let t = alternate(&ctx, scene, (512, 512), &mut renderers, frames);
+            println!("| {name} | | {:.1} ms | |", t[0]);
+            continue;
+        }
         let mut renderers = [
             ("gpu", Renderer::with_compositor(Compositor::Gpu)),
             ("cpu", Renderer::with_compositor(Compositor::Cpu)),
@@ -161,7 +170,7 @@ fn main() {
             t[0] / t[1]
         );
     }
-    if std::env::args().any(|a| a == "peers") {
+    if cpu_only || std::env::args().any(|a| a == "peers") {
         return;
     }
     let tf = TransferFunction::ramp(100.0, 200.0, [0.85, 0.8, 0.75, 0.5]);

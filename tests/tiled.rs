@@ -196,6 +196,43 @@ fn early_termination_leaves_out_no_more_than_its_threshold() {
 }
 
 #[test]
+fn splats_left_out_behind_opaque_tiles_change_nothing() {
+    let ctx = context();
+    // A dense, nearly opaque block of 46,656 splats, more than the first batches: later
+    // batches find most tiles opaque.
+    let mut volume = shells(36, [1.0; 3]);
+    volume.values.iter_mut().for_each(|v| *v = 1800.0);
+    let scene = volume_scene(volume, Ordering::IpPbtfImplicit);
+    for camera in [
+        camera_of(&scene),
+        camera_of(&scene).orbit_about(scene.up_axis(), 50.0, 20.0),
+    ] {
+        let mut culling = Renderer::with_compositor(Compositor::Cpu);
+        let mut all = Renderer::with_compositor(Compositor::Cpu);
+        all.tile_compositor_mut().cull_hidden = false;
+        let a = culling
+            .screenshot(&ctx, &scene, &camera, (96, 80), &OPTIONS)
+            .unwrap();
+        let b = all
+            .screenshot(&ctx, &scene, &camera, (96, 80), &OPTIONS)
+            .unwrap();
+        let (sa, sb) = (a.report.tiles.unwrap(), b.report.tiles.unwrap());
+        assert_eq!(sb.culled, 0);
+        assert!(
+            sa.culled > sa.splats / 3,
+            "most splats are never projected: {sa:?}"
+        );
+        // Culled splats are counted once, and include any behind the eye or off the image
+        // once every tile is opaque.
+        assert!(sa.projected + sa.culled <= sa.splats);
+        assert!(sa.projected + sa.culled >= sb.projected, "{sa:?} {sb:?}");
+        // The same splat-tile pairs composited in the same order: the same pixels.
+        assert_eq!(sa.composited, sb.composited);
+        assert_eq!(a.frame.pixels, b.frame.pixels);
+    }
+}
+
+#[test]
 fn the_built_in_scene_looks_the_same_on_either_compositor() {
     let scene = splatscene::scene::shoulder::shoulder_scene().unwrap();
     let camera = scene.camera.unwrap();
