@@ -11,7 +11,8 @@
 //!
 //! `cargo bench --bench compositors` (data from `SPLATSCENE_DATA`, default `../shared/data`);
 //! `-- quick` runs 3 frames a case instead of 9; `-- peers` only the first table; `-- cpu` only
-//! the CPU compositor's frames of the first table (for profiling it alone).
+//! the CPU compositor's frames of the first table (for profiling it alone); `-- growth` all but
+//! the first table.
 
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -151,7 +152,8 @@ fn main() {
         "\n| volume, 512x512 | GPU splat pass frame | CPU tiles frame | ratio |\n|---|---|---|---|"
     );
     let cpu_only = std::env::args().any(|a| a == "cpu");
-    for (name, scene) in &cases {
+    let growth = std::env::args().any(|a| a == "growth");
+    for (name, scene) in cases.iter().filter(|_| !growth) {
         if cpu_only {
             let mut renderers = [("cpu", Renderer::with_compositor(Compositor::Cpu))];
             let t = alternate(&ctx, scene, (512, 512), &mut renderers, frames);

@@ -199,13 +199,18 @@ fn early_termination_leaves_out_no_more_than_its_threshold() {
 fn splats_left_out_behind_opaque_tiles_change_nothing() {
     let ctx = context();
     // A dense, nearly opaque block of 46,656 splats, more than the first batches: later
-    // batches find most tiles opaque.
+    // batches find most tiles opaque. Perspective, turned, and orthographic.
     let mut volume = shells(36, [1.0; 3]);
     volume.values.iter_mut().for_each(|v| *v = 1800.0);
     let scene = volume_scene(volume, Ordering::IpPbtfImplicit);
+    let flat = SceneCamera {
+        projection: Projection::Orthographic { height: 40.0 },
+        ..camera_of(&scene)
+    };
     for camera in [
         camera_of(&scene),
         camera_of(&scene).orbit_about(scene.up_axis(), 50.0, 20.0),
+        flat,
     ] {
         let mut culling = Renderer::with_compositor(Compositor::Cpu);
         let mut all = Renderer::with_compositor(Compositor::Cpu);
