@@ -793,7 +793,8 @@ impl TilePixels {
     }
 
     /// Composites this batch's splats touching tile `t` (its top-left pixel at `origin`),
-    /// nearest first, under what the tile holds.
+    /// nearest first, under what the tile holds: 8 lanes wide where the processor has AVX2
+    /// and FMA.
     fn composite(
         &mut self,
         t: usize,
@@ -802,23 +803,57 @@ impl TilePixels {
         bins: &[ChunkBins],
         opaque: f32,
     ) {
-        let lists = bins.iter().rev().map(|b| {
-            let (s, e) = (b.starts[t] as usize, b.starts[t + 1] as usize);
-            &b.entries[s..e]
-        });
-        for list in lists {
-            let mut splats = list.iter().rev();
-            for &i in splats.by_ref() {
-                if self.open == 0 {
-                    self.skipped += 1;
-                    break;
-                }
-                self.composited += 1;
-                self.open -= composite_splat(self, origin, &projected[i as usize], opaque);
-            }
-            self.skipped += splats.len();
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
+        {
+            #[allow(unsafe_code)]
+            // SAFETY: the processor has the features the function is built for, checked above.
+            return unsafe { composite_tile_avx2(self, t, origin, projected, bins, opaque) };
         }
+        composite_tile_lanes(self, t, origin, projected, bins, opaque);
     }
+}
+
+/// [`TilePixels::composite`], with the pixel loop inlined.
+#[inline(always)]
+fn composite_tile_lanes(
+    tile: &mut TilePixels,
+    t: usize,
+    origin: (usize, usize),
+    projected: &[Projected],
+    bins: &[ChunkBins],
+    opaque: f32,
+) {
+    let lists = bins.iter().rev().map(|b| {
+        let (s, e) = (b.starts[t] as usize, b.starts[t + 1] as usize);
+        &b.entries[s..e]
+    });
+    for list in lists {
+        let mut splats = list.iter().rev();
+        for &i in splats.by_ref() {
+            if tile.open == 0 {
+                tile.skipped += 1;
+                break;
+            }
+            tile.composited += 1;
+            tile.open -= composite_splat_lanes(tile, origin, &projected[i as usize], opaque);
+        }
+        tile.skipped += splats.len();
+    }
+}
+
+/// [`composite_tile_lanes`] built for AVX2 and FMA.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+fn composite_tile_avx2(
+    tile: &mut TilePixels,
+    t: usize,
+    origin: (usize, usize),
+    projected: &[Projected],
+    bins: &[ChunkBins],
+    opaque: f32,
+) {
+    composite_tile_lanes(tile, t, origin, projected, bins, opaque);
 }
 
 /// Lanes of the pixel loop: a row of a tile is two groups.
@@ -829,7 +864,7 @@ const LANES: usize = 8;
 /// Plain loops over groups of [`LANES`] pixels, with no branch and no library call inside
 /// (`exp` is [`exp_neg`]), which the compiler turns into vector instructions: 4 lanes wide
 /// with the x86-64 baseline (SSE2), 8 with AVX2 and FMA where the processor has them (chosen
-/// at run time, see [`composite_splat`]). Rows and groups whose pixels are all opaque are
+/// at run time, see [`TilePixels::composite`]). Rows and groups whose pixels are all opaque are
 /// skipped from the tile's row masks. Within a group a pixel is left alone where it is opaque,
 /// the meshes are in front, or it lies past the footprint's cut-off; the footprint's quad
 /// always holds its cut-off ellipse, so the quad's rectangle only chooses the rows and groups
@@ -913,35 +948,6 @@ fn composite_splat_lanes(
     turned
 }
 
-/// [`composite_splat_lanes`] built for AVX2 and FMA.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-fn composite_splat_avx2(
-    tile: &mut TilePixels,
-    origin: (usize, usize),
-    p: &Projected,
-    opaque: f32,
-) -> u32 {
-    composite_splat_lanes(tile, origin, p, opaque)
-}
-
-/// [`composite_splat_lanes`], 8 lanes wide where the processor has AVX2 and FMA.
-#[inline]
-fn composite_splat(
-    tile: &mut TilePixels,
-    origin: (usize, usize),
-    p: &Projected,
-    opaque: f32,
-) -> u32 {
-    #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
-        #[allow(unsafe_code)]
-        // SAFETY: the processor has the features the function is built for, checked above.
-        return unsafe { composite_splat_avx2(tile, origin, p, opaque) };
-    }
-    composite_splat_lanes(tile, origin, p, opaque)
-}
-
 /// `exp(-x)` for `x >= 0`, without a library call so that it vectorises: `2^n 2^f` with `n`
 /// the nearest integer to `-x log2(e)` (by the 1.5 * 2^23 rounding trick) and
 /// `2^f = e^(f ln 2)`, `|f ln 2| <= 0.35`, by its Taylor series to degree 6. The relative error
@@ -1019,6 +1025,16 @@ mod tests {
             .collect()
     }
 
+    /// Bins holding splats `0..n` for tile 0, so that tile 0 takes them in that order (the
+    /// nearest, taken first, is last in a list).
+    fn one_list(n: usize) -> ChunkBins {
+        ChunkBins {
+            starts: vec![0, n as u32],
+            entries: (0..n as u32).rev().collect(),
+            ..ChunkBins::default()
+        }
+    }
+
     fn fresh_tile(depth: &[f32]) -> TilePixels {
         let mut tile = TilePixels::default();
         // A 40x40 image whose depth varies, with the tile at (16, 32) cut by its bottom edge.
@@ -1031,9 +1047,9 @@ mod tests {
         let depth: Vec<f32> = (0..40 * 40).map(|i| (i % 7) as f32 * 0.1).collect();
         let mut tile = fresh_tile(&depth);
         let mut reference = vec![[0.0f32; 4]; PIXELS];
-        let mut open = tile.open;
-        for p in splats() {
-            open -= composite_splat(&mut tile, (16, 32), &p, OPAQUE);
+        let splats = splats();
+        tile.composite(0, (16, 32), &splats, &[one_list(splats.len())], OPAQUE);
+        for &p in &splats {
             // The old scalar loop, pixel by pixel over the quad's rectangle, with libm's exp.
             for y in p.y0.max(32)..=p.y1.min(32 + 15).min(39) {
                 for x in p.x0.max(16)..=p.x1.min(16 + 15).min(39) {
@@ -1055,8 +1071,9 @@ mod tests {
             }
         }
         let bits: u32 = tile.rows.iter().map(|r| r.count_ones()).sum();
-        assert_eq!(open, bits);
-        assert!(open < 8 * 16, "some pixels turned opaque");
+        assert_eq!(tile.open, bits);
+        assert!(tile.open < 8 * 16, "some pixels turned opaque");
+        assert_eq!(tile.composited + tile.skipped, splats.len());
         let mut worst = 0.0f32;
         let mut covered = 0;
         for (i, want) in reference.iter().enumerate() {
@@ -1084,13 +1101,14 @@ mod tests {
         {
             let depth = vec![0.0; 40 * 40];
             let (mut wide, mut narrow) = (fresh_tile(&depth), fresh_tile(&depth));
-            for p in splats() {
-                #[allow(unsafe_code)]
-                // SAFETY: the features were checked above.
-                let a = unsafe { composite_splat_avx2(&mut wide, (16, 32), &p, OPAQUE) };
-                let b = composite_splat_lanes(&mut narrow, (16, 32), &p, OPAQUE);
-                assert_eq!(a, b);
-            }
+            let (splats, bins) = (splats(), [one_list(400)]);
+            #[allow(unsafe_code)]
+            // SAFETY: the features were checked above.
+            unsafe {
+                composite_tile_avx2(&mut wide, 0, (16, 32), &splats, &bins, OPAQUE)
+            };
+            composite_tile_lanes(&mut narrow, 0, (16, 32), &splats, &bins, OPAQUE);
+            assert_eq!(wide.open, narrow.open);
             assert_eq!(wide.a, narrow.a);
             assert_eq!(wide.r, narrow.r);
             assert_eq!(wide.rows, narrow.rows);
