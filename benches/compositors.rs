@@ -116,6 +116,14 @@ fn alternate(
                     ms(t.tiles),
                     ms(shot.report.timings.order)
                 );
+                let timings = &shot.report.timings;
+                if timings.readback > Duration::ZERO {
+                    eprintln!(
+                        "    meshes: pass {:.1} ms, readback (waiting for the pass) {:.1} ms",
+                        ms(timings.mesh_pass),
+                        ms(timings.readback)
+                    );
+                }
             }
         }
     }
@@ -192,6 +200,15 @@ fn main() {
         let t = alternate(&ctx, &scene, (512, 512), &mut renderers, frames);
         println!("| {label} | {splats} | {:.1} ms |", t[0]);
     }
+    // The viewer's first picture: the built-in shoulder scene (meshes and a volume) at its
+    // default window size, meshes drawn by the adapter and read back under the tiles.
+    let shoulder = splatscene::scene::shoulder::shoulder_scene().unwrap();
+    let mut renderers = [("cpu", Renderer::with_compositor(Compositor::Cpu))];
+    let t = alternate(&ctx, &shoulder, (960, 720), &mut renderers, frames);
+    println!(
+        "\n| built-in shoulder scene, 960x720 | CPU tiles frame |\n|---|---|\n| full frame | {:.1} ms |",
+        t[0]
+    );
     println!("\n| engine, image | CPU tiles frame |\n|---|---|");
     let scene = scene(engine, tf);
     for side in [256, 512, 1024] {
