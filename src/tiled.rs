@@ -411,15 +411,18 @@ impl TiledCompositor {
                     .sum::<usize>();
                 // Composite every tile, nearest splat first.
                 let started = std::time::Instant::now();
-                let (projected, bins, opaque) =
-                    (&self.projected, &self.bins[..chunks], self.opaque);
+                let batch = Batch {
+                    projected: &self.projected,
+                    bins: &self.bins[..chunks],
+                    opaque: self.opaque,
+                };
                 self.tiles
                     .par_iter_mut()
                     .zip(self.closed.par_iter_mut())
                     .enumerate()
                     .for_each(|(t, (tile, closed))| {
                         let origin = ((t % tx) * TILE, (t / tx) * TILE);
-                        tile.composite(t, origin, projected, bins, opaque);
+                        tile.composite(t, origin, batch);
                         *closed = tile.open == 0;
                     });
                 open_pixels = self.tiles.iter().map(|t| t.open as usize).sum();
@@ -446,6 +449,16 @@ impl TiledCompositor {
         stats.tiles += started.elapsed();
         stats
     }
+}
+
+/// The voxel `(x, y, z)` of id `id`, by divisions by the grid's row and plane sizes done as
+/// multiplications (the hardware divide was a fifth of the projection's time).
+#[inline(always)]
+fn voxel(u: &SplatProjection, id: u32) -> [u32; 3] {
+    let z = id / u.plane;
+    let rest = id - z * u.plane.get();
+    let y = rest / u.row;
+    [rest - y * u.row.get(), y, z]
 }
 
 /// The image's size in pixels and its width in tiles.
@@ -513,10 +526,7 @@ impl FootprintBound {
     fn group_hidden(&self, u: &SplatProjection, ids: &[u32], s: &Screen, closed: &[bool]) -> bool {
         let (mut lo, mut hi) = ([u32::MAX; 3], [0u32; 3]);
         for &id in ids {
-            let z = id / u.plane;
-            let rest = id - z * u.plane.get();
-            let y = rest / u.row;
-            let x = rest - y * u.row.get();
+            let [x, y, z] = voxel(u, id);
             lo = [lo[0].min(x), lo[1].min(y), lo[2].min(z)];
             hi = [hi[0].max(x), hi[1].max(y), hi[2].max(z)];
         }
@@ -581,12 +591,7 @@ impl FootprintBound {
         s: &Screen,
         closed: Option<&[bool]>,
     ) -> Visibility {
-        // Divisions by the grid's row and plane sizes, done by multiplication (the hardware
-        // divide was a fifth of the projection's time).
-        let z = id / u.plane;
-        let rest = id - z * u.plane.get();
-        let y = rest / u.row;
-        let x = rest - y * u.row.get();
+        let [x, y, z] = voxel(u, id);
         let k = Vec3::new(x as f32, y as f32, z as f32);
         let d = k - u.eye_index;
         let p = Vec3::new(u.m[0].dot(d), u.m[1].dot(d), u.m[2].dot(d));
@@ -795,35 +800,35 @@ impl TilePixels {
     /// Composites this batch's splats touching tile `t` (its top-left pixel at `origin`),
     /// nearest first, under what the tile holds: 8 lanes wide where the processor has AVX2
     /// and FMA.
-    fn composite(
-        &mut self,
-        t: usize,
-        origin: (usize, usize),
-        projected: &[Projected],
-        bins: &[ChunkBins],
-        opaque: f32,
-    ) {
+    fn composite(&mut self, t: usize, origin: (usize, usize), batch: Batch<'_>) {
         #[cfg(target_arch = "x86_64")]
         if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
         {
             #[allow(unsafe_code)]
             // SAFETY: the processor has the features the function is built for, checked above.
-            return unsafe { composite_tile_avx2(self, t, origin, projected, bins, opaque) };
+            return unsafe { composite_tile_avx2(self, t, origin, batch) };
         }
-        composite_tile_lanes(self, t, origin, projected, bins, opaque);
+        composite_tile_lanes(self, t, origin, batch);
     }
+}
+
+/// What every tile takes from a batch: its projected splats, their tile lists and the
+/// opacity that stops a pixel.
+#[derive(Clone, Copy)]
+struct Batch<'a> {
+    projected: &'a [Projected],
+    bins: &'a [ChunkBins],
+    opaque: f32,
 }
 
 /// [`TilePixels::composite`], with the pixel loop inlined.
 #[inline(always)]
-fn composite_tile_lanes(
-    tile: &mut TilePixels,
-    t: usize,
-    origin: (usize, usize),
-    projected: &[Projected],
-    bins: &[ChunkBins],
-    opaque: f32,
-) {
+fn composite_tile_lanes(tile: &mut TilePixels, t: usize, origin: (usize, usize), batch: Batch<'_>) {
+    let Batch {
+        projected,
+        bins,
+        opaque,
+    } = batch;
     let lists = bins.iter().rev().map(|b| {
         let (s, e) = (b.starts[t] as usize, b.starts[t + 1] as usize);
         &b.entries[s..e]
@@ -845,15 +850,8 @@ fn composite_tile_lanes(
 /// [`composite_tile_lanes`] built for AVX2 and FMA.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
-fn composite_tile_avx2(
-    tile: &mut TilePixels,
-    t: usize,
-    origin: (usize, usize),
-    projected: &[Projected],
-    bins: &[ChunkBins],
-    opaque: f32,
-) {
-    composite_tile_lanes(tile, t, origin, projected, bins, opaque);
+fn composite_tile_avx2(tile: &mut TilePixels, t: usize, origin: (usize, usize), batch: Batch<'_>) {
+    composite_tile_lanes(tile, t, origin, batch);
 }
 
 /// Lanes of the pixel loop: a row of a tile is two groups.
@@ -1035,6 +1033,14 @@ mod tests {
         }
     }
 
+    fn batch<'a>(projected: &'a [Projected], bins: &'a [ChunkBins]) -> Batch<'a> {
+        Batch {
+            projected,
+            bins,
+            opaque: OPAQUE,
+        }
+    }
+
     fn fresh_tile(depth: &[f32]) -> TilePixels {
         let mut tile = TilePixels::default();
         // A 40x40 image whose depth varies, with the tile at (16, 32) cut by its bottom edge.
@@ -1048,7 +1054,8 @@ mod tests {
         let mut tile = fresh_tile(&depth);
         let mut reference = vec![[0.0f32; 4]; PIXELS];
         let splats = splats();
-        tile.composite(0, (16, 32), &splats, &[one_list(splats.len())], OPAQUE);
+        let bins = [one_list(splats.len())];
+        tile.composite(0, (16, 32), batch(&splats, &bins));
         for &p in &splats {
             // The old scalar loop, pixel by pixel over the quad's rectangle, with libm's exp.
             for y in p.y0.max(32)..=p.y1.min(32 + 15).min(39) {
@@ -1105,9 +1112,9 @@ mod tests {
             #[allow(unsafe_code)]
             // SAFETY: the features were checked above.
             unsafe {
-                composite_tile_avx2(&mut wide, 0, (16, 32), &splats, &bins, OPAQUE)
+                composite_tile_avx2(&mut wide, 0, (16, 32), batch(&splats, &bins))
             };
-            composite_tile_lanes(&mut narrow, 0, (16, 32), &splats, &bins, OPAQUE);
+            composite_tile_lanes(&mut narrow, 0, (16, 32), batch(&splats, &bins));
             assert_eq!(wide.open, narrow.open);
             assert_eq!(wide.a, narrow.a);
             assert_eq!(wide.r, narrow.r);
