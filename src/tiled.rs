@@ -191,7 +191,7 @@ pub struct TileStats {
     /// screen).
     pub projected: usize,
     /// Splats left out before projection because every tile their footprint could touch was
-    /// opaque already.
+    /// opaque already (and, once every tile of the image is opaque, all the splats left).
     pub culled: usize,
     /// Splat-tile pairs composited.
     pub composited: usize,
