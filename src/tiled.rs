@@ -854,7 +854,7 @@ fn composite_tile_avx2(tile: &mut TilePixels, t: usize, origin: (usize, usize), 
     composite_tile_lanes(tile, t, origin, batch);
 }
 
-/// Lanes of the pixel loop: a row of a tile is two groups.
+/// Lanes of the pixel loop: a group of pixels along a row, starting where a footprint does.
 const LANES: usize = 8;
 
 /// Composites one splat under the tile's pixels; returns how many pixels turned opaque.
