@@ -13,12 +13,16 @@
 //!
 //! The order is walked nearest first in batches (4,096 splats, doubling to 32,768): each batch
 //! is projected and binned, then composited, before the next; a splat whose footprint can only
-//! touch tiles that are opaque by then is left out before its texel is even read. Projection
-//! is the part of a frame that early termination alone does not shrink.
+//! touch pixels that are opaque by then (known by 8x8 cells) is left out before its texel is
+//! even read. Projection is the part of a frame that early termination alone does not shrink.
 //!
-//! The pixel loop works on rows of 8 pixels held as planes, in plain loops the compiler
-//! vectorises (no `wide`: the same code builds for SSE2 and, chosen at run time, AVX2 and
-//! FMA); rayon runs the chunks of a batch and the tiles in parallel. Every buffer lives in the
+//! The pixel loop works on rows of 8 pixels held as planes. It is written twice: in plain
+//! loops the compiler vectorises for the x86-64 baseline (SSE2) and any other processor, and
+//! in AVX2 and FMA intrinsics, chosen at run time where the processor has them, since the
+//! compiler neither fuses multiply-adds nor gathers lane masks well on its own (no `wide`: it
+//! picks its instructions from the features the whole build targets, so it cannot follow a
+//! choice made at run time). Projection runs 8 splats a vector in the AVX2
+//! build too. rayon runs the chunks of a batch and the tiles in parallel. Every buffer lives in the
 //! [`TiledCompositor`] and is reused from frame to frame; none grows with the volume past one
 //! batch.
 
@@ -261,8 +265,9 @@ pub struct TileStats {
     /// Splats projected onto the image (in front of the eye, kept by the clip planes, on
     /// screen).
     pub projected: usize,
-    /// Splats left out before projection because every tile their footprint could touch was
-    /// opaque already (and, once every tile of the image is opaque, all the splats left).
+    /// Splats left out before projection because every pixel their footprint could touch was
+    /// opaque already, by cells of 8x8 pixels (and, once every tile of the image is opaque,
+    /// all the splats left).
     pub culled: usize,
     /// Splat-tile pairs composited.
     pub composited: usize,
@@ -329,7 +334,7 @@ pub struct TiledCompositor {
     /// The accumulated opacity past which a pixel takes no more splats ([`OPAQUE`] by
     /// default; above 1 no pixel and no tile ever stops).
     pub opaque: f32,
-    /// Leave out, before projecting them, splats whose footprint can only touch opaque tiles
+    /// Leave out, before projecting them, splats whose footprint can only touch opaque cells
     /// (on by default; the image is the same either way, see [`TiledCompositor::composite`]).
     pub cull_hidden: bool,
     projected: Vec<Projected>,
@@ -344,7 +349,7 @@ pub struct TiledCompositor {
 const FIRST_BATCH: usize = 4096;
 /// See [`FIRST_BATCH`].
 const MAX_BATCH: usize = 1 << 15;
-/// Splats whose voxels' box is tested against the opaque tiles before each is tested alone.
+/// Splats whose voxels' box is tested against the opaque cells before each is tested alone.
 const GROUP: usize = 32;
 
 impl Default for TiledCompositor {
@@ -373,7 +378,7 @@ impl TiledCompositor {
     ///
     /// The splats are taken nearest first in batches (the first small, then doubling): a batch
     /// is projected, binned and composited before the next, and a splat of a later batch whose
-    /// footprint can only touch tiles that are opaque by then is not projected at all. This
+    /// footprint can only touch pixels that are opaque by then is not projected at all. This
     /// leaves out nothing that compositing every splat would have drawn: such a splat's
     /// splat-tile pairs would all have been skipped.
     pub fn composite(
@@ -395,11 +400,12 @@ impl TiledCompositor {
             .par_iter_mut()
             .enumerate()
             .for_each(|(t, tile)| tile.reset((t % tx) * TILE, (t / tx) * TILE, (w, h), depth));
+        let (across, down) = (w.div_ceil(CELL), h.div_ceil(CELL));
         self.closed.clear();
-        self.closed.resize(tx * ty, false);
+        self.closed.resize(across * down, false);
         let mut open_pixels = w * h;
         stats.tiles += started.elapsed();
-        let screen = Screen { w, h, tx };
+        let screen = Screen { w, h, across };
         // Nearest first: the volumes near to far, each one's order from its end.
         let mut batch = FIRST_BATCH;
         'volumes: for (v, (projection, texels, ids)) in volumes.iter().enumerate().rev() {
@@ -483,15 +489,18 @@ impl TiledCompositor {
                     bins: &self.bins[..chunks],
                     opaque: self.opaque,
                 };
-                self.tiles
-                    .par_iter_mut()
-                    .zip(self.closed.par_iter_mut())
-                    .enumerate()
-                    .for_each(|(t, (tile, closed))| {
-                        let origin = ((t % tx) * TILE, (t / tx) * TILE);
-                        tile.composite(t, origin, batch);
-                        *closed = tile.open == 0;
-                    });
+                self.tiles.par_iter_mut().enumerate().for_each(|(t, tile)| {
+                    let origin = ((t % tx) * TILE, (t / tx) * TILE);
+                    tile.composite(t, origin, batch);
+                });
+                for (t, tile) in self.tiles.iter().enumerate() {
+                    let (x, y) = ((t % tx) * TILE / CELL, (t / tx) * TILE / CELL);
+                    for (qy, qx) in [(0, 0), (0, 1), (1, 0), (1, 1)] {
+                        if x + qx < across && y + qy < down {
+                            self.closed[(y + qy) * across + x + qx] = tile.cell_closed(qx, qy);
+                        }
+                    }
+                }
                 open_pixels = self.tiles.iter().map(|t| t.open as usize).sum();
                 stats.tiles += started.elapsed();
             }
@@ -528,12 +537,17 @@ fn voxel(u: &SplatProjection, id: u32) -> [u32; 3] {
     [rest - y * u.row.get(), y, z]
 }
 
-/// The image's size in pixels and its width in tiles.
+/// The image's size in pixels and its width in cells.
 struct Screen {
     w: usize,
     h: usize,
-    tx: usize,
+    across: usize,
 }
+
+/// The side in pixels of the squares whose pixels are known to be opaque (a tile is 2 by 2
+/// of them), against which splats are left out before projection. Smaller than a tile, since
+/// the tiles along a silhouette never close: a quarter of one often does.
+const CELL: usize = TILE / 2;
 
 /// What projecting a stretch of one volume's draw order takes.
 #[derive(Clone, Copy)]
@@ -542,13 +556,13 @@ struct Group<'a> {
     texels: &'a SplatTexels,
     bound: &'a FootprintBound,
     screen: &'a Screen,
-    /// The tiles opaque before this batch (`None` while none is).
+    /// The cells (see [`CELL`]) opaque before this batch (`None` while none is).
     closed: Option<&'a [bool]>,
 }
 
 impl Group<'_> {
     /// Projects the splats `ids` into `out` (as long), leaving out those hidden behind
-    /// opaque tiles; returns how many were left out so. Eight at a time in AVX2 vectors where
+    /// opaque cells; returns how many were left out so. Eight at a time in AVX2 vectors where
     /// the processor has them.
     fn project(&self, ids: &[u32], out: &mut [Projected]) -> usize {
         #[cfg(target_arch = "x86_64")]
@@ -634,9 +648,9 @@ impl FootprintBound {
         }
     }
 
-    /// Whether every splat of `ids` (a stretch of the draw order) is hidden behind the tiles
+    /// Whether every splat of `ids` (a stretch of the draw order) is hidden behind the cells
     /// `closed`: the box of their voxels, projected, lies on the image (so that the footprint
-    /// bound holds for each) and on closed tiles alone. Decoding a voxel id and taking the
+    /// bound holds for each) and on closed cells alone. Decoding a voxel id and taking the
     /// box's bounds costs less than a splat's own test; the order's rows make most stretches
     /// short segments.
     fn group_hidden(&self, u: &SplatProjection, ids: &[u32], s: &Screen, closed: &[bool]) -> bool {
@@ -691,13 +705,13 @@ impl FootprintBound {
         } else {
             self.per_inverse_depth / nearest + self.constant
         };
-        let tile = |v: f32, pixels: usize| (v.max(0.0) as usize).min(pixels - 1) / TILE;
-        let (tx0, tx1) = (tile(left - e, s.w), tile(right + e, s.w));
-        let (ty0, ty1) = (tile(top - e, s.h), tile(bottom + e, s.h));
-        (ty0..=ty1).all(|ty| !closed[ty * s.tx + tx0..=ty * s.tx + tx1].contains(&false))
+        let cell = |v: f32, pixels: usize| (v.max(0.0) as usize).min(pixels - 1) / CELL;
+        let (x0, x1) = (cell(left - e, s.w), cell(right + e, s.w));
+        let (y0, y1) = (cell(top - e, s.h), cell(bottom + e, s.h));
+        (y0..=y1).all(|y| !closed[y * s.across + x0..=y * s.across + x1].contains(&false))
     }
 
-    /// Whether splat `id` can show, given the tiles `closed` (opaque) before its batch
+    /// Whether splat `id` can show, given the cells `closed` (opaque) before its batch
     /// (`None` while none is).
     #[inline]
     fn visible(
@@ -738,7 +752,7 @@ impl FootprintBound {
     }
 
     /// Whether a splat centred at `centre` on the screen, its footprint bounded by `e` pixels
-    /// either side, touches closed tiles alone. Never for a centre off the image (or NaN),
+    /// either side, touches closed cells alone. Never for a centre off the image (or NaN),
     /// where the bound does not hold: the projection then decides.
     #[inline(always)]
     fn hidden_at(centre: [f32; 2], e: f32, s: &Screen, closed: &[bool]) -> bool {
@@ -746,10 +760,10 @@ impl FootprintBound {
         if !(centre[0] >= 0.0 && centre[0] <= w && centre[1] >= 0.0 && centre[1] <= h) {
             return false;
         }
-        let tile = |v: f32, pixels: usize| (v.max(0.0) as usize).min(pixels - 1) / TILE;
-        let (tx0, tx1) = (tile(centre[0] - e, s.w), tile(centre[0] + e, s.w));
-        let (ty0, ty1) = (tile(centre[1] - e, s.h), tile(centre[1] + e, s.h));
-        (ty0..=ty1).all(|ty| !closed[ty * s.tx + tx0..=ty * s.tx + tx1].contains(&false))
+        let cell = |v: f32, pixels: usize| (v.max(0.0) as usize).min(pixels - 1) / CELL;
+        let (x0, x1) = (cell(centre[0] - e, s.w), cell(centre[0] + e, s.w));
+        let (y0, y1) = (cell(centre[1] - e, s.h), cell(centre[1] + e, s.h));
+        (y0..=y1).all(|y| !closed[y * s.across + x0..=y * s.across + x1].contains(&false))
     }
 }
 
@@ -917,6 +931,15 @@ impl TilePixels {
                 self.depth[at..at + (x1 - x0)].copy_from_slice(d);
             }
         }
+    }
+
+    /// Whether the pixels of the tile's cell `(qx, qy)` (each 0 or 1) are all opaque or off
+    /// the image.
+    fn cell_closed(&self, qx: usize, qy: usize) -> bool {
+        let columns = (u16::MAX >> (TILE - CELL)) << (qx * CELL);
+        self.rows[qy * CELL..(qy + 1) * CELL]
+            .iter()
+            .all(|row| row & columns == 0)
     }
 
     /// Composites this batch's splats touching tile `t` (its top-left pixel at `origin`),
@@ -1223,7 +1246,7 @@ mod avx2 {
     }
 
     /// [`super::Group::project`] for up to [`LANES`] splats: [`super::project`] with the
-    /// splats' arithmetic in vectors. Reading the voxels' ids and texels, testing closed tiles
+    /// splats' arithmetic in vectors. Reading the voxels' ids and texels, testing closed cells
     /// and writing the results stay a lane at a time.
     ///
     /// # Safety
@@ -1761,11 +1784,11 @@ mod tests {
                 let screen = Screen {
                     w: 64,
                     h: 48,
-                    tx: 4,
+                    across: 8,
                 };
                 let bound = FootprintBound::new(&u, (64, 48));
-                // All tiles but two closed, then none.
-                let closed: Vec<bool> = (0..12).map(|t| t != 5 && t != 10).collect();
+                // All cells but four closed, then none.
+                let closed: Vec<bool> = (0..48).map(|c| ![10, 19, 21, 36].contains(&c)).collect();
                 for closed in [Some(closed.as_slice()), None] {
                     let group = Group {
                         u: &u,

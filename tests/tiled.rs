@@ -231,8 +231,8 @@ fn splats_left_out_behind_opaque_tiles_change_nothing() {
         // once every tile is opaque.
         assert!(sa.projected + sa.culled <= sa.splats);
         assert!(sa.projected + sa.culled >= sb.projected, "{sa:?} {sb:?}");
-        // The same splat-tile pairs composited in the same order: the same pixels.
-        assert_eq!(sa.composited, sb.composited);
+        // Pairs left out touch opaque pixels alone, which take nothing: the same pixels.
+        assert!(sa.composited <= sb.composited, "{sa:?} {sb:?}");
         assert_eq!(a.frame.pixels, b.frame.pixels);
     }
 }
