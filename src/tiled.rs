@@ -933,6 +933,19 @@ impl TilePixels {
         }
     }
 
+    /// The planes' [`LANES`] values from pixel `at` on (`None` past the planes' ends).
+    #[inline(always)]
+    fn lanes(&mut self, at: usize) -> Option<Lanes<'_>> {
+        let end = at.checked_add(LANES)?;
+        Some(Lanes {
+            r: self.r.get_mut(at..end)?.try_into().ok()?,
+            g: self.g.get_mut(at..end)?.try_into().ok()?,
+            b: self.b.get_mut(at..end)?.try_into().ok()?,
+            a: self.a.get_mut(at..end)?.try_into().ok()?,
+            depth: self.depth.get(at..end)?.try_into().ok()?,
+        })
+    }
+
     /// Whether the pixels of the tile's cell `(qx, qy)` (each 0 or 1) are all opaque or off
     /// the image.
     fn cell_closed(&self, qx: usize, qy: usize) -> bool {
@@ -954,6 +967,15 @@ impl TilePixels {
         }
         composite_tile_lanes(self, t, origin, batch, composite_splat_lanes);
     }
+}
+
+/// A group of [`LANES`] pixels of a tile, plane by plane.
+struct Lanes<'a> {
+    r: &'a mut [f32; LANES],
+    g: &'a mut [f32; LANES],
+    b: &'a mut [f32; LANES],
+    a: &'a mut [f32; LANES],
+    depth: &'a [f32; LANES],
 }
 
 /// What every tile takes from a batch: its projected splats, their tile lists and the
@@ -1067,15 +1089,14 @@ fn composite_splat_lanes(
             if lanes_open == 0 {
                 continue;
             }
-            let at = ly * TILE + start;
-            let lanes = at..at + LANES;
-            let (Some(r), Some(g), Some(b), Some(a), Some(d)) = (
-                tile.r.get_mut(lanes.clone()),
-                tile.g.get_mut(lanes.clone()),
-                tile.b.get_mut(lanes.clone()),
-                tile.a.get_mut(lanes.clone()),
-                tile.depth.get(lanes),
-            ) else {
+            let Some(Lanes {
+                r,
+                g,
+                b,
+                a,
+                depth: d,
+            }) = tile.lanes(ly * TILE + start)
+            else {
                 continue;
             };
             let first = dx0 + start as f32;
@@ -1143,8 +1164,8 @@ mod avx2 {
     use std::arch::x86_64::*;
 
     use super::{
-        Batch, FootprintBound, Group, LANES, Projected, TILE, TilePixels, composite_tile_lanes,
-        splat_rect, voxel,
+        Batch, FootprintBound, Group, LANES, Lanes, Projected, TILE, TilePixels,
+        composite_tile_lanes, splat_rect, voxel,
     };
 
     /// [`composite_tile_lanes`] with [`composite_splat`].
@@ -1201,15 +1222,14 @@ mod avx2 {
                 if lanes_open == 0 {
                     continue;
                 }
-                let at = ly * TILE + start;
-                let lanes = at..at + LANES;
-                let (Some(r), Some(g), Some(b), Some(a), Some(d)) = (
-                    tile.r.get_mut(lanes.clone()),
-                    tile.g.get_mut(lanes.clone()),
-                    tile.b.get_mut(lanes.clone()),
-                    tile.a.get_mut(lanes.clone()),
-                    tile.depth.get(lanes),
-                ) else {
+                let Some(Lanes {
+                    r,
+                    g,
+                    b,
+                    a,
+                    depth: d,
+                }) = tile.lanes(ly * TILE + start)
+                else {
                     continue;
                 };
                 let dx = _mm256_add_ps(_mm256_set1_ps(dx0 + start as f32), iota);
@@ -1218,7 +1238,7 @@ mod avx2 {
                 let mask = _mm256_and_si256(_mm256_set1_epi32(lanes_open as i32), bits);
                 let open = _mm256_castsi256_ps(_mm256_cmpeq_epi32(mask, bits));
                 #[allow(unsafe_code)]
-                // SAFETY: each slice holds LANES floats (checked by `get` above).
+                // SAFETY: each plane's group is an array of LANES floats.
                 unsafe {
                     let d = _mm256_loadu_ps(d.as_ptr());
                     let live = _mm256_and_ps(
@@ -1427,8 +1447,7 @@ mod avx2 {
         let mut rgb = [0, 1, 2].map(|i| _mm256_mul_ps(lanes(&texel[i]), inv255));
         if u.shading > 0.0 {
             let g = [4, 5, 6].map(|i| lanes(&texel[i]));
-            let [_, _, nz] = [0, 1, 2].map(|r| dot3(u.normal[r], g));
-            let [nx, ny] = [0, 1].map(|r| dot3(u.normal[r], g));
+            let [nx, ny, nz] = [0, 1, 2].map(|r| dot3(u.normal[r], g));
             let len2 = _mm256_fmadd_ps(nx, nx, _mm256_fmadd_ps(ny, ny, _mm256_mul_ps(nz, nz)));
             let abs_nz = _mm256_andnot_ps(splat(-0.0), nz);
             let lambert = _mm256_and_ps(
