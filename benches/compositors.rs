@@ -104,8 +104,9 @@ fn alternate(
             {
                 let ms = |d: Duration| d.as_secs_f64() * 1e3;
                 eprintln!(
-                    "    {} splats: {} projected, {} left out unprojected, {} splat-tile pairs composited, {} skipped behind opaque pixels, {} tiles opaque; project {:.1} ms, bin {:.1} ms, tiles {:.1} ms, order {:.1} ms",
+                    "    {} splats: {} drew pixels, {} projected, {} left out unprojected, {} splat-tile pairs composited, {} skipped behind opaque pixels, {} tiles opaque; project {:.1} ms, bin {:.1} ms, tiles {:.1} ms, order {:.1} ms",
                     t.splats,
+                    t.drew,
                     t.projected,
                     t.culled,
                     t.composited,
@@ -159,6 +160,10 @@ fn main() {
     println!(
         "\n| volume, 512x512 | GPU splat pass frame | CPU tiles frame | ratio |\n|---|---|---|---|"
     );
+    if std::env::args().any(|a| a == "skip") {
+        skipping(&ctx, &cases[1].1);
+        return;
+    }
     let cpu_only = std::env::args().any(|a| a == "cpu");
     let growth = std::env::args().any(|a| a == "growth");
     for (name, scene) in cases.iter().filter(|_| !growth) {
@@ -215,5 +220,46 @@ fn main() {
         let mut renderers = [("cpu", Renderer::with_compositor(Compositor::Cpu))];
         let t = alternate(&ctx, &scene, (side, side), &mut renderers, frames);
         println!("| {side}x{side} | {:.1} ms |", t[0]);
+    }
+}
+
+/// What the CPU compositor leaves out of the CT head's first view under bone transfer
+/// functions of rising opacity, and how much of the image turns opaque.
+fn skipping(ctx: &GpuContext, base: &Scene) {
+    let ramps = [
+        (
+            "ramp 1200-1800 to 0.6 (the table's)",
+            TransferFunction::ramp(1200.0, 1800.0, [1.0, 0.93, 0.85, 0.6]),
+        ),
+        (
+            "ramp 1200-1800 to 0.9",
+            TransferFunction::ramp(1200.0, 1800.0, [1.0, 0.93, 0.85, 0.9]),
+        ),
+        (
+            "ramp 1200-1500 to 1.0",
+            TransferFunction::ramp(1200.0, 1500.0, [1.0, 0.93, 0.85, 1.0]),
+        ),
+    ];
+    let options = FrameOptions {
+        background: None,
+        ..OPTIONS
+    };
+    println!(
+        "| CT head, 512x512 | splats | drew pixels | left out unprojected | pairs composited | pairs skipped | pixels covered | of those opaque |\n|---|---|---|---|---|---|---|---|"
+    );
+    for (label, tf) in ramps {
+        let mut scene = scene(common::ct_head(), tf);
+        scene.camera = base.camera;
+        let mut renderer = Renderer::with_compositor(Compositor::Cpu);
+        let shot = renderer
+            .screenshot(ctx, &scene, &scene.camera.unwrap(), (512, 512), &options)
+            .unwrap();
+        let t = shot.report.tiles.unwrap();
+        let covered = shot.frame.pixels.iter().filter(|p| p[3] > 0.01).count();
+        let opaque = shot.frame.pixels.iter().filter(|p| p[3] >= 0.996).count();
+        println!(
+            "| {label} | {} | {} | {} | {} | {} | {covered} | {opaque} |",
+            t.splats, t.drew, t.culled, t.composited, t.skipped_opaque
+        );
     }
 }

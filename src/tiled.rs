@@ -12,9 +12,11 @@
 //! most `1 - OPAQUE` of every channel.
 //!
 //! The order is walked nearest first in batches (4,096 splats, doubling to 32,768): each batch
-//! is projected and binned, then composited, before the next; a splat whose footprint can only
-//! touch pixels that are opaque by then (known by 8x8 cells) is left out before its texel is
-//! even read. Projection is the part of a frame that early termination alone does not shrink.
+//! is projected and binned, then composited, before the next. A splat's pixel rectangle follows
+//! from its centre alone (the covariance is the volume's), so a splat whose rectangle holds
+//! only pixels opaque by then (a bit per pixel) is left out before its texel is even read;
+//! stretches of the order whose box of voxels is hidden are left out before each splat's
+//! centre is. Projection is the part of a frame that early termination alone does not shrink.
 //!
 //! The pixel loop works on rows of 8 pixels held as planes. It is written twice: in plain
 //! loops the compiler vectorises for the x86-64 baseline (SSE2) and any other processor, and
@@ -26,6 +28,7 @@
 //! [`TiledCompositor`] and is reused from frame to frame; none grows with the volume past one
 //! batch.
 
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
 use glam::Vec3;
@@ -265,14 +268,17 @@ pub struct TileStats {
     /// Splats projected onto the image (in front of the eye, kept by the clip planes, on
     /// screen).
     pub projected: usize,
-    /// Splats left out before projection because every pixel their footprint could touch was
-    /// opaque already, by cells of 8x8 pixels (and, once every tile of the image is opaque,
-    /// all the splats left).
+    /// Splats left out before their texel was read because every pixel of their footprint was
+    /// opaque already (and, once every pixel of the image is opaque, all the splats left).
     pub culled: usize,
-    /// Splat-tile pairs composited.
+    /// Splats that reached at least one pixel still open: all the others added nothing to
+    /// the image.
+    pub drew: usize,
+    /// Splat-tile pairs composited: the splat reached a pixel of the tile still open.
     pub composited: usize,
-    /// Splat-tile pairs skipped because their tile turned opaque within the batch that held
-    /// them.
+    /// Splat-tile pairs skipped because every pixel the splat covers in the tile had turned
+    /// opaque (within the batch that held them, after the opaque pixels were last taken
+    /// for culling).
     pub skipped_opaque: usize,
     /// Tiles whose pixels all turned opaque.
     pub tiles_opaque: usize,
@@ -334,14 +340,16 @@ pub struct TiledCompositor {
     /// The accumulated opacity past which a pixel takes no more splats ([`OPAQUE`] by
     /// default; above 1 no pixel and no tile ever stops).
     pub opaque: f32,
-    /// Leave out, before projecting them, splats whose footprint can only touch opaque cells
+    /// Leave out, before projecting them, splats whose footprint covers opaque pixels alone
     /// (on by default; the image is the same either way, see [`TiledCompositor::composite`]).
     pub cull_hidden: bool,
     projected: Vec<Projected>,
     bins: Vec<ChunkBins>,
     tiles: Vec<TilePixels>,
-    /// Per tile, whether all its pixels were opaque when the batch began.
-    closed: Vec<bool>,
+    /// The pixels opaque when the batch began.
+    mask: OpaqueMask,
+    /// Per splat of the batch, whether it reached a pixel still open.
+    drew: Vec<AtomicBool>,
 }
 
 /// The first batch of splats (the nearest) and the largest; batches double in between, so
@@ -349,7 +357,7 @@ pub struct TiledCompositor {
 const FIRST_BATCH: usize = 4096;
 /// See [`FIRST_BATCH`].
 const MAX_BATCH: usize = 1 << 15;
-/// Splats whose voxels' box is tested against the opaque cells before each is tested alone.
+/// Splats whose voxels' box is tested against the opaque pixels before each is tested alone.
 const GROUP: usize = 32;
 
 impl Default for TiledCompositor {
@@ -360,7 +368,8 @@ impl Default for TiledCompositor {
             projected: Vec::new(),
             bins: Vec::new(),
             tiles: Vec::new(),
-            closed: Vec::new(),
+            mask: OpaqueMask::default(),
+            drew: Vec::new(),
         }
     }
 }
@@ -400,12 +409,10 @@ impl TiledCompositor {
             .par_iter_mut()
             .enumerate()
             .for_each(|(t, tile)| tile.reset((t % tx) * TILE, (t / tx) * TILE, (w, h), depth));
-        let (across, down) = (w.div_ceil(CELL), h.div_ceil(CELL));
-        self.closed.clear();
-        self.closed.resize(across * down, false);
+        self.mask.reset(w, h);
         let mut open_pixels = w * h;
         stats.tiles += started.elapsed();
-        let screen = Screen { w, h, across };
+        let screen = Screen { w, h };
         // Nearest first: the volumes near to far, each one's order from its end.
         let mut batch = FIRST_BATCH;
         'volumes: for (v, (projection, texels, ids)) in volumes.iter().enumerate().rev() {
@@ -433,9 +440,11 @@ impl TiledCompositor {
                 if self.bins.len() < chunks {
                     self.bins.resize_with(chunks, ChunkBins::default);
                 }
-                // No test while no tile is closed.
-                let closed = (self.cull_hidden && self.closed.contains(&true))
-                    .then_some(self.closed.as_slice());
+                if self.drew.len() < ids.len() {
+                    self.drew.resize_with(ids.len(), AtomicBool::default);
+                }
+                // No test while no pixel is opaque.
+                let mask = (self.cull_hidden && open_pixels < w * h).then_some(&self.mask);
                 let (culled, project_time, bin_time) = self.projected[..ids.len()]
                     .par_chunks_mut(chunk)
                     .zip(ids.par_chunks(chunk))
@@ -447,13 +456,12 @@ impl TiledCompositor {
                         let group = Group {
                             u: projection,
                             texels,
-                            bound: &bound,
                             screen: &screen,
-                            closed,
+                            mask,
                         };
                         for (out, ids) in out.chunks_mut(GROUP).zip(ids.chunks(GROUP)) {
-                            if let Some(closed) = closed
-                                && bound.group_hidden(projection, ids, &screen, closed)
+                            if let Some(mask) = mask
+                                && bound.group_hidden(projection, ids, &screen, mask)
                             {
                                 out.fill(Projected::NONE);
                                 culled += ids.len();
@@ -488,19 +496,20 @@ impl TiledCompositor {
                     projected: &self.projected,
                     bins: &self.bins[..chunks],
                     opaque: self.opaque,
+                    drew: &self.drew,
                 };
                 self.tiles.par_iter_mut().enumerate().for_each(|(t, tile)| {
                     let origin = ((t % tx) * TILE, (t / tx) * TILE);
                     tile.composite(t, origin, batch);
                 });
                 for (t, tile) in self.tiles.iter().enumerate() {
-                    let (x, y) = ((t % tx) * TILE / CELL, (t / tx) * TILE / CELL);
-                    for (qy, qx) in [(0, 0), (0, 1), (1, 0), (1, 1)] {
-                        if x + qx < across && y + qy < down {
-                            self.closed[(y + qy) * across + x + qx] = tile.cell_closed(qx, qy);
-                        }
-                    }
+                    self.mask
+                        .set_tile((t % tx) * TILE, (t / tx) * TILE, &tile.rows);
                 }
+                stats.drew += self.drew[..ids.len()]
+                    .iter()
+                    .filter(|d| d.swap(false, Ordering::Relaxed))
+                    .count();
                 open_pixels = self.tiles.iter().map(|t| t.open as usize).sum();
                 stats.tiles += started.elapsed();
             }
@@ -537,32 +546,89 @@ fn voxel(u: &SplatProjection, id: u32) -> [u32; 3] {
     [rest - y * u.row.get(), y, z]
 }
 
-/// The image's size in pixels and its width in cells.
+/// The image's size in pixels.
 struct Screen {
     w: usize,
     h: usize,
-    across: usize,
 }
 
-/// The side in pixels of the squares whose pixels are known to be opaque (a tile is 2 by 2
-/// of them), against which splats are left out before projection. Smaller than a tile, since
-/// the tiles along a silhouette never close: a quarter of one often does.
-const CELL: usize = TILE / 2;
+/// Which pixels of the image are opaque, a bit each, in rows of 64-pixel words: splats are
+/// tested against it before they are projected. A pixel each, not a tile or a square of
+/// pixels, since along a silhouette and round a thin bone's open pixels whole squares never
+/// turn opaque while most of their pixels do.
+#[derive(Debug, Default)]
+struct OpaqueMask {
+    /// Words in a row of the image.
+    words: usize,
+    /// Bit `x % 64` of word `y * words + x / 64` for pixel `(x, y)`, set where opaque.
+    bits: Vec<u64>,
+}
+
+impl OpaqueMask {
+    /// No pixel of a `w` by `h` image opaque.
+    fn reset(&mut self, w: usize, h: usize) {
+        self.words = w.div_ceil(64);
+        self.bits.clear();
+        self.bits.resize(self.words * h, 0);
+    }
+
+    /// Takes the opaque pixels of the tile whose top-left pixel is `(x0, y0)` from its rows
+    /// of open pixels (rows and columns past the image's edges are never read).
+    fn set_tile(&mut self, x0: usize, y0: usize, rows: &[u16; TILE]) {
+        let (word, shift) = (x0 / 64, x0 % 64);
+        for (ly, &open) in rows.iter().enumerate() {
+            if let Some(bits) = self.bits.get_mut((y0 + ly) * self.words + word) {
+                *bits = (*bits & !(0xffff << shift)) | u64::from(!open) << shift;
+            }
+        }
+    }
+
+    /// Whether every pixel from `(x0, y0)` to `(x1, y1)` (inclusive, on the image, `x0 <= x1`,
+    /// `y0 <= y1`) is opaque.
+    #[inline(always)]
+    fn covers(&self, x0: usize, x1: usize, y0: usize, y1: usize) -> bool {
+        let (w0, w1) = (x0 / 64, x1 / 64);
+        let first = u64::MAX << (x0 % 64);
+        let last = u64::MAX >> (63 - x1 % 64);
+        (y0..=y1).all(|y| {
+            let Some(row) = self.bits.get(y * self.words..(y + 1) * self.words) else {
+                return false;
+            };
+            if w1 >= row.len() {
+                false
+            } else if w0 == w1 {
+                row[w0] & first & last == first & last
+            } else {
+                row[w0] & first == first
+                    && row[w1] & last == last
+                    && row[w0 + 1..w1].iter().all(|&b| b == u64::MAX)
+            }
+        })
+    }
+
+    /// [`OpaqueMask::covers`] for a splat's pixel rectangle as [`Projected`] holds it.
+    #[inline(always)]
+    fn covers_rect(&self, [x0, y0, x1, y1]: [i32; 4]) -> bool {
+        x0 <= x1 && y0 <= y1 && x0 >= 0 && y0 >= 0 && {
+            let [x0, y0, x1, y1] = [x0, y0, x1, y1].map(|v| v as usize);
+            self.covers(x0, x1, y0, y1)
+        }
+    }
+}
 
 /// What projecting a stretch of one volume's draw order takes.
 #[derive(Clone, Copy)]
 struct Group<'a> {
     u: &'a SplatProjection,
     texels: &'a SplatTexels,
-    bound: &'a FootprintBound,
     screen: &'a Screen,
-    /// The cells (see [`CELL`]) opaque before this batch (`None` while none is).
-    closed: Option<&'a [bool]>,
+    /// The pixels opaque before this batch (`None` while none is).
+    mask: Option<&'a OpaqueMask>,
 }
 
 impl Group<'_> {
     /// Projects the splats `ids` into `out` (as long), leaving out those hidden behind
-    /// opaque cells; returns how many were left out so. Eight at a time in AVX2 vectors where
+    /// opaque pixels; returns how many were left out so. Eight at a time in AVX2 vectors where
     /// the processor has them.
     fn project(&self, ids: &[u32], out: &mut [Projected]) -> usize {
         #[cfg(target_arch = "x86_64")]
@@ -585,27 +651,19 @@ impl Group<'_> {
         let (w, h) = (self.screen.w as i32, self.screen.h as i32);
         let mut culled = 0;
         for (p, &id) in out.iter_mut().zip(ids) {
-            *p = match self.bound.visible(self.u, id, self.screen, self.closed) {
-                Visibility::Hidden => {
+            let [x, y, z] = voxel(self.u, id);
+            let centre = camera_centre(self.u, [x, y, z]);
+            *p = match place(self.u, centre, w, h) {
+                None => Projected::NONE,
+                Some(at) if self.mask.is_some_and(|m| m.covers_rect(at.rect)) => {
                     culled += 1;
                     Projected::NONE
                 }
-                Visibility::Off => Projected::NONE,
-                Visibility::Maybe(k, c) => project(self.u, self.texels, k, c, w, h),
+                Some(at) => project(self.u, self.texels, [x, y, z], centre, &at),
             };
         }
         culled
     }
-}
-
-/// Whether a splat can show, from its centre alone (before its texel is read).
-enum Visibility {
-    /// Left out as the projection would leave it out (behind the eye, off the image).
-    Off,
-    /// Every tile it could touch is opaque.
-    Hidden,
-    /// To be projected: its voxel and camera-space centre.
-    Maybe([u32; 3], Vec3),
 }
 
 /// A bound on the screen footprint of a splat whose centre lies on the image, linear in the
@@ -648,12 +706,18 @@ impl FootprintBound {
         }
     }
 
-    /// Whether every splat of `ids` (a stretch of the draw order) is hidden behind the cells
-    /// `closed`: the box of their voxels, projected, lies on the image (so that the footprint
-    /// bound holds for each) and on closed cells alone. Decoding a voxel id and taking the
+    /// Whether every splat of `ids` (a stretch of the draw order) is hidden behind the opaque
+    /// pixels `mask`: the box of their voxels, projected, lies on the image (so that the
+    /// footprint bound holds for each) and, grown by the bound, on opaque pixels alone. Decoding a voxel id and taking the
     /// box's bounds costs less than a splat's own test; the order's rows make most stretches
     /// short segments.
-    fn group_hidden(&self, u: &SplatProjection, ids: &[u32], s: &Screen, closed: &[bool]) -> bool {
+    fn group_hidden(
+        &self,
+        u: &SplatProjection,
+        ids: &[u32],
+        s: &Screen,
+        mask: &OpaqueMask,
+    ) -> bool {
         let (mut lo, mut hi) = ([u32::MAX; 3], [0u32; 3]);
         for &id in ids {
             let [x, y, z] = voxel(u, id);
@@ -705,78 +769,99 @@ impl FootprintBound {
         } else {
             self.per_inverse_depth / nearest + self.constant
         };
-        let cell = |v: f32, pixels: usize| (v.max(0.0) as usize).min(pixels - 1) / CELL;
-        let (x0, x1) = (cell(left - e, s.w), cell(right + e, s.w));
-        let (y0, y1) = (cell(top - e, s.h), cell(bottom + e, s.h));
-        (y0..=y1).all(|y| !closed[y * s.across + x0..=y * s.across + x1].contains(&false))
-    }
-
-    /// Whether splat `id` can show, given the cells `closed` (opaque) before its batch
-    /// (`None` while none is).
-    #[inline]
-    fn visible(
-        &self,
-        u: &SplatProjection,
-        id: u32,
-        s: &Screen,
-        closed: Option<&[bool]>,
-    ) -> Visibility {
-        let [x, y, z] = voxel(u, id);
-        let k = Vec3::new(x as f32, y as f32, z as f32);
-        let d = k - u.eye_index;
-        let p = Vec3::new(u.m[0].dot(d), u.m[1].dot(d), u.m[2].dot(d));
-        if (!u.orthographic && p.z <= u.near_cut) || (u.orthographic && p.z <= u.near) {
-            return Visibility::Off;
-        }
-        let Some(closed) = closed else {
-            return Visibility::Maybe([x, y, z], p);
-        };
-        let f = u.focal;
-        let (centre, e) = if u.orthographic {
-            (
-                [u.centre[0] + f * p.x, u.centre[1] - f * p.y],
-                self.constant,
-            )
-        } else {
-            let iz = 1.0 / p.z;
-            (
-                [u.centre[0] + f * p.x * iz, u.centre[1] - f * p.y * iz],
-                self.per_inverse_depth * iz + self.constant,
-            )
-        };
-        if Self::hidden_at(centre, e, s, closed) {
-            Visibility::Hidden
-        } else {
-            Visibility::Maybe([x, y, z], p)
-        }
-    }
-
-    /// Whether a splat centred at `centre` on the screen, its footprint bounded by `e` pixels
-    /// either side, touches closed cells alone. Never for a centre off the image (or NaN),
-    /// where the bound does not hold: the projection then decides.
-    #[inline(always)]
-    fn hidden_at(centre: [f32; 2], e: f32, s: &Screen, closed: &[bool]) -> bool {
-        let (w, h) = (s.w as f32, s.h as f32);
-        if !(centre[0] >= 0.0 && centre[0] <= w && centre[1] >= 0.0 && centre[1] <= h) {
-            return false;
-        }
-        let cell = |v: f32, pixels: usize| (v.max(0.0) as usize).min(pixels - 1) / CELL;
-        let (x0, x1) = (cell(centre[0] - e, s.w), cell(centre[0] + e, s.w));
-        let (y0, y1) = (cell(centre[1] - e, s.h), cell(centre[1] + e, s.h));
-        (y0..=y1).all(|y| !closed[y * s.across + x0..=y * s.across + x1].contains(&false))
+        let pixel = |v: f32, pixels: usize| (v.max(0.0) as usize).min(pixels - 1);
+        let (x0, x1) = (pixel(left - e, s.w), pixel(right + e, s.w));
+        let (y0, y1) = (pixel(top - e, s.h), pixel(bottom + e, s.h));
+        mask.covers(x0, x1, y0, y1)
     }
 }
 
-/// A splat on the screen, as the splat pass's vertex shader places it, from its voxel and
-/// camera-space centre `p` (in front of the eye: see
-/// [`FootprintBound::visible`]); a splat left out gets an empty rectangle.
+/// The camera-space centre of voxel `k`.
+#[inline(always)]
+fn camera_centre(u: &SplatProjection, k: [u32; 3]) -> Vec3 {
+    let d = Vec3::new(k[0] as f32, k[1] as f32, k[2] as f32) - u.eye_index;
+    Vec3::new(u.m[0].dot(d), u.m[1].dot(d), u.m[2].dot(d))
+}
+
+/// Where a splat falls on the screen, as the splat pass's vertex shader places it: all that
+/// its camera-space centre decides, before its texel is read.
+struct Placement {
+    centre: [f32; 2],
+    /// Reversed depth.
+    depth: f32,
+    /// The screen covariance `[[a, b], [b, c]]`, the pixel variance added.
+    a: f32,
+    b: f32,
+    c: f32,
+    /// Covered pixel rectangle, inclusive: `[x0, y0, x1, y1]`.
+    rect: [i32; 4],
+}
+
+/// The placement of a splat centred at `p` (camera space) on a `w` by `h` image; `None` where
+/// the splat pass leaves it out: behind the near cut, a footprint that is not an ellipse, or
+/// no pixel centre inside its quad.
+fn place(u: &SplatProjection, p: Vec3, w: i32, h: i32) -> Option<Placement> {
+    let f = u.focal;
+    let (j0, j1, centre, depth) = if u.orthographic {
+        if p.z <= u.near {
+            return None;
+        }
+        let z = ((u.far - p.z) / (u.far - u.near)).clamp(0.0, 1.0);
+        (
+            Vec3::new(f, 0.0, 0.0),
+            Vec3::new(0.0, -f, 0.0),
+            [u.centre[0] + f * p.x, u.centre[1] - f * p.y],
+            z,
+        )
+    } else {
+        if p.z <= u.near_cut {
+            return None;
+        }
+        let iz = 1.0 / p.z;
+        (
+            Vec3::new(f * iz, 0.0, -f * p.x * iz * iz),
+            Vec3::new(0.0, -f * iz, f * p.y * iz * iz),
+            [u.centre[0] + f * p.x * iz, u.centre[1] - f * p.y * iz],
+            u.near * iz,
+        )
+    };
+    let cov = |v: Vec3| Vec3::new(u.cov[0].dot(v), u.cov[1].dot(v), u.cov[2].dot(v));
+    let a = j0.dot(cov(j0)) + u.pixel_variance;
+    let b = j0.dot(cov(j1));
+    let c = j1.dot(cov(j1)) + u.pixel_variance;
+    // Also refuses a NaN determinant.
+    if (a * c - b * b).partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
+        return None;
+    }
+    // The quad of the vertex shader: +-(radius sqrt(a) + 0.5) by +-(radius sqrt(c) + 0.5);
+    // the pixels whose centres it holds.
+    let radius = u.cutoff.sqrt();
+    let (ex, ey) = (radius * a.sqrt() + 0.5, radius * c.sqrt() + 0.5);
+    // The first and last pixel centres inside the quad, clamped to the image.
+    let lim = |v: f32, hi: i32| v.clamp(-1.0, hi as f32 + 1.0);
+    let x0 = ceil(lim(centre[0] - ex - 0.5, w)).max(0);
+    let x1 = floor(lim(centre[0] + ex - 0.5, w)).min(w - 1);
+    let y0 = ceil(lim(centre[1] - ey - 0.5, h)).max(0);
+    let y1 = floor(lim(centre[1] + ey - 0.5, h)).min(h - 1);
+    (x0 <= x1 && y0 <= y1).then_some(Placement {
+        centre,
+        depth,
+        a,
+        b,
+        c,
+        rect: [x0, y0, x1, y1],
+    })
+}
+
+/// A splat on the screen, as the splat pass's vertex shader places and colours it, from its
+/// voxel, camera-space centre `p` and placement; a splat left out (no texel, no opacity,
+/// clipped) gets an empty rectangle.
 fn project(
     u: &SplatProjection,
     texels: &SplatTexels,
     [x, y, z]: [u32; 3],
     p: Vec3,
-    w: i32,
-    h: i32,
+    at: &Placement,
 ) -> Projected {
     let none = Projected::NONE;
     let Some(texel) = texels.get(x, y, z) else {
@@ -792,47 +877,6 @@ fn project(
     {
         return none;
     }
-    let f = u.focal;
-    let (j0, j1, centre, depth) = if u.orthographic {
-        let z = ((u.far - p.z) / (u.far - u.near)).clamp(0.0, 1.0);
-        (
-            Vec3::new(f, 0.0, 0.0),
-            Vec3::new(0.0, -f, 0.0),
-            [u.centre[0] + f * p.x, u.centre[1] - f * p.y],
-            z,
-        )
-    } else {
-        let iz = 1.0 / p.z;
-        (
-            Vec3::new(f * iz, 0.0, -f * p.x * iz * iz),
-            Vec3::new(0.0, -f * iz, f * p.y * iz * iz),
-            [u.centre[0] + f * p.x * iz, u.centre[1] - f * p.y * iz],
-            u.near * iz,
-        )
-    };
-    let cov = |v: Vec3| Vec3::new(u.cov[0].dot(v), u.cov[1].dot(v), u.cov[2].dot(v));
-    let a = j0.dot(cov(j0)) + u.pixel_variance;
-    let b = j0.dot(cov(j1));
-    let c = j1.dot(cov(j1)) + u.pixel_variance;
-    let det = a * c - b * b;
-    // Also refuses a NaN determinant.
-    if det.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
-        return none;
-    }
-    let inv_det = 1.0 / det;
-    // The quad of the vertex shader: +-(radius sqrt(a) + 0.5) by +-(radius sqrt(c) + 0.5);
-    // the pixels whose centres it holds.
-    let radius = u.cutoff.sqrt();
-    let (ex, ey) = (radius * a.sqrt() + 0.5, radius * c.sqrt() + 0.5);
-    // The first and last pixel centres inside the quad, clamped to the image.
-    let lim = |v: f32, hi: i32| v.clamp(-1.0, hi as f32 + 1.0);
-    let x0 = ceil(lim(centre[0] - ex - 0.5, w)).max(0);
-    let x1 = floor(lim(centre[0] + ex - 0.5, w)).min(w - 1);
-    let y0 = ceil(lim(centre[1] - ey - 0.5, h)).max(0);
-    let y1 = floor(lim(centre[1] + ey - 0.5, h)).min(h - 1);
-    if !(x0 <= x1 && y0 <= y1) {
-        return none;
-    }
     let mut rgb = [straight[0], straight[1], straight[2]];
     let g = [4, 5, 6, 7].map(|i| texel[i] as i8);
     if u.shading > 0.0 && g[3] > 63 {
@@ -843,11 +887,13 @@ fn project(
         rgb = rgb.map(|v| v * scale);
     }
     let alpha = straight[3];
+    let inv_det = 1.0 / (at.a * at.c - at.b * at.b);
+    let [x0, y0, x1, y1] = at.rect;
     Projected {
-        centre,
-        conic: [c * inv_det, -b * inv_det, a * inv_det],
+        centre: at.centre,
+        conic: [at.c * inv_det, -at.b * inv_det, at.a * inv_det],
         color: [rgb[0] * alpha, rgb[1] * alpha, rgb[2] * alpha, alpha],
-        depth,
+        depth: at.depth,
         cutoff: u.cutoff,
         x0,
         y0,
@@ -946,15 +992,6 @@ impl TilePixels {
         })
     }
 
-    /// Whether the pixels of the tile's cell `(qx, qy)` (each 0 or 1) are all opaque or off
-    /// the image.
-    fn cell_closed(&self, qx: usize, qy: usize) -> bool {
-        let columns = (u16::MAX >> (TILE - CELL)) << (qx * CELL);
-        self.rows[qy * CELL..(qy + 1) * CELL]
-            .iter()
-            .all(|row| row & columns == 0)
-    }
-
     /// Composites this batch's splats touching tile `t` (its top-left pixel at `origin`),
     /// nearest first, under what the tile holds: 8 lanes wide where the processor has AVX2
     /// and FMA.
@@ -985,6 +1022,8 @@ struct Batch<'a> {
     projected: &'a [Projected],
     bins: &'a [ChunkBins],
     opaque: f32,
+    /// Per splat of `projected`, set once it reaches an open pixel.
+    drew: &'a [AtomicBool],
 }
 
 /// [`TilePixels::composite`], with the pixel loop `splat` inlined: it composites one splat
@@ -996,12 +1035,13 @@ fn composite_tile_lanes(
     t: usize,
     origin: (usize, usize),
     batch: Batch<'_>,
-    splat: impl Fn(&mut TilePixels, (usize, usize), &Projected, f32) -> u32,
+    splat: impl Fn(&mut TilePixels, (usize, usize), &Projected, TileRect, f32) -> u32,
 ) {
     let Batch {
         projected,
         bins,
         opaque,
+        drew,
     } = batch;
     let lists = bins.iter().rev().map(|b| {
         let (s, e) = (b.starts[t] as usize, b.starts[t + 1] as usize);
@@ -1014,8 +1054,20 @@ fn composite_tile_lanes(
                 tile.skipped += 1;
                 break;
             }
+            let p = &projected[i as usize];
+            // The splat's rows in the tile from the first with an open pixel under it; none,
+            // and it takes nothing.
+            let rows = splat_rect(origin, p).and_then(|(lx0, lx1, ly0, ly1, span)| {
+                let first = (ly0..=ly1).find(|&ly| tile.rows[ly] & span != 0)?;
+                Some((lx0, lx1, first, ly1, span))
+            });
+            let Some(rows) = rows else {
+                tile.skipped += 1;
+                continue;
+            };
             tile.composited += 1;
-            tile.open -= splat(tile, origin, &projected[i as usize], opaque);
+            drew[i as usize].store(true, Ordering::Relaxed);
+            tile.open -= splat(tile, origin, p, rows, opaque);
         }
         tile.skipped += splats.len();
     }
@@ -1032,10 +1084,14 @@ fn has_avx2() -> bool {
 /// Lanes of the pixel loop: a group of pixels along a row, starting where a footprint does.
 const LANES: usize = 8;
 
-/// The part of a splat's pixel rectangle in the tile at `origin`: its first and last columns
-/// and rows in the tile, and a row mask of its columns; `None` where they do not meet.
+/// The part of a splat's pixel rectangle in a tile: its first and last columns, its first and
+/// last rows, and a row mask of its columns.
+type TileRect = (usize, usize, usize, usize, u16);
+
+/// The part of a splat's pixel rectangle in the tile at `origin`; `None` where they do not
+/// meet.
 #[inline(always)]
-fn splat_rect(origin: (usize, usize), p: &Projected) -> Option<(usize, usize, usize, usize, u16)> {
+fn splat_rect(origin: (usize, usize), p: &Projected) -> Option<TileRect> {
     let (ox, oy) = (origin.0 as i32, origin.1 as i32);
     let (lx0, lx1) = ((p.x0 - ox).max(0), (p.x1 - ox).min(TILE as i32 - 1));
     let (ly0, ly1) = ((p.y0 - oy).max(0), (p.y1 - oy).min(TILE as i32 - 1));
@@ -1066,11 +1122,9 @@ fn composite_splat_lanes(
     tile: &mut TilePixels,
     origin: (usize, usize),
     p: &Projected,
+    (lx0, lx1, ly0, ly1, span): TileRect,
     opaque: f32,
 ) -> u32 {
-    let Some((lx0, lx1, ly0, ly1, span)) = splat_rect(origin, p) else {
-        return 0;
-    };
     let dx0 = origin.0 as f32 + 0.5 - p.centre[0];
     let [ca, cb, cc] = p.conic;
     let (cutoff, depth) = (p.cutoff, p.depth);
@@ -1164,8 +1218,8 @@ mod avx2 {
     use std::arch::x86_64::*;
 
     use super::{
-        Batch, FootprintBound, Group, LANES, Lanes, Projected, TILE, TilePixels,
-        composite_tile_lanes, splat_rect, voxel,
+        Batch, Group, LANES, Lanes, Projected, TILE, TilePixels, TileRect, composite_tile_lanes,
+        voxel,
     };
 
     /// [`composite_tile_lanes`] with [`composite_splat`].
@@ -1181,8 +1235,8 @@ mod avx2 {
         origin: (usize, usize),
         batch: Batch<'_>,
     ) {
-        composite_tile_lanes(tile, t, origin, batch, |tile, origin, p, opaque| {
-            composite_splat(tile, origin, p, opaque)
+        composite_tile_lanes(tile, t, origin, batch, |tile, origin, p, rect, opaque| {
+            composite_splat(tile, origin, p, rect, opaque)
         });
     }
 
@@ -1193,11 +1247,9 @@ mod avx2 {
         tile: &mut TilePixels,
         origin: (usize, usize),
         p: &Projected,
+        (lx0, lx1, ly0, ly1, span): TileRect,
         opaque: f32,
     ) -> u32 {
-        let Some((lx0, lx1, ly0, ly1, span)) = splat_rect(origin, p) else {
-            return 0;
-        };
         let dx0 = origin.0 as f32 + 0.5 - p.centre[0];
         let [ca, cb, cc] = p.conic;
         let conic_a = _mm256_set1_ps(ca);
@@ -1266,7 +1318,7 @@ mod avx2 {
     }
 
     /// [`super::Group::project`] for up to [`LANES`] splats: [`super::project`] with the
-    /// splats' arithmetic in vectors. Reading the voxels' ids and texels, testing closed cells
+    /// splats' arithmetic in vectors. Reading the voxels' ids and texels, testing the opaque pixels
     /// and writing the results stay a lane at a time.
     ///
     /// # Safety
@@ -1300,13 +1352,12 @@ mod avx2 {
         let f = splat(u.focal);
         // Perspective: f / z scales the centre and the Jacobian, whose third column is the
         // centre's slope; orthographic: f alone, and no slope.
-        let (fiz, iz, slope_x, slope_y, depth, front) = if u.orthographic {
+        let (fiz, slope_x, slope_y, depth, front) = if u.orthographic {
             let depth = _mm256_div_ps(_mm256_sub_ps(splat(u.far), pz), splat(u.far - u.near));
             let depth = _mm256_min_ps(_mm256_max_ps(depth, splat(0.0)), splat(1.0));
             let zero = splat(0.0);
             (
                 f,
-                splat(1.0),
                 zero,
                 zero,
                 depth,
@@ -1316,7 +1367,6 @@ mod avx2 {
             let iz = _mm256_div_ps(splat(1.0), pz);
             (
                 _mm256_mul_ps(f, iz),
-                iz,
                 _mm256_mul_ps(px, iz),
                 _mm256_mul_ps(py, iz),
                 _mm256_mul_ps(splat(u.near), iz),
@@ -1326,65 +1376,6 @@ mod avx2 {
         let cx = _mm256_fmadd_ps(fiz, px, splat(u.centre[0]));
         let cy = _mm256_fnmadd_ps(fiz, py, splat(u.centre[1]));
         let (centre_x, centre_y) = (unlanes(cx), unlanes(cy));
-        // Which lanes go on: in front of the eye, not hidden, with a texel that has opacity.
-        let front = _mm256_movemask_ps(front) as u32;
-        let reach = if u.orthographic {
-            splat(group.bound.constant)
-        } else {
-            _mm256_fmadd_ps(
-                splat(group.bound.per_inverse_depth),
-                iz,
-                splat(group.bound.constant),
-            )
-        };
-        let reach = unlanes(reach);
-        let mut culled = 0;
-        let mut texel = [[0.0f32; LANES]; 8];
-        let mut go = 0u32;
-        for l in 0..n {
-            if front >> l & 1 == 0 {
-                continue;
-            }
-            if let Some(closed) = group.closed
-                && FootprintBound::hidden_at(
-                    [centre_x[l], centre_y[l]],
-                    reach[l],
-                    group.screen,
-                    closed,
-                )
-            {
-                culled += 1;
-                continue;
-            }
-            let [x, y, z] = voxels[l];
-            let Some(t) = group.texels.get(x, y, z) else {
-                continue;
-            };
-            if t[3] == 0 {
-                continue;
-            }
-            go |= 1 << l;
-            for c in 0..4 {
-                texel[c][l] = f32::from(t[c]);
-                texel[4 + c][l] = f32::from(t[4 + c] as i8);
-            }
-        }
-        if go == 0 {
-            out[..n].fill(Projected::NONE);
-            return culled;
-        }
-        let mut keep = _mm256_castsi256_ps(_mm256_cmpeq_epi32(
-            _mm256_and_si256(_mm256_set1_epi32(go as i32), lane_bits()),
-            lane_bits(),
-        ));
-        for c in &u.clip {
-            let side = _mm256_fmadd_ps(
-                splat(c[0]),
-                px,
-                _mm256_fmadd_ps(splat(c[1]), py, _mm256_mul_ps(splat(c[2]), pz)),
-            );
-            keep = _mm256_and_ps(keep, _mm256_cmp_ps::<_CMP_LE_OQ>(side, splat(c[3])));
-        }
         // The screen covariance J S J^T + pixel variance, with J's rows f/z (1, 0, -x/z) and
         // f/z (0, -1, y/z) (S symmetric).
         let s = |r: usize, c: usize| splat(u.cov[r][c]);
@@ -1422,8 +1413,7 @@ mod avx2 {
             fiz2,
         );
         let det = _mm256_fmsub_ps(a, c, _mm256_mul_ps(b, b));
-        keep = _mm256_and_ps(keep, _mm256_cmp_ps::<_CMP_GT_OQ>(det, splat(0.0)));
-        let inv_det = _mm256_div_ps(splat(1.0), det);
+        let mut placed = _mm256_and_ps(front, _mm256_cmp_ps::<_CMP_GT_OQ>(det, splat(0.0)));
         let radius = splat(u.cutoff.sqrt());
         let half = splat(0.5);
         let ex = _mm256_fmadd_ps(radius, _mm256_sqrt_ps(a), half);
@@ -1440,8 +1430,54 @@ mod avx2 {
         let x1 = _mm256_min_ps(x1, splat(w - 1.0));
         let y0 = _mm256_max_ps(y0, splat(0.0));
         let y1 = _mm256_min_ps(y1, splat(h - 1.0));
-        keep = _mm256_and_ps(keep, _mm256_cmp_ps::<_CMP_LE_OQ>(x0, x1));
-        keep = _mm256_and_ps(keep, _mm256_cmp_ps::<_CMP_LE_OQ>(y0, y1));
+        placed = _mm256_and_ps(placed, _mm256_cmp_ps::<_CMP_LE_OQ>(x0, x1));
+        placed = _mm256_and_ps(placed, _mm256_cmp_ps::<_CMP_LE_OQ>(y0, y1));
+        let rect = [x0, y0, x1, y1].map(|v| unlanes_i32(_mm256_cvtps_epi32(v)));
+        // Which lanes go on: placed on the image, not hidden, with a texel that has opacity.
+        let placed = _mm256_movemask_ps(placed) as u32;
+        let mut culled = 0;
+        let mut texel = [[0.0f32; LANES]; 8];
+        let mut go = 0u32;
+        for l in 0..n {
+            if placed >> l & 1 == 0 {
+                continue;
+            }
+            if let Some(mask) = group.mask
+                && mask.covers_rect([rect[0][l], rect[1][l], rect[2][l], rect[3][l]])
+            {
+                culled += 1;
+                continue;
+            }
+            let [x, y, z] = voxels[l];
+            let Some(t) = group.texels.get(x, y, z) else {
+                continue;
+            };
+            if t[3] == 0 {
+                continue;
+            }
+            go |= 1 << l;
+            for c in 0..4 {
+                texel[c][l] = f32::from(t[c]);
+                texel[4 + c][l] = f32::from(t[4 + c] as i8);
+            }
+        }
+        if go == 0 {
+            out[..n].fill(Projected::NONE);
+            return culled;
+        }
+        let mut keep = _mm256_castsi256_ps(_mm256_cmpeq_epi32(
+            _mm256_and_si256(_mm256_set1_epi32(go as i32), lane_bits()),
+            lane_bits(),
+        ));
+        for c in &u.clip {
+            let side = _mm256_fmadd_ps(
+                splat(c[0]),
+                px,
+                _mm256_fmadd_ps(splat(c[1]), py, _mm256_mul_ps(splat(c[2]), pz)),
+            );
+            keep = _mm256_and_ps(keep, _mm256_cmp_ps::<_CMP_LE_OQ>(side, splat(c[3])));
+        }
+        let inv_det = _mm256_div_ps(splat(1.0), det);
         // Headlight shading where the gradient is defined (w > 63).
         let inv255 = splat(1.0 / 255.0);
         let mut rgb = [0, 1, 2].map(|i| _mm256_mul_ps(lanes(&texel[i]), inv255));
@@ -1468,7 +1504,6 @@ mod avx2 {
             unlanes(_mm256_mul_ps(a, inv_det)),
         ];
         let depth = unlanes(depth);
-        let rect = [x0, y0, x1, y1].map(|v| unlanes_i32(_mm256_cvtps_epi32(v)));
         let keep = _mm256_movemask_ps(keep) as u32;
         for (l, p) in out[..n].iter_mut().enumerate() {
             *p = if keep >> l & 1 == 0 {
@@ -1645,6 +1680,10 @@ mod tests {
             projected,
             bins,
             opaque: OPAQUE,
+            drew: (0..projected.len())
+                .map(|_| AtomicBool::new(false))
+                .collect::<Vec<_>>()
+                .leak(),
         }
     }
 
@@ -1800,21 +1839,24 @@ mod tests {
         if has_avx2() {
             for orthographic in [false, true] {
                 let (u, texels) = grid_and_view(orthographic);
-                let screen = Screen {
-                    w: 64,
-                    h: 48,
-                    across: 8,
-                };
-                let bound = FootprintBound::new(&u, (64, 48));
-                // All cells but four closed, then none.
-                let closed: Vec<bool> = (0..48).map(|c| ![10, 19, 21, 36].contains(&c)).collect();
-                for closed in [Some(closed.as_slice()), None] {
+                let screen = Screen { w: 64, h: 48 };
+                // Every pixel opaque but those of four squares of 8x8 and one pixel, then
+                // none.
+                let mut mask = OpaqueMask::default();
+                mask.reset(64, 48);
+                mask.bits.fill(u64::MAX);
+                for (x0, y0) in [(16, 8), (24, 16), (40, 16), (32, 32)] {
+                    for y in y0..y0 + 8 {
+                        mask.bits[y] &= !(0xff << x0);
+                    }
+                }
+                mask.bits[3] &= !(1 << 50);
+                for mask in [Some(&mask), None] {
                     let group = Group {
                         u: &u,
                         texels: &texels,
-                        bound: &bound,
                         screen: &screen,
-                        closed,
+                        mask,
                     };
                     let ids: Vec<u32> = (0..20 * 18 * 16).rev().collect();
                     let mut wide = vec![Projected::default(); ids.len()];
@@ -1830,7 +1872,7 @@ mod tests {
                         culled[1] += group.project_each(ids, &mut each[range]);
                     }
                     assert_eq!(culled[0], culled[1]);
-                    assert_eq!(culled[0] > 0, closed.is_some());
+                    assert_eq!(culled[0] > 0, mask.is_some());
                     let mut shown = 0;
                     for (a, b) in wide.iter().zip(&each) {
                         assert_eq!(
