@@ -458,18 +458,22 @@ impl TiledCompositor {
                             screen: &screen,
                             mask,
                         };
-                        for (out, ids) in out.chunks_mut(GROUP).zip(ids.chunks(GROUP)) {
+                        // The chunk's splats on the image, in order, packed at the front of
+                        // its share of the buffer.
+                        let mut kept = 0;
+                        for ids in ids.chunks(GROUP) {
                             if let Some(mask) = mask
                                 && group_hidden(projection, ids, &screen, mask)
                             {
-                                out.fill(Projected::NONE);
                                 culled += ids.len();
                                 continue;
                             }
-                            culled += group.project(ids, out);
+                            let (hidden, placed) = group.project(ids, &mut out[kept..]);
+                            culled += hidden;
+                            kept += placed;
                         }
                         let projected = started.elapsed();
-                        bin_chunk(out, (c * chunk) as u32, tx, ty, bins);
+                        bin_chunk(&out[..kept], (c * chunk) as u32, tx, ty, bins);
                         (culled, projected, started.elapsed() - projected)
                     })
                     .reduce(
@@ -591,20 +595,23 @@ impl OpaqueMask {
         let (w0, w1) = (x0 / 64, x1 / 64);
         let first = u64::MAX << (x0 % 64);
         let last = u64::MAX >> (63 - x1 % 64);
-        (y0..=y1).all(|y| {
-            let Some(row) = self.bits.get(y * self.words..(y + 1) * self.words) else {
-                return false;
-            };
-            if w1 >= row.len() {
-                false
-            } else if w0 == w1 {
-                row[w0] & first & last == first & last
-            } else {
+        let Some(rows) = self.bits.get(y0 * self.words..(y1 + 1) * self.words) else {
+            return false;
+        };
+        if w1 >= self.words {
+            return false;
+        }
+        let mut rows = rows.chunks_exact(self.words);
+        if w0 == w1 {
+            let span = first & last;
+            rows.all(|row| row[w0] & span == span)
+        } else {
+            rows.all(|row| {
                 row[w0] & first == first
                     && row[w1] & last == last
                     && row[w0 + 1..w1].iter().all(|&b| b == u64::MAX)
-            }
-        })
+            })
+        }
     }
 
     /// [`OpaqueMask::covers`] for a splat's pixel rectangle as [`Projected`] holds it.
@@ -628,42 +635,49 @@ struct Group<'a> {
 }
 
 impl Group<'_> {
-    /// Projects the splats `ids` into `out` (as long), leaving out those hidden behind
-    /// opaque pixels; returns how many were left out so. Eight at a time in AVX2 vectors where
-    /// the processor has them.
-    fn project(&self, ids: &[u32], out: &mut [Projected]) -> usize {
+    /// Projects the splats `ids`, writing those that land on the image, in order, to the
+    /// front of `out` (at least as long as `ids`): neither the splats left out nor their
+    /// places are written, read or binned. Returns how many were left out as hidden behind
+    /// opaque pixels, and how many were written. Eight at a time in AVX2 vectors where the
+    /// processor has them.
+    fn project(&self, ids: &[u32], out: &mut [Projected]) -> (usize, usize) {
         #[cfg(target_arch = "x86_64")]
         if has_avx2() {
-            let mut culled = 0;
-            for (ids, out) in ids.chunks(LANES).zip(out.chunks_mut(LANES)) {
+            let (mut culled, mut kept) = (0, 0);
+            for ids in ids.chunks(LANES) {
                 #[allow(unsafe_code)]
                 // SAFETY: the processor has the features the function is built for, checked
                 // above.
-                let hidden = unsafe { avx2::project(self, ids, out) };
+                let (hidden, placed) = unsafe { avx2::project(self, ids, &mut out[kept..]) };
                 culled += hidden;
+                kept += placed;
             }
-            return culled;
+            return (culled, kept);
         }
         self.project_each(ids, out)
     }
 
     /// [`Group::project`] a splat at a time.
-    fn project_each(&self, ids: &[u32], out: &mut [Projected]) -> usize {
+    fn project_each(&self, ids: &[u32], out: &mut [Projected]) -> (usize, usize) {
         let (w, h) = (self.screen.w as i32, self.screen.h as i32);
-        let mut culled = 0;
-        for (p, &id) in out.iter_mut().zip(ids) {
+        let (mut culled, mut kept) = (0, 0);
+        for &id in ids {
             let [x, y, z] = voxel(self.u, id);
             let centre = camera_centre(self.u, [x, y, z]);
-            *p = match place(self.u, centre, w, h) {
-                None => Projected::NONE,
-                Some(at) if self.mask.is_some_and(|m| m.covers_rect(at.rect)) => {
-                    culled += 1;
-                    Projected::NONE
-                }
-                Some(at) => project(self.u, self.texels, [x, y, z], centre, &at),
+            let Some(at) = place(self.u, centre, w, h) else {
+                continue;
             };
+            if self.mask.is_some_and(|m| m.covers_rect(at.rect)) {
+                culled += 1;
+                continue;
+            }
+            let p = project(self.u, self.texels, [x, y, z], centre, &at);
+            if p.x0 <= p.x1 {
+                out[kept] = p;
+                kept += 1;
+            }
         }
-        culled
+        (culled, kept)
     }
 }
 
@@ -1307,10 +1321,14 @@ mod avx2 {
     /// The processor must have AVX2, FMA and POPCNT.
     #[target_feature(enable = "avx2,fma,popcnt")]
     #[allow(unsafe_code)]
-    pub(super) unsafe fn project(group: &Group<'_>, ids: &[u32], out: &mut [Projected]) -> usize {
+    pub(super) unsafe fn project(
+        group: &Group<'_>,
+        ids: &[u32],
+        out: &mut [Projected],
+    ) -> (usize, usize) {
         let n = ids.len().min(out.len()).min(LANES);
         if n == 0 {
-            return 0;
+            return (0, 0);
         }
         let u = group.u;
         let mut voxels = [[0u32; 3]; LANES];
@@ -1443,8 +1461,7 @@ mod avx2 {
             }
         }
         if go == 0 {
-            out[..n].fill(Projected::NONE);
-            return culled;
+            return (culled, 0);
         }
         let mut keep = _mm256_castsi256_ps(_mm256_cmpeq_epi32(
             _mm256_and_si256(_mm256_set1_epi32(go as i32), lane_bits()),
@@ -1486,24 +1503,22 @@ mod avx2 {
         ];
         let depth = unlanes(depth);
         let keep = _mm256_movemask_ps(keep) as u32;
-        for (l, p) in out[..n].iter_mut().enumerate() {
-            *p = if keep >> l & 1 == 0 {
-                Projected::NONE
-            } else {
-                Projected {
-                    centre: [centre_x[l], centre_y[l]],
-                    conic: [conic[0][l], conic[1][l], conic[2][l]],
-                    color: [r[l], g[l], bl[l], alpha[l]],
-                    depth: depth[l],
-                    cutoff: u.cutoff,
-                    x0: rect[0][l],
-                    y0: rect[1][l],
-                    x1: rect[2][l],
-                    y1: rect[3][l],
-                }
+        let mut kept = 0;
+        for l in (0..n).filter(|l| keep >> l & 1 != 0) {
+            out[kept] = Projected {
+                centre: [centre_x[l], centre_y[l]],
+                conic: [conic[0][l], conic[1][l], conic[2][l]],
+                color: [r[l], g[l], bl[l], alpha[l]],
+                depth: depth[l],
+                cutoff: u.cutoff,
+                x0: rect[0][l],
+                y0: rect[1][l],
+                x1: rect[2][l],
+                y1: rect[3][l],
             };
+            kept += 1;
         }
-        culled
+        (culled, kept)
     }
 
     /// `row . v` for vectors of three lanes.
@@ -1888,18 +1903,25 @@ mod tests {
                     let ids: Vec<u32> = (0..20 * 18 * 16).rev().collect();
                     let mut wide = vec![Projected::default(); ids.len()];
                     let mut each = wide.clone();
-                    let mut culled = [0; 2];
-                    for (c, ids) in ids.chunks(GROUP).enumerate() {
-                        let range = c * GROUP..c * GROUP + ids.len();
-                        #[allow(unsafe_code)]
-                        // SAFETY: the features were checked above.
-                        for (ids, out) in ids.chunks(5).zip(wide[range.clone()].chunks_mut(5)) {
-                            culled[0] += unsafe { avx2::project(&group, ids, out) };
+                    let (mut culled, mut kept) = ([0; 2], [0; 2]);
+                    for ids in ids.chunks(GROUP) {
+                        for ids in ids.chunks(5) {
+                            #[allow(unsafe_code)]
+                            // SAFETY: the features were checked above.
+                            let (c, k) =
+                                unsafe { avx2::project(&group, ids, &mut wide[kept[0]..]) };
+                            culled[0] += c;
+                            kept[0] += k;
                         }
-                        culled[1] += group.project_each(ids, &mut each[range]);
+                        let (c, k) = group.project_each(ids, &mut each[kept[1]..]);
+                        culled[1] += c;
+                        kept[1] += k;
                     }
                     assert_eq!(culled[0], culled[1]);
                     assert_eq!(culled[0] > 0, mask.is_some());
+                    assert_eq!(kept[0], kept[1]);
+                    wide.truncate(kept[0]);
+                    each.truncate(kept[1]);
                     let mut shown = 0;
                     for (a, b) in wide.iter().zip(&each) {
                         assert_eq!(
@@ -1907,9 +1929,7 @@ mod tests {
                             [b.x0, b.x1, b.y0, b.y1],
                             "{a:?} {b:?}"
                         );
-                        if b.x0 > b.x1 {
-                            continue;
-                        }
+                        assert!(b.x0 <= b.x1 && b.y0 <= b.y1, "{b:?}");
                         shown += 1;
                         let close = |x: f32, y: f32| (x - y).abs() <= 1e-4 * (1.0 + y.abs());
                         let values = |p: &Projected| {
