@@ -196,10 +196,11 @@ fn early_termination_leaves_out_no_more_than_its_threshold() {
 }
 
 #[test]
-fn splats_left_out_behind_opaque_tiles_change_nothing() {
+fn splats_left_out_behind_opaque_pixels_change_nothing() {
     let ctx = context();
     // A dense, nearly opaque block of 46,656 splats, more than the first batches: later
-    // batches find most tiles opaque. Perspective, turned, and orthographic.
+    // batches find most pixels opaque. Perspective, turned, and orthographic; an image whose
+    // sides are multiples of neither a tile nor a word of the opaque pixels' rows.
     let mut volume = shells(36, [1.0; 3]);
     volume.values.iter_mut().for_each(|v| *v = 1800.0);
     let scene = volume_scene(volume, Ordering::IpPbtfImplicit);
@@ -207,19 +208,24 @@ fn splats_left_out_behind_opaque_tiles_change_nothing() {
         projection: Projection::Orthographic { height: 40.0 },
         ..camera_of(&scene)
     };
-    for camera in [
+    let cameras = [
         camera_of(&scene),
         camera_of(&scene).orbit_about(scene.up_axis(), 50.0, 20.0),
         flat,
-    ] {
+    ];
+    let views = cameras
+        .iter()
+        .map(|c| (c, (96, 80)))
+        .chain([(&cameras[1], (150, 71))]);
+    for (camera, size) in views {
         let mut culling = Renderer::with_compositor(Compositor::Cpu);
         let mut all = Renderer::with_compositor(Compositor::Cpu);
         all.tile_compositor_mut().cull_hidden = false;
         let a = culling
-            .screenshot(&ctx, &scene, &camera, (96, 80), &OPTIONS)
+            .screenshot(&ctx, &scene, camera, size, &OPTIONS)
             .unwrap();
         let b = all
-            .screenshot(&ctx, &scene, &camera, (96, 80), &OPTIONS)
+            .screenshot(&ctx, &scene, camera, size, &OPTIONS)
             .unwrap();
         let (sa, sb) = (a.report.tiles.unwrap(), b.report.tiles.unwrap());
         assert_eq!(sb.culled, 0);
