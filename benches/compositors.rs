@@ -247,8 +247,9 @@ fn skipping(ctx: &GpuContext, base: &Scene) {
     println!(
         "| CT head, 512x512 | splats | drew pixels | left out unprojected | pairs composited | pairs skipped | pixels covered | of those opaque |\n|---|---|---|---|---|---|---|---|"
     );
+    let head = common::ct_head();
     for (label, tf) in ramps {
-        let mut scene = scene(common::ct_head(), tf);
+        let mut scene = scene(head.clone(), tf);
         scene.camera = base.camera;
         let mut renderer = Renderer::with_compositor(Compositor::Cpu);
         let shot = renderer

@@ -911,7 +911,8 @@ fn ceil(v: f32) -> i32 {
 }
 
 /// Counts, then lists, the tiles each splat of a chunk touches (a counting sort by tile, which
-/// keeps the draw order within every tile). `first` is the chunk's first splat index.
+/// keeps the draw order within every tile). `splats` are those of the chunk that landed on the
+/// image, as [`Group::project`] packs them; `first` is the index of the first.
 fn bin_chunk(splats: &[Projected], first: u32, tx: usize, ty: usize, bins: &mut ChunkBins) {
     let tiles = tx * ty;
     bins.starts.clear();
@@ -920,9 +921,8 @@ fn bin_chunk(splats: &[Projected], first: u32, tx: usize, ty: usize, bins: &mut 
         let t = TILE as i32;
         (p.x0 / t, p.x1 / t, p.y0 / t, p.y1 / t)
     };
-    bins.projected = 0;
-    for p in splats.iter().filter(|p| p.x0 <= p.x1) {
-        bins.projected += 1;
+    bins.projected = splats.len();
+    for p in splats {
         let (a, b, c, d) = range(p);
         for y in c..=d {
             for x in a..=b {
@@ -937,7 +937,7 @@ fn bin_chunk(splats: &[Projected], first: u32, tx: usize, ty: usize, bins: &mut 
     bins.entries.resize(bins.starts[tiles] as usize, 0);
     bins.next.clear();
     bins.next.extend_from_slice(&bins.starts[..tiles]);
-    for (i, p) in splats.iter().enumerate().filter(|(_, p)| p.x0 <= p.x1) {
+    for (i, p) in splats.iter().enumerate() {
         let (a, b, c, d) = range(p);
         for y in c..=d {
             for x in a..=b {

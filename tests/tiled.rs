@@ -345,6 +345,31 @@ fn a_volume_renders_without_any_gpu_adapter_and_meshes_say_what_they_need() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
+/// A real volume alone, seen as `benches/compositors.rs` and the VTK peer script see it: fitted
+/// to its bounds looking along (-0.4, 1, -0.55), for an image of width over height `aspect`.
+fn benchmark_view(
+    volume: splatscene::volume::CpuVolume,
+    transfer: TransferFunction,
+    aspect: f64,
+) -> (Scene, SceneCamera) {
+    let mut scene = Scene::new();
+    let node = splatscene::scene::VolumeNode {
+        volume: Arc::new(volume),
+        transfer: Arc::new(transfer),
+        splats: Default::default(),
+    };
+    scene
+        .add("volume", DMat4::IDENTITY, None, NodeContent::Volume(node))
+        .unwrap();
+    let camera = SceneCamera::fit(
+        scene.bounds().unwrap(),
+        DVec3::new(-0.4, 1.0, -0.55),
+        Default::default(),
+        aspect,
+    );
+    (scene, camera)
+}
+
 #[test]
 fn the_engine_looks_the_same_on_either_compositor() {
     // The GE engine block (Open SciVis datasets, General Electric), 1.05M splats.
@@ -357,20 +382,9 @@ fn the_engine_looks_the_same_on_either_compositor() {
         splatscene::volume::ByteOrder::Little,
     );
     let volume = splatscene::volume::load_raw(&path, &spec).unwrap();
-    let mut scene = Scene::new();
-    let node = splatscene::scene::VolumeNode {
-        volume: Arc::new(volume),
-        transfer: Arc::new(TransferFunction::ramp(100.0, 200.0, [0.85, 0.8, 0.75, 0.5])),
-        splats: Default::default(),
-    };
-    scene
-        .add("engine", DMat4::IDENTITY, None, NodeContent::Volume(node))
-        .unwrap();
-    let bounds = scene.bounds().unwrap();
-    let camera = SceneCamera::fit(
-        bounds,
-        DVec3::new(-0.4, 1.0, -0.55),
-        Default::default(),
+    let (scene, camera) = benchmark_view(
+        volume,
+        TransferFunction::ramp(100.0, 200.0, [0.85, 0.8, 0.75, 0.5]),
         1.2,
     );
     // At 288x240 rather than 96x80: with about 140 sub-pixel splats under each pixel of a
@@ -394,34 +408,21 @@ fn a_bone_rendering_of_the_ct_head_skips_most_of_its_splats() {
         ..RawSpec::new([256, 256, 113], ScalarType::U16, ByteOrder::Big)
     };
     let volume = load_raw_slices(&slice_stack(&first).unwrap(), &spec).unwrap();
-    let mut scene = Scene::new();
-    let node = splatscene::scene::VolumeNode {
-        volume: Arc::new(volume),
-        transfer: Arc::new(TransferFunction::ramp(
-            1200.0,
-            1800.0,
-            [1.0, 0.93, 0.85, 0.6],
-        )),
-        splats: Default::default(),
-    };
-    scene
-        .add("head", DMat4::IDENTITY, None, NodeContent::Volume(node))
-        .unwrap();
-    let camera = SceneCamera::fit(
-        scene.bounds().unwrap(),
-        DVec3::new(-0.4, 1.0, -0.55),
-        Default::default(),
+    let (scene, camera) = benchmark_view(
+        volume,
+        TransferFunction::ramp(1200.0, 1800.0, [1.0, 0.93, 0.85, 0.6]),
         1.0,
     );
+    let ctx = context();
     for camera in [camera, camera.orbit_about(scene.up_axis(), 70.0, 0.0)] {
         let mut culling = Renderer::with_compositor(Compositor::Cpu);
         let mut all = Renderer::with_compositor(Compositor::Cpu);
         all.tile_compositor_mut().cull_hidden = false;
         let a = culling
-            .screenshot(&context(), &scene, &camera, (512, 512), &OPTIONS)
+            .screenshot(&ctx, &scene, &camera, (512, 512), &OPTIONS)
             .unwrap();
         let b = all
-            .screenshot(&context(), &scene, &camera, (512, 512), &OPTIONS)
+            .screenshot(&ctx, &scene, &camera, (512, 512), &OPTIONS)
             .unwrap();
         let (sa, sb) = (a.report.tiles.unwrap(), b.report.tiles.unwrap());
         assert!(sa.splats > 400_000, "{sa:?}");
