@@ -2,10 +2,62 @@
 //! OBJ material library, a batch manifest) is opened through [`open_regular`], which refuses
 //! anything but a regular file before a byte is read, so that a named pipe cannot block the
 //! tool and a device cannot feed it without end.
+//!
+//! Every file opened so is also recorded by its identity (device and inode), so that an output
+//! can be refused when it is a file this process has read: [`input_with_identity_of`]. The
+//! record is the process's, not a value handed through every loader, because the loaders open
+//! files at many depths (a NRRD's detached slices, a glTF's buffers, every file of a DICOM
+//! folder) and an output check must see all of them; it holds a few dozen bytes per file.
 
+use std::collections::HashMap;
 use std::fs::{File, Metadata, OpenOptions};
 use std::io;
-use std::path::Path;
+use std::path::{Path, PathBuf};
+use std::sync::{LazyLock, Mutex};
+
+/// A file's identity: the device and inode it lives at, the same through any link or name.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct FileId {
+    dev: u64,
+    ino: u64,
+}
+
+impl FileId {
+    /// The identity of the file `meta` describes.
+    pub fn of(meta: &Metadata) -> Self {
+        use std::os::unix::fs::MetadataExt;
+        Self {
+            dev: meta.dev(),
+            ino: meta.ino(),
+        }
+    }
+}
+
+/// Every regular file opened for reading through this module, with the path it was opened by.
+static OPENED: LazyLock<Mutex<HashMap<FileId, PathBuf>>> = LazyLock::new(Default::default);
+
+/// Records `meta` (of the file opened at `path`) as an input of this process.
+fn record(meta: &Metadata, path: &Path) {
+    let id = FileId::of(meta);
+    let mut opened = OPENED.lock().unwrap_or_else(|e| e.into_inner());
+    opened.entry(id).or_insert_with(|| path.to_path_buf());
+}
+
+/// Records the file at `path` as an input without opening it through this module (a folder's
+/// files listed by a reader of its own); nothing is recorded where it cannot be read.
+pub fn record_input(path: &Path) {
+    if let Ok(meta) = std::fs::metadata(path) {
+        record(&meta, path);
+    }
+}
+
+/// The path an input was read by, where `path` (links followed) is that same file: a file this
+/// process has read, reached by the same name, another name, a hard link or a symbolic link.
+pub fn input_with_identity_of(path: &Path) -> Option<PathBuf> {
+    let id = FileId::of(&std::fs::metadata(path).ok()?);
+    let opened = OPENED.lock().unwrap_or_else(|e| e.into_inner());
+    opened.get(&id).cloned()
+}
 
 /// What kind of file `meta` describes, in words for an error message.
 pub fn kind(meta: &Metadata) -> &'static str {
@@ -54,6 +106,7 @@ pub fn open_regular(path: &Path) -> io::Result<File> {
     if !meta.is_file() {
         return Err(not_regular(&meta));
     }
+    record(&meta, path);
     Ok(file)
 }
 

@@ -2,6 +2,8 @@
 //! rename, so that a failed write leaves any earlier file whole and a user's file at any other
 //! name is never touched; links are followed to the file they name, and a device or named pipe
 //! is written into as it is (a pipe that no process reads is refused, not waited on for ever).
+//! No output is ever a file the process has read ([`check_not_input`]): an output that is an
+//! input by any name or link is refused before it is written.
 
 use std::io;
 use std::path::{Path, PathBuf};
@@ -16,6 +18,7 @@ fn context(e: io::Error, what: &str, path: &Path) -> io::Error {
 /// leaves a partial file. Returns whether a file was replaced.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> io::Result<bool> {
     static TEMPORARIES: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+    check_not_input(path)?;
     let path = &follow_links(path)?;
     if let Ok(meta) = std::fs::metadata(path)
         && !meta.is_file()
@@ -54,6 +57,29 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> io::Result<bool> {
         return Err(context(e, &what, path));
     }
     Ok(existed)
+}
+
+/// Refuses `path` as an output where it is, by any name, hard link or chain of symbolic
+/// links, a file this process has read as an input ([`crate::input`] records every one): an
+/// [`io::ErrorKind::InvalidInput`] error naming both.
+pub fn check_not_input(path: &Path) -> io::Result<()> {
+    match crate::input::input_with_identity_of(path) {
+        None => Ok(()),
+        Some(input) => {
+            let how = if input == path {
+                String::new()
+            } else {
+                format!(" (read as {})", input.display())
+            };
+            Err(io::Error::new(
+                io::ErrorKind::InvalidInput,
+                format!(
+                    "{}: this output is an input of this run{how}; writing it would replace the input, so choose another output name",
+                    path.display()
+                ),
+            ))
+        }
+    }
 }
 
 /// Writes into a device, pipe or socket as it is. A named pipe that no process reads would

@@ -326,6 +326,7 @@ fn a_folder_of_two_series_lists_them_and_loads_the_one_chosen() {
         splatscene::volume::dicom::load_dicom_series_choosing(
             &dir,
             Some(&splatscene::volume::dicom::SeriesChoice(c.into())),
+            false,
         )
     };
     let (copied, _) = choose(&main.uid).expect("load the chosen series");

@@ -29,6 +29,10 @@ pub struct VolumeChoices {
     /// (without it, such a folder lists its series).
     #[arg(long)]
     pub series: Option<String>,
+    /// DICOM: load the series without its files that cannot be read (a slice cut short),
+    /// naming them on stderr; without it such a file is an error.
+    #[arg(long)]
+    pub skip_unreadable: bool,
     /// 4-D NIfTI: the 3-D frame, from 0 (default 0, said on stderr).
     #[arg(long)]
     pub frame: Option<u32>,
@@ -58,6 +62,7 @@ impl VolumeChoices {
                 .series
                 .clone()
                 .map(splatscene::volume::detect::SeriesChoice),
+            skip_unreadable: self.skip_unreadable,
             frame: self.frame,
             nifti_transform: parse(&self.nifti_transform)?,
             coordinate_frame: parse(&self.coordinate_frame)?,
@@ -171,6 +176,7 @@ impl InputArgs {
             ("--origin", self.origin.is_some()),
             ("--orientation", self.orientation.is_some()),
             ("--series", self.choices.series.is_some()),
+            ("--skip-unreadable", self.choices.skip_unreadable),
             ("--frame", self.choices.frame.is_some()),
             ("--nifti-transform", self.choices.nifti_transform.is_some()),
             (
@@ -223,6 +229,7 @@ impl InputArgs {
             origin: self.origin,
             orientation: self.orientation.clone(),
             series: self.choices.series.clone(),
+            skip_unreadable: self.choices.skip_unreadable.then_some(true),
             frame: self.choices.frame,
             nifti_transform: self.choices.nifti_transform.clone(),
             coordinate_frame: self.choices.coordinate_frame.clone(),

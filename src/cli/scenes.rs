@@ -204,6 +204,13 @@ pub fn run_render(args: RenderArgs) -> Result<()> {
         None => vec![None; cameras.len()],
     };
     check_distinct(&outputs, &depths)?;
+    refuse_inputs(
+        outputs
+            .iter()
+            .chain(depths.iter().flatten())
+            .cloned()
+            .chain(depths.iter().flatten().map(|d| sidecar_of(d))),
+    )?;
     let options = FrameOptions {
         ordering: args.ordering.or(loaded.ordering),
         background: if args.transparent {
@@ -286,7 +293,7 @@ fn write_depth(
         );
     }
     write_replacing(path, &png)?;
-    let sidecar = path.with_extension("json");
+    let sidecar = sidecar_of(path);
     write_replacing(
         &sidecar,
         serde_json::to_string_pretty(&calibration)?.as_bytes(),
@@ -328,7 +335,22 @@ pub(crate) fn depth_files(
     Ok(image.encode_png(view)?)
 }
 
-/// Refuses outputs that name one file, so that no image replaces another.
+/// The depth calibration's file beside the depth image `depth`: its name with `.json`.
+pub(crate) fn sidecar_of(depth: &Path) -> PathBuf {
+    depth.with_extension("json")
+}
+
+/// Refuses every output of a run that is one of the run's inputs, before anything is drawn
+/// (the inputs have all been read by then; see [`splatscene::output::check_not_input`]).
+pub(crate) fn refuse_inputs(outputs: impl IntoIterator<Item = PathBuf>) -> Result<()> {
+    for path in outputs {
+        splatscene::output::check_not_input(&path)?;
+    }
+    Ok(())
+}
+
+/// Refuses outputs that name one file, so that no image replaces another: colour images,
+/// depth images and their calibration files.
 fn check_distinct(outputs: &[PathBuf], depths: &[Option<PathBuf>]) -> Result<()> {
     for (d, out) in depths
         .iter()
@@ -343,9 +365,32 @@ fn check_distinct(outputs: &[PathBuf], depths: &[Option<PathBuf>]) -> Result<()>
             );
         }
     }
+    for d in depths.iter().flatten() {
+        let sidecar = sidecar_of(d);
+        if same_file(d, &sidecar) {
+            bail!(
+                "--depth {}: the depth calibration is written beside the image with .json, which is this name; end the depth image's name with .png",
+                d.display()
+            );
+        }
+        let taken = outputs
+            .iter()
+            .chain(depths.iter().flatten())
+            .find(|o| same_file(o, &sidecar));
+        if let Some(o) = taken {
+            bail!(
+                "--depth {}: its calibration {} is the name of another output ({}); choose names that differ in more than the extension",
+                d.display(),
+                sidecar.display(),
+                o.display()
+            );
+        }
+    }
+    let sidecars: Vec<PathBuf> = depths.iter().flatten().map(|d| sidecar_of(d)).collect();
     for list in [
         outputs.iter().collect::<Vec<_>>(),
         depths.iter().flatten().collect(),
+        sidecars.iter().collect(),
     ] {
         for (i, a) in list.iter().enumerate() {
             if let Some(b) = list[i + 1..].iter().find(|b| same_file(a, b)) {
@@ -502,6 +547,7 @@ pub fn run_measure(args: MeasureArgs) -> Result<()> {
     }
     println!("{}", serde_json::to_string_pretty(&out)?);
     if let Some(path) = &args.out {
+        refuse_inputs([path.clone()])?;
         let style = MarkerStyle::for_scene(&loaded.scene);
         let mut labels = draw_scene_measurements(&mut loaded.scene).map_err(anyhow::Error::msg)?;
         annotate(&mut loaded.scene, &measurement, &style)?;

@@ -248,6 +248,9 @@ pub struct VolumeSpec {
     /// DICOM: the series to load from a folder holding several, by SeriesNumber or
     /// SeriesInstanceUID.
     pub series: Option<String>,
+    /// DICOM: load the series without its files that cannot be read (said on stderr); by
+    /// default such a file is an error naming it.
+    pub skip_unreadable: Option<bool>,
     /// 4-D NIfTI: the 3-D frame to draw, from 0 (the first by default, said on stderr).
     pub frame: Option<u32>,
     /// NIfTI: which transform places the grid when both are set, `sform` (the default, as
@@ -499,6 +502,17 @@ impl SceneFile {
             scene.measurements.push(m);
         }
         scene.clipping = clipping(self).map_err(&invalid)?;
+        if let (Some((lo, hi)), Some((vlo, vhi))) = (scene.clipping.crop, scene.volume_bounds())
+            && !(lo.cmplt(vhi).all() && vlo.cmplt(hi).all())
+        {
+            return Err(invalid(format!(
+                "crop_box from {} to {} mm lies wholly outside the volumes, which span {} to {} mm: it would leave nothing to draw",
+                mm(lo),
+                mm(hi),
+                mm(vlo),
+                mm(vhi)
+            )));
+        }
         for warning in scale_warnings(&scene, &meshes) {
             eprintln!("warning: {}: {warning}", path.display());
         }
@@ -733,6 +747,37 @@ impl DataRoot {
     }
 }
 
+/// A world point for a message: `[x, y, z]` to 0.1 mm.
+fn mm(p: DVec3) -> String {
+    format!("[{:.1}, {:.1}, {:.1}]", p.x, p.y, p.z)
+}
+
+/// At most the first 60 characters of a text a user wrote, for an error message: a label or
+/// name of a megabyte is not repeated whole.
+pub fn shortened(text: &str) -> String {
+    const SHOWN: usize = 60;
+    match text.char_indices().nth(SHOWN) {
+        Some((end, _)) => format!("{}... ({} characters)", &text[..end], text.chars().count()),
+        None => text.to_owned(),
+    }
+}
+
+impl SceneFile {
+    /// The files and folders this scene's volumes and meshes name, resolved as loading resolves
+    /// them (built-in names and paths that cannot be resolved left out): what a run must never
+    /// write, known before anything is loaded.
+    pub fn named_paths(&self, base: &Path) -> Vec<PathBuf> {
+        let data = DataRoot::from_env();
+        self.volumes
+            .iter()
+            .map(|v| &v.path)
+            .chain(self.meshes.iter().map(|m| &m.path))
+            .filter(|p| !p.starts_with("builtin:"))
+            .filter_map(|p| resolve_path(p, base, &data.dir).ok())
+            .collect()
+    }
+}
+
 /// Where a volume or mesh `path` of a scene file points (see the module documentation): a
 /// `data:` path inside `data_dir`, a relative path inside `base` (the scene file's folder), an
 /// absolute path as it is. Built-in names are not paths and must be handled before.
@@ -929,6 +974,7 @@ fn load_raw_volume(
     ];
     let file_keys = [
         ("series", spec.series.is_some(), "DICOM"),
+        ("skip_unreadable", spec.skip_unreadable.is_some(), "DICOM"),
         ("frame", spec.frame.is_some(), "4-D NIfTI"),
         ("nifti_transform", spec.nifti_transform.is_some(), "NIfTI"),
         (
@@ -950,6 +996,7 @@ fn load_raw_volume(
         // or a DICOM series folder, found from the first bytes and the name.
         let options = LoadOptions {
             series: spec.series.clone().map(SeriesChoice),
+            skip_unreadable: spec.skip_unreadable.unwrap_or(false),
             frame: spec.frame,
             coordinate_frame: parse_key(path, "coordinate_frame", &spec.coordinate_frame)
                 .map_err(invalid)?,
@@ -1197,7 +1244,7 @@ fn measurement(
     index: usize,
 ) -> Result<SceneMeasurement, String> {
     let name = match &spec.label {
-        Some(l) => format!("measurement {} ({l:?})", index + 1),
+        Some(l) => format!("measurement {} ({:?})", index + 1, shortened(l)),
         None => format!("measurement {}", index + 1),
     };
     if let Some(label) = &spec.label
@@ -1211,6 +1258,13 @@ fn measurement(
     }
     let node = match &spec.node {
         None => None,
+        Some(n) if scene.nodes().iter().filter(|node| node.name == *n).count() > 1 => {
+            return Err(format!(
+                "{name}: node {:?} names {} nodes of the scene, so the measurement cannot tell which one it follows; give the meshes or volumes their own `name`",
+                shortened(n),
+                scene.nodes().iter().filter(|node| node.name == *n).count()
+            ));
+        }
         Some(n) => Some(scene.find(n).ok_or_else(|| {
             let names: Vec<&str> = scene
                 .nodes()
@@ -1219,7 +1273,8 @@ fn measurement(
                 .map(|node| node.name.as_str())
                 .collect();
             format!(
-                "{name}: node {n:?} is not in the scene (its top nodes: {})",
+                "{name}: node {:?} is not in the scene (its top nodes: {})",
+                shortened(n),
                 names.join(", ")
             )
         })?),
@@ -1328,7 +1383,11 @@ fn file_frame(
 
 fn transform(spec: &TransformSpec) -> Result<DMat4, String> {
     let m = match spec.matrix {
-        Some(cols) => DMat4::from_cols_array(&cols),
+        Some(mut cols) => {
+            // The last row was checked to be 0, 0, 0, 1 within rounding: made exact.
+            [cols[3], cols[7], cols[11], cols[15]] = [0.0, 0.0, 0.0, 1.0];
+            DMat4::from_cols_array(&cols)
+        }
         None => {
             let [rx, ry, rz] = spec.rotate_degrees.unwrap_or([0.0; 3]).map(f64::to_radians);
             DMat4::from_scale_rotation_translation(

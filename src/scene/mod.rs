@@ -365,6 +365,21 @@ impl Scene {
         self.bounds
     }
 
+    /// World-space bounds `(min, max)` of the volumes alone, or `None` for a scene without
+    /// volumes.
+    pub fn volume_bounds(&self) -> Option<(DVec3, DVec3)> {
+        self.nodes
+            .iter()
+            .zip(&self.local_bounds)
+            .zip(&self.world)
+            .filter(|((node, _), _)| matches!(node.content, NodeContent::Volume(_)))
+            .filter_map(|((_, b), world)| {
+                b.map(|(lo, hi)| box_corners(lo, hi).map(|c| world.transform_point3(c)))
+            })
+            .flatten()
+            .fold(None, grow)
+    }
+
     fn edited(&mut self) {
         self.generation += 1;
         let corners = self

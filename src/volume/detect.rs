@@ -52,9 +52,13 @@ pub fn load_volume_with(path: &Path, options: &LoadOptions) -> Result<LoadedVolu
         VolumeFormat::Dicom => {
             // The DICOM loader reads a whole folder; a single file picks its own series.
             let (volume, scalar_type) = if path.is_dir() {
-                dicom::load_dicom_series_choosing(path, options.series.as_ref())?
+                dicom::load_dicom_series_choosing(
+                    path,
+                    options.series.as_ref(),
+                    options.skip_unreadable,
+                )?
             } else {
-                dicom::load_dicom_file_series(path)?
+                dicom::load_dicom_file_series(path, options.skip_unreadable)?
             };
             LoadedVolume {
                 volume,

@@ -248,16 +248,19 @@ pub fn load_dicom_series(dir: &Path) -> Result<CpuVolume, VolumeError> {
 pub fn load_dicom_series_with_type(
     dir: &Path,
 ) -> Result<(CpuVolume, Option<ScalarType>), VolumeError> {
-    load_dicom_series_choosing(dir, None)
+    load_dicom_series_choosing(dir, None, false)
 }
 
 /// [`load_dicom_series_with_type`], loading the series `choice` names when the folder holds
-/// several ([`VolumeError::DicomSeries`] lists them when none is chosen).
+/// several ([`VolumeError::DicomSeries`] lists them when none is chosen). A file of that
+/// series that cannot be read (cut inside its pixel data) is an error naming it, unless
+/// `skip_unreadable`, which loads the series without it and says so.
 pub fn load_dicom_series_choosing(
     dir: &Path,
     choice: Option<&SeriesChoice>,
+    skip_unreadable: bool,
 ) -> Result<(CpuVolume, Option<ScalarType>), VolumeError> {
-    let (images, unreadable) = read_folder(dir)?;
+    let (images, unreadable, damaged) = read_folder(dir)?;
     let mut ignored = Ignored::unreadable(&unreadable);
     if images.is_empty()
         && let Some(first) = unreadable.into_iter().next()
@@ -265,6 +268,8 @@ pub fn load_dicom_series_choosing(
         return Err(first);
     }
     let images = select_series(dir, images, choice)?;
+    let series = images.first().map(|i| i.series.clone()).unwrap_or_default();
+    refuse_damaged(&series, damaged, skip_unreadable, &mut ignored)?;
     let images = without_copies(images, None, &mut ignored);
     let slices = images
         .into_iter()
@@ -280,7 +285,12 @@ pub fn load_dicom_series_choosing(
 /// Loads the series of the DICOM file at `path` from its folder: the file's own series, and
 /// within it the images of the file's orientation and size; every other file is ignored and
 /// counted in a note on stderr. A multi-frame file is a volume by itself.
-pub fn load_dicom_file_series(path: &Path) -> Result<(CpuVolume, Option<ScalarType>), VolumeError> {
+/// A file of the series that cannot be read is an error, unless `skip_unreadable`, as for
+/// [`load_dicom_series_choosing`].
+pub fn load_dicom_file_series(
+    path: &Path,
+    skip_unreadable: bool,
+) -> Result<(CpuVolume, Option<ScalarType>), VolumeError> {
     let own = read_image(path)?
         .ok_or_else(|| dicom_error(path, "this DICOM file holds no image (no PixelData)"))?;
     let own_slices = match &own.slices {
@@ -297,8 +307,9 @@ pub fn load_dicom_file_series(path: &Path) -> Result<(CpuVolume, Option<ScalarTy
         Some(parent) if !parent.as_os_str().is_empty() => parent,
         _ => Path::new("."),
     };
-    let (images, unreadable) = read_folder(dir)?;
+    let (images, unreadable, damaged) = read_folder(dir)?;
     let mut ignored = Ignored::unreadable(&unreadable);
+    refuse_damaged(&own.series, damaged, skip_unreadable, &mut ignored)?;
     let own_path = fs::canonicalize(path).map_err(io_error(path))?;
     let mut kept = Vec::new();
     for image in images {
@@ -388,14 +399,7 @@ struct Ignored {
 impl Ignored {
     /// Counts the files that could not be read, naming the first three.
     fn unreadable(errors: &[VolumeError]) -> Self {
-        let names = errors
-            .iter()
-            .take(3)
-            .map(|e| match e {
-                VolumeError::Dicom { path, .. } | VolumeError::Io { path, .. } => name(path),
-                other => other.to_string(),
-            })
-            .collect();
+        let names = errors.iter().take(3).map(error_file).collect();
         Self {
             unreadable: errors.len(),
             unreadable_names: names,
@@ -485,18 +489,110 @@ fn without_copies(
 
 /// Reads every DICOM-looking file of `dir`: the images, and the errors of files that could
 /// not be parsed (in name order).
-fn read_folder(dir: &Path) -> Result<(Vec<Image>, Vec<VolumeError>), VolumeError> {
+fn read_folder(dir: &Path) -> Result<FolderFiles, VolumeError> {
     let (paths, mut unreadable) = dicom_files(dir)?;
-    let read: Vec<_> = paths.par_iter().map(|p| read_image(p)).collect();
+    let read: Vec<_> = paths
+        .par_iter()
+        .map(|p| match read_image(p) {
+            Err(e) => Err((e, series_of_damaged(p))),
+            Ok(image) => Ok(image),
+        })
+        .collect();
     let mut images = Vec::new();
+    let mut damaged = Vec::new();
     for result in read {
         match result {
             Ok(Some(image)) => images.push(image),
             Ok(None) => {}
-            Err(e) => unreadable.push(e),
+            Err((e, Some(series))) => damaged.push(Damaged { series, error: e }),
+            Err((e, None)) => unreadable.push(e),
         }
     }
-    Ok((images, unreadable))
+    Ok((images, unreadable, damaged))
+}
+
+/// A folder's images, the files that could not be read as DICOM at all, and those whose
+/// header names their series but whose whole file could not be read.
+type FolderFiles = (Vec<Image>, Vec<VolumeError>, Vec<Damaged>);
+
+/// A file whose header, up to its pixel data, names its series, but which cannot be read
+/// whole: a slice cut inside its pixel data, a damaged pixel element.
+struct Damaged {
+    series: String,
+    error: VolumeError,
+}
+
+/// The SeriesInstanceUID in the header of a file that could not be read whole, read up to
+/// its pixel data; `None` where even that cannot be read or names no series.
+fn series_of_damaged(path: &Path) -> Option<String> {
+    let read = catch_unwind(AssertUnwindSafe(|| {
+        let obj = OpenFileOptions::new()
+            .read_until(tags::PIXEL_DATA)
+            .open_file(path)
+            .ok()?;
+        optional_text(&obj, tags::SERIES_INSTANCE_UID).filter(|t| !t.is_empty())
+    }));
+    read.ok().flatten()
+}
+
+/// Refuses a load of `series` that would leave out one of its files that cannot be read
+/// (the volume would lack its slice without a word), unless `skip`, which says on stderr
+/// which files it leaves out. Damaged files of other series are counted as ignored.
+fn refuse_damaged(
+    series: &str,
+    damaged: Vec<Damaged>,
+    skip: bool,
+    ignored: &mut Ignored,
+) -> Result<(), VolumeError> {
+    let (own, other): (Vec<Damaged>, Vec<Damaged>) =
+        damaged.into_iter().partition(|d| d.series == series);
+    ignored.unreadable += other.len();
+    ignored
+        .unreadable_names
+        .extend(other.iter().take(3).map(|d| error_file(&d.error)));
+    ignored.unreadable_names.truncate(3);
+    let Some(first) = own.first() else {
+        return Ok(());
+    };
+    if !skip {
+        let others = match own.len() {
+            1 => String::new(),
+            n => format!(" ({} files of the series cannot be read)", n),
+        };
+        return Err(dicom_error(
+            Path::new(&error_file_path(&first.error)),
+            format!(
+                "a file of the series being loaded cannot be read{others}, so the volume would lack its slice ({}); to load the series without the files that cannot be read, give --skip-unreadable (scene files and manifests: skip_unreadable = true)",
+                match &first.error {
+                    VolumeError::Dicom { message, .. } => message.clone(),
+                    other => other.to_string(),
+                }
+            ),
+        ));
+    }
+    let names: Vec<String> = own.iter().map(|d| error_file(&d.error)).collect();
+    eprintln!(
+        "warning: skipping {} file(s) of the series that cannot be read, as --skip-unreadable asks: {}",
+        own.len(),
+        names.join(", ")
+    );
+    Ok(())
+}
+
+/// The file an error of a damaged file names.
+fn error_file_path(e: &VolumeError) -> PathBuf {
+    match e {
+        VolumeError::Dicom { path, .. } | VolumeError::Io { path, .. } => path.clone(),
+        _ => PathBuf::new(),
+    }
+}
+
+/// The name of the file an error names, for a list.
+fn error_file(e: &VolumeError) -> String {
+    match e {
+        VolumeError::Dicom { path, .. } | VolumeError::Io { path, .. } => name(path),
+        other => other.to_string(),
+    }
 }
 
 /// The volume of `slices` (of one grid), placed and decoded. `at` names the folder or file in
@@ -1133,7 +1229,7 @@ fn summary(folder: &Path, uid: &str, images: &[Image]) -> SeriesSummary {
 /// The series of DICOM images in `dir` (not its subfolders), without decoding any pixel data.
 /// Files that cannot be read as DICOM are left out here; loading the folder reports them.
 pub fn list_series(dir: &Path) -> Result<Vec<SeriesSummary>, VolumeError> {
-    let (images, _) = read_folder(dir)?;
+    let (images, ..) = read_folder(dir)?;
     Ok(group_series(images)
         .iter()
         .map(|(uid, g)| summary(dir, uid, g))

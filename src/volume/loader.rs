@@ -220,6 +220,9 @@ pub struct LoadOptions {
     pub coordinate_frame: Option<CoordinateFrame>,
     /// NIfTI: which transform places the grid; refused for other formats.
     pub nifti_transform: Option<NiftiTransform>,
+    /// DICOM: load the series without its files that cannot be read (said on stderr) instead
+    /// of refusing it; refused for other formats.
+    pub skip_unreadable: bool,
 }
 
 impl LoadOptions {
@@ -242,6 +245,15 @@ impl LoadOptions {
         }
         if self.series.is_some() && format != VolumeFormat::Dicom {
             return refuse("a series", "DICOM");
+        }
+        if self.skip_unreadable && format != VolumeFormat::Dicom {
+            return refuse("skipping unreadable files", "DICOM series");
+        }
+        if self.series.is_some() && !path.is_dir() {
+            return Err(unsupported(
+                path,
+                "a series choice for one DICOM file, which loads its own series; give the folder to choose among its series",
+            ));
         }
         Ok(())
     }

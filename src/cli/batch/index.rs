@@ -208,6 +208,7 @@ impl Index {
 
     /// Writes the index to `path` through a temporary file and a rename.
     pub fn write(&self, path: &Path) -> Result<()> {
+        super::refuse_link(path)?;
         let text = serde_json::to_string_pretty(self)?;
         crate::write_atomic(path, text.as_bytes())?;
         Ok(())
@@ -221,6 +222,10 @@ impl Index {
             .with_context(|| format!("{}: not a batch index", path.display()))
     }
 }
+
+/// Most shards a batch is split into: above any Slurm array (4,000,001 tasks at most), so
+/// that a count read from a command line or a file name never sizes anything by itself.
+pub const MAX_SHARDS: usize = 4_000_001;
 
 /// The index file's name for shard `K` of `N`, or the whole batch's.
 pub fn index_name(shard: Option<(usize, usize)>) -> String {
@@ -310,18 +315,54 @@ pub fn merge(dir: &Path) -> Result<Index> {
         );
     }
     let n = *counts.iter().next().unwrap_or(&1);
-    let missing: Vec<String> = (1..=n)
-        .filter(|k| !shards.iter().any(|((j, _), _)| j == k))
-        .map(|k| index_name(Some((k, n))))
-        .collect();
-    if !missing.is_empty() {
+    if let Some(((k, _), file)) = shards
+        .iter()
+        .find(|((k, n), _)| *n > MAX_SHARDS || k > n || *k == 0)
+    {
         bail!(
-            "{}: missing {} (has that shard run?)",
-            dir.display(),
-            missing.join(", ")
+            "{}: not the index of a shard K of N with K from 1 to N and N at most {MAX_SHARDS} (K = {k}, N = {n}); remove it",
+            file.display()
         );
     }
+    // The missing shards, found in the shards present (sorted, without repeats): the cost
+    // follows the files in the folder, never N.
     shards.sort_by_key(|((k, _), _)| *k);
+    if let Some(pair) = shards.windows(2).find(|p| p[0].0 == p[1].0) {
+        bail!(
+            "{} and {} are both the index of shard {} of {n}; remove the one of the run to leave out",
+            pair[0].1.display(),
+            pair[1].1.display(),
+            pair[0].0.0
+        );
+    }
+    let missing_count = n - shards.len();
+    if missing_count > 0 {
+        let mut named = Vec::new();
+        let mut next = 1;
+        for ((k, _), _) in shards
+            .iter()
+            .chain(std::iter::once(&((n + 1, n), PathBuf::new())))
+        {
+            while next < *k && named.len() < 3 {
+                named.push(index_name(Some((next, n))));
+                next += 1;
+            }
+            if named.len() == 3 {
+                break;
+            }
+            next = k + 1;
+        }
+        let more = if missing_count > named.len() {
+            format!(" and {} more", missing_count - named.len())
+        } else {
+            String::new()
+        };
+        bail!(
+            "{}: missing {}{more} (has that shard run?)",
+            dir.display(),
+            named.join(", ")
+        );
+    }
     let mut merged: Option<Index> = None;
     for (_, file) in &shards {
         let index = Index::read(file)?;

@@ -264,6 +264,22 @@ pub struct PlannedJob {
     pub spec: JobSpec,
 }
 
+impl PlannedJob {
+    /// Every file the job writes, relative to the output folder: the measurements, and per
+    /// picture the image, the depth image and its calibration.
+    pub fn outputs(&self) -> Vec<PathBuf> {
+        let mut files: Vec<PathBuf> = self.measurements.iter().cloned().collect();
+        for item in &self.items {
+            files.push(item.image.clone());
+            if let Some(d) = &item.depth {
+                files.push(d.clone());
+                files.push(super::super::scenes::sidecar_of(d));
+            }
+        }
+        files
+    }
+}
+
 /// A problem with a manifest: which job, which key, what.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Problem {
@@ -733,6 +749,19 @@ fn plan_job(position: usize, spec: JobSpec, base: &Path) -> Result<PlannedJob, V
             problem(key, e);
         }
     }
+    // A depth image's calibration is written beside it with `.json`.
+    if let Some(depth) = &spec.depth
+        && super::super::scenes::sidecar_of(Path::new(depth))
+            .file_name()
+            .is_some_and(|n| is_index_name(&n.to_string_lossy()))
+    {
+        problem(
+            "depth",
+            format!(
+                "{depth:?}: the depth image's calibration beside it (its name with .json) would take the name of the output folder's index"
+            ),
+        );
+    }
     let measurements_out = spec
         .measurements
         .clone()
@@ -816,7 +845,8 @@ fn check_name(name: &str) -> Result<(), String> {
         Ok(())
     } else {
         Err(format!(
-            "{name:?}: a name goes into file names: 1 to 100 letters, digits, '.', '_' or '-', not starting with '.'"
+            "{:?}: a name goes into file names: 1 to 100 letters, digits, '.', '_' or '-', not starting with '.'",
+            splatscene::scene::file::shortened(name)
         ))
     }
 }
@@ -984,7 +1014,7 @@ fn check_outputs(jobs: &[PlannedJob], problems: &mut Vec<Problem>) {
             let mut files = vec![("out", normal(&item.image))];
             if let Some(d) = &item.depth {
                 files.push(("depth", normal(d)));
-                files.push(("depth", normal(&d.with_extension("json"))));
+                files.push(("depth", normal(&super::super::scenes::sidecar_of(d))));
             }
             for (key, file) in files {
                 let what = format!(

@@ -103,6 +103,8 @@ pub fn run_batch(args: BatchArgs) -> Result<()> {
         )
     })?;
     let total_jobs = jobs.len();
+    let index_path = out.join(index::index_name(shard));
+    refuse_named_inputs(&jobs, out, &index_path)?;
     let mine: Vec<PlannedJob> = match shard {
         Some((k, n)) => jobs
             .into_iter()
@@ -134,7 +136,6 @@ pub fn run_batch(args: BatchArgs) -> Result<()> {
         return Ok(());
     }
     std::fs::create_dir_all(out).with_context(|| format!("{}: cannot create", out.display()))?;
-    let index_path = out.join(index::index_name(shard));
     let _lock = lock(&index_path)?;
     let earlier = if args.force {
         Default::default()
@@ -257,6 +258,42 @@ pub fn run_batch(args: BatchArgs) -> Result<()> {
     finish(&index, &index_path)
 }
 
+/// Refuses, before anything is drawn, a batch whose outputs (the index included) would
+/// replace one of its inputs: the manifest, a scene file, a file a job names, or a file in a
+/// folder a job reads (a DICOM series). Files the inputs name in turn (a header's data file, a
+/// glTF's buffers) are known once a job is loaded: each job checks its outputs against
+/// everything read so far before it draws ([`run_job`]), and every write checks again.
+fn refuse_named_inputs(jobs: &[PlannedJob], out: &Path, index_path: &Path) -> Result<()> {
+    use splatscene::input::record_input;
+    for job in jobs {
+        if let Some(scene) = &job.scene_path {
+            record_input(scene);
+        }
+        for path in job.file.named_paths(Path::new(".")) {
+            match std::fs::read_dir(&path) {
+                Ok(entries) => entries
+                    .flatten()
+                    .filter(|e| e.file_type().is_ok_and(|t| !t.is_dir()))
+                    .for_each(|e| record_input(&e.path())),
+                Err(_) => record_input(&path),
+            }
+        }
+    }
+    splatscene::output::check_not_input(index_path)?;
+    for job in jobs {
+        for file in job.outputs() {
+            splatscene::output::check_not_input(&out.join(file)).with_context(|| {
+                format!(
+                    "job {} ({}); nothing was rendered",
+                    job.position + 1,
+                    job.name
+                )
+            })?;
+        }
+    }
+    Ok(())
+}
+
 /// The exit status: an error when any job failed or was not reached.
 fn finish(index: &Index, path: &Path) -> Result<()> {
     let s = &index.summary;
@@ -302,14 +339,26 @@ fn shard_from(
         if n == 0 {
             bail!("--shard {text}: N, the number of shards, must be at least 1");
         }
+        if n > index::MAX_SHARDS {
+            bail!(
+                "--shard {text}: at most {} shards (a Slurm array is at most 4,000,001 tasks, and every shard writes an index)",
+                index::MAX_SHARDS
+            );
+        }
         if k == 0 || k > n {
             bail!("--shard {text}: K counts the shards from 1 to N (here 1 to {n})");
         }
         return Ok(Some((k, n)));
     }
-    let (Some(id), Some(count)) = (env("SLURM_ARRAY_TASK_ID"), env("SLURM_ARRAY_TASK_COUNT"))
-    else {
-        return Ok(None);
+    let (id, count) = match (env("SLURM_ARRAY_TASK_ID"), env("SLURM_ARRAY_TASK_COUNT")) {
+        (Some(id), Some(count)) => (id, count),
+        (None, None) => return Ok(None),
+        (Some(id), None) => bail!(
+            "SLURM_ARRAY_TASK_ID={id} is set but SLURM_ARRAY_TASK_COUNT is not, so this task's shard is unknown; give --shard K/N (or unset SLURM_ARRAY_TASK_ID to run the whole batch)"
+        ),
+        (None, Some(count)) => bail!(
+            "SLURM_ARRAY_TASK_COUNT={count} is set but SLURM_ARRAY_TASK_ID is not, so this task's shard is unknown; give --shard K/N (or unset SLURM_ARRAY_TASK_COUNT to run the whole batch)"
+        ),
     };
     let number = |name: &str, text: &str| {
         text.trim()
@@ -334,6 +383,12 @@ fn shard_from(
             "SLURM_ARRAY_TASK_ID={id} does not lie among SLURM_ARRAY_TASK_COUNT={count} tasks from SLURM_ARRAY_TASK_MIN={min}; give --shard K/N"
         );
     }
+    if count > index::MAX_SHARDS {
+        bail!(
+            "SLURM_ARRAY_TASK_COUNT={count}: at most {} shards",
+            index::MAX_SHARDS
+        );
+    }
     let shard = (id - min + 1, count);
     eprintln!("shard {} of {} (Slurm array task {id})", shard.0, shard.1);
     Ok(Some(shard))
@@ -344,10 +399,14 @@ fn shard_from(
 fn lock(index: &Path) -> Result<std::fs::File> {
     let name = index.file_name().unwrap_or_default().to_string_lossy();
     let path = index.with_file_name(format!(".{name}.lock"));
+    use std::os::unix::fs::OpenOptionsExt;
+    refuse_link(&path)?;
+    // O_NOFOLLOW: a link at the lock's name is refused, not opened into another file.
     let file = std::fs::OpenOptions::new()
         .create(true)
         .truncate(false)
         .write(true)
+        .custom_flags(libc::O_NOFOLLOW)
         .open(&path)
         .with_context(|| format!("{}: cannot create", path.display()))?;
     match file.try_lock() {
@@ -441,6 +500,12 @@ fn run_job(
         Err(e) => return failed(job, None, format!("{:#}", anyhow::Error::from(e))),
     };
     timings.load = ms(started.elapsed());
+    // Everything the job read is known now: none of it may be written.
+    for file in job.outputs() {
+        if let Err(e) = splatscene::output::check_not_input(&settings.out.join(file)) {
+            return failed(job, None, e.to_string());
+        }
+    }
     let hashing = Instant::now();
     let (inputs, hash) = match job_hash(job, &loaded, settings.compositor) {
         Ok(h) => h,
@@ -642,14 +707,36 @@ fn measurements_json(scene: &Scene) -> Result<String> {
     }))?)
 }
 
-/// Writes one output file inside the output folder, making its folders.
+/// Writes one output file inside the output folder, making its folders. A symbolic link met
+/// inside the folder (at the file or at a folder on its way) is refused, never followed: the
+/// batch writes plain files inside its own folder only.
 fn write_output(out: &Path, file: &Path, bytes: &[u8]) -> Result<()> {
-    let path = out.join(file);
+    let mut path = out.to_path_buf();
+    for component in file.components() {
+        path.push(component);
+        refuse_link(&path)?;
+    }
     if let Some(parent) = path.parent() {
         std::fs::create_dir_all(parent)
             .with_context(|| format!("{}: cannot create", parent.display()))?;
     }
     crate::write_atomic(&path, bytes)?;
+    Ok(())
+}
+
+/// Refuses `path` when it is a symbolic link: a batch's files inside its output folder are
+/// never written through one into another folder.
+pub(crate) fn refuse_link(path: &Path) -> Result<()> {
+    if let Ok(meta) = std::fs::symlink_metadata(path)
+        && meta.file_type().is_symlink()
+    {
+        let target = std::fs::read_link(path).unwrap_or_default();
+        bail!(
+            "{} is a symbolic link (to {}); the batch writes plain files inside its output folder and never through a link: remove the link",
+            path.display(),
+            target.display()
+        );
+    }
     Ok(())
 }
 

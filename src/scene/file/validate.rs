@@ -197,6 +197,19 @@ fn transform(t: &TransformSpec) -> Result<(), String> {
         if !m.iter().all(|v| v.is_finite()) {
             return Err("transform.matrix holds a number that is not finite".into());
         }
+        // Column-major: the last row is elements 3, 7, 11 and 15.
+        // Rounding in a matrix written by a program is allowed; anything more is refused.
+        let last_row = [m[3], m[7], m[11], m[15]];
+        let affine = last_row
+            .iter()
+            .zip([0.0, 0.0, 0.0, 1.0])
+            .all(|(v, want)| (v - want).abs() <= 1e-9);
+        if !affine {
+            return Err(format!(
+                "transform.matrix has the last row {}, not 0, 0, 0, 1: a projective matrix cannot place a node (the matrix is column-major: elements 4, 8, 12 and 16 make the last row; the translation is elements 13 to 15)",
+                last_row.map(|v| v.to_string()).join(", ")
+            ));
+        }
         if t.translate.is_some() || t.rotate_degrees.is_some() || t.scale.is_some() {
             return Err(
                 "transform.matrix replaces translate, rotate_degrees and scale; give one or the other"
@@ -219,6 +232,7 @@ fn volume(v: &VolumeSpec) -> Result<(), String> {
             ("origin", v.origin.is_some()),
             ("orientation", v.orientation.is_some()),
             ("series", v.series.is_some()),
+            ("skip_unreadable", v.skip_unreadable.is_some()),
             ("frame", v.frame.is_some()),
             ("nifti_transform", v.nifti_transform.is_some()),
             ("coordinate_frame", v.coordinate_frame.is_some()),
