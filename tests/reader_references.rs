@@ -170,9 +170,21 @@ fn check_file(
     geometry: &str,
     format: VolumeFormat,
 ) {
-    let reference = reference(folder);
+    check_entry(&reference(folder), folder, key, file, options, geometry, format);
+}
+
+/// [`check_file`] against the entry `key` of the reference JSON `reference`.
+fn check_entry(
+    reference: &Value,
+    folder: &str,
+    key: &str,
+    file: &str,
+    options: &LoadOptions,
+    geometry: &str,
+    format: VolumeFormat,
+) {
     let entry = &reference["files"][key];
-    assert!(entry.is_object(), "{folder}/reference.json has no {key}");
+    assert!(entry.is_object(), "{folder}: the reference has no {key}");
     let what = format!("{folder}/{file} ({geometry})");
     let loaded = load(&data_dir(folder).join(file), options);
     assert_eq!(loaded.format, format, "{what}");
@@ -293,6 +305,46 @@ fn nrrd_bzip2_and_ascii_match_their_headers_and_itk() {
         "header",
         nrrd,
     );
+}
+
+/// A scalar volume written as a 4-D NRRD with one single-sample non-spatial axis (a
+/// 1-vector first, a list of one last), as pynrrd writes it: the 3-D volume SimpleITK and the
+/// header make of it.
+#[test]
+fn nrrd_with_a_single_sample_non_spatial_axis_reads_as_its_volume() {
+    let options = LoadOptions::default();
+    for file in ["vector-first.nrrd", "list-last.nrrd"] {
+        for geometry in ["header", "simpleitk"] {
+            check_file("nrrd", file, file, &options, geometry, VolumeFormat::Nrrd);
+        }
+    }
+}
+
+/// Legacy VTK as VTK's own writer makes it: ASCII data, and negative spacings (VTK keeps
+/// them, SimpleITK flips the axis; both put voxel (1, 2, 1) at one point with one value).
+#[test]
+fn legacy_vtk_ascii_and_negative_spacing_match_vtk_and_itk() {
+    let reference = read_json(&data_dir("vtk").join("legacy-reference.json"));
+    let options = LoadOptions::default();
+    for file in [
+        "legacy-ascii.vtk",
+        "legacy-negative-spacing.vtk",
+        "legacy-negative-spacing-ascii.vtk",
+        "legacy-ascii-float.vtk",
+    ] {
+        let vtk = VolumeFormat::VtkLegacy;
+        check_entry(&reference, "vtk", file, file, &options, "simpleitk", vtk);
+        // VTK's own placement: the world point of (1, 2, 1) (its spacing may be negative,
+        // which a spacing-and-direction placement states as a flipped axis).
+        let g = &reference["files"][file]["geometry"]["vtk"];
+        let v = load(&data_dir("vtk").join(file), &options).volume;
+        let ours = world(&v, DVec3::new(1.0, 2.0, 1.0));
+        assert!(
+            ours.abs_diff_eq(vec3(&g["point_1_2_1"]), MM),
+            "{file}: index (1, 2, 1) at {ours}, VTK {}",
+            g["point_1_2_1"]
+        );
+    }
 }
 
 #[test]

@@ -46,6 +46,10 @@ pub fn load_volume_with_info(path: &Path) -> Result<LoadedVolume, VolumeError> {
 /// NIfTI transform, the coordinate frame of a format that states none. An option that cannot
 /// apply to the file's format is [`VolumeError::Unsupported`], naming it.
 pub fn load_volume_with(path: &Path, options: &LoadOptions) -> Result<LoadedVolume, VolumeError> {
+    load_format(path, options).map_err(|e| e.named_by_header(path))
+}
+
+fn load_format(path: &Path, options: &LoadOptions) -> Result<LoadedVolume, VolumeError> {
     let format = detect_format(path)?;
     options.check_applies(path, format)?;
     let loaded = match format {

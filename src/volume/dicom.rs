@@ -269,7 +269,7 @@ pub fn load_dicom_series_choosing(
     }
     let images = select_series(dir, images, choice)?;
     let series = images.first().map(|i| i.series.clone()).unwrap_or_default();
-    refuse_damaged(&series, damaged, skip_unreadable, &mut ignored)?;
+    refuse_damaged(&series, &images, damaged, skip_unreadable, &mut ignored)?;
     let images = without_copies(images, None, &mut ignored);
     let slices = images
         .into_iter()
@@ -309,7 +309,7 @@ pub fn load_dicom_file_series(
     };
     let (images, unreadable, damaged) = read_folder(dir)?;
     let mut ignored = Ignored::unreadable(&unreadable);
-    refuse_damaged(&own.series, damaged, skip_unreadable, &mut ignored)?;
+    refuse_damaged(&own.series, &images, damaged, skip_unreadable, &mut ignored)?;
     let own_path = fs::canonicalize(path).map_err(io_error(path))?;
     let mut kept = Vec::new();
     for image in images {
@@ -494,7 +494,7 @@ fn read_folder(dir: &Path) -> Result<FolderFiles, VolumeError> {
     let read: Vec<_> = paths
         .par_iter()
         .map(|p| match read_image(p) {
-            Err(e) => Err((e, series_of_damaged(p))),
+            Err(e) => Err((e, header_of_damaged(p))),
             Ok(image) => Ok(image),
         })
         .collect();
@@ -504,7 +504,12 @@ fn read_folder(dir: &Path) -> Result<FolderFiles, VolumeError> {
         match result {
             Ok(Some(image)) => images.push(image),
             Ok(None) => {}
-            Err((e, Some(series))) => damaged.push(Damaged { series, error: e }),
+            Err((e, Some((series, instance, position)))) => damaged.push(Damaged {
+                series,
+                instance,
+                position,
+                error: e,
+            }),
             Err((e, None)) => unreadable.push(e),
         }
     }
@@ -519,33 +524,62 @@ type FolderFiles = (Vec<Image>, Vec<VolumeError>, Vec<Damaged>);
 /// whole: a slice cut inside its pixel data, a damaged pixel element.
 struct Damaged {
     series: String,
+    /// SOPInstanceUID (empty when absent).
+    instance: String,
+    /// ImagePositionPatient, LPS.
+    position: Option<DVec3>,
     error: VolumeError,
 }
 
-/// The SeriesInstanceUID in the header of a file that could not be read whole, read up to
-/// its pixel data; `None` where even that cannot be read or names no series.
-fn series_of_damaged(path: &Path) -> Option<String> {
+/// The SeriesInstanceUID, SOPInstanceUID and ImagePositionPatient in the header of a file
+/// that could not be read whole, read up to its pixel data; `None` where even that cannot be
+/// read or names no series.
+fn header_of_damaged(path: &Path) -> Option<(String, String, Option<DVec3>)> {
     let read = catch_unwind(AssertUnwindSafe(|| {
         let obj = OpenFileOptions::new()
             .read_until(tags::PIXEL_DATA)
             .open_file(path)
             .ok()?;
-        optional_text(&obj, tags::SERIES_INSTANCE_UID).filter(|t| !t.is_empty())
+        let series = optional_text(&obj, tags::SERIES_INSTANCE_UID).filter(|t| !t.is_empty())?;
+        let instance = optional_text(&obj, tags::SOP_INSTANCE_UID).unwrap_or_default();
+        let position = floats::<3>(&obj, tags::IMAGE_POSITION_PATIENT, "ImagePositionPatient")
+            .ok()
+            .map(DVec3::from);
+        Some((series, instance, position))
     }));
     read.ok().flatten()
 }
 
-/// Refuses a load of `series` that would leave out one of its files that cannot be read
-/// (the volume would lack its slice without a word), unless `skip`, which says on stderr
-/// which files it leaves out. Damaged files of other series are counted as ignored.
+/// Whether a damaged file stands for nothing the readable `images` lack: a copy of one of
+/// them (its SOPInstanceUID), or a second version of a slice at one of their positions.
+fn has_stand_in(d: &Damaged, images: &[Image]) -> bool {
+    let key = |p: DVec3| (p * 1e3).round().to_array().map(|x| x as i64);
+    images.iter().filter(|image| image.series == d.series).any(|image| {
+        (!d.instance.is_empty() && image.instance == d.instance)
+            || d.position.is_some_and(|p| {
+                image
+                    .slices
+                    .iter()
+                    .flatten()
+                    .any(|s| key(s.position) == key(p))
+            })
+    })
+}
+
+/// Refuses a load of `series` (read as `images`) that would leave out one of its files that
+/// cannot be read (the volume would lack its slice without a word), unless `skip`, which says
+/// on stderr which files it leaves out. Damaged files of other series, and damaged copies or
+/// second versions of slices the series has, are counted as ignored.
 fn refuse_damaged(
     series: &str,
+    images: &[Image],
     damaged: Vec<Damaged>,
     skip: bool,
     ignored: &mut Ignored,
 ) -> Result<(), VolumeError> {
-    let (own, other): (Vec<Damaged>, Vec<Damaged>) =
-        damaged.into_iter().partition(|d| d.series == series);
+    let (own, other): (Vec<Damaged>, Vec<Damaged>) = damaged
+        .into_iter()
+        .partition(|d| d.series == series && !has_stand_in(d, images));
     ignored.unreadable += other.len();
     ignored
         .unreadable_names

@@ -18,9 +18,14 @@
 //! a `space`, `axis mins` place the first sample as teem and ITK do: at the minimum for
 //! `node`-centred axes, half a step past it for `cell`-centred ones (teem's default).
 //!
-//! Not read (a typed [`VolumeError::Unsupported`]): other dimensions than 3 (vectors, time
-//! series, images), 64-bit integers and `block`, the `hex` encoding, `none` axes in `space directions`, spaces with a time axis, and data files that
-//! do not each hold whole z slices.
+//! A 4-D header whose one non-spatial axis has a single sample (`kinds: vector space space
+//! space` with `sizes: 1 ...`, or a `list` of one last; its space direction `none`) is the 3-D
+//! volume it holds, as SimpleITK and pynrrd read it.
+//!
+//! Not read (a typed [`VolumeError::Unsupported`]): other dimensions (vectors of several
+//! components, time series, images), 64-bit integers and `block`, the `hex` encoding, `none`
+//! axes among the spatial `space directions`, spaces with a time axis, and data files that do
+//! not each hold whole z slices.
 //!
 //! Every declared size is checked before voxel memory is allocated: raw data against the data
 //! files' lengths (through [`load_raw`] and [`load_raw_slices`]), gzip data by inflating at
@@ -178,6 +183,80 @@ impl Fields {
         header_error(&self.path, format!("line {line}: {message}"))
     }
 
+    /// Makes a 4-D header whose one non-spatial axis has a single sample (a scalar volume
+    /// written as a 1-vector, `kinds: vector space space space`, or a list of one, `list`
+    /// last, as ITK, Slicer and pynrrd write them) the 3-D header of the same data: an axis of
+    /// size 1 does not change where any sample lies, so only the per-axis fields lose its
+    /// entry. The axis must be non-spatial: its `kinds` entry not `space` or `domain`, or its
+    /// `space directions` entry `none`. Any other 4-D array is refused.
+    fn drop_single_axis(&mut self) -> Result<(), VolumeError> {
+        let sizes: [u64; 4] = self.numbers(self.require("sizes", "sizes")?)?;
+        let kinds: Vec<String> = self.get("kinds").map_or(Vec::new(), |f| {
+            f.value
+                .split_whitespace()
+                .map(str::to_ascii_lowercase)
+                .collect()
+        });
+        let directions = match self.get("spacedirections") {
+            Some(f) => vectors(self, f)?,
+            None => Vec::new(),
+        };
+        let spatial_kind = |k: &str| matches!(k, "space" | "domain");
+        let non_spatial = |axis: usize| {
+            kinds.get(axis).is_some_and(|k| !spatial_kind(k))
+                || directions.get(axis).is_some_and(Option::is_none)
+        };
+        let single: Vec<usize> = (0..4)
+            .filter(|&a| sizes[a] == 1 && non_spatial(a))
+            .collect();
+        let [axis] = single[..] else {
+            let described = (0..4)
+                .map(|a| match kinds.get(a) {
+                    Some(k) => format!("{} ({k})", sizes[a]),
+                    None => sizes[a].to_string(),
+                })
+                .collect::<Vec<_>>()
+                .join(", ");
+            return Err(unsupported(
+                &self.path,
+                format!(
+                    "a 4-D NRRD of sizes {described}; read are 3-D volumes and 4-D ones whose one non-spatial axis (a kind other than space or domain, or a `none` space direction) has a single sample"
+                ),
+            ));
+        };
+        for field in &mut self.fields {
+            match field.key.as_str() {
+                "spacedirections" => {
+                    let words: Vec<String> = directions
+                        .iter()
+                        .enumerate()
+                        .filter(|(a, _)| *a != axis)
+                        .map(|(_, d)| match d {
+                            Some(v) => format!("({},{},{})", v.x, v.y, v.z),
+                            None => "none".into(),
+                        })
+                        .collect();
+                    field.value = words.join(" ");
+                }
+                "sizes" | "spacings" | "thicknesses" | "axismins" | "axismaxs" | "centers"
+                | "centerings" | "kinds" => {
+                    let words: Vec<&str> = field.value.split_whitespace().collect();
+                    if words.len() == 4 {
+                        field.value = words
+                            .iter()
+                            .enumerate()
+                            .filter(|(a, _)| *a != axis)
+                            .map(|(_, w)| *w)
+                            .collect::<Vec<_>>()
+                            .join(" ");
+                    }
+                }
+                _ => {}
+            }
+        }
+        Ok(())
+    }
+
     fn get(&self, key: &str) -> Option<&Field> {
         self.fields.iter().find(|f| f.key == key)
     }
@@ -216,10 +295,12 @@ fn is_magic(line: &str) -> bool {
 
 impl Header {
     fn read(path: &Path) -> Result<Self, VolumeError> {
-        let (fields, offset) = Fields::read(path)?;
+        let (mut fields, offset) = Fields::read(path)?;
         let dimension = fields.require("dimension", "dimension")?;
         let [n]: [u32; 1] = fields.numbers(dimension)?;
-        if n != 3 {
+        if n == 4 {
+            fields.drop_single_axis()?;
+        } else if n != 3 {
             return Err(unsupported(
                 path,
                 format!("{n}-D NRRD; only 3-D volumes are read"),

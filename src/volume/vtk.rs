@@ -1,10 +1,13 @@
 //! VTK image volumes: legacy `STRUCTURED_POINTS` files and XML `ImageData` (`.vti`) files.
 //!
 //! **Legacy** (`# vtk DataFile Version x.y`): `BINARY` data (big-endian, as the VTK file-format
-//! specification fixes it), `DATASET STRUCTURED_POINTS` with `DIMENSIONS`, `SPACING` (or the
-//! old `ASPECT_RATIO`) and `ORIGIN`, then `POINT_DATA n` and one-component `SCALARS` of an 8-
-//! to 32-bit integer type, `float` or `double`, followed by a `LOOKUP_TABLE` line and the
-//! values. The file's length is checked against the declared size before allocating.
+//! specification fixes it) or `ASCII` (numbers separated by white space), `DATASET
+//! STRUCTURED_POINTS` with `DIMENSIONS`, `SPACING` (or the old `ASPECT_RATIO`; a negative
+//! step runs its axis the other way, as VTK keeps it and SimpleITK flips it: each voxel lands
+//! at `ORIGIN + SPACING x index` either way) and `ORIGIN`, then `POINT_DATA n` and
+//! one-component `SCALARS` of an 8- to 32-bit integer type, `float` or `double`, followed by a
+//! `LOOKUP_TABLE` line and the values. The file's length is checked against the declared size
+//! before allocating.
 //!
 //! **XML** (`<VTKFile type="ImageData">`): one `Piece` covering the `WholeExtent`; the point-data
 //! array named by `PointData Scalars` (else the first), one component; `format="ascii"`,
@@ -15,7 +18,7 @@
 //! not start at 0 moves the origin to the first voxel. The whole file is read into memory
 //! (never more than its length); compressed blocks inflate to exactly their declared sizes.
 //!
-//! Not read (a typed [`VolumeError::Unsupported`]): `ASCII` legacy data, other dataset types,
+//! Not read (a typed [`VolumeError::Unsupported`]): other dataset types,
 //! cell data, vectors and multi-component arrays, 64-bit integers, LZMA compression, and
 //! multi-piece files.
 //!
@@ -40,21 +43,91 @@ use super::{ByteOrder, CpuVolume, RawSpec, ScalarFormat, ScalarType, VolumeError
 /// Loads a legacy VTK `STRUCTURED_POINTS` file with binary scalars.
 pub fn load_vtk_legacy(path: &Path) -> Result<LoadedVolume, VolumeError> {
     let header = LegacyHeader::read(path)?;
-    let placement = Placement::axis_aligned(path, header.spacing, header.origin)?;
-    let spec = RawSpec {
-        header_bytes: header.data_offset,
-        ..RawSpec::new(header.dims, header.scalar, ByteOrder::Big)
+    // A negative SPACING steps the other way along its axis: VTK keeps it so and SimpleITK
+    // flips the axis, which put every voxel at the same point (origin + spacing x index).
+    let [sx, sy, sz] = header.spacing;
+    let columns = [DVec3::X * sx, DVec3::Y * sy, DVec3::Z * sz];
+    let placement = Placement::from_columns(path, columns, DVec3::from(header.origin))?;
+    let volume = if header.ascii {
+        legacy_ascii_values(path, &header)?
+    } else {
+        let spec = RawSpec {
+            header_bytes: header.data_offset,
+            ..RawSpec::new(header.dims, header.scalar, ByteOrder::Big)
+        };
+        load_raw(path, &spec)?
     };
     Ok(LoadedVolume {
-        volume: placement.apply(load_raw(path, &spec)?),
+        volume: placement.apply(volume),
         format: VolumeFormat::VtkLegacy,
         scalar_type: Some(header.scalar),
         patient_frame: false,
     })
 }
 
+/// The values of an `ASCII` legacy file: white-space-separated numbers after the header,
+/// exactly as many as the grid has voxels; a keyword after them (VTK writes `METADATA` blocks
+/// and further arrays there) ends them.
+fn legacy_ascii_values(path: &Path, header: &LegacyHeader) -> Result<CpuVolume, VolumeError> {
+    use std::io::{Read, Seek, SeekFrom};
+    let count = usize::try_from(grid_count(path, header.dims)?)
+        .map_err(|_| header_error(path, "declared size overflows"))?;
+    let mut file = crate::input::open_regular(path).map_err(io_error(path))?;
+    let len = file.metadata().map_err(io_error(path))?.len();
+    // Each value takes at least two characters (a digit and a separator): a file too short
+    // for the grid is refused before any value memory is taken.
+    let available = len.saturating_sub(header.data_offset);
+    if available.saturating_add(1) / 2 < count as u64 {
+        return Err(VolumeError::TooShort {
+            path: path.into(),
+            expected: header.data_offset + 2 * count as u64 - 1,
+            actual: len,
+        });
+    }
+    file.seek(SeekFrom::Start(header.data_offset))
+        .map_err(io_error(path))?;
+    let mut text = String::new();
+    file.take(available)
+        .read_to_string(&mut text)
+        .map_err(|e| header_error(path, format!("the ASCII data are not text: {e}")))?;
+    let mut words = text.split_whitespace();
+    let mut values = Vec::with_capacity(count);
+    for word in words.by_ref().take(count) {
+        let value: f64 = word.parse().map_err(|_| {
+            header_error(
+                path,
+                format!(
+                    "{word:?} after {} of the {count} declared values is not a number",
+                    values.len()
+                ),
+            )
+        })?;
+        values.push(value as f32);
+    }
+    if values.len() < count {
+        let message = format!(
+            "the ASCII data hold {} values where {count} are declared",
+            values.len()
+        );
+        return Err(header_error(path, message));
+    }
+    if words.next().is_some_and(|w| w.parse::<f64>().is_ok()) {
+        let message = format!("the ASCII data hold more than the {count} values declared");
+        return Err(header_error(path, message));
+    }
+    Ok(CpuVolume {
+        dims: header.dims,
+        spacing: [1.0; 3],
+        origin: [0.0; 3],
+        direction: DMat3::IDENTITY,
+        values,
+    })
+}
+
 /// What a legacy header says.
 struct LegacyHeader {
+    /// `ASCII` data (else `BINARY`).
+    ascii: bool,
     dims: [u32; 3],
     spacing: [f64; 3],
     origin: [f64; 3],
@@ -86,6 +159,7 @@ impl LegacyHeader {
 #[derive(Default)]
 struct PartialLegacy {
     binary: bool,
+    ascii: bool,
     dataset: bool,
     dims: Option<[u32; 3]>,
     spacing: Option<[f64; 3]>,
@@ -105,7 +179,7 @@ impl PartialLegacy {
         let three = || numbers(rest).ok_or_else(|| at(format!("{keyword} needs 3 numbers")));
         match (keyword.as_str(), rest) {
             ("BINARY", []) => self.binary = true,
-            ("ASCII", []) => return Err(unsupported(path, "ASCII legacy VTK data")),
+            ("ASCII", []) => self.ascii = true,
             ("DATASET", [kind]) if kind.eq_ignore_ascii_case("STRUCTURED_POINTS") => {
                 self.dataset = true;
             }
@@ -145,8 +219,8 @@ impl PartialLegacy {
 
     fn finish(self, path: &Path, data_offset: u64) -> Result<LegacyHeader, VolumeError> {
         let missing = |what: &str| header_error(path, format!("no {what} before the data"));
-        if !self.binary {
-            return Err(missing("BINARY"));
+        if self.binary == self.ascii {
+            return Err(missing("BINARY or ASCII (one of them)"));
         }
         if !self.dataset {
             return Err(missing("DATASET STRUCTURED_POINTS"));
@@ -159,6 +233,7 @@ impl PartialLegacy {
             return Err(header_error(path, message));
         }
         Ok(LegacyHeader {
+            ascii: self.ascii,
             dims,
             spacing: self.spacing.unwrap_or([1.0; 3]),
             origin: self.origin.unwrap_or([0.0; 3]),

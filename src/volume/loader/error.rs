@@ -1,6 +1,6 @@
 //! The error every volume loader returns, and the DICOM series summaries it can carry.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use thiserror::Error;
 
@@ -77,6 +77,22 @@ pub enum VolumeError {
         /// Header plus value bytes the spec declares.
         expected: u64,
         /// The file's length.
+        actual: u64,
+    },
+    /// A data file a header names is shorter than the header declares.
+    #[error(
+        "{}: its data file {} needs {expected} bytes for the declared size but has {actual}",
+        path.display(),
+        data_file.display()
+    )]
+    DataFileTooShort {
+        /// The header naming the data file.
+        path: PathBuf,
+        /// The data file.
+        data_file: PathBuf,
+        /// Bytes the header declares.
+        expected: u64,
+        /// The data file's length.
         actual: u64,
     },
     /// Spacing is not finite and positive, or the origin is not finite.
@@ -191,6 +207,26 @@ pub enum VolumeError {
         /// Bytes the data inflated to.
         actual: u64,
     },
+}
+
+impl VolumeError {
+    /// This error as the user's `header` sees it: a data file found short is named with the
+    /// header that declared its size, since that is the file the user gave.
+    pub fn named_by_header(self, header: &Path) -> Self {
+        match self {
+            Self::TooShort {
+                path,
+                expected,
+                actual,
+            } if path != header => Self::DataFileTooShort {
+                path: header.into(),
+                data_file: path,
+                expected,
+                actual,
+            },
+            other => other,
+        }
+    }
 }
 
 /// One DICOM series of a folder, as `volume::dicom::list_series` finds it.

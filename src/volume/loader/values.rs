@@ -29,13 +29,26 @@ fn data_file_problem(path: &Path) -> Option<String> {
     }
 }
 
-/// Refuses the first of the data `files` a header at `path` names that does not exist or is
-/// not a regular file, saying which and what it is.
+/// Refuses the first of the data `files` a header at `path` names that does not exist, is not
+/// a regular file, or is the header itself (by any name or link), saying which and what it is.
 pub(crate) fn check_data_files(
     path: &Path,
     files: &[std::path::PathBuf],
 ) -> Result<(), VolumeError> {
+    let header = std::fs::metadata(path).ok().map(|m| crate::input::FileId::of(&m));
     for file in files {
+        let itself = header.is_some()
+            && std::fs::metadata(file)
+                .ok()
+                .map(|m| crate::input::FileId::of(&m))
+                == header;
+        if itself {
+            return Err(VolumeError::MissingDataFile {
+                path: path.into(),
+                data_file: file.clone(),
+                problem: "is the header itself, whose text is not voxel data (data that follow the header in its own file need no data file field)".into(),
+            });
+        }
         if let Some(problem) = data_file_problem(file) {
             return Err(VolumeError::MissingDataFile {
                 path: path.into(),
