@@ -690,3 +690,93 @@ fn two_time_points_in_one_series_are_named_as_such() {
     expect_dicom_error(load_dicom_series(&dir), &dir, "several time points");
     fs::remove_dir_all(&dir).expect("clean up");
 }
+
+/// Five neighbouring slices of the shared series written again with native (uncompressed)
+/// pixel data, in which a cut inside the pixel data stops the parser, as in most CT series.
+fn native_series(shared: &Path, test: &str) -> PathBuf {
+    let dir = scratch(test);
+    let vr = |name: &str| name.parse().expect("a VR name");
+    for (k, h) in headers_in_order(shared).iter().skip(10).take(5).enumerate() {
+        let obj = open_file(&h.path).expect("open slice");
+        let decoded = obj.decode_pixel_data().expect("decode slice");
+        let bytes = decoded.data().to_vec();
+        let mut inner = obj.into_inner();
+        inner.put(dicom_object::mem::InMemElement::new(
+            tags::PIXEL_DATA,
+            vr("OW"),
+            dicom_core::PrimitiveValue::from(bytes),
+        ));
+        let meta = FileMetaTableBuilder::new()
+            .transfer_syntax(uids::EXPLICIT_VR_LITTLE_ENDIAN)
+            .media_storage_sop_class_uid(uids::CT_IMAGE_STORAGE)
+            .media_storage_sop_instance_uid(format!("2.25.55{k}"));
+        let file = inner.with_meta(meta).expect("meta table");
+        file.write_to_file(dir.join(format!("n{k}.dcm")))
+            .expect("write native slice");
+    }
+    dir
+}
+
+/// The first or last slice of a series cut inside its pixel data (as an interrupted copy
+/// leaves it) would leave the volume a slice short with no gap to show it: the load names the
+/// file and says how to go on without it; with that option the series loads without the
+/// slice, and a damaged file of another series is ignored as before.
+#[test]
+fn a_slice_of_the_series_cut_short_is_an_error_unless_skipped() {
+    use splatscene::volume::detect::{LoadOptions, load_volume_with};
+    let Some(shared) = series_dir() else { return };
+    let native = native_series(&shared, "native");
+    let headers = headers_in_order(&native);
+    let original = load_dicom_series(&native).expect("load the native series");
+    for (end, header) in [
+        ("first", &headers[0]),
+        ("last", &headers[headers.len() - 1]),
+    ] {
+        let dir = copy_series(&native, &format!("cut-{end}"), |_| false);
+        let victim = dir.join(header.path.file_name().expect("file name"));
+        let bytes = fs::read(&victim).expect("read slice");
+        fs::write(&victim, &bytes[..bytes.len() * 2 / 3]).expect("cut the slice");
+        let result = load_dicom_series(&dir).map(|v| v.dims);
+        assert!(
+            matches!(&result, Err(VolumeError::Dicom { path, message }) if *path == victim && message.contains("--skip-unreadable")),
+            "{end}: {result:?}"
+        );
+        // A file of the series given alone reaches the same slice.
+        let other = dir.join(headers[headers.len() / 2].path.file_name().unwrap());
+        let given = load_volume_with(&other, &LoadOptions::default());
+        assert!(
+            matches!(&given, Err(VolumeError::Dicom { path, .. }) if *path == victim),
+            "{end}: {given:?}"
+        );
+        let skip = LoadOptions {
+            skip_unreadable: true,
+            ..LoadOptions::default()
+        };
+        let loaded = load_volume_with(&dir, &skip).expect("load without the cut slice");
+        assert_eq!(loaded.volume.dims[2], original.dims[2] - 1, "{end}");
+        let loaded = load_volume_with(&other, &skip).expect("load the file's series without it");
+        assert_eq!(loaded.volume.dims[2], original.dims[2] - 1, "{end}");
+        fs::remove_dir_all(&dir).expect("clean up");
+    }
+    // A cut file of another series stays ignored.
+    let dir = copy_series(&native, "cut-other", |_| false);
+    let stranger = dir.join("other-series.dcm");
+    let mut obj = open_file(&series_files(&native)[0]).expect("open slice");
+    obj.put_str(
+        tags::SERIES_INSTANCE_UID,
+        dicom_core::VR::UI,
+        "1.2.826.0.1.3680043.2.1125.99",
+    );
+    obj.put_str(
+        tags::SOP_INSTANCE_UID,
+        dicom_core::VR::UI,
+        "1.2.826.0.1.3680043.2.1125.98",
+    );
+    obj.write_to_file(&stranger)
+        .expect("write the other series' file");
+    let bytes = fs::read(&stranger).expect("read it");
+    fs::write(&stranger, &bytes[..bytes.len() / 2]).expect("cut it");
+    assert_eq!(load_dicom_series(&dir).expect("the series loads"), original);
+    fs::remove_dir_all(&dir).expect("clean up");
+    fs::remove_dir_all(&native).expect("clean up");
+}

@@ -170,7 +170,15 @@ fn check_file(
     geometry: &str,
     format: VolumeFormat,
 ) {
-    check_entry(&reference(folder), folder, key, file, options, geometry, format);
+    check_entry(
+        &reference(folder),
+        folder,
+        key,
+        file,
+        options,
+        geometry,
+        format,
+    );
 }
 
 /// [`check_file`] against the entry `key` of the reference JSON `reference`.

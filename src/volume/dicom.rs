@@ -533,14 +533,15 @@ struct Damaged {
 
 /// The SeriesInstanceUID, SOPInstanceUID and ImagePositionPatient in the header of a file
 /// that could not be read whole, read up to its pixel data; `None` where even that cannot be
-/// read or names no series.
+/// read.
 fn header_of_damaged(path: &Path) -> Option<(String, String, Option<DVec3>)> {
     let read = catch_unwind(AssertUnwindSafe(|| {
         let obj = OpenFileOptions::new()
             .read_until(tags::PIXEL_DATA)
             .open_file(path)
             .ok()?;
-        let series = optional_text(&obj, tags::SERIES_INSTANCE_UID).filter(|t| !t.is_empty())?;
+        // Grouped as readable images are: a file without the UID joins the others without it.
+        let series = optional_text(&obj, tags::SERIES_INSTANCE_UID).unwrap_or_default();
         let instance = optional_text(&obj, tags::SOP_INSTANCE_UID).unwrap_or_default();
         let position = floats::<3>(&obj, tags::IMAGE_POSITION_PATIENT, "ImagePositionPatient")
             .ok()
@@ -554,16 +555,19 @@ fn header_of_damaged(path: &Path) -> Option<(String, String, Option<DVec3>)> {
 /// them (its SOPInstanceUID), or a second version of a slice at one of their positions.
 fn has_stand_in(d: &Damaged, images: &[Image]) -> bool {
     let key = |p: DVec3| (p * 1e3).round().to_array().map(|x| x as i64);
-    images.iter().filter(|image| image.series == d.series).any(|image| {
-        (!d.instance.is_empty() && image.instance == d.instance)
-            || d.position.is_some_and(|p| {
-                image
-                    .slices
-                    .iter()
-                    .flatten()
-                    .any(|s| key(s.position) == key(p))
-            })
-    })
+    images
+        .iter()
+        .filter(|image| image.series == d.series)
+        .any(|image| {
+            (!d.instance.is_empty() && image.instance == d.instance)
+                || d.position.is_some_and(|p| {
+                    image
+                        .slices
+                        .iter()
+                        .flatten()
+                        .any(|s| key(s.position) == key(p))
+                })
+        })
 }
 
 /// Refuses a load of `series` (read as `images`) that would leave out one of its files that

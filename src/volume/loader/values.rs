@@ -35,7 +35,9 @@ pub(crate) fn check_data_files(
     path: &Path,
     files: &[std::path::PathBuf],
 ) -> Result<(), VolumeError> {
-    let header = std::fs::metadata(path).ok().map(|m| crate::input::FileId::of(&m));
+    let header = std::fs::metadata(path)
+        .ok()
+        .map(|m| crate::input::FileId::of(&m));
     for file in files {
         let itself = header.is_some()
             && std::fs::metadata(file)
