@@ -33,6 +33,8 @@ struct Case {
     expect: Expect,
     /// What must hold of the case's folder afterwards.
     after: Option<AfterCheck>,
+    /// Links and folders made in the case's folder before the run.
+    setup: Option<fn(&Path)>,
 }
 
 fn case(name: &str, files: Vec<(&str, Vec<u8>)>, args: &[&str], words: &[&str]) -> Case {
@@ -42,6 +44,7 @@ fn case(name: &str, files: Vec<(&str, Vec<u8>)>, args: &[&str], words: &[&str]) 
         args: args.iter().map(|a| a.to_string()).collect(),
         expect: Expect::Error(words.iter().map(|w| w.to_string()).collect()),
         after: None,
+        setup: None,
     }
 }
 
@@ -1315,6 +1318,7 @@ fn all_cases() -> Vec<Case> {
         argument_cases(),
         limit_cases(),
         output_cases(),
+        input_output_cases(),
     ]
     .into_iter()
     .flatten()
@@ -1335,6 +1339,9 @@ fn crafted_inputs_end_in_clear_errors_or_correct_results() {
             let path = dir.join(name);
             std::fs::create_dir_all(path.parent().unwrap()).unwrap();
             std::fs::write(path, bytes).unwrap();
+        }
+        if let Some(setup) = case.setup {
+            setup(&dir);
         }
         // A device file and a named pipe for inputs to name.
         if !dir.join("zero").exists() {
@@ -1720,4 +1727,204 @@ fn output_cases() -> Vec<Case> {
             &["o.png"],
         )),
     ]
+}
+
+// ---- Outputs against inputs, links, sidecars, shard counts, silent choices ------------------
+
+/// A 4x4x4 `uchar` NRRD: the input every case below must leave as it was.
+fn ct_nrrd() -> Vec<u8> {
+    let mut bytes =
+        b"NRRD0004\ntype: uchar\ndimension: 3\nsizes: 4 4 4\nencoding: raw\n\n".to_vec();
+    bytes.extend((0..64u8).map(|v| v * 4));
+    bytes
+}
+
+/// `ct.nrrd`, `ct.raw` (as written for the detached header) and `keep.txt` are as written.
+fn inputs_kept(dir: &Path) -> Result<(), String> {
+    let raw: Vec<u8> = (0..64u8).map(|v| v * 4).collect();
+    for (name, bytes) in [
+        ("ct.nrrd", ct_nrrd()),
+        ("ct.raw", raw),
+        ("keep.txt", b"mine".to_vec()),
+    ] {
+        match std::fs::read(dir.join(name)) {
+            Ok(b) if b == bytes => {}
+            Ok(_) => return Err(format!("{name} was changed")),
+            Err(e) => return Err(format!("{name}: {e}")),
+        }
+    }
+    Ok(())
+}
+
+fn input_output_cases() -> Vec<Case> {
+    let files = || -> Vec<(&'static str, Vec<u8>)> {
+        vec![
+            ("ct.nrrd", ct_nrrd()),
+            ("ct.raw", (0..64u8).map(|v| v * 4).collect()),
+            (
+                "ct.nhdr",
+                b"NRRD0004\ntype: uchar\ndimension: 3\nsizes: 4 4 4\nencoding: raw\ndata file: ct.raw\n".to_vec(),
+            ),
+            ("keep.txt", b"mine".to_vec()),
+        ]
+    };
+    let with = |mut c: Case, setup: Option<fn(&Path)>| {
+        c.after = Some(inputs_kept);
+        c.setup = setup.or(c.setup);
+        c
+    };
+    let render = |out: &[&'static str]| -> Vec<&'static str> {
+        let mut args = vec!["render", "ct.nrrd", "--size", "32x24"];
+        args.extend(out);
+        args
+    };
+    let scene = |extra: &str| -> Vec<u8> {
+        format!("[[volume]]\npath = \"ct.nrrd\"\n{extra}").into_bytes()
+    };
+    let files_and = |name: &'static str, bytes: Vec<u8>| {
+        let mut f = files();
+        f.push((name, bytes));
+        f
+    };
+    let manifest = |extra: &str| -> Vec<u8> {
+        format!("[[job]]\nname = \"a\"\nvolume = \"ct.nrrd\"\nviews = [\"anterior\"]\nsizes = [[32, 24]]\n{extra}").into_bytes()
+    };
+    vec![
+        with(case("out-is-the-volume", files(), &render(&["--out", "ct.nrrd"]), &["ct.nrrd", "input"]), None),
+        with(case("out-is-the-volume-by-another-name", files(), &render(&["--out", "./sub/../ct.nrrd"]), &["ct.nrrd", "input"]), Some(|d| std::fs::create_dir_all(d.join("sub")).unwrap())),
+        with(case("depth-is-the-volume", files(), &render(&["--out", "o.png", "--depth", "ct.nrrd"]), &["ct.nrrd", "input"]), None),
+        with(
+            case("out-links-to-the-volume", files(), &render(&["--out", "link.png"]), &["link.png", "input", "ct.nrrd"]),
+            Some(|d| std::os::unix::fs::symlink("ct.nrrd", d.join("link.png")).unwrap()),
+        ),
+        with(
+            case("out-links-through-two-links", files(), &render(&["--out", "l2.png"]), &["l2.png", "input"]),
+            Some(|d| {
+                std::os::unix::fs::symlink("ct.nrrd", d.join("l1.png")).unwrap();
+                std::os::unix::fs::symlink(d.join("l1.png"), d.join("l2.png")).unwrap();
+            }),
+        ),
+        with(
+            case("out-is-a-hard-link-to-the-volume", files(), &render(&["--out", "hard.png"]), &["hard.png", "input"]),
+            Some(|d| std::fs::hard_link(d.join("ct.nrrd"), d.join("hard.png")).unwrap()),
+        ),
+        with(
+            case("out-is-a-detached-data-file", files(), &["render", "ct.nhdr", "--size", "32x24", "--out", "ct.raw"], &["ct.raw", "input"]),
+            None,
+        ),
+        with(
+            case("depth-sidecar-is-the-out", files(), &render(&["--out", "a.json", "--depth", "a.png"]), &["a.json", "calibration"]),
+            None,
+        ),
+        with(
+            case("depth-is-its-own-sidecar", files(), &render(&["--out", "o.png", "--depth", "d.json"]), &["d.json", ".png"]),
+            None,
+        ),
+        with(
+            case("depth-sidecar-is-the-volume", files_and("v.json", ct_nrrd()), &["render", "v.json", "--size", "32x24", "--out", "o.png", "--depth", "v.png"], &["v.json", "input"]),
+            None,
+        ),
+        with(
+            case("measure-out-is-the-scene", files_and("s.toml", scene("")), &["measure", "s.toml", "--point", "0,0,0", "--point", "1,0,0", "--out", "s.toml"], &["s.toml", "input"]),
+            None,
+        ),
+        with(
+            case("measure-out-is-the-volume", files(), &["measure", "ct.nrrd", "--point", "0,0,0", "--point", "1,0,0", "--out", "ct.nrrd"], &["ct.nrrd", "input"]),
+            None,
+        ),
+        with(
+            case("nrrd-data-file-is-the-header", files_and("self.nhdr", b"NRRD0004\ntype: uchar\ndimension: 3\nsizes: 2 2 2\nencoding: raw\ndata file: self.nhdr\n".to_vec()), &["info", "self.nhdr"], &["self.nhdr", "header itself"]),
+            None,
+        ),
+        with(
+            case("dat-object-file-is-the-header", files_and("v.dat", b"ObjectFileName: v.dat\nResolution: 2 2 2\nSliceThickness: 1 1 1\nFormat: UCHAR\n".to_vec()), &["info", "v.dat"], &["v.dat", "header itself"]),
+            None,
+        ),
+        with(
+            case("nrrd-short-data-file-names-the-header", files_and("short.nhdr", b"NRRD0004\ntype: uchar\ndimension: 3\nsizes: 8 8 8\nencoding: raw\ndata file: ct.raw\n".to_vec()), &["info", "short.nhdr"], &["short.nhdr", "ct.raw", "512"]),
+            None,
+        ),
+        with(
+            case("matrix-projective", files_and("s.toml", scene("transform = { matrix = [1,0,0,0.5, 0,1,0,0, 0,0,1,0, 0,0,0,1] }")), &["render", "s.toml", "--size", "32x24", "--out", "o.png"], &["matrix", "last row"]),
+            None,
+        ),
+        with(
+            case("crop-box-outside", files_and("s.toml", scene("crop_box = { min = [100, 100, 100], max = [200, 200, 200] }")), &["render", "s.toml", "--size", "32x24", "--out", "o.png"], &["crop_box", "outside"]),
+            None,
+        ),
+        with(
+            case(
+                "measurement-node-names-two-meshes",
+                files_and("s.toml", scene("[[mesh]]\nname = \"stem\"\npath = \"builtin:prosthesis\"\n\n[[mesh]]\nname = \"stem\"\npath = \"builtin:prosthesis\"\n\n[[measurement]]\nkind = \"distance\"\nnode = \"stem\"\npoints = [[0, 0, 0], [1, 0, 0]]")),
+                &["render", "s.toml", "--size", "32x24", "--out", "o.png"],
+                &["stem", "2 meshes or volumes"],
+            ),
+            None,
+        ),
+        with(
+            case(
+                "measurement-label-of-a-megabyte",
+                files_and("s.toml", scene(&format!("[[measurement]]\nkind = \"distance\"\nlabel = \"{}\"\npoints = [[0, 0, 0], [1, 0, 0]]", "x".repeat(1 << 20)))),
+                &["render", "s.toml", "--size", "32x24", "--out", "o.png"],
+                &["label", "1048576 characters"],
+            ),
+            None,
+        ),
+        // Batches: the index and outputs never written through links, sidecars kept apart
+        // from the index, shard counts bounded, merges that cost in the files present.
+        with(
+            case("batch-index-is-a-link", files_and("m.toml", manifest("")), &["batch", "m.toml", "--out", "out"], &["index.json", "symbolic link"]),
+            Some(|d| {
+                std::fs::create_dir_all(d.join("out")).unwrap();
+                std::os::unix::fs::symlink("../keep.txt", d.join("out/index.json")).unwrap();
+            }),
+        ),
+        with(
+            case("batch-output-folder-is-a-link", files_and("m.toml", manifest("out = \"sub/{job}.png\"")), &["batch", "m.toml", "--out", "out"], &["sub", "symbolic link"]),
+            Some(|d| {
+                std::fs::create_dir_all(d.join("out")).unwrap();
+                std::fs::create_dir_all(d.join("elsewhere")).unwrap();
+                std::os::unix::fs::symlink("../elsewhere", d.join("out/sub")).unwrap();
+            }),
+        ),
+        with(
+            case("batch-output-is-the-manifest", files_and("m.json", manifest("depth = \"m.png\"")), &["batch", "m.json", "--out", "."], &["m.json", "input", "nothing was rendered"]),
+            None,
+        ),
+        with(
+            case("batch-output-is-a-volume", files_and("m.toml", manifest("out = \"ct.png\"")), &["batch", "m.toml", "--out", "."], &["input"]).setup_link_volume(),
+            None,
+        ),
+        with(
+            case("batch-depth-sidecar-is-the-index", files_and("m.toml", manifest("depth = \"index.png\"")), &["batch", "m.toml", "--check"], &["depth", "index"]),
+            None,
+        ),
+        with(
+            case("batch-shard-count-huge", files_and("m.toml", manifest("")), &["batch", "m.toml", "--shard", "1/18446744073709551615"], &["--shard", "at most"]),
+            None,
+        ),
+        with(
+            case("merge-of-a-huge-shard-count", files_and("out/index-1-of-4000000.json", b"{}".to_vec()), &["batch", "--merge", "out"], &["missing", "more"]),
+            None,
+        ),
+        with(
+            case("merge-of-a-shard-beyond-the-limit", files_and("out/index-1-of-18446744073709551615.json", b"{}".to_vec()), &["batch", "--merge", "out"], &["index-1-of-18446744073709551615.json", "at most"]),
+            None,
+        ),
+    ]
+}
+
+/// Small adjustments to a case, chained where it is built.
+trait CaseExt {
+    /// `ct.png` is made a link to the volume before the run.
+    fn setup_link_volume(self) -> Self;
+}
+
+impl CaseExt for Case {
+    fn setup_link_volume(self) -> Self {
+        Case {
+            setup: Some(|d| std::os::unix::fs::symlink("ct.nrrd", d.join("ct.png")).unwrap()),
+            ..self
+        }
+    }
 }

@@ -747,6 +747,16 @@ impl DataRoot {
     }
 }
 
+/// How many nodes are named `name` apart from a parent of that name (the parts of a mesh
+/// file may take its name): more than one, and a name does not say which node it means.
+fn named_apart(scene: &Scene, name: &str) -> usize {
+    let nodes = scene.nodes();
+    nodes
+        .iter()
+        .filter(|node| node.name == name && node.parent().is_none_or(|p| nodes[p.0].name != name))
+        .count()
+}
+
 /// A world point for a message: `[x, y, z]` to 0.1 mm.
 fn mm(p: DVec3) -> String {
     format!("[{:.1}, {:.1}, {:.1}]", p.x, p.y, p.z)
@@ -1258,11 +1268,11 @@ fn measurement(
     }
     let node = match &spec.node {
         None => None,
-        Some(n) if scene.nodes().iter().filter(|node| node.name == *n).count() > 1 => {
+        Some(n) if named_apart(scene, n) > 1 => {
             return Err(format!(
-                "{name}: node {:?} names {} nodes of the scene, so the measurement cannot tell which one it follows; give the meshes or volumes their own `name`",
+                "{name}: node {:?} names {} meshes or volumes of the scene, so the measurement cannot tell which one it follows; give each its own `name`",
                 shortened(n),
-                scene.nodes().iter().filter(|node| node.name == *n).count()
+                named_apart(scene, n)
             ));
         }
         Some(n) => Some(scene.find(n).ok_or_else(|| {

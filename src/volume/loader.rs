@@ -619,6 +619,32 @@ pub(super) mod tests {
     use super::*;
     use flate2::read::MultiGzDecoder;
 
+    #[test]
+    fn a_series_choice_or_a_skip_applies_to_a_dicom_folder_only() {
+        let series = LoadOptions {
+            series: Some(SeriesChoice("2".into())),
+            ..LoadOptions::default()
+        };
+        let file = Path::new("slice.dcm");
+        let e = series
+            .check_applies(file, VolumeFormat::Dicom)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("one DICOM file") && e.contains("folder"), "{e}");
+        let dir = scratch("series-choice");
+        assert!(series.check_applies(&dir, VolumeFormat::Dicom).is_ok());
+        let skip = LoadOptions {
+            skip_unreadable: true,
+            ..LoadOptions::default()
+        };
+        assert!(skip.check_applies(&dir, VolumeFormat::Dicom).is_ok());
+        let e = skip
+            .check_applies(Path::new("v.nrrd"), VolumeFormat::Nrrd)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("skipping unreadable files"), "{e}");
+    }
+
     /// A fresh directory per test, so that parallel tests and earlier runs never collide.
     pub fn scratch(tag: &str) -> PathBuf {
         let nanos = std::time::SystemTime::now()

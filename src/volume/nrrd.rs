@@ -190,7 +190,16 @@ impl Fields {
     /// entry. The axis must be non-spatial: its `kinds` entry not `space` or `domain`, or its
     /// `space directions` entry `none`. Any other 4-D array is refused.
     fn drop_single_axis(&mut self) -> Result<(), VolumeError> {
-        let sizes: [u64; 4] = self.numbers(self.require("sizes", "sizes")?)?;
+        let field = self.require("sizes", "sizes")?;
+        let sizes: [u64; 4] = self.numbers(field).map_err(|_| {
+            self.error(
+                field.line,
+                format!(
+                    "a 4-D NRRD (dimension 4) needs 4 sizes, not {:?}",
+                    field.value
+                ),
+            )
+        })?;
         let kinds: Vec<String> = self.get("kinds").map_or(Vec::new(), |f| {
             f.value
                 .split_whitespace()

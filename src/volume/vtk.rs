@@ -78,11 +78,10 @@ fn legacy_ascii_values(path: &Path, header: &LegacyHeader) -> Result<CpuVolume, 
     // for the grid is refused before any value memory is taken.
     let available = len.saturating_sub(header.data_offset);
     if available.saturating_add(1) / 2 < count as u64 {
-        return Err(VolumeError::TooShort {
-            path: path.into(),
-            expected: header.data_offset + 2 * count as u64 - 1,
-            actual: len,
-        });
+        let message = format!(
+            "the ASCII data take {available} bytes, too few for the {count} values declared"
+        );
+        return Err(header_error(path, message));
     }
     file.seek(SeekFrom::Start(header.data_offset))
         .map_err(io_error(path))?;
@@ -1013,8 +1012,8 @@ mod tests {
             ),
             (
                 "ascii.vtk",
-                b"# vtk DataFile Version 3.0\nt\nASCII\n".to_vec(),
-                "ASCII",
+                b"# vtk DataFile Version 3.0\nt\nASCII\nDATASET STRUCTURED_POINTS\nDIMENSIONS 2 2 2\nPOINT_DATA 8\nSCALARS s short\nLOOKUP_TABLE default\n1 2 x 4 5 6 7 8\n".to_vec(),
+                "\"x\" after 2 of the 8 declared values is not a number",
             ),
             (
                 "grid.vtk",

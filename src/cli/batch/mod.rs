@@ -866,7 +866,17 @@ mod tests {
         let none = env_of(&[]);
         assert_eq!(shard_from(Some("2/4"), &none).unwrap(), Some((2, 4)));
         assert_eq!(shard_from(Some("1/1"), &none).unwrap(), Some((1, 1)));
-        for bad in ["3/2", "0/0", "0/2", "2", "a/b", "1/0", "-1/2"] {
+        for bad in [
+            "3/2",
+            "0/0",
+            "0/2",
+            "2",
+            "a/b",
+            "1/0",
+            "-1/2",
+            "1/18446744073709551615",
+            "1/4000002",
+        ] {
             let e = shard_from(Some(bad), &none).unwrap_err().to_string();
             assert!(e.contains("--shard"), "{bad}: {e}");
         }
@@ -904,5 +914,18 @@ mod tests {
             ("SLURM_ARRAY_TASK_MIN", "0"),
         ]);
         assert!(shard_from(None, &outside).is_err());
+        // One of the pair without the other is refused, not a run of the whole batch.
+        for pair in [
+            &[("SLURM_ARRAY_TASK_ID", "3")][..],
+            &[("SLURM_ARRAY_TASK_COUNT", "4")][..],
+        ] {
+            let e = shard_from(None, &env_of(pair)).unwrap_err().to_string();
+            assert!(e.contains("--shard K/N"), "{e}");
+        }
+        let huge = env_of(&[
+            ("SLURM_ARRAY_TASK_ID", "1"),
+            ("SLURM_ARRAY_TASK_COUNT", "18446744073709551615"),
+        ]);
+        assert!(shard_from(None, &huge).is_err());
     }
 }
