@@ -1895,6 +1895,25 @@ fn input_output_cases() -> Vec<Case> {
             case("batch-output-is-a-volume", files_and("m.toml", manifest("out = \"ct.png\"")), &["batch", "m.toml", "--out", "."], &["input"]).setup_link_volume(),
             None,
         ),
+        // A data file a header names is known once its job loads: the job fails before it
+        // draws, and the data file is as it was.
+        Case {
+            after: Some(|d| match std::fs::read(d.join("out/a.png")) {
+                Ok(b) if b == (0..64u8).map(|v| v * 4).collect::<Vec<u8>>() => Ok(()),
+                _ => Err("out/a.png, the header's data file, was changed".into()),
+            }),
+            ..case(
+                "batch-output-is-a-header-data-file",
+                {
+                    let mut f = files_and("m.toml", b"[[job]]\nname = \"a\"\nvolume = \"d.nhdr\"\nviews = [\"anterior\"]\nsizes = [[32, 24]]\nout = \"a.png\"\n".to_vec());
+                    f.push(("d.nhdr", b"NRRD0004\ntype: uchar\ndimension: 3\nsizes: 4 4 4\nencoding: raw\ndata file: out/a.png\n".to_vec()));
+                    f.push(("out/a.png", (0..64u8).map(|v| v * 4).collect()));
+                    f
+                },
+                &["batch", "m.toml", "--out", "out"],
+                &["a.png", "input"],
+            )
+        },
         with(
             case("batch-depth-sidecar-is-the-index", files_and("m.toml", manifest("depth = \"index.png\"")), &["batch", "m.toml", "--check"], &["depth", "index"]),
             None,

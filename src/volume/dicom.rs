@@ -491,29 +491,42 @@ fn without_copies(
 /// not be parsed (in name order).
 fn read_folder(dir: &Path) -> Result<FolderFiles, VolumeError> {
     let (paths, mut unreadable) = dicom_files(dir)?;
-    let read: Vec<_> = paths
+    let read: Vec<FileRead> = paths
         .par_iter()
         .map(|p| match read_image(p) {
-            Err(e) => Err((e, header_of_damaged(p))),
-            Ok(image) => Ok(image),
+            Ok(image) => FileRead::Image(image),
+            Err(error) => match header_of_damaged(p) {
+                Some((series, instance, position)) => FileRead::Damaged(Damaged {
+                    series,
+                    instance,
+                    position,
+                    error,
+                }),
+                None => FileRead::Unreadable(error),
+            },
         })
         .collect();
     let mut images = Vec::new();
     let mut damaged = Vec::new();
     for result in read {
         match result {
-            Ok(Some(image)) => images.push(image),
-            Ok(None) => {}
-            Err((e, Some((series, instance, position)))) => damaged.push(Damaged {
-                series,
-                instance,
-                position,
-                error: e,
-            }),
-            Err((e, None)) => unreadable.push(e),
+            FileRead::Image(Some(image)) => images.push(image),
+            FileRead::Image(None) => {}
+            FileRead::Damaged(d) => damaged.push(d),
+            FileRead::Unreadable(e) => unreadable.push(e),
         }
     }
     Ok((images, unreadable, damaged))
+}
+
+/// What reading one file of a folder came to.
+enum FileRead {
+    /// An image, or `None` for a DICOM file without pixel data.
+    Image(Option<Image>),
+    /// A file whose header names its series but which cannot be read whole.
+    Damaged(Damaged),
+    /// A file that cannot be read as DICOM at all.
+    Unreadable(VolumeError),
 }
 
 /// A folder's images, the files that could not be read as DICOM at all, and those whose
