@@ -8,7 +8,7 @@ use std::hint::black_box;
 use std::time::Duration;
 
 use criterion::{Criterion, criterion_group, criterion_main};
-use splatscene::classify::{TransferFunction, classify, classify_shell};
+use splatscene::classify::{ClassifyOptions, TransferFunction, classify, classify_with};
 
 mod common;
 
@@ -31,20 +31,21 @@ fn classification(c: &mut Criterion) {
         .sample_size(10)
         .warm_up_time(Duration::from_millis(500))
         .measurement_time(Duration::from_secs(5));
+    let shell = ClassifyOptions {
+        shell: Some(0.5),
+        ..Default::default()
+    };
     for (name, volume, tf) in &cases {
         let full = classify(volume, tf, 1.0 / 255.0).unwrap().grid.len();
-        let shell = classify_shell(volume, tf, 1.0 / 255.0, 0.5, 1.0)
-            .unwrap()
-            .grid
-            .len();
+        let on_shell = classify_with(volume, tf, &shell).unwrap().grid.len();
         eprintln!(
-            "{name}: {full} significant voxels, {shell} on the shell (neighbour at or below 0.5)"
+            "{name}: {full} significant voxels, {on_shell} on the shell (neighbour at or below 0.5)"
         );
         group.bench_function(format!("{name}/full"), |b| {
             b.iter(|| black_box(classify(volume, tf, 1.0 / 255.0)))
         });
         group.bench_function(format!("{name}/shell"), |b| {
-            b.iter(|| black_box(classify_shell(volume, tf, 1.0 / 255.0, 0.5, 1.0)))
+            b.iter(|| black_box(classify_with(volume, tf, &shell)))
         });
     }
     group.finish();

@@ -21,7 +21,8 @@ struct Splat {
     // x, y: image size; z: cut-off of the Gaussian's exponent (radius^2 / sigma^2);
     // w: 1 for orthographic.
     size: vec4<f32>,
-    // x: perspective depth scale (near plane); orthographic: y near, z far.
+    // x: perspective depth scale (near plane); orthographic: y near, z far; w: millimetres one
+    // index step spans along the view (a splat's opacity is 1 - exp(-density * w)).
     depth: vec4<f32>,
     // Grid size; w: clip planes in use.
     dims: vec4<u32>,
@@ -36,10 +37,25 @@ struct Splat {
 }
 
 @group(0) @binding(0) var<uniform> u: Splat;
-// Straight (not premultiplied) RGBA per voxel; only significant voxels are ever read.
-@group(0) @binding(1) var colors: texture_3d<f32>;
-// Unit index-space gradient per voxel in xyz (w = 1 where the gradient is defined).
-@group(0) @binding(2) var normals: texture_3d<f32>;
+// Per voxel the tile compositor's 8-byte texel (src/tiled.rs, `texel`): x holds straight RGB8
+// and the gradient's x, y holds its y and z (snorm8, all zero where undefined) and the density
+// as an f16 in its high half. Only significant voxels are ever read.
+@group(0) @binding(1) var texels: texture_3d<u32>;
+
+// A non-negative IEEE half, given by its bits, as f32 (written out: `unpack2x16float` needs a
+// capability not every device has). Infinity and NaN (never written) come out as 2^17, which
+// makes any splat opaque.
+fn half_bits_to_f32(h: u32) -> f32 {
+    let e = (h >> 10u) & 0x1fu;
+    let m = h & 0x3ffu;
+    if e == 0u {
+        return f32(m) * 5.9604645e-8;
+    }
+    if e == 31u {
+        return 131072.0;
+    }
+    return bitcast<f32>(((e + 112u) << 23u) | (m << 13u));
+}
 
 struct VsOut {
     @builtin(position) clip: vec4<f32>,
@@ -62,11 +78,13 @@ fn discarded() -> VsOut {
 fn vs_main(@builtin(vertex_index) corner: u32, @location(0) id: u32) -> VsOut {
     let n = u.dims.xyz;
     let k = vec3<u32>(id % n.x, (id / n.x) % n.y, id / (n.x * n.y));
-    let straight = textureLoad(colors, k, 0);
+    let texel = textureLoad(texels, k, 0).xy;
+    let density = half_bits_to_f32(texel.y >> 16u);
+    let peak = 1.0 - exp(-density * u.depth.w);
     let d = vec3<f32>(k) - u.eye.xyz;
     let p = vec3<f32>(dot(u.m0.xyz, d), dot(u.m1.xyz, d), dot(u.m2.xyz, d));
     let ortho = u.size.w > 0.5;
-    if straight.a <= 0.0 || (!ortho && p.z <= u.eye.w) || (ortho && p.z <= u.depth.y) {
+    if !(peak > 0.0) || (!ortho && p.z <= u.eye.w) || (ortho && p.z <= u.depth.y) {
         return discarded();
     }
     for (var i = 0u; i < u.dims.w; i++) {
@@ -103,18 +121,23 @@ fn vs_main(@builtin(vertex_index) corner: u32, @location(0) id: u32) -> VsOut {
     out.clip = vec4<f32>(pixel.x / u.size.x * 2.0 - 1.0, 1.0 - pixel.y / u.size.y * 2.0, z, 1.0);
     out.offset = offset;
     out.conic = vec3<f32>(c / det, -b / det, a / det);
-    var rgb = straight.rgb;
+    var rgb = unpack4x8unorm(texel.x).xyz;
     let strength = u.n0.w;
+    let g = vec3<f32>(unpack4x8snorm(texel.x).w, unpack4x8snorm(texel.y).xy);
     if strength > 0.0 {
-        let g = textureLoad(normals, k, 0);
-        if g.w > 0.5 {
-            let n = vec3<f32>(dot(u.n0.xyz, g.xyz), dot(u.n1.xyz, g.xyz), dot(u.n2.xyz, g.xyz));
+        if any(g != vec3<f32>(0.0)) {
+            let n = vec3<f32>(dot(u.n0.xyz, g), dot(u.n1.xyz, g), dot(u.n2.xyz, g));
             // Headlight, two-sided: a surface facing the eye either way is lit.
             let lambert = abs(normalize(n).z);
             rgb *= 1.0 - strength + strength * lambert;
         }
     }
-    out.color = vec4<f32>(rgb * straight.a, straight.a);
+    // Mip-Splatting's 2-D filter: the pixel variance widens the footprint, and the opacity
+    // shrinks so that its integral over the image is kept (see `kept_integral` in
+    // src/tiled.rs).
+    let own = (a - u.screen.w) * (c - u.screen.w) - b * b;
+    let alpha = peak * min(sqrt(max(own / det, 0.0)), 1.0);
+    out.color = vec4<f32>(rgb * alpha, alpha);
     return out;
 }
 

@@ -78,20 +78,24 @@ pub fn check_frame_size(width: u32, height: u32) -> Result<(), CompositeError> {
 /// Splat shape, in voxel units along each grid axis.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SplatStyle {
-    /// Standard deviation of the Gaussian (the original ShellSplatting used 0.7).
+    /// Standard deviation of the Gaussian (the original ShellSplatting used 0.7; the default is
+    /// [`crate::classify::DEFAULT_SIGMA`]).
     pub sigma: f64,
-    /// Footprint radius where the Gaussian is cut off (the original used 2.0).
+    /// Footprint radius where the Gaussian is cut off (the original used 2.0; the default is
+    /// [`crate::classify::DEFAULT_CUTOFF`]).
     pub cutoff: f64,
     /// Screen-space variance in square pixels added to every footprint, so that splats smaller
-    /// than a pixel still cover one (the EWA low-pass filter).
+    /// than a pixel still cover one (the EWA low-pass filter); the splat's opacity shrinks so
+    /// that the footprint's integral is that of the unwidened one (Mip-Splatting's 2-D filter),
+    /// and sub-pixel splats do not pile up opacity.
     pub pixel_variance: f64,
 }
 
 impl Default for SplatStyle {
     fn default() -> Self {
         Self {
-            sigma: 0.7,
-            cutoff: 2.0,
+            sigma: crate::classify::DEFAULT_SIGMA,
+            cutoff: crate::classify::DEFAULT_CUTOFF,
             pixel_variance: 0.3,
         }
     }
@@ -312,11 +316,20 @@ fn project(
         if bounds[0] > bounds[1] || bounds[2] > bounds[3] {
             continue;
         }
+        // Mip-Splatting's 2-D filter: the widened footprint keeps the unwidened one's
+        // integral (see `kept_integral` in src/tiled.rs; computed here on its own, in f64).
+        let v = style.pixel_variance;
+        let own = (a - v) * (c - v) - b * b;
+        let kept = if own > 0.0 {
+            (own / det).sqrt().min(1.0) as f32
+        } else {
+            0.0
+        };
         out.push(Footprint {
             centre,
             conic: [c / det, -b / det, a / det],
             bounds,
-            color,
+            color: color.map(|v| v * kept),
             depth: p.length(),
         });
     }
@@ -417,9 +430,9 @@ mod tests {
             (centre[2] - 0.8).abs() < 1e-6 && (centre[3] - 0.8).abs() < 1e-6,
             "{centre:?}"
         );
-        // One pixel to the right: sigma 0.7 voxel at distance 11 with focal f.
+        // One pixel to the right: sigma voxels at distance 11 with focal f.
         let f = 0.5 * 33.0 / 25f64.to_radians().tan();
-        let sigma_px = 0.7 * f / 11.0;
+        let sigma_px = style.sigma * f / 11.0;
         let expected = 0.8 * (-0.5 / (sigma_px * sigma_px)).exp();
         assert!((f64::from(frame.pixels[16 * 33 + 17][3]) - expected).abs() < 1e-5);
         assert_eq!(stats.pairs, 0);
@@ -434,7 +447,11 @@ mod tests {
             grid: &grid,
             colors: &colors,
         };
-        let style = SplatStyle::default();
+        // No low-pass: a splat's centre keeps its full opacity.
+        let style = SplatStyle {
+            pixel_variance: 0.0,
+            ..SplatStyle::default()
+        };
         let (back_to_front, good) = composite(&camera(), &volume, &[1, 0], &style).unwrap();
         let (front_to_back, bad) = composite(&camera(), &volume, &[0, 1], &style).unwrap();
         let c = back_to_front.pixels[16 * 33 + 16];
@@ -449,6 +466,45 @@ mod tests {
         assert_eq!(
             compare(&back_to_front, &back_to_front).unwrap(),
             ImageDifference::default()
+        );
+    }
+
+    #[test]
+    fn the_low_pass_keeps_a_splats_integral_over_the_image() {
+        // A splat far away, well below a pixel: widened by the pixel variance, its summed
+        // opacity over the image stays its own footprint's integral, 2 pi alpha sigma_px^2
+        // (the cut-off keeps all but exp(-cutoff^2 / 2 sigma^2) of it).
+        let geometry = VolumeGeometry::axis_aligned([1, 1, 1], [1.0; 3], [0.0; 3]).unwrap();
+        let grid = SparseGrid::dense([1, 1, 1]).unwrap();
+        let colors = vec![[0.0, 0.0, 0.02, 0.02]];
+        let volume = SplatVolume {
+            geometry: &geometry,
+            grid: &grid,
+            colors: &colors,
+        };
+        let camera = Camera::looking_at(DVec3::new(-80.0, 0.0, 0.0), DVec3::ZERO, 33, 33);
+        let style = SplatStyle::default();
+        let (frame, _) = composite(&camera, &volume, &[0], &style).unwrap();
+        let sum: f64 = frame.pixels.iter().map(|p| f64::from(p[3])).sum();
+        let f = 0.5 * 33.0 / 25f64.to_radians().tan();
+        let sigma_px = style.sigma * f / 80.0;
+        assert!(sigma_px < 0.3, "below a pixel: {sigma_px}");
+        let kept = 1.0 - (-0.5 * (style.cutoff / style.sigma).powi(2)).exp();
+        let want = std::f64::consts::TAU * 0.02 * sigma_px * sigma_px * kept;
+        // The pixel grid samples the widened Gaussian (sigma over half a pixel): its sum is
+        // the integral within a few per cent.
+        assert!((sum / want - 1.0).abs() < 0.05, "{sum} against {want}");
+        // Without the low-pass the tiny footprint falls between pixel centres or not: no
+        // integral is kept at all, which is what the filter is for.
+        let sharp = SplatStyle {
+            pixel_variance: 0.0,
+            ..style
+        };
+        let (frame, _) = composite(&camera, &volume, &[0], &sharp).unwrap();
+        let sharp_sum: f64 = frame.pixels.iter().map(|p| f64::from(p[3])).sum();
+        assert!(
+            (sharp_sum / want - 1.0).abs() > 0.5,
+            "{sharp_sum} against {want}"
         );
     }
 

@@ -37,6 +37,14 @@ pub enum GridError {
     /// Ids given as a list must be strictly increasing.
     #[error("voxel ids must be strictly increasing; position {0} breaks that")]
     Unsorted(usize),
+    /// A volume holds fewer values than its grid has voxels.
+    #[error("the volume holds {values} values for {voxels} voxels")]
+    TooFewValues {
+        /// Values held.
+        values: usize,
+        /// Voxels of the grid.
+        voxels: usize,
+    },
 }
 
 /// A run of consecutive significant voxels along one axis: `start..start + len`.

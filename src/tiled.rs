@@ -35,6 +35,10 @@ use glam::Vec3;
 use rayon::prelude::*;
 use strength_reduce::StrengthReducedU32;
 
+use crate::classify::{Classified, gradient_snorm8};
+use crate::grid::SparseGrid;
+use crate::volume::CpuVolume;
+
 /// Tile side in pixels.
 pub const TILE: usize = 16;
 /// A pixel whose accumulated opacity reaches this takes no more splats; a tile whose pixels
@@ -79,17 +83,59 @@ pub struct SplatProjection {
     pub shading: f32,
     /// Clip planes in camera space: a splat is kept where `dot(xyz, p) <= w` for each.
     pub clip: Vec<[f32; 4]>,
+    /// A splat's peak opacity in this view by the f16 bits of its density
+    /// ([`alpha_table`]).
+    pub alpha: std::sync::Arc<[f32]>,
 }
 
-/// A volume's splat data as the GPU keeps it (straight RGBA8 colour, and the unit index-space
-/// gradient as snorm8 with w = 127 where defined), both in one 8-byte texel per voxel, for the
-/// voxels that have any opacity alone, stored brick by brick (4x4x4 voxels).
+impl SplatProjection {
+    /// The peak opacity of the splat whose texel is `texel`.
+    #[inline(always)]
+    fn alpha_of(&self, texel: &[u8; 8]) -> f32 {
+        let bits = u16::from_le_bytes([texel[6], texel[7]]);
+        self.alpha.get(usize::from(bits)).copied().unwrap_or(0.0)
+    }
+}
+
+/// The peak opacity of a splat by the f16 bits of its density (all 65,536 of them), in a view
+/// whose index step spans `step_mm` millimetres: [`crate::classify::splat_alpha`] of each.
+/// The last few views' tables are kept, so a frame does not remake its table (65,536
+/// exponentials, about half a millisecond).
+pub fn alpha_table(step_mm: f32) -> std::sync::Arc<[f32]> {
+    use std::sync::{Arc, Mutex};
+    static KEPT: Mutex<Vec<(u32, Arc<[f32]>)>> = Mutex::new(Vec::new());
+    let key = step_mm.to_bits();
+    if let Ok(kept) = KEPT.lock()
+        && let Some((_, table)) = kept.iter().find(|(k, _)| *k == key)
+    {
+        return Arc::clone(table);
+    }
+    let table: Arc<[f32]> = (0..=u16::MAX)
+        .map(|bits| {
+            let density = half::f16::from_bits(bits).to_f32();
+            // Negative or NaN densities (never written) stay transparent.
+            crate::classify::splat_alpha(density, step_mm)
+        })
+        .collect();
+    if let Ok(mut kept) = KEPT.lock() {
+        if kept.len() >= 8 {
+            kept.remove(0);
+        }
+        kept.push((key, Arc::clone(&table)));
+    }
+    table
+}
+
+/// A volume's splat data in 8 bytes a splat: straight RGB8 colour, the unit index-space
+/// gradient as snorm8 (all zero where undefined), and the density as an f16 (see
+/// [`crate::classify::SplatColor`]), for the significant voxels alone, stored brick by brick
+/// (4x4x4 voxels).
 ///
 /// Bricks, since the draw order runs along any axis: within a brick the next voxel along y or
-/// z is as near as the next along x. Only voxels with opacity, since a frame reads the texel of
+/// z is as near as the next along x. Only significant voxels, since a frame reads the texel of
 /// every splat it projects, and packed, the texels of neighbouring splats share cache lines
 /// (the engine's 1.05M voxels with opacity, of 8.4M, take 8 MB of texels and 2 MB of bricks
-/// instead of 67 MB). A brick's voxels with opacity are a bit mask, and a voxel's texel is
+/// instead of 67 MB). A brick's significant voxels are a bit mask, and a voxel's texel is
 /// found by counting the bits before its own.
 #[derive(Debug, Clone, Default)]
 pub struct SplatTexels {
@@ -114,9 +160,18 @@ struct Brick {
 const BRICK: usize = 4;
 
 impl SplatTexels {
-    /// The texels of a grid of `dims` from the splat pass's colour and normal textures (four
-    /// bytes per voxel each, x fastest). Voxels past the textures' ends are left out.
-    pub fn new(dims: [u32; 3], colors: &[u8], normals: &[u8]) -> Self {
+    /// The texels of a classified volume: its colours and densities, and the gradients of the
+    /// volume it was classified from. Built brick by brick from the significant voxels; no
+    /// buffer the size of the whole grid.
+    pub fn new(classified: &Classified, volume: &CpuVolume) -> Self {
+        Self::build(&classified.grid, |k, rank| {
+            texel(volume, classified, k, rank)
+        })
+    }
+
+    /// The texels of `grid`'s voxels, each given by `texel(voxel, rank)`.
+    pub fn build(grid: &SparseGrid, texel: impl Fn([u32; 3], usize) -> [u8; 8] + Sync) -> Self {
+        let dims = grid.dims();
         let [nx, ny, nz] = dims.map(|n| n as usize);
         let bricks = [nx.div_ceil(BRICK), ny.div_ceil(BRICK)];
         let layer = bricks[0] * bricks[1];
@@ -124,10 +179,8 @@ impl SplatTexels {
         if layer == 0 || layers == 0 {
             return Self::default();
         }
-        let present = |id: usize| {
-            colors.get(4 * id + 3).is_some_and(|&a| a > 0) && normals.len() >= 4 * id + 4
-        };
-        // Which voxels have opacity, a layer of bricks (four z-slices) a task.
+        // Which voxels are significant, a layer of bricks (four z-slices) a task, from the
+        // grid's x rows.
         let mut table = vec![Brick::default(); layer * layers];
         table
             .par_chunks_mut(layer)
@@ -135,8 +188,8 @@ impl SplatTexels {
             .for_each(|(bz, bricks_of_layer)| {
                 for z in bz * BRICK..((bz + 1) * BRICK).min(nz) {
                     for y in 0..ny {
-                        for x in 0..nx {
-                            if present(x + nx * (y + ny * z)) {
+                        for run in grid.row(0, y as u32, z as u32) {
+                            for x in run.start as usize..run.end() as usize {
                                 let brick =
                                     &mut bricks_of_layer[(y / BRICK) * bricks[0] + x / BRICK];
                                 brick.present |= 1 << within_brick(x, y, z);
@@ -145,7 +198,7 @@ impl SplatTexels {
                     }
                 }
             });
-        // Voxel ids are `u32`, so the count of voxels with opacity is too.
+        // Voxel ids are `u32`, so the count of significant voxels is too.
         let mut count = 0u32;
         for brick in &mut table {
             brick.first = count;
@@ -176,13 +229,10 @@ impl SplatTexels {
                         let x = bx * BRICK + bit % BRICK;
                         let y = by * BRICK + (bit / BRICK) % BRICK;
                         let z = bz * BRICK + bit / (BRICK * BRICK);
-                        let id = 4 * (x + nx * (y + ny * z));
-                        if let (Some(slot), Some(c), Some(n)) = (
-                            slots.next(),
-                            colors.get(id..id + 4),
-                            normals.get(id..id + 4),
-                        ) {
-                            *slot = [c[0], c[1], c[2], c[3], n[0], n[1], n[2], n[3]];
+                        let k = [x, y, z].map(|c| c as u32);
+                        let id = (x + nx * (y + ny * z)) as u32;
+                        if let (Some(slot), Some(rank)) = (slots.next(), grid.rank(id)) {
+                            *slot = texel(k, rank as usize);
                         }
                     }
                 }
@@ -195,8 +245,8 @@ impl SplatTexels {
         }
     }
 
-    /// The texel of voxel `(x, y, z)`: straight RGBA8, then the gradient as snorm8; `None`
-    /// off the grid or where the voxel has no opacity.
+    /// The texel of voxel `(x, y, z)`: straight RGB8, the gradient as snorm8, the density's
+    /// f16 bits (little-endian); `None` off the grid or where the voxel is not significant.
     #[inline]
     fn get(&self, x: u32, y: u32, z: u32) -> Option<&[u8; 8]> {
         let [nx, ny, nz] = self.dims;
@@ -213,6 +263,16 @@ impl SplatTexels {
         let before = (brick.present & ((1u64 << bit) - 1)).count_ones();
         self.texels.get((brick.first + before) as usize)
     }
+}
+
+/// The 8-byte texel of significant voxel `k` (rank `rank`) of a classified volume: straight
+/// RGB8, the gradient of `volume` as snorm8 (zero where undefined), the density's f16 bits
+/// little-endian. The GPU's splat pass reads the same bytes as two `u32`.
+pub fn texel(volume: &CpuVolume, classified: &Classified, k: [u32; 3], rank: usize) -> [u8; 8] {
+    let c = classified.colors.get(rank).copied().unwrap_or_default();
+    let n = gradient_snorm8(volume, k).unwrap_or([0; 3]);
+    let d = c.density.to_bits().to_le_bytes();
+    [c.rgb[0], c.rgb[1], c.rgb[2], n[0], n[1], n[2], d[0], d[1]]
 }
 
 /// The bit of voxel `(x, y, z)` in its brick's mask.
@@ -862,8 +922,8 @@ fn project(
     let Some(texel) = texels.get(x, y, z) else {
         return none;
     };
-    let straight = [texel[0], texel[1], texel[2], texel[3]].map(|v| f32::from(v) / 255.0);
-    if straight[3] <= 0.0 {
+    let peak = u.alpha_of(texel);
+    if peak <= 0.0 {
         return none;
     }
     if u.clip
@@ -872,16 +932,16 @@ fn project(
     {
         return none;
     }
-    let mut rgb = [straight[0], straight[1], straight[2]];
-    let g = [4, 5, 6, 7].map(|i| texel[i] as i8);
-    if u.shading > 0.0 && g[3] > 63 {
-        let g = Vec3::new(f32::from(g[0]), f32::from(g[1]), f32::from(g[2])) / 127.0;
+    let mut rgb = [texel[0], texel[1], texel[2]].map(|v| f32::from(v) / 255.0);
+    let g = [3, 4, 5].map(|i| f32::from(texel[i] as i8));
+    if u.shading > 0.0 && g != [0.0; 3] {
+        let g = Vec3::from(g) / 127.0;
         let n = Vec3::new(u.normal[0].dot(g), u.normal[1].dot(g), u.normal[2].dot(g));
         let lambert = n.normalize_or_zero().z.abs();
         let scale = 1.0 - u.shading + u.shading * lambert;
         rgb = rgb.map(|v| v * scale);
     }
-    let alpha = straight[3];
+    let alpha = peak * kept_integral(at.a, at.b, at.c, u.pixel_variance);
     let inv_det = 1.0 / (at.a * at.c - at.b * at.b);
     let [x0, y0, x1, y1] = at.rect;
     Projected {
@@ -894,6 +954,23 @@ fn project(
         y0,
         x1,
         y1,
+    }
+}
+
+/// The share of a splat's opacity a footprint widened by the pixel variance keeps, so that its
+/// integral over the image stays that of the unwidened footprint (Mip-Splatting's 2-D
+/// filter: `sqrt(det S / det(S + v I))` for the screen covariance `S` and pixel variance `v`;
+/// Yu et al. 2024, eq. 8): a splat smaller than a pixel covers a pixel with the opacity it
+/// would have spread over its own area, instead of the full opacity. `a`, `b` and `c` are the
+/// widened covariance's entries.
+#[inline(always)]
+fn kept_integral(a: f32, b: f32, c: f32, v: f32) -> f32 {
+    let wide = a * c - b * b;
+    let own = (a - v) * (c - v) - b * b;
+    if own > 0.0 && wide > 0.0 {
+        (own / wide).sqrt().min(1.0)
+    } else {
+        0.0
     }
 }
 
@@ -1435,7 +1512,7 @@ mod avx2 {
         // Which lanes go on: placed on the image, not hidden, with a texel that has opacity.
         let placed = _mm256_movemask_ps(placed) as u32;
         let mut culled = 0;
-        let mut texel = [[0.0f32; LANES]; 8];
+        let mut texel = [[0.0f32; LANES]; 7];
         let mut go = 0u32;
         for l in 0..n {
             if placed >> l & 1 == 0 {
@@ -1451,14 +1528,16 @@ mod avx2 {
             let Some(t) = group.texels.get(x, y, z) else {
                 continue;
             };
-            if t[3] == 0 {
+            let peak = u.alpha_of(t);
+            if peak <= 0.0 {
                 continue;
             }
             go |= 1 << l;
-            for c in 0..4 {
+            for c in 0..3 {
                 texel[c][l] = f32::from(t[c]);
-                texel[4 + c][l] = f32::from(t[4 + c] as i8);
+                texel[3 + c][l] = f32::from(t[3 + c] as i8);
             }
+            texel[6][l] = peak;
         }
         if go == 0 {
             return (culled, 0);
@@ -1480,7 +1559,7 @@ mod avx2 {
         let inv255 = splat(1.0 / 255.0);
         let mut rgb = [0, 1, 2].map(|i| _mm256_mul_ps(lanes(&texel[i]), inv255));
         if u.shading > 0.0 {
-            let g = [4, 5, 6].map(|i| lanes(&texel[i]));
+            let g = [3, 4, 5].map(|i| lanes(&texel[i]));
             let [nx, ny, nz] = [0, 1, 2].map(|r| dot3(u.normal[r], g));
             let len2 = _mm256_fmadd_ps(nx, nx, _mm256_fmadd_ps(ny, ny, _mm256_mul_ps(nz, nz)));
             let abs_nz = _mm256_andnot_ps(splat(-0.0), nz);
@@ -1489,11 +1568,23 @@ mod avx2 {
                 _mm256_cmp_ps::<_CMP_GT_OQ>(len2, splat(0.0)),
             );
             let scale = _mm256_fmadd_ps(splat(u.shading), lambert, splat(1.0 - u.shading));
-            let shaded = _mm256_cmp_ps::<_CMP_GT_OQ>(lanes(&texel[7]), splat(63.0));
+            // An undefined gradient is stored as zero.
+            let shaded = _mm256_cmp_ps::<_CMP_GT_OQ>(len2, splat(0.0));
             let scale = _mm256_blendv_ps(splat(1.0), scale, shaded);
             rgb = rgb.map(|v| _mm256_mul_ps(v, scale));
         }
-        let alpha = _mm256_mul_ps(lanes(&texel[3]), inv255);
+        // The peak opacity times the share of the footprint's integral the pixel variance
+        // keeps (see `kept_integral`).
+        let own = _mm256_fmsub_ps(
+            _mm256_sub_ps(a, pv),
+            _mm256_sub_ps(c, pv),
+            _mm256_mul_ps(b, b),
+        );
+        let kept = _mm256_min_ps(
+            _mm256_sqrt_ps(_mm256_max_ps(_mm256_div_ps(own, det), splat(0.0))),
+            splat(1.0),
+        );
+        let alpha = _mm256_mul_ps(lanes(&texel[6]), kept);
         let [r, g, bl] = rgb.map(|v| unlanes(_mm256_mul_ps(v, alpha)));
         let alpha = unlanes(alpha);
         let conic = [
@@ -1796,13 +1887,33 @@ mod tests {
             state ^= state << 5;
             state
         };
-        let mut colors = vec![0u8; 4 * count];
-        let mut normals = vec![0u8; 4 * count];
-        for i in 0..count {
+        // A third of the voxels left out; densities from clear to nearly opaque; a quarter of
+        // the gradients undefined (zero).
+        let mut ids = Vec::new();
+        let mut texel_of = std::collections::HashMap::new();
+        for id in 0..count as u32 {
             let (c, n) = (next().to_le_bytes(), next().to_le_bytes());
-            colors[4 * i..4 * i + 4].copy_from_slice(&[c[0], c[1], c[2], c[3] % 3 * c[3] / 2]);
-            normals[4 * i..4 * i + 4].copy_from_slice(&[n[0], n[1], n[2], n[3] % 128]);
+            if c[3] % 3 == 0 {
+                continue;
+            }
+            let density = half::f16::from_f32(f32::from(c[3]) / 64.0)
+                .to_bits()
+                .to_le_bytes();
+            let g = if n[3] % 4 == 0 {
+                [0; 3]
+            } else {
+                [n[0], n[1], n[2]]
+            };
+            ids.push(id);
+            texel_of.insert(
+                id,
+                [c[0], c[1], c[2], g[0], g[1], g[2], density[0], density[1]],
+            );
         }
+        let grid = SparseGrid::from_sorted_ids(dims, &ids).unwrap();
+        let texels = SplatTexels::build(&grid, |[x, y, z], _| {
+            texel_of[&(x + dims[0] * (y + dims[1] * z))]
+        });
         let turn = glam::Mat3::from_euler(glam::EulerRot::XYZ, 0.4, -0.7, 0.2);
         let m = [turn.row(0), turn.row(1), turn.row(2)];
         let cov = glam::Mat3::from_diagonal(Vec3::new(0.3, 0.5, 0.2));
@@ -1825,8 +1936,9 @@ mod tests {
             normal: [turn.row(0), turn.row(1), turn.row(2)],
             shading: 0.7,
             clip: vec![[0.3, -0.2, 0.9, 29.0]],
+            alpha: alpha_table(0.8),
         };
-        (u, SplatTexels::new(dims, &colors, &normals))
+        (u, texels)
     }
 
     #[test]

@@ -5,7 +5,7 @@
 
 use glam::DVec3;
 use splatscene::camera::Camera;
-use splatscene::classify::{TransferFunction, classify};
+use splatscene::classify::{TransferFunction, classify, view_step_mm};
 use splatscene::composite::{SplatStyle, SplatVolume, compare, composite};
 use splatscene::order::{OrderOptions, Orderer, Ordering, ViewCase};
 use splatscene::volume::CpuVolume;
@@ -42,11 +42,6 @@ fn shells(spacing: [f64; 3]) -> CpuVolume {
 fn errors(volume: &CpuVolume, eyes: &[[f64; 3]]) -> Vec<(Ordering, f64)> {
     let geometry = volume.geometry().unwrap();
     let classified = classify(volume, &TransferFunction::ct_bone(), 1.0 / 255.0).unwrap();
-    let splats = SplatVolume {
-        geometry: &geometry,
-        grid: &classified.grid,
-        colors: &classified.colors,
-    };
     let mut orderer = Orderer::new();
     let mut list = Vec::new();
     let options = OrderOptions {
@@ -59,6 +54,13 @@ fn errors(volume: &CpuVolume, eyes: &[[f64; 3]]) -> Vec<(Ordering, f64)> {
         let eye = geometry.index_to_world_point(DVec3::from(*eye));
         let target = geometry.centre_world();
         let view = ViewCase::new(&geometry, eye, target).unwrap();
+        let step = view_step_mm(geometry.index_to_world().matrix3, target - eye).unwrap();
+        let colors = classified.premultiplied(step as f32);
+        let splats = SplatVolume {
+            geometry: &geometry,
+            grid: &classified.grid,
+            colors: &colors,
+        };
         let mut camera = Camera::looking_at(eye, target, 96, 96);
         camera.up = Camera::safe_up(eye, target);
         orderer

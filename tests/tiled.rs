@@ -45,9 +45,14 @@ fn shoot(
 /// over the same f32 footprints (see `assert_matches_reference` in tests/render_gpu.rs for the
 /// edge jump between f32 and f64 footprints, which the reference adds).
 fn assert_alike(d: &ImageDifference, what: &str) {
+    assert_alike_within(d, what, 0.002);
+}
+
+/// [`assert_alike`] with an RMSE bound of `rmse`.
+fn assert_alike_within(d: &ImageDifference, what: &str, rmse: f64) {
     let style = SplatStyle::default();
     let edge_jump = (-0.5 * (style.cutoff / style.sigma).powi(2)).exp();
-    assert!(d.rmse < 0.002, "{what}: {d:?}");
+    assert!(d.rmse < rmse, "{what}: {d:?}");
     assert!(d.max_abs < edge_jump + 3.0 / 255.0, "{what}: {d:?}");
 }
 
@@ -61,6 +66,16 @@ fn gpu_against_tiles_at(
     size: (u32, u32),
     what: &str,
 ) -> ImageDifference {
+    gpu_against_tiles_within(scene, camera, size, what, 0.002)
+}
+
+fn gpu_against_tiles_within(
+    scene: &Scene,
+    camera: &SceneCamera,
+    size: (u32, u32),
+    what: &str,
+    rmse: f64,
+) -> ImageDifference {
     let ctx = context();
     let gpu = shoot(&ctx, Compositor::Gpu, scene, camera, size);
     let cpu = shoot(&ctx, Compositor::Cpu, scene, camera, size);
@@ -72,7 +87,7 @@ fn gpu_against_tiles_at(
         .count();
     assert!(covered > 100, "{what}: the scene shows");
     let d = compare(&gpu, &cpu).unwrap();
-    assert_alike(&d, what);
+    assert_alike_within(&d, what, rmse);
     d
 }
 
@@ -173,7 +188,14 @@ fn early_termination_leaves_out_no_more_than_its_threshold() {
     // A dense, nearly opaque block: most splats lie behind opaque pixels.
     let mut volume = shells(24, [1.0; 3]);
     volume.values.iter_mut().for_each(|v| *v = 1800.0);
-    let scene = volume_scene(volume, Ordering::IpPbtfImplicit);
+    let mut scene = volume_scene(volume, Ordering::IpPbtfImplicit);
+    // Opacity 0.8 per quarter millimetre: each 1 mm splat nearly opaque.
+    let id = scene.find("volume").unwrap();
+    let NodeContent::Volume(mut node) = scene.node(id).unwrap().content.clone() else {
+        unreachable!()
+    };
+    node.splats.opacity_reference_mm = 0.25;
+    scene.set_content(id, NodeContent::Volume(node)).unwrap();
     let camera = camera_of(&scene);
     let mut stopping = Renderer::with_compositor(Compositor::Cpu);
     let mut full = Renderer::with_compositor(Compositor::Cpu);
@@ -249,7 +271,9 @@ fn splats_left_out_behind_opaque_pixels_change_nothing() {
 fn the_built_in_scene_looks_the_same_on_either_compositor() {
     let scene = splatscene::scene::shoulder::shoulder_scene().unwrap();
     let camera = scene.camera.unwrap();
-    gpu_against_tiles(&scene, &camera, "built-in");
+    // At 384x320: smaller, the scene's splats are below a pixel and the GPU's 16-bit float
+    // blending drifts (RMSE 0.0093 at 96x80 on lavapipe), as on the engine below.
+    gpu_against_tiles_at(&scene, &camera, (384, 320), "built-in");
 }
 
 #[test]
@@ -353,10 +377,16 @@ fn benchmark_view(
     aspect: f64,
 ) -> (Scene, SceneCamera) {
     let mut scene = Scene::new();
+    // Opacities per half millimetre: about the look these views had when a splat took the
+    // ramp's opacity at its centre (a 1 mm voxel's splat now carries 1 / 1.87 mm of tissue's,
+    // `2 pi sigma^2` of the default splat).
     let node = splatscene::scene::VolumeNode {
         volume: Arc::new(volume),
         transfer: Arc::new(transfer),
-        splats: Default::default(),
+        splats: splatscene::scene::SplatSettings {
+            opacity_reference_mm: 0.5,
+            ..Default::default()
+        },
     };
     scene
         .add("volume", DMat4::IDENTITY, None, NodeContent::Volume(node))
@@ -387,11 +417,12 @@ fn the_engine_looks_the_same_on_either_compositor() {
         TransferFunction::ramp(100.0, 200.0, [0.85, 0.8, 0.75, 0.5]),
         1.2,
     );
-    // At 288x240 rather than 96x80: with about 140 sub-pixel splats under each pixel of a
-    // 96x80 image, the GPU's 16-bit float blending drifts from the tiles' f32 (RMSE 0.0043,
-    // largest 0.037, measured on lavapipe), and more so with early termination off (0.0049,
-    // 0.040): the drift is the GPU's. At 288x240: 0.0018 and 0.019.
-    gpu_against_tiles_at(&scene, &camera, (288, 240), "engine");
+    // Sub-pixel splats: the GPU's 16-bit float blending drifts from the tiles' f32, the more
+    // the more splats share a pixel. Their opacities are low (the low-pass keeps a sub-pixel
+    // splat's integral, not its peak), so many faint layers add up: RMSE 0.0047 (largest
+    // 0.052) at 288x240 and 0.0021 (0.025) at 576x480, measured on lavapipe; the drift is the
+    // GPU's (it halves as the pixels shrink), hence the bound of 0.003 at 576x480.
+    gpu_against_tiles_within(&scene, &camera, (576, 480), "engine", 0.003);
 }
 
 #[test]

@@ -8,11 +8,11 @@ use std::time::{Duration, Instant};
 use glam::{DMat3, DMat4, DVec3};
 
 use super::mesh_pass::{GpuMesh, MeshPass};
-use super::splat_pass::{GpuVolume, SplatPass, color_texels, gradient_texels, projection};
+use super::splat_pass::{GpuVolume, SplatPass, projection};
 use super::target::RenderTarget;
 use super::view::ViewSetup;
 use super::{GpuContext, RenderError};
-use crate::classify::{Classified, classify_corrected, classify_shell, opacity_length_ratio};
+use crate::classify::{Classified, ClassifyOptions, Opacity, classify_with};
 use crate::composite::Frame;
 use crate::order::{OrderOptions, Orderer, Ordering, ViewCase, VolumeGeometry};
 use crate::scene::{NodeId, Scene, SceneCamera, VolumeNode, placed_geometry};
@@ -104,7 +104,7 @@ pub struct Screenshot {
 }
 
 /// Identity of a classification: the volume, the transfer function and the threshold.
-type ClassKey = (usize, usize, u32, Option<u64>, Option<u32>);
+type ClassKey = (usize, usize, u32, u64, u64, u64, Option<u32>);
 
 struct VolumeState {
     key: ClassKey,
@@ -416,11 +416,7 @@ impl Renderer {
             if let Some(state) = states.get_mut(id)
                 && state.texels.is_none()
             {
-                state.texels = Some(SplatTexels::new(
-                    state.classified.grid.dims(),
-                    &color_texels(&state.classified),
-                    &gradient_texels(&state.volume, &state.classified),
-                ));
+                state.texels = Some(SplatTexels::new(&state.classified, &state.volume));
             }
         }
         let mut inputs = Vec::with_capacity(ordered.len());
@@ -527,18 +523,19 @@ impl Renderer {
             } else {
                 Arc::clone(&node.volume)
             };
-            // Opacities as given hold for the node's own voxels; a halved copy's voxels are
-            // longer, by the cube root of the ratio of voxel volumes.
-            let voxel_size = |v: &CpuVolume| v.spacing.iter().product::<f64>().cbrt();
-            let ratio = match node.splats.opacity_reference_mm {
-                Some(r) => opacity_length_ratio(volume.spacing, node.splats.style.sigma, r),
-                None => voxel_size(&volume) / voxel_size(&node.volume),
+            // Opacities hold per length of tissue, so a halved copy (voxels twice as long)
+            // needs nothing of its own.
+            let style = &node.splats.style;
+            let options = ClassifyOptions {
+                min_opacity: node.splats.min_opacity,
+                opacity: Opacity {
+                    reference_mm: node.splats.opacity_reference_mm,
+                    sigma: style.sigma,
+                    cutoff: style.cutoff,
+                },
+                shell: node.splats.shell,
             };
-            let min = node.splats.min_opacity;
-            let result = match node.splats.shell {
-                Some(high) => classify_shell(&volume, &node.transfer, min, high, ratio),
-                None => classify_corrected(&volume, &node.transfer, min, ratio),
-            };
+            let result = classify_with(&volume, &node.transfer, &options);
             let result = result.map_err(|e| RenderError::Volume {
                 node: name.clone(),
                 message: e.to_string(),
@@ -909,7 +906,9 @@ fn class_key(node: &VolumeNode) -> ClassKey {
         Arc::as_ptr(&node.volume) as usize,
         Arc::as_ptr(&node.transfer) as usize,
         node.splats.min_opacity.to_bits(),
-        node.splats.opacity_reference_mm.map(f64::to_bits),
+        node.splats.opacity_reference_mm.to_bits(),
+        node.splats.style.sigma.to_bits(),
+        node.splats.style.cutoff.to_bits(),
         node.splats.shell.map(f32::to_bits),
     )
 }

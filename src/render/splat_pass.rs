@@ -1,8 +1,9 @@
 //! The splat pass: one instanced quad per significant voxel, drawn in the order the `order`
 //! module gives, premultiplied "over", depth-tested against the meshes without writing depth.
 //!
-//! Per volume the GPU holds a 3D texture of straight RGBA8 colour (uploaded when the volume or
-//! its transfer function changes) and the draw order as an instance vertex buffer of u32 voxel
+//! Per volume the GPU holds a 3D texture of the tile compositor's 8-byte texels (straight RGB8
+//! colour, snorm8 gradient, f16 density; uploaded when the volume or its transfer function
+//! changes) and the draw order as an instance vertex buffer of u32 voxel
 //! ids, the one thing uploaded per frame. Vertex buffers are not bound by the 128 MiB storage
 //! binding ceiling: their size is limited only by the adapter's `max_buffer_size`.
 
@@ -13,7 +14,7 @@ use rayon::prelude::*;
 use super::target::{COLOR_FORMAT, DEPTH_FORMAT};
 use super::view::ViewSetup;
 use super::{GpuContext, RenderError};
-use crate::classify::Classified;
+use crate::classify::{Classified, view_step_mm};
 use crate::order::VolumeGeometry;
 use crate::scene::{ClipPlane, Clipping, SplatSettings};
 use crate::volume::CpuVolume;
@@ -77,7 +78,7 @@ fn texture_3d(
         texels,
         wgpu::TexelCopyBufferLayout {
             offset: 0,
-            bytes_per_row: Some(4 * dims[0]),
+            bytes_per_row: Some(8 * dims[0]),
             rows_per_image: Some(dims[1]),
         },
         size,
@@ -85,39 +86,12 @@ fn texture_3d(
     texture
 }
 
-/// The colour a splat gets on the GPU, as premultiplied RGBA: colours are stored straight in
-/// 8 bits per channel and premultiplied in the shader. A CPU reference meant to match a GPU
-/// frame composites these.
-pub fn gpu_colors(colors: &[[f32; 4]]) -> Vec<[f32; 4]> {
-    colors
-        .iter()
-        .map(|c| {
-            let s = straight_rgba8(*c).map(|v| f32::from(v) / 255.0);
-            [s[0] * s[3], s[1] * s[3], s[2] * s[3], s[3]]
-        })
-        .collect()
-}
-
-fn straight_rgba8(premultiplied: [f32; 4]) -> [u8; 4] {
-    let a = premultiplied[3].clamp(0.0, 1.0);
-    let q = |v: f32| (v.clamp(0.0, 1.0) * 255.0).round() as u8;
-    if a <= 0.0 {
-        return [0; 4];
-    }
-    [
-        q(premultiplied[0] / a),
-        q(premultiplied[1] / a),
-        q(premultiplied[2] / a),
-        q(a),
-    ]
-}
-
 fn texture_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
     wgpu::BindGroupLayoutEntry {
         binding,
         visibility: wgpu::ShaderStages::VERTEX,
         ty: wgpu::BindingType::Texture {
-            sample_type: wgpu::TextureSampleType::Float { filterable: false },
+            sample_type: wgpu::TextureSampleType::Uint,
             view_dimension: wgpu::TextureViewDimension::D3,
             multisampled: false,
         },
@@ -125,77 +99,32 @@ fn texture_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
     }
 }
 
-/// Unit index-space gradients of `volume` by central differences (one-sided at the faces),
-/// as snorm8 texels for the significant voxels (w = 127 where the gradient is not zero).
-/// Straight RGBA8 per voxel of the whole grid (zero where not significant): the colour
-/// texture of the splat pass, and the colours of the CPU tile compositor.
-pub(crate) fn color_texels(classified: &Classified) -> Vec<u8> {
+/// The 8-byte texel of every voxel of the grid (zero where not significant), as the tile
+/// compositor stores them ([`crate::tiled::SplatTexels`]): the splat pass's one texture. One
+/// z-slice a task, walking the slice's x rows, so only significant voxels are visited.
+fn splat_texels(volume: &CpuVolume, classified: &Classified) -> Vec<u8> {
     let grid = &classified.grid;
-    significant_texels(grid, |[x, y, z]| {
-        let [nx, ny, _] = grid.dims();
-        let rank = grid.rank(x + nx * (y + ny * z))?;
-        Some(straight_rgba8(classified.colors[rank as usize]))
-    })
-}
-
-/// Four bytes per voxel of `grid`'s whole box, zero except where `texel` gives the bytes of a
-/// significant voxel (its index coordinates). One z-slice a task, walking the slice's x rows,
-/// so only significant voxels are visited.
-fn significant_texels(
-    grid: &crate::grid::SparseGrid,
-    texel: impl Fn([u32; 3]) -> Option<[u8; 4]> + Sync,
-) -> Vec<u8> {
     let [nx, ny, nz] = grid.dims().map(|n| n as usize);
-    let mut texels = vec![0u8; nx * ny * nz * 4];
+    let mut texels = vec![0u8; nx * ny * nz * 8];
     texels
-        .par_chunks_mut((nx * ny * 4).max(1))
+        .par_chunks_mut((nx * ny * 8).max(1))
         .enumerate()
         .for_each(|(z, slice)| {
             for y in 0..ny {
                 for run in grid.row(0, y as u32, z as u32) {
                     for x in run.start..run.end() {
-                        if let Some(bytes) = texel([x, y as u32, z as u32]) {
-                            let i = (x as usize + nx * y) * 4;
-                            slice[i..i + 4].copy_from_slice(&bytes);
+                        let id = x + (nx * (y + ny * z)) as u32;
+                        if let Some(rank) = grid.rank(id) {
+                            let k = [x, y as u32, z as u32];
+                            let i = (x as usize + nx * y) * 8;
+                            let t = crate::tiled::texel(volume, classified, k, rank as usize);
+                            slice[i..i + 8].copy_from_slice(&t);
                         }
                     }
                 }
             }
         });
     texels
-}
-
-/// The unit index-space gradient per voxel as snorm8 (w = 127 where defined): the normal
-/// texture of the splat pass, and the normals of the CPU tile compositor.
-pub(crate) fn gradient_texels(volume: &CpuVolume, classified: &Classified) -> Vec<u8> {
-    let [nx, ny, nz] = volume.dims.map(|n| n as usize);
-    let value = |x: usize, y: usize, z: usize| {
-        volume
-            .values
-            .get(x + nx * (y + ny * z))
-            .copied()
-            .unwrap_or(0.0)
-    };
-    let diff = |k: usize, n: usize, at: &dyn Fn(usize) -> f32| {
-        let (lo, hi) = (k.saturating_sub(1), (k + 1).min(n - 1));
-        if hi == lo {
-            0.0
-        } else {
-            (at(hi) - at(lo)) / (hi - lo) as f32
-        }
-    };
-    significant_texels(&classified.grid, |[x, y, z]| {
-        let [x, y, z] = [x, y, z].map(|c| c as usize);
-        let g = glam::Vec3::new(
-            diff(x, nx, &|i| value(i, y, z)),
-            diff(y, ny, &|i| value(x, i, z)),
-            diff(z, nz, &|i| value(x, y, i)),
-        );
-        // Pointing from dense to less dense: outward on bone surfaces.
-        let n = (-g).try_normalize()?;
-        let q = |v: f32| (v * 127.0).round() as i8 as u8;
-        Some([q(n.x), q(n.y), q(n.z), 127])
-    })
 }
 
 impl SplatPass {
@@ -216,7 +145,6 @@ impl SplatPass {
                     count: None,
                 },
                 texture_entry(1),
-                texture_entry(2),
             ],
         });
         let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
@@ -274,7 +202,7 @@ impl SplatPass {
         Self { pipeline, layout }
     }
 
-    /// Uploads a classified volume's colours as a dense 3D texture.
+    /// Uploads a classified volume's texels as a dense 3D texture.
     pub(crate) fn upload(
         &self,
         ctx: &GpuContext,
@@ -286,19 +214,12 @@ impl SplatPass {
         if dims.iter().any(|&n| n > max) {
             return Err(RenderError::VolumeTooLarge { dims, max });
         }
-        let colors = texture_3d(
+        let texels = texture_3d(
             ctx,
             dims,
-            wgpu::TextureFormat::Rgba8Unorm,
-            &color_texels(classified),
-            "splat colours",
-        );
-        let normals = texture_3d(
-            ctx,
-            dims,
-            wgpu::TextureFormat::Rgba8Snorm,
-            &gradient_texels(volume, classified),
-            "splat normals",
+            wgpu::TextureFormat::Rg32Uint,
+            &splat_texels(volume, classified),
+            "splat texels",
         );
         let uniforms = ctx.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("splat uniforms"),
@@ -306,10 +227,7 @@ impl SplatPass {
             usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
-        let (colors, normals) = (
-            colors.create_view(&Default::default()),
-            normals.create_view(&Default::default()),
-        );
+        let texels = texels.create_view(&Default::default());
         let group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("splat"),
             layout: &self.layout,
@@ -320,11 +238,7 @@ impl SplatPass {
                 },
                 wgpu::BindGroupEntry {
                     binding: 1,
-                    resource: wgpu::BindingResource::TextureView(&colors),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 2,
-                    resource: wgpu::BindingResource::TextureView(&normals),
+                    resource: wgpu::BindingResource::TextureView(&texels),
                 },
             ],
         });
@@ -437,7 +351,7 @@ fn uniforms(
             view.near as f32,
             view.near as f32,
             view.far.min(f64::MAX) as f32,
-            0.0,
+            view_step_mm(linear, view.axes.col(2)).unwrap_or(0.0) as f32,
         ],
         dims: {
             let d = geometry.dims();
@@ -482,6 +396,7 @@ pub(crate) fn projection(
         normal: u.normal.map(v),
         shading: u.normal[0][3],
         clip: u.clip[..u.dims[3] as usize].to_vec(),
+        alpha: crate::tiled::alpha_table(u.depth[3]),
     }
 }
 

@@ -10,7 +10,7 @@ use std::time::Instant;
 use glam::DVec3;
 
 use crate::camera::Camera;
-use crate::classify::Classified;
+use crate::classify::{Classified, view_step_mm};
 use crate::composite::{
     CompositeError, FragmentStats, Frame, ImageDifference, SplatStyle, SplatVolume,
     check_frame_size, compare, composite,
@@ -313,11 +313,6 @@ pub fn measure_views_with(
     {
         return Err(ReportError::BucketWidthOnGpu(width));
     }
-    let volume = SplatVolume {
-        geometry,
-        grid: &classified.grid,
-        colors: &classified.colors,
-    };
     let near = settings.near_voxels * geometry.spacing().iter().copied().fold(0.0, f64::max);
     let mut orderer = Orderer::new();
     let mut list = Vec::new();
@@ -338,6 +333,15 @@ pub fn measure_views_with(
                 fov_y_degrees: settings.fov_y_degrees,
             },
             near: Some(near),
+        };
+        // The splats' opacities in this view (they follow the index step along the view).
+        let step =
+            view_step_mm(geometry.index_to_world().matrix3, view.target - view.eye).unwrap_or(0.0);
+        let colors = classified.premultiplied(step as f32);
+        let volume = SplatVolume {
+            geometry,
+            grid: &classified.grid,
+            colors: &colors,
         };
         // The frame of the order in `list` (CPU), or of `ordering` as the renderer draws it
         // (with its splat pass timed).

@@ -272,8 +272,8 @@ pub struct VolumeSpec {
     pub shift: Option<f32>,
     /// Stretches the transfer function over the window `[level, width]`.
     pub level_width: Option<[f32; 2]>,
-    /// The transfer function's opacities hold for this many millimetres; corrected for the
-    /// voxel size.
+    /// The transfer function's opacities hold for this many millimetres of tissue (1 by
+    /// default, whatever the voxel size).
     pub opacity_reference_mm: Option<f64>,
     /// Headlight shading of the splats from 0 (flat) to 1.
     pub shading: Option<f32>,
@@ -946,7 +946,7 @@ fn load_volume(
         transfer: Arc::new(transfer),
         splats: SplatSettings {
             min_opacity,
-            opacity_reference_mm: spec.opacity_reference_mm,
+            opacity_reference_mm: spec.opacity_reference_mm.unwrap_or(1.0),
             shell: spec.shell.map(|v| v.clamp(0.0, 1.0)),
             shading: spec
                 .shading
@@ -1880,7 +1880,7 @@ mod tests {
             .windowed(1500.0, 2000.0)
             .shifted(100.0);
         assert_eq!(*node.transfer, expected);
-        assert_eq!(node.splats.opacity_reference_mm, Some(1.0));
+        assert_eq!(node.splats.opacity_reference_mm, 1.0);
         assert_eq!(node.splats.shading, 0.0);
         let err = load("transfer = \"ct-lung\"\n").unwrap_err().to_string();
         assert!(

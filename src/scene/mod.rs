@@ -63,11 +63,10 @@ pub struct SplatSettings {
     /// Headlight shading from the gradient: 0 keeps the transfer function's flat colour
     /// (what the CPU reference compositor draws), 1 fully shades.
     pub shading: f32,
-    /// When set, the transfer function's opacities hold for this many millimetres of tissue
-    /// and are corrected for the voxel size and the splat size
-    /// ([`crate::classify::opacity_length_ratio`]), so that a volume looks alike at any
-    /// resolution and splat size; `None` takes them as they are per splat.
-    pub opacity_reference_mm: Option<f64>,
+    /// The transfer function's opacities hold for this many millimetres of tissue (1 mm by
+    /// default, VTK's scalar opacity unit distance); see [`crate::classify::Opacity`]: a volume
+    /// looks alike at any resolution and splat size.
+    pub opacity_reference_mm: f64,
     /// Shell mode: only voxels with a neighbour at or below this opacity become splats (the
     /// hidden inside of opaque tissue is left out); `None` keeps every visible voxel.
     pub shell: Option<f32>,
@@ -80,7 +79,7 @@ impl Default for SplatSettings {
             min_opacity: 1.0 / 255.0,
             ordering: Ordering::IpPbtfImplicit,
             shading: 0.8,
-            opacity_reference_mm: None,
+            opacity_reference_mm: 1.0,
             shell: None,
         }
     }

@@ -2,14 +2,15 @@
 
 #![allow(dead_code)]
 
+pub mod raymarch;
+
 use std::sync::Arc;
 
 use glam::{DMat3, DMat4, DVec3};
 use splatscene::camera::Camera;
-use splatscene::classify::{TransferFunction, classify};
+use splatscene::classify::{TransferFunction, classify, view_step_mm};
 use splatscene::composite::{Frame, SplatStyle, SplatVolume, composite};
 use splatscene::order::{OrderOptions, Orderer, Ordering, ViewCase};
-use splatscene::render::gpu_colors;
 use splatscene::scene::{NodeContent, Scene, SplatSettings, VolumeNode};
 use splatscene::volume::CpuVolume;
 
@@ -71,7 +72,12 @@ pub fn rotated_anisotropic() -> CpuVolume {
 pub fn reference_frame(volume: &CpuVolume, pinhole: &Camera, ordering: Ordering) -> (Frame, usize) {
     let geometry = volume.geometry().unwrap();
     let classified = classify(volume, &TransferFunction::ct_bone(), 1.0 / 255.0).unwrap();
-    let colors = gpu_colors(&classified.colors);
+    let step = view_step_mm(
+        geometry.index_to_world().matrix3,
+        pinhole.target - pinhole.eye,
+    )
+    .unwrap();
+    let colors = classified.premultiplied(step as f32);
     let view = ViewCase::new(&geometry, pinhole.eye, pinhole.target).unwrap();
     let mut ids = Vec::new();
     let options = OrderOptions {
