@@ -27,14 +27,20 @@ impl TransferFunction {
         Self::new(vec![(lo, clear), (hi.max(lo), color)])
     }
 
+    // The presets' opacities are per millimetre of tissue. They were first tuned as opacities
+    // per splat of 1 mm voxels (Gaussians of 0.7 voxels, whose layer carries 2 pi 0.7^2 = 3.08
+    // times a splat's optical depth); each is that look per millimetre,
+    // `1 - (1 - a)^3.08`, so that a CT of about 1 mm voxels looks as it did, and any other grid
+    // alike.
+
     /// CT bone in Hounsfield units: transparent below 150 HU, cancellous bone faint and warm,
     /// cortical bone near-white and dense.
     pub fn ct_bone() -> Self {
         Self::new(vec![
             (150.0, [0.8, 0.55, 0.45, 0.0]),
-            (300.0, [0.9, 0.7, 0.55, 0.12]),
-            (700.0, [0.95, 0.88, 0.78, 0.45]),
-            (1200.0, [1.0, 0.97, 0.92, 0.8]),
+            (300.0, [0.9, 0.7, 0.55, 0.325]),
+            (700.0, [0.95, 0.88, 0.78, 0.84]),
+            (1200.0, [1.0, 0.97, 0.92, 0.993]),
         ])
     }
 
@@ -42,11 +48,11 @@ impl TransferFunction {
     pub fn ct_soft_tissue() -> Self {
         Self::new(vec![
             (-250.0, [0.75, 0.45, 0.35, 0.0]),
-            (-50.0, [0.8, 0.5, 0.4, 0.015]),
-            (100.0, [0.85, 0.55, 0.45, 0.03]),
-            (200.0, [0.9, 0.75, 0.6, 0.06]),
-            (700.0, [0.96, 0.9, 0.82, 0.5]),
-            (1200.0, [1.0, 0.97, 0.92, 0.8]),
+            (-50.0, [0.8, 0.5, 0.4, 0.046]),
+            (100.0, [0.85, 0.55, 0.45, 0.09]),
+            (200.0, [0.9, 0.75, 0.6, 0.174]),
+            (700.0, [0.96, 0.9, 0.82, 0.882]),
+            (1200.0, [1.0, 0.97, 0.92, 0.993]),
         ])
     }
 
@@ -55,9 +61,9 @@ impl TransferFunction {
     pub fn ct_metal() -> Self {
         Self::new(vec![
             (300.0, [0.9, 0.8, 0.7, 0.0]),
-            (1000.0, [0.95, 0.9, 0.85, 0.08]),
-            (1800.0, [0.8, 0.85, 0.95, 0.1]),
-            (2500.0, [0.75, 0.85, 1.0, 0.9]),
+            (1000.0, [0.95, 0.9, 0.85, 0.226]),
+            (1800.0, [0.8, 0.85, 0.95, 0.277]),
+            (2500.0, [0.75, 0.85, 1.0, 0.999]),
         ])
     }
 
@@ -65,8 +71,8 @@ impl TransferFunction {
     pub fn mr_default() -> Self {
         Self::new(vec![
             (150.0, [0.8, 0.8, 0.8, 0.0]),
-            (500.0, [0.9, 0.88, 0.85, 0.3]),
-            (1000.0, [1.0, 1.0, 1.0, 0.7]),
+            (500.0, [0.9, 0.88, 0.85, 0.666]),
+            (1000.0, [1.0, 1.0, 1.0, 0.975]),
         ])
     }
 
@@ -777,7 +783,7 @@ mod tests {
         assert_eq!(w.sample(1000.0), bone.sample(1200.0));
         // The metal preset keeps bone faint and metal nearly opaque.
         let metal = TransferFunction::ct_metal();
-        assert!(metal.sample(700.0)[3] < 0.1 && metal.sample(3000.0)[3] > 0.8);
+        assert!(metal.sample(700.0)[3] < 0.15 && metal.sample(3000.0)[3] > 0.8);
     }
 
     #[test]

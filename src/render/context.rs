@@ -46,10 +46,12 @@ impl GpuContext {
         // Ask for all the adapter can do: large volumes need big buffers and textures
         // (wgpu's defaults stop at 256 MiB buffers and 2048 texels).
         let required_limits = adapter.limits();
+        // Blending into 32-bit float targets where the adapter can (see `color_format`).
+        let required_features = adapter.features() & wgpu::Features::FLOAT32_BLENDABLE;
         let (device, queue) = adapter
             .request_device(&wgpu::DeviceDescriptor {
                 label: Some("splatscene"),
-                required_features: wgpu::Features::empty(),
+                required_features,
                 required_limits,
                 ..Default::default()
             })

@@ -7,7 +7,7 @@ use glam::{DMat3, Mat4};
 use wgpu::util::DeviceExt;
 
 use super::GpuContext;
-use super::target::{COLOR_FORMAT, DEPTH_FORMAT};
+use super::target::{DEPTH_FORMAT, color_format};
 use super::view::ViewSetup;
 use crate::mesh::{CpuMesh, Material};
 use crate::scene::{ClipPlane, Clipping, Lights};
@@ -416,7 +416,7 @@ fn mesh_pipeline(
             entry_point: Some("fs_main"),
             compilation_options: Default::default(),
             targets: &[Some(wgpu::ColorTargetState {
-                format: COLOR_FORMAT,
+                format: color_format(device),
                 blend,
                 write_mask,
             })],

@@ -20,7 +20,7 @@ pub use context::GpuContext;
 pub use depth_image::{DepthImage, DepthMode};
 pub use output::{encode_png, frame_to_rgba8};
 pub use renderer::{Compositor, FrameOptions, FrameReport, FrameTimings, Renderer, Screenshot};
-pub use target::{COLOR_FORMAT, DEPTH_FORMAT, RenderTarget, read_texture};
+pub use target::{DEPTH_FORMAT, RenderTarget, color_format, read_texture};
 pub use view::ViewSetup;
 
 /// Why a frame could not be rendered.

@@ -203,7 +203,7 @@ impl Renderer {
     }
 
     /// Renders `scene` seen through `view` into the given colour and depth views (formats
-    /// [`super::COLOR_FORMAT`] and [`super::DEPTH_FORMAT`], of `view.size`).
+    /// [`super::color_format`] and [`super::DEPTH_FORMAT`], of `view.size`).
     pub fn render(
         &mut self,
         ctx: &GpuContext,

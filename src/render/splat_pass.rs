@@ -11,7 +11,7 @@ use bytemuck::{Pod, Zeroable};
 use glam::DVec3;
 use rayon::prelude::*;
 
-use super::target::{COLOR_FORMAT, DEPTH_FORMAT};
+use super::target::{DEPTH_FORMAT, color_format};
 use super::view::ViewSetup;
 use super::{GpuContext, RenderError};
 use crate::classify::{Classified, view_step_mm};
@@ -188,7 +188,7 @@ impl SplatPass {
                 entry_point: Some("fs_main"),
                 compilation_options: Default::default(),
                 targets: &[Some(wgpu::ColorTargetState {
-                    format: COLOR_FORMAT,
+                    format: color_format(device),
                     blend: Some(wgpu::BlendState {
                         color: over,
                         alpha: over,
