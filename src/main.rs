@@ -381,7 +381,9 @@ fn run_orderings(args: OrderingsArgs) -> Result<()> {
     } else {
         None
     };
+    // The report measures every ordering on the volume's own grid.
     let mut renderer = Renderer::new();
+    renderer.set_level_of_detail(false);
     let mut compositor = match &gpu {
         Some((ctx, scene)) => Compositor::Gpu {
             ctx,

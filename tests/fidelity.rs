@@ -77,6 +77,17 @@ fn transfer() -> TransferFunction {
 }
 
 fn splats(volume: CpuVolume, camera: &SceneCamera) -> Frame {
+    splats_at(volume, camera, SIZE, true).0
+}
+
+/// The tiles' frame of `volume` at `size`, with the level of detail on or off, and the
+/// renderer's report.
+fn splats_at(
+    volume: CpuVolume,
+    camera: &SceneCamera,
+    size: (u32, u32),
+    level_of_detail: bool,
+) -> (Frame, splatscene::render::FrameReport) {
     let mut scene = Scene::new();
     let node = VolumeNode {
         volume: Arc::new(volume),
@@ -93,13 +104,19 @@ fn splats(volume: CpuVolume, camera: &SceneCamera) -> Frame {
         background: None,
         ..Default::default()
     };
-    Renderer::new()
-        .screenshot_without_gpu(&scene, camera, SIZE, &options)
-        .unwrap()
-        .frame
+    let mut renderer = Renderer::new();
+    renderer.set_level_of_detail(level_of_detail);
+    let shot = renderer
+        .screenshot_without_gpu(&scene, camera, size, &options)
+        .unwrap();
+    (shot.frame, shot.report)
 }
 
 fn marched(camera: &SceneCamera) -> Frame {
+    marched_at(camera, SIZE)
+}
+
+fn marched_at(camera: &SceneCamera, size: (u32, u32)) -> Frame {
     let tf = transfer();
     let field = |p: DVec3| Some(phantom(p));
     let volume = raymarch::Volume {
@@ -118,11 +135,11 @@ fn marched(camera: &SceneCamera) -> Frame {
         target: camera.target,
         up: camera.up,
         fov_y_degrees,
-        size: SIZE,
+        size,
     };
     Frame {
-        width: SIZE.0,
-        height: SIZE.1,
+        width: size.0,
+        height: size.1,
         pixels: raymarch::march(&volume, &pinhole, 0.1),
     }
 }
@@ -181,4 +198,50 @@ fn thick_and_thin_slices_draw_the_ray_marchers_picture() {
             0.03,
         );
     }
+}
+
+#[test]
+fn a_grid_finer_than_the_pixels_is_drawn_from_a_coarser_level_with_the_same_picture() {
+    // The 0.6 mm phantom at 64x64: about 0.3 pixels between voxels, so the renderer draws
+    // level 1 (1.2 mm, 0.6 pixels apart); the picture stays the full grid's and the marcher's.
+    let thin = sampled([0.6; 3]);
+    let camera = camera(DVec3::new(0.35, 1.0, -0.3), DVec3::new(0.0, 0.0, 1.0));
+    let size = (64, 64);
+    let (coarse, report) = splats_at(thin.clone(), &camera, size, true);
+    let (full, full_report) = splats_at(thin, &camera, size, false);
+    eprintln!(
+        "level {}: {} splats against {}",
+        report.level, report.splats, full_report.splats
+    );
+    assert_eq!(full_report.level, 0);
+    assert!(report.level >= 1, "{report:?}");
+    assert!(
+        report.splats * 6 < full_report.splats,
+        "about an eighth of the splats a level: {} against {}",
+        report.splats,
+        full_report.splats
+    );
+    let reference = marched_at(&camera, size);
+    check(
+        "level of detail against the full grid",
+        &compare(&coarse, &full).unwrap(),
+        0.02,
+    );
+    check(
+        "level of detail against the marcher",
+        &compare(&coarse, &reference).unwrap(),
+        0.03,
+    );
+    check(
+        "full grid against the marcher",
+        &compare(&full, &reference).unwrap(),
+        0.03,
+    );
+    // Close enough for a voxel to span pixels, the full grid is drawn.
+    let near = SceneCamera {
+        eye: camera.target + (camera.eye - camera.target) * 0.3,
+        ..camera
+    };
+    let (_, report) = splats_at(sampled([1.5, 1.5, 3.0]), &near, (160, 160), true);
+    assert_eq!(report.level, 0);
 }

@@ -399,7 +399,10 @@ fn twenty_million_splats_render() {
         measure: true,
         ..TRANSPARENT
     };
-    let shot = Renderer::new()
+    // Every voxel a splat: no level of detail.
+    let mut renderer = Renderer::new();
+    renderer.set_level_of_detail(false);
+    let shot = renderer
         .screenshot(&ctx, &scene, &camera, (48, 48), &options)
         .unwrap();
     assert_eq!(shot.report.splats, (n * n * n) as usize);

@@ -52,6 +52,11 @@ pub struct RenderArgs {
     /// and where there is no adapter at all for a scene without meshes.
     #[arg(long, default_value = "auto")]
     compositor: Compositor,
+    /// Level of detail: `on` draws each volume from the level of its pyramid (2x2x2 voxels a
+    /// splat a level) whose voxels are about a pixel apart where it comes nearest the eye;
+    /// `off` from its own grid, every voxel a splat
+    #[arg(long, default_value = "on", value_parser = ["on", "off"])]
+    lod: String,
     /// Transparent background (the PNG's alpha is the coverage).
     #[arg(long)]
     transparent: bool,
@@ -250,6 +255,7 @@ pub fn run_render(args: RenderArgs) -> Result<()> {
     let ctx = context_for(args.compositor, &drawn)?;
     // One renderer for every view: the volumes are classified once.
     let mut renderer = Renderer::with_compositor(args.compositor);
+    renderer.set_level_of_detail(args.lod == "on");
     let device = ctx
         .as_ref()
         .map_or("no GPU adapter".into(), GpuContext::describe);
@@ -444,10 +450,15 @@ pub(crate) fn describe(r: &FrameReport) -> String {
         None => format!("splat pass {:.1} ms", ms(r.timings.splat_pass)),
     };
     format!(
-        "{} meshes ({} triangles), {} splats; classify {:.0} ms, order {:.1} ms, upload {:.1} ms, mesh pass {:.1} ms, {splats}, readback {:.1} ms",
+        "{} meshes ({} triangles), {} splats{}; classify {:.0} ms, order {:.1} ms, upload {:.1} ms, mesh pass {:.1} ms, {splats}, readback {:.1} ms",
         r.meshes,
         r.triangles,
         r.splats,
+        if r.level > 0 {
+            format!(" (level of detail {})", r.level)
+        } else {
+            String::new()
+        },
         ms(r.timings.classify),
         ms(r.timings.order),
         ms(r.timings.upload),

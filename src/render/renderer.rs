@@ -29,10 +29,10 @@ pub struct FrameOptions {
     /// Wait for the GPU after each stage so that [`FrameTimings`] splits the frame (costs a
     /// little throughput; screenshots and benchmarks want it, a window does not).
     pub measure: bool,
-    /// Draw every volume from a copy at half its resolution ([`CpuVolume::halved`]): about an
-    /// eighth of the splats, each twice as large, with opacities corrected for the longer
-    /// voxels. For frames while the camera moves; the copy is made and classified once and
-    /// kept beside the full volume.
+    /// Draw every volume at least one level of detail coarser than its own grid (see
+    /// [`Renderer::set_level_of_detail`]): about an eighth of the splats, each twice as large.
+    /// For frames while the camera moves; each level is made once and kept beside the full
+    /// grid.
     pub preview: bool,
 }
 
@@ -82,6 +82,8 @@ pub struct FrameReport {
     pub overlays: usize,
     /// Splats drawn (significant voxels in front of the eye).
     pub splats: usize,
+    /// The coarsest level of detail a volume was drawn at (0: every volume from its own grid).
+    pub level: u8,
     /// Volumes classified this frame (0 when nothing changed).
     pub classified: usize,
     /// What the CPU tile compositor did, when it composited the splats.
@@ -108,7 +110,8 @@ type ClassKey = (usize, usize, u32, u64, u64, u64, Option<u32>);
 
 struct VolumeState {
     key: ClassKey,
-    /// The volume drawn: the node's own, or its halved copy for previews.
+    /// The volume drawn: the node's own at level 0, halved once per level above (for the
+    /// splats' placement and gradients).
     volume: Arc<CpuVolume>,
     classified: Classified,
     /// The GPU copy, made on the first frame the splat pass draws it.
@@ -117,6 +120,69 @@ struct VolumeState {
     texels: Option<SplatTexels>,
     orderer: Orderer,
     ids: Vec<u32>,
+}
+
+impl VolumeState {
+    fn new(
+        key: ClassKey,
+        volume: Arc<CpuVolume>,
+        classified: Classified,
+        orderer: Orderer,
+        ids: Vec<u32>,
+    ) -> Self {
+        Self {
+            key,
+            volume,
+            classified,
+            gpu: None,
+            texels: None,
+            orderer,
+            ids,
+        }
+    }
+}
+
+/// The most levels of detail above a volume's own grid (a splat for 8^4 = 4,096 voxels).
+pub const MAX_LEVEL: u8 = 4;
+
+/// The level of detail a volume placed as `geometry` is drawn at in `view`: the coarsest whose
+/// voxels are still at most a pixel apart where the volume comes nearest the eye (its grid's
+/// box, half a voxel beyond the centres), so that the picture keeps the detail the pixels can
+/// show there while a grid two or more times finer than the pixels does not put four or more
+/// splats under each. Level 0 when the eye is inside the box. (A level one coarser, with
+/// voxels up to two pixels apart, was measured on the LIDC2 CT resampled to 0.7 mm at 512 x
+/// 512: 3.4 times faster, but RMSE 0.037 against the reference ray marcher where the full grid
+/// gives 0.024.)
+pub fn level_for(geometry: &VolumeGeometry, view: &ViewSetup) -> u8 {
+    let spacing = geometry.spacing().into_iter().fold(f64::INFINITY, f64::min);
+    let pixels = if view.is_orthographic() {
+        view.focal * spacing
+    } else {
+        let dims = geometry.dims().map(|n| f64::from(n) - 0.5);
+        let (mut lo, mut hi) = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
+        for corner in 0..8 {
+            let c = DVec3::from(std::array::from_fn::<f64, 3, _>(|a| {
+                if corner >> a & 1 == 1 { dims[a] } else { -0.5 }
+            }));
+            let p = geometry.index_to_world_point(c);
+            lo = lo.min(p);
+            hi = hi.max(p);
+        }
+        let eye = view.camera.eye;
+        let nearest = (eye.clamp(lo, hi) - eye).length();
+        if nearest <= 0.0 {
+            return 0;
+        }
+        view.focal * spacing / nearest
+    };
+    // Coarser while the next level's voxels are still at most a pixel apart.
+    let mut level = 0;
+    let mut apart = pixels;
+    while level < MAX_LEVEL && apart.is_finite() && apart > 0.0 && 2.0 * apart <= 1.0 {
+        apart *= 2.0;
+        level += 1;
+    }
+    level
 }
 
 /// Who composites the splats of screenshots.
@@ -152,9 +218,12 @@ pub struct Renderer {
     mesh_pass: Option<MeshPass>,
     splat_pass: Option<SplatPass>,
     meshes: HashMap<NodeId, GpuMesh>,
-    volumes: HashMap<NodeId, VolumeState>,
-    /// The halved copies drawn by preview frames.
-    previews: HashMap<NodeId, VolumeState>,
+    /// Each volume's classified grid at each level of detail made so far (0: its own grid).
+    volumes: HashMap<(NodeId, u8), VolumeState>,
+    /// The level of detail each volume is drawn at in the current frame.
+    levels: HashMap<NodeId, u8>,
+    /// Every volume drawn from its own grid (`--lod off`).
+    full_grid: bool,
     /// Who composites the splats of screenshots.
     compositor: Compositor,
     /// The CPU tile compositor's buffers.
@@ -168,7 +237,7 @@ impl std::fmt::Debug for Renderer {
             .field("splat_pipeline", &self.splat_pass.is_some())
             .field("meshes", &self.meshes.len())
             .field("volumes", &self.volumes.len())
-            .field("previews", &self.previews.len())
+            .field("full_grid", &self.full_grid)
             .finish()
     }
 }
@@ -185,6 +254,16 @@ impl Renderer {
             compositor,
             ..Self::default()
         }
+    }
+
+    /// Whether volumes are drawn at a level of detail (on by default): each volume from the
+    /// level of its pyramid ([`Classified::halved`], 2 x 2 x 2 voxels a splat a level, up to
+    /// [`MAX_LEVEL`]) that [`level_for`] chooses, one level for the whole volume, so that a
+    /// grid finer than the image does not cost splats that fall under one pixel; within the
+    /// level the draw order is the node's, over that level's grid. Off, every volume is drawn
+    /// from its own grid.
+    pub fn set_level_of_detail(&mut self, on: bool) {
+        self.full_grid = !on;
     }
 
     /// The CPU tile compositor, to set its opacity threshold.
@@ -216,11 +295,11 @@ impl Renderer {
         let mut report = FrameReport::default();
         self.sync_meshes(ctx, scene);
         let started = Instant::now();
-        report.classified = self.sync_volumes(scene, options.preview)?;
+        report.classified = self.sync_volumes(scene, view, options.preview)?;
         report.timings.classify = started.elapsed();
         let ordered = self.order_volumes(scene, view, options, &mut report)?;
         let started = Instant::now();
-        self.upload(ctx, scene, view, &ordered, options.preview, &mut report)?;
+        self.upload(ctx, scene, view, &ordered, &mut report)?;
         if options.measure {
             // Queue writes are staged until the next submission: submit nothing to flush them.
             ctx.queue.submit([]);
@@ -234,7 +313,7 @@ impl Renderer {
         }
         report.timings.mesh_pass = started.elapsed();
         let started = Instant::now();
-        self.splat_stage(ctx, &ordered, options.preview, color, depth);
+        self.splat_stage(ctx, &ordered, color, depth);
         if options.measure {
             finish_drawing(ctx, color)?;
         }
@@ -313,7 +392,7 @@ impl Renderer {
         let view = ViewSetup::new(camera, size, scene.bounds())?;
         let mut report = FrameReport::default();
         let started = Instant::now();
-        report.classified = self.sync_volumes(scene, options.preview)?;
+        report.classified = self.sync_volumes(scene, &view, options.preview)?;
         report.timings.classify = started.elapsed();
         let ordered = self.order_volumes(scene, &view, options, &mut report)?;
         // What lies under the splats: the meshes on the GPU, or the background alone.
@@ -323,7 +402,7 @@ impl Renderer {
             Some(ctx) if has_meshes => {
                 self.sync_meshes(ctx, scene);
                 let target = RenderTarget::new(ctx, size.0, size.1)?;
-                self.upload(ctx, scene, &view, &[], options.preview, &mut report)?;
+                self.upload(ctx, scene, &view, &[], &mut report)?;
                 let started = Instant::now();
                 self.mesh_stage(ctx, scene, &target.color_view, &target.depth_view, options);
                 report.timings.mesh_pass = started.elapsed();
@@ -350,8 +429,7 @@ impl Renderer {
             }
         };
         let started = Instant::now();
-        report.tiles =
-            Some(self.composite_tiles(scene, &view, &ordered, options.preview, &depth, &mut frame));
+        report.tiles = Some(self.composite_tiles(scene, &view, &ordered, &depth, &mut frame));
         report.timings.splat_pass = started.elapsed();
         if let Some((ctx, target)) = &target
             && scene.meshes().any(|(_, m, _)| is_translucent(m))
@@ -401,19 +479,18 @@ impl Renderer {
         scene: &Scene,
         view: &ViewSetup,
         ordered: &[(NodeId, VolumeGeometry)],
-        preview: bool,
         depth: &[f32],
         frame: &mut Frame,
     ) -> TileStats {
         let Self {
             volumes,
-            previews,
+            levels,
             tiles,
             ..
         } = self;
-        let states = if preview { previews } else { volumes };
+        let level = |id: &NodeId| levels.get(id).copied().unwrap_or(0);
         for (id, _) in ordered {
-            if let Some(state) = states.get_mut(id)
+            if let Some(state) = volumes.get_mut(&(*id, level(id)))
                 && state.texels.is_none()
             {
                 state.texels = Some(SplatTexels::new(&state.classified, &state.volume));
@@ -421,9 +498,10 @@ impl Renderer {
         }
         let mut inputs = Vec::with_capacity(ordered.len());
         for (id, geometry) in ordered {
-            let (Some(state), Some((_, node, _))) =
-                (states.get(id), scene.volumes().find(|(v, _, _)| v == id))
-            else {
+            let (Some(state), Some((_, node, _))) = (
+                volumes.get(&(*id, level(id))),
+                scene.volumes().find(|(v, _, _)| v == id),
+            ) else {
                 continue;
             };
             let Some(texels) = &state.texels else {
@@ -493,75 +571,96 @@ impl Renderer {
         self.meshes.retain(|id, _| live.contains(id));
     }
 
-    /// The volumes of full frames, or the halved copies of preview frames.
-    fn states_mut(&mut self, preview: bool) -> &mut HashMap<NodeId, VolumeState> {
-        if preview {
-            &mut self.previews
-        } else {
-            &mut self.volumes
-        }
+    /// The state a volume is drawn from in the current frame.
+    fn drawn_mut(&mut self, id: NodeId) -> Option<&mut VolumeState> {
+        let level = self.levels.get(&id).copied().unwrap_or(0);
+        self.volumes.get_mut(&(id, level))
     }
 
-    /// Classifies volumes whose data, transfer function or threshold changed, or their halved
-    /// copies for a preview frame; returns how many.
-    fn sync_volumes(&mut self, scene: &Scene, preview: bool) -> Result<usize, RenderError> {
-        let Self {
-            volumes, previews, ..
-        } = self;
-        let states = if preview { previews } else { volumes };
+    /// Classifies volumes whose data, transfer function or threshold changed, chooses the
+    /// level of detail each is drawn at in `view` (at least 1 for a preview frame) and makes
+    /// the levels up to it that are missing; returns how many classifications and levels were
+    /// made.
+    fn sync_volumes(
+        &mut self,
+        scene: &Scene,
+        view: &ViewSetup,
+        preview: bool,
+    ) -> Result<usize, RenderError> {
         let mut live = Vec::new();
-        let mut classified = 0;
-        for (id, node, _) in scene.volumes() {
+        let mut made = 0;
+        self.levels.clear();
+        for (id, node, world) in scene.volumes() {
             live.push(id);
             let key = class_key(node);
-            if states.get(&id).is_some_and(|v| v.key == key) {
-                continue;
-            }
             let name = &scene.nodes()[id.0].name;
-            let volume = if preview {
-                Arc::new(node.volume.halved())
-            } else {
-                Arc::clone(&node.volume)
-            };
-            // Opacities hold per length of tissue, so a halved copy (voxels twice as long)
-            // needs nothing of its own.
-            let style = &node.splats.style;
-            let options = ClassifyOptions {
-                min_opacity: node.splats.min_opacity,
-                opacity: Opacity {
-                    reference_mm: node.splats.opacity_reference_mm,
-                    sigma: style.sigma,
-                    cutoff: style.cutoff,
-                },
-                shell: node.splats.shell,
-            };
-            let result = classify_with(&volume, &node.transfer, &options);
-            let result = result.map_err(|e| RenderError::Volume {
+            let fail = |message: String| RenderError::Volume {
                 node: name.clone(),
-                message: e.to_string(),
-            })?;
-            classified += 1;
-            if result.grid.is_empty() {
-                states.remove(&id);
-                continue;
+                message,
+            };
+            if self.volumes.get(&(id, 0)).is_none_or(|v| v.key != key) {
+                let style = &node.splats.style;
+                let options = ClassifyOptions {
+                    min_opacity: node.splats.min_opacity,
+                    opacity: Opacity {
+                        reference_mm: node.splats.opacity_reference_mm,
+                        sigma: style.sigma,
+                        cutoff: style.cutoff,
+                    },
+                    shell: node.splats.shell,
+                };
+                let result = classify_with(&node.volume, &node.transfer, &options)
+                    .map_err(|e| fail(e.to_string()))?;
+                made += 1;
+                // The coarser levels of the old classification go with it.
+                self.volumes.retain(|(v, level), _| *v != id || *level == 0);
+                let old = self.volumes.remove(&(id, 0));
+                if result.grid.is_empty() {
+                    continue;
+                }
+                let (orderer, ids) = old.map(|o| (o.orderer, o.ids)).unwrap_or_default();
+                self.volumes.insert(
+                    (id, 0),
+                    VolumeState::new(key, Arc::clone(&node.volume), result, orderer, ids),
+                );
             }
-            let old = states.remove(&id);
-            let (orderer, ids) = old.map(|o| (o.orderer, o.ids)).unwrap_or_default();
-            states.insert(
-                id,
-                VolumeState {
-                    key,
-                    volume,
-                    classified: result,
-                    gpu: None,
-                    texels: None,
-                    orderer,
-                    ids,
-                },
-            );
+            let Some(full) = self.volumes.get(&(id, 0)) else {
+                continue;
+            };
+            let wanted = if self.full_grid {
+                0
+            } else {
+                let geometry =
+                    placed_geometry(&full.volume, world).map_err(|e| fail(e.to_string()))?;
+                level_for(&geometry, view)
+            };
+            let wanted = if preview { wanted.max(1) } else { wanted };
+            // Make the levels up to the one wanted, each from the one below; a level whose
+            // grid would have no splat, or that would not shrink the grid, is not made.
+            let mut level = 0;
+            while level < wanted {
+                if !self.volumes.contains_key(&(id, level + 1)) {
+                    let below = &self.volumes[&(id, level)];
+                    if below.volume.dims.iter().all(|&n| n <= 1) {
+                        break;
+                    }
+                    let classified = below.classified.halved().map_err(|e| fail(e.to_string()))?;
+                    if classified.grid.is_empty() {
+                        break;
+                    }
+                    let volume = Arc::new(below.volume.halved());
+                    made += 1;
+                    self.volumes.insert(
+                        (id, level + 1),
+                        VolumeState::new(key, volume, classified, Orderer::new(), Vec::new()),
+                    );
+                }
+                level += 1;
+            }
+            self.levels.insert(id, level);
         }
-        states.retain(|id, _| live.contains(id));
-        Ok(classified)
+        self.volumes.retain(|(id, _), _| live.contains(id));
+        Ok(made)
     }
 
     /// Orders every volume's splats for this view; returns the volumes far to near.
@@ -575,9 +674,8 @@ impl Renderer {
         let started = Instant::now();
         let pinhole = view.pinhole()?;
         let mut ordered = Vec::new();
-        let states = self.states_mut(options.preview);
         for (id, node, world) in scene.volumes() {
-            let Some(state) = states.get_mut(&id) else {
+            let Some(state) = self.drawn_mut(id) else {
                 continue;
             };
             let name = &scene.nodes()[id.0].name;
@@ -605,6 +703,7 @@ impl Renderer {
                 )
                 .map_err(|e| fail(e.to_string()))?;
             report.splats += state.ids.len();
+            report.level = report.level.max(self.levels.get(&id).copied().unwrap_or(0));
             ordered.push((id, geometry));
         }
         // Between volumes: farthest centre first (volumes that interpenetrate are not sorted
@@ -622,18 +721,17 @@ impl Renderer {
         scene: &Scene,
         view: &ViewSetup,
         ordered: &[(NodeId, VolumeGeometry)],
-        preview: bool,
         report: &mut FrameReport,
     ) -> Result<(), RenderError> {
         let Self {
             splat_pass,
             volumes,
-            previews,
+            levels,
             ..
         } = self;
-        let states = if preview { previews } else { volumes };
         for (id, geometry) in ordered {
-            let Some(state) = states.get_mut(id) else {
+            let level = levels.get(id).copied().unwrap_or(0);
+            let Some(state) = volumes.get_mut(&(*id, level)) else {
                 continue;
             };
             let settings = scene
@@ -711,23 +809,18 @@ impl Renderer {
         &self,
         ctx: &GpuContext,
         ordered: &[(NodeId, VolumeGeometry)],
-        preview: bool,
         color: &wgpu::TextureView,
         depth: &wgpu::TextureView,
     ) {
         let Some(splat_pass) = &self.splat_pass else {
             return;
         };
-        let states = if preview {
-            &self.previews
-        } else {
-            &self.volumes
-        };
         let mut encoder = ctx.device.create_command_encoder(&Default::default());
         {
             let mut pass = begin(&mut encoder, color, depth, None, "splat pass");
             for (id, _) in ordered {
-                if let Some(gpu) = states.get(id).and_then(|s| s.gpu.as_ref()) {
+                let level = self.levels.get(id).copied().unwrap_or(0);
+                if let Some(gpu) = self.volumes.get(&(*id, level)).and_then(|s| s.gpu.as_ref()) {
                     splat_pass.draw(&mut pass, gpu);
                 }
             }
