@@ -222,6 +222,15 @@ fn a_batch_renders_every_picture_with_an_index_and_leaves_finished_jobs_alone() 
     ok(&["batch", m, "--out", o]);
     let stderr = ok(&["batch", m, "--out", o, "--force"]);
     assert!(stderr.contains("3 rendered, 0 up to date"), "{stderr}");
+    // Turning the level of detail off draws every job again; the same setting again, none.
+    let stderr = ok(&["batch", m, "--out", o, "--lod", "off"]);
+    assert!(stderr.contains("3 rendered, 0 up to date"), "{stderr}");
+    let stderr = ok(&["batch", m, "--out", o, "--lod", "off"]);
+    assert!(stderr.contains("0 rendered, 3 up to date"), "{stderr}");
+    assert!(
+        fails(&["batch", m, "--out", o, "--lod", "half"]).contains("half"),
+        "a value other than on or off is refused"
+    );
 }
 
 #[test]

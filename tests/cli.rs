@@ -176,6 +176,45 @@ fn render_writes_the_built_in_scene_at_any_size_with_depth() {
 }
 
 #[test]
+fn a_small_picture_draws_a_coarser_level_unless_told_not_to() {
+    // The built-in scene at 40x30: its voxels fall well under a pixel, so a coarser level of
+    // the pyramid is drawn and the stage line says which; `--lod off` draws the full grid.
+    let out = temp_path("small-lod.png");
+    let run = |lod: &str| {
+        let result = splatscene(&[
+            "render",
+            "--out",
+            out.to_str().unwrap(),
+            "--size",
+            "40x30",
+            "--lod",
+            lod,
+        ]);
+        assert!(
+            result.status.success(),
+            "{}",
+            String::from_utf8_lossy(&result.stderr)
+        );
+        let stderr = String::from_utf8_lossy(&result.stderr).into_owned();
+        let splats: usize = stderr
+            .split(" splats")
+            .next()
+            .and_then(|s| s.rsplit(' ').next())
+            .and_then(|n| n.parse().ok())
+            .unwrap_or_else(|| panic!("a splat count in {stderr}"));
+        (stderr, splats)
+    };
+    let (on, coarse) = run("on");
+    let (off, full) = run("off");
+    assert!(on.contains("level of detail"), "{on}");
+    assert!(!off.contains("level of detail"), "{off}");
+    assert!(coarse * 4 < full, "{coarse} splats against {full}");
+    let bad = splatscene(&["render", "--out", out.to_str().unwrap(), "--lod", "maybe"]);
+    assert!(!bad.status.success());
+    std::fs::remove_file(&out).ok();
+}
+
+#[test]
 fn render_without_an_adapter_names_the_package_to_install() {
     // No adapter of a backend this build lacks: wgpu finds nothing at all.
     let out = temp_path("none.png");

@@ -55,6 +55,11 @@ pub struct BatchArgs {
     /// itself a CPU), gpu or cpu.
     #[arg(long, default_value = "auto")]
     compositor: Compositor,
+    /// Level of detail: `on` draws each volume from the level of its pyramid whose voxels are
+    /// about a pixel apart where it comes nearest the eye; `off` from its own grid (a job's
+    /// pictures are redrawn when this changes)
+    #[arg(long, default_value = "on", value_parser = ["on", "off"])]
+    lod: String,
 }
 
 /// Runs `splatscene batch`.
@@ -188,10 +193,17 @@ pub fn run_batch(args: BatchArgs) -> Result<()> {
 
     let pictures: usize = mine.iter().map(|j| j.items.len()).sum();
     let bar = progress_bar(pictures as u64);
-    let mut renderer = Renderer::with_compositor(args.compositor);
+    let level_of_detail = args.lod == "on";
+    let fresh_renderer = || {
+        let mut renderer = Renderer::with_compositor(args.compositor);
+        renderer.set_level_of_detail(level_of_detail);
+        renderer
+    };
+    let mut renderer = fresh_renderer();
     let settings = Settings {
         out,
         compositor: args.compositor,
+        level_of_detail,
         ctx: ctx.as_ref(),
     };
     for (slot, job) in mine.iter().enumerate() {
@@ -204,7 +216,7 @@ pub fn run_batch(args: BatchArgs) -> Result<()> {
             Ok(record) => record,
             Err(panic) => {
                 // The renderer may be left half-way through a frame: start afresh.
-                renderer = Renderer::with_compositor(args.compositor);
+                renderer = fresh_renderer();
                 let text = panic
                     .downcast_ref::<String>()
                     .cloned()
@@ -452,6 +464,7 @@ fn progress_bar(len: u64) -> ProgressBar {
 struct Settings<'a> {
     out: &'a Path,
     compositor: Compositor,
+    level_of_detail: bool,
     ctx: Option<&'a GpuContext>,
 }
 
@@ -507,7 +520,7 @@ fn run_job(
         }
     }
     let hashing = Instant::now();
-    let (inputs, hash) = match job_hash(job, &loaded, settings.compositor) {
+    let (inputs, hash) = match job_hash(job, &loaded, settings) {
         Ok(h) => h,
         Err(e) => return failed(job, None, format!("{e:#}")),
     };
@@ -760,7 +773,7 @@ fn content_scene(full: &Scene, content: Content) -> Result<Scene> {
 fn job_hash(
     job: &PlannedJob,
     loaded: &LoadedScene,
-    compositor: Compositor,
+    settings: &Settings<'_>,
 ) -> Result<(Vec<InputRecord>, String)> {
     let scene = &loaded.scene;
     let mut inputs = Vec::new();
@@ -840,7 +853,8 @@ fn job_hash(
     }
     let settings = serde_json::json!({
         "splatscene": env!("CARGO_PKG_VERSION"),
-        "compositor": compositor_name(compositor),
+        "compositor": compositor_name(settings.compositor),
+        "level_of_detail": settings.level_of_detail,
         "job": job.spec,
         "scene": file,
         "inputs": inputs.iter().map(|i| &i.blake3).collect::<Vec<_>>(),
