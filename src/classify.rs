@@ -625,7 +625,7 @@ pub fn classify_with(
 }
 
 /// Z-slices a classification task takes.
-const SLAB: usize = 8;
+const SLAB: usize = 16;
 
 /// `-ln(1 - a)` is capped here (an opacity of 1 - 2e-9), so that opaque tissue has a finite
 /// extinction to average.
@@ -671,6 +671,14 @@ impl ClearIntervals {
 
     /// The number of the clear range holding each value, 0 for none (NaN included).
     fn labels(&self, values: &[f32]) -> Vec<u8> {
+        // One clear range (the usual transfer function, transparent below a threshold): a
+        // comparison the compiler vectorises.
+        if let [(lo, hi)] = self.ranges[..] {
+            return values
+                .iter()
+                .map(|&v| u8::from(v >= lo && v <= hi))
+                .collect();
+        }
         values
             .iter()
             .map(|&v| {
