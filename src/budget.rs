@@ -22,11 +22,20 @@ pub const MAX_SIDE: u32 = 16384;
 /// The most pixels in one image (8192 x 8192: 1 GiB of f32 RGBA in the CPU compositors).
 pub const MAX_PIXELS: u64 = 1 << 26;
 
-/// Bytes a voxel costs from loading to drawing, at most: its value as f32 (4), its colour and
-/// gradient texels for the GPU (8), the CPU compositor's bricked copy of them (8) and its place
-/// in the draw order (4). Classified colours (16 bytes) come on top for significant voxels
-/// only; they are left out so that a dense volume that is mostly empty is not refused.
-pub const DRAW_BYTES_PER_VOXEL: u64 = 24;
+/// Bytes a voxel costs from loading to drawing, before the significant ones are known: its
+/// value as f32 (4) and its texel in the splat pass's full-grid texture (8, made on the host
+/// before it is uploaded). What each significant voxel adds ([`SPLAT_BYTES`]) is checked
+/// after classification, so that a large grid that is mostly empty is not refused. Measured
+/// peaks of a whole `render` with the CPU tiles: 5.9 bytes a voxel for the LIDC2 CT resampled
+/// to 512 x 512 x 532 (5.4M splats), 6.4 for a 1024^3 u16 ball with 20% of its voxels
+/// significant (6.8 GB).
+pub const DRAW_BYTES_PER_VOXEL: u64 = 12;
+
+/// Bytes a significant voxel costs once classified, on top of [`DRAW_BYTES_PER_VOXEL`]: its
+/// colour (6) and id (4, twice while the slices' lists are joined), its texel for the CPU tiles
+/// (8), its place in the draw order (4), and an eighth of that again for the coarser levels of
+/// detail.
+pub const SPLAT_BYTES: u64 = 30;
 
 /// The environment variable that sets the memory budget in bytes.
 pub const MEMORY_LIMIT_VAR: &str = "SPLATSCENE_MEMORY_LIMIT";

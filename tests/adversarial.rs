@@ -1429,13 +1429,14 @@ fn nifti_header_u8(dims: [i16; 3]) -> Vec<u8> {
 }
 
 fn limit_cases() -> Vec<Case> {
-    // A real bomb: 3 MB of gzip that inflates to the 128 MiB of a 1024x1024x128 grid, which
-    // drawing would take 3 GiB for, past the 2 GiB budget: refused from the header.
-    let grid = 1024 * 1024 * 128;
-    let mut bomb = nifti_header_u8([1024, 1024, 128]);
+    // A real bomb: 1.2 MB of gzip that inflates to the 256 MiB of a 1024x1024x256 grid,
+    // which drawing would take 3 GiB for (12 bytes a voxel), past the 2 GiB budget: refused
+    // from the header.
+    let grid = 1024 * 1024 * 256;
+    let mut bomb = nifti_header_u8([1024, 1024, 256]);
     bomb.extend(std::iter::repeat_n(0u8, grid));
     let bomb = gzip(&bomb);
-    assert!(bomb.len() < 1 << 20, "the bomb is {} bytes", bomb.len());
+    assert!(bomb.len() < 2 << 20, "the bomb is {} bytes", bomb.len());
     // A stream that inflates to far more than its header declares.
     let mut long = nifti_header_u8([2, 2, 2]);
     long.extend(std::iter::repeat_n(0u8, 64 << 20));
@@ -1443,7 +1444,7 @@ fn limit_cases() -> Vec<Case> {
     let nrrd_bomb = nrrd(
         &[
             ("type", "uchar"),
-            ("sizes", "1024 1024 128"),
+            ("sizes", "1024 1024 256"),
             ("encoding", "gzip"),
         ],
         &gzip(&vec![0u8; grid]),
@@ -1455,14 +1456,14 @@ fn limit_cases() -> Vec<Case> {
         nrrd(
             &[
                 ("type", "uchar"),
-                ("sizes", "1024 1024 128"),
+                ("sizes", "1024 1024 256"),
                 ("encoding", "bzip2"),
             ],
             &e.finish().unwrap(),
         )
     };
     let mha_bomb = {
-        let mut b = b"ObjectType = Image\nNDims = 3\nDimSize = 1024 1024 128\nElementType = MET_UCHAR\nCompressedData = True\nElementDataFile = LOCAL\n".to_vec();
+        let mut b = b"ObjectType = Image\nNDims = 3\nDimSize = 1024 1024 256\nElementType = MET_UCHAR\nCompressedData = True\nElementDataFile = LOCAL\n".to_vec();
         let mut z = flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::fast());
         std::io::Write::write_all(&mut z, &[0u8; 1 << 20]).unwrap();
         b.extend(z.finish().unwrap());

@@ -615,6 +615,54 @@ fn a_dense_grid_larger_than_memory_is_refused_before_allocating() {
 }
 
 #[test]
+fn splats_past_the_memory_budget_are_refused_after_classification() {
+    // A 64^3 raw volume, every voxel significant: the grid fits a 5 MiB budget (12 bytes a
+    // voxel, 3 MiB), its 262,144 splats (30 bytes each, 7.5 MiB) do not.
+    let raw = temp_path("dense64.raw");
+    std::fs::write(&raw, vec![200u8; 64 * 64 * 64]).unwrap();
+    let out = temp_path("dense64.png");
+    let render = |limit: &str| {
+        Command::new(env!("CARGO_BIN_EXE_splatscene"))
+            .env("SPLATSCENE_MEMORY_LIMIT", limit)
+            .env("RUST_BACKTRACE", "0")
+            .args([
+                "render",
+                raw.to_str().unwrap(),
+                "--dims",
+                "64,64,64",
+                "--scalar",
+                "u8",
+                "--window",
+                "100,150",
+                "--size",
+                "32x32",
+                "--compositor",
+                "cpu",
+                "--out",
+                out.to_str().unwrap(),
+            ])
+            .output()
+            .unwrap()
+    };
+    let refused = render("5M");
+    let said = String::from_utf8_lossy(&refused.stderr);
+    assert!(!refused.status.success());
+    assert!(
+        said.contains("drawing 262144 splats needs 7.5 MiB"),
+        "{said}"
+    );
+    assert!(!out.exists(), "nothing written");
+    let drawn = render("64M");
+    assert!(
+        drawn.status.success(),
+        "{}",
+        String::from_utf8_lossy(&drawn.stderr)
+    );
+    std::fs::remove_file(&raw).ok();
+    std::fs::remove_file(&out).ok();
+}
+
+#[test]
 fn numbers_that_are_not_finite_or_out_of_range_are_refused() {
     for args in [
         &["orderings", "--threshold", "NaN"][..],

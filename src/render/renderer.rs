@@ -611,6 +611,14 @@ impl Renderer {
                 };
                 let result = classify_with(&node.volume, &node.transfer, &options)
                     .map_err(|e| fail(e.to_string()))?;
+                // What drawing these splats takes, before any of it is made.
+                let splats = result.grid.len() as u64;
+                crate::budget::check_memory(
+                    format!("drawing {splats} splats"),
+                    splats,
+                    crate::budget::SPLAT_BYTES,
+                )
+                .map_err(|e| fail(e.to_string()))?;
                 made += 1;
                 // The coarser levels of the old classification go with it.
                 self.volumes.retain(|(v, level), _| *v != id || *level == 0);
