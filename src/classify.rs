@@ -296,6 +296,21 @@ impl Classified {
             .collect()
     }
 
+    /// The significant voxels of a `dims` grid and their colours from per-slice lists, the
+    /// slices in increasing id order.
+    fn joined(dims: [u32; 3], parts: Vec<(Vec<u32>, Vec<SplatColor>)>) -> Result<Self, GridError> {
+        let total = parts.iter().map(|(ids, _)| ids.len()).sum();
+        let (mut ids, mut colors) = (Vec::with_capacity(total), Vec::with_capacity(total));
+        for (i, c) in parts {
+            ids.extend(i);
+            colors.extend(c);
+        }
+        Ok(Self {
+            grid: SparseGrid::from_sorted_ids(dims, &ids)?,
+            colors,
+        })
+    }
+
     /// The next level of detail: each block of 2 x 2 x 2 voxels (fewer at an odd grid's far
     /// faces, and none along an axis of one voxel) becomes one splat, on the grid
     /// [`CpuVolume::halved`] makes. Its density is the mean of the block's densities (the
@@ -365,16 +380,7 @@ impl Classified {
                 (ids, colors)
             })
             .collect();
-        let total = slices.iter().map(|(ids, _)| ids.len()).sum();
-        let (mut ids, mut colors) = (Vec::with_capacity(total), Vec::with_capacity(total));
-        for (i, c) in slices {
-            ids.extend(i);
-            colors.extend(c);
-        }
-        Ok(Classified {
-            grid: SparseGrid::from_sorted_ids(out, &ids)?,
-            colors,
-        })
+        Self::joined(out, slices)
     }
 }
 
@@ -436,27 +442,20 @@ impl Opacity {
         }
     }
 
-    /// The density of a splat whose transfer-function opacity is `alpha` (see [`SplatColor`]).
+    /// The density of a splat whose cell has the transfer-function opacity `alpha` throughout
+    /// (see [`SplatColor`]): its [`extinction`] times `1 / (reference_mm 2 pi sigma^2 kept)`.
     pub fn density(&self, alpha: f32) -> f32 {
-        if alpha.is_nan() || alpha <= 0.0 {
-            return 0.0;
-        }
-        if alpha >= 1.0 {
-            return f32::INFINITY;
-        }
-        (f64::from(alpha).ln_1p_neg() * self.scale()) as f32
+        (extinction(alpha) * self.scale()) as f32
     }
 }
 
-/// `-ln(1 - a)`, accurate for small `a`.
-trait LnOneMinus {
-    fn ln_1p_neg(self) -> f64;
-}
-
-impl LnOneMinus for f64 {
-    fn ln_1p_neg(self) -> f64 {
-        -(-self).ln_1p()
+/// `-ln(1 - a)` for an opacity `a` (accurate for small `a`), capped at [`MAX_DEPTH`] so that
+/// opaque tissue has a finite extinction to average; 0 for `a` at or below 0 and for NaN.
+pub fn extinction(alpha: f32) -> f64 {
+    if alpha.is_nan() || alpha <= 0.0 {
+        return 0.0;
     }
+    (-(-f64::from(alpha.min(1.0))).ln_1p()).min(MAX_DEPTH)
 }
 
 /// A splat's opacity in a view: `1 - exp(-density step_mm)`.
@@ -612,16 +611,7 @@ pub fn classify_with(
             (ids, colors)
         })
         .collect();
-    let total = slabs.iter().map(|(ids, _)| ids.len()).sum();
-    let (mut ids, mut colors) = (Vec::with_capacity(total), Vec::with_capacity(total));
-    for (i, c) in slabs {
-        ids.extend(i);
-        colors.extend(c);
-    }
-    Ok(Classified {
-        grid: SparseGrid::from_sorted_ids(volume.dims, &ids)?,
-        colors,
-    })
+    Classified::joined(volume.dims, slabs)
 }
 
 /// Z-slices a classification task takes.
@@ -629,7 +619,7 @@ const SLAB: usize = 16;
 
 /// `-ln(1 - a)` is capped here (an opacity of 1 - 2e-9), so that opaque tissue has a finite
 /// extinction to average.
-const MAX_DEPTH: f64 = 20.0;
+pub const MAX_DEPTH: f64 = 20.0;
 
 /// The value ranges over which a transfer function is fully transparent, numbered from 1.
 struct ClearIntervals {
@@ -742,12 +732,7 @@ impl ExtinctionTable {
     fn new(tf: &TransferFunction) -> Self {
         let entry = |v: f32| {
             let [r, g, b, a] = tf.sample(v);
-            let d = if a > 0.0 {
-                (-(-f64::from(a.min(1.0))).ln_1p()).min(MAX_DEPTH) as f32
-            } else {
-                0.0
-            };
-            [r, g, b, d]
+            [r, g, b, extinction(a) as f32]
         };
         let knots: Vec<f32> = tf.points().iter().map(|p| p.0).collect();
         let mut entries = Vec::with_capacity(knots.len().saturating_sub(1) * (BINS + 1));
@@ -1010,7 +995,11 @@ mod tests {
         let opacity = Opacity::default();
         assert_eq!(opacity.density(0.0), 0.0);
         assert_eq!(opacity.density(f32::NAN), 0.0);
-        assert_eq!(opacity.density(1.0), f32::INFINITY);
+        let opaque = opacity.density(1.0);
+        assert!(
+            opaque.is_finite() && splat_alpha(opaque, 1.0) > 0.9999,
+            "{opaque}"
+        );
         assert_eq!(splat_alpha(f32::INFINITY, 0.5), 1.0);
         assert_eq!(splat_alpha(0.3, 0.0), 0.0);
         // Twice the reference length: half the density.
