@@ -487,6 +487,75 @@ pub fn view_step_mm(index_to_world: glam::DMat3, forward: glam::DVec3) -> Option
 /// `None` where it is zero. Never all three zero otherwise: a unit vector has a component of
 /// at least 1/sqrt(3).
 pub fn gradient_snorm8(volume: &CpuVolume, k: [u32; 3]) -> Option<[u8; 3]> {
+    snorm8(-differences(volume, k))
+}
+
+/// The unit index-space gradient at voxel `k` of the grid `factors` times finer than
+/// `volume`'s ([`classify_refined`]), as [`gradient_snorm8`] in the fine grid's index space:
+/// central differences of the volume's trilinear field one fine voxel either side of the fine
+/// voxel's centre, as they would be taken on the fine grid resampled. The volume's own
+/// gradient where every factor is 1.
+pub fn refined_gradient_snorm8(
+    volume: &CpuVolume,
+    factors: [u32; 3],
+    k: [u32; 3],
+) -> Option<[u8; 3]> {
+    if factors == [1, 1, 1] {
+        return gradient_snorm8(volume, k);
+    }
+    let f = factors.map(|f| f64::from(f.max(1)));
+    let centre: [f64; 3] = std::array::from_fn(|a| (f64::from(k[a]) + 0.5) / f[a] - 0.5);
+    let g: [f32; 3] = std::array::from_fn(|a| {
+        let (mut lo, mut hi) = (centre, centre);
+        lo[a] -= 1.0 / f[a];
+        hi[a] += 1.0 / f[a];
+        (trilinear(volume, hi) - trilinear(volume, lo)) / 2.0
+    });
+    snorm8(-glam::Vec3::from(g))
+}
+
+/// The trilinear interpolation of `volume`'s values at index coordinates `p`, the grid's
+/// faces extended outward.
+fn trilinear(volume: &CpuVolume, p: [f64; 3]) -> f32 {
+    let dims = volume.dims.map(|n| n.max(1) as usize);
+    let mut lower = [0usize; 3];
+    let mut upper = [0usize; 3];
+    let mut t = [0.0f32; 3];
+    for a in 0..3 {
+        let c = p[a].clamp(0.0, (dims[a] - 1) as f64);
+        lower[a] = (c.floor() as usize).min(dims[a] - 1);
+        upper[a] = (lower[a] + 1).min(dims[a] - 1);
+        t[a] = (c - lower[a] as f64) as f32;
+    }
+    let value = |x: usize, y: usize, z: usize| {
+        volume
+            .values
+            .get(x + dims[0] * (y + dims[1] * z))
+            .copied()
+            .unwrap_or(0.0)
+    };
+    let line = |y: usize, z: usize| {
+        let a = value(lower[0], y, z);
+        a + t[0] * (value(upper[0], y, z) - a)
+    };
+    let plane = |z: usize| {
+        let a = line(lower[1], z);
+        a + t[1] * (line(upper[1], z) - a)
+    };
+    let a = plane(lower[2]);
+    a + t[2] * (plane(upper[2]) - a)
+}
+
+/// A direction as snorm8 once made unit length; `None` for a zero or non-finite one.
+fn snorm8(v: glam::Vec3) -> Option<[u8; 3]> {
+    let n = v.try_normalize()?;
+    let q = |v: f32| (v * 127.0).round() as i8 as u8;
+    Some([q(n.x), q(n.y), q(n.z)])
+}
+
+/// The index-space gradient of `volume` at voxel `k` by central differences (one-sided at the
+/// faces; 0 along an axis of one voxel).
+fn differences(volume: &CpuVolume, k: [u32; 3]) -> glam::Vec3 {
     let [nx, ny, nz] = volume.dims.map(|n| n as usize);
     let [x, y, z] = k.map(|c| c as usize);
     let value = |x: usize, y: usize, z: usize| {
@@ -504,14 +573,11 @@ pub fn gradient_snorm8(volume: &CpuVolume, k: [u32; 3]) -> Option<[u8; 3]> {
             (at(hi) - at(lo)) / (hi - lo) as f32
         }
     };
-    let g = glam::Vec3::new(
+    glam::Vec3::new(
         diff(x, nx, &|i| value(i, y, z)),
         diff(y, ny, &|i| value(x, i, z)),
         diff(z, nz, &|i| value(x, y, i)),
-    );
-    let n = (-g).try_normalize()?;
-    let q = |v: f32| (v * 127.0).round() as i8 as u8;
-    Some([q(n.x), q(n.y), q(n.z)])
+    )
 }
 
 /// How a volume is classified.
@@ -561,6 +627,37 @@ pub fn classify_with(
     tf: &TransferFunction,
     options: &ClassifyOptions,
 ) -> Result<Classified, GridError> {
+    classify_refined(volume, tf, options, [1, 1, 1])
+}
+
+/// The grid [`classify_refined`] makes from a `dims` grid refined by `factors`: `factors[a]`
+/// voxels along axis `a` in place of each one.
+pub fn refined_dims(dims: [u32; 3], factors: [u32; 3]) -> Result<[u32; 3], GridError> {
+    let mut out = [0u32; 3];
+    for a in 0..3 {
+        out[a] = dims[a].checked_mul(factors[a]).ok_or(GridError::TooLarge {
+            dims,
+            count: u64::MAX,
+        })?;
+    }
+    crate::grid::voxel_count(out)?;
+    Ok(out)
+}
+
+/// Classifies the volume's field on a grid `factors[a]` times finer along each axis `a`: each
+/// voxel's box split into `factors[0] x factors[1] x factors[2]` voxels, which keep the
+/// volume's box (see [`CpuVolume::refined`]); `[1, 1, 1]` is the volume's own grid. Each fine
+/// voxel's splat is its own cell of the trilinear field, classified as [`classify_with`]
+/// classifies the own grid's cells, so a grid coarser than the pixels can be drawn with splats
+/// at most a pixel apart: a Gaussian a coarse voxel wide is far softer than the trilinear
+/// field a ray caster samples (measured in BENCHMARKS.md, "Grids coarser than the pixels").
+/// The fine grid is never held as values: its cells are interpolated from the volume's.
+pub fn classify_refined(
+    volume: &CpuVolume,
+    tf: &TransferFunction,
+    options: &ClassifyOptions,
+    factors: [u32; 3],
+) -> Result<Classified, GridError> {
     let count = crate::grid::voxel_count(volume.dims)? as usize;
     if volume.values.len() < count {
         return Err(GridError::TooFewValues {
@@ -568,50 +665,69 @@ pub fn classify_with(
             voxels: count,
         });
     }
+    let fine = refined_dims(volume.dims, factors)?;
     let [nx, ny, nz] = volume.dims.map(|n| n as usize);
+    let [fx, fy, fz] = factors.map(|f| f as usize);
     let plane = nx * ny;
     let clear = ClearIntervals::new(tf);
     let table = ExtinctionTable::new(tf);
+    let cells = Cells {
+        tf,
+        table: &table,
+        options,
+        samples: factors.map(|f| Samples::new(f as usize)),
+        fine: fine.map(|n| n as usize),
+    };
     let slabs: Vec<(Vec<u32>, Vec<SplatColor>)> = (0..nz.div_ceil(SLAB))
         .into_par_iter()
         .map(|slab| {
             let (mut ids, mut colors) = (Vec::new(), Vec::new());
-            let cells = Cells {
-                volume,
-                tf,
-                table: &table,
-                options,
-            };
             let z0 = slab * SLAB;
             let z1 = (z0 + SLAB).min(nz);
             // Per z-slice of the slab, with the slices beside it: which voxels' cells lie in
-            // one clear interval of the transfer function.
+            // one clear interval of the transfer function. A fine voxel's cell lies in the
+            // 3x3x3 voxels around the coarse voxel it splits, and trilinear interpolation
+            // stays in the interval its corners lie in, so the same test skips it.
             let labels: Vec<Vec<u8>> = (z0.saturating_sub(1)..(z1 + 1).min(nz))
                 .map(|z| {
                     uniform_in_plane(&clear.labels(&volume.values[z * plane..][..plane]), nx, ny)
                 })
                 .collect();
             let first = z0.saturating_sub(1);
+            let (fine_row, fine_plane) = (nx * fx, nx * fx * ny * fy);
+            let mut block = Block::default();
             for z in z0..z1 {
                 let below = &labels[z.saturating_sub(1) - first];
                 let here = &labels[z - first];
                 let above = &labels[(z + 1).min(nz - 1) - first];
-                for i in 0..plane {
-                    let label = here[i];
-                    if label != 0 && below[i] == label && above[i] == label {
-                        continue;
-                    }
-                    let (x, y) = (i % nx, i / nx);
-                    if let Some(c) = cells.color([x, y, z]) {
-                        ids.push((i + z * plane) as u32);
-                        colors.push(c);
+                for jz in 0..fz {
+                    for y in 0..ny {
+                        for jy in 0..fy {
+                            for x in 0..nx {
+                                let i = x + nx * y;
+                                let label = here[i];
+                                if label != 0 && below[i] == label && above[i] == label {
+                                    continue;
+                                }
+                                block.load(volume, [x, y, z]);
+                                for jx in 0..fx {
+                                    if let Some(c) = cells.color(&block, [jx, jy, jz]) {
+                                        let f = [x * fx + jx, y * fy + jy, z * fz + jz];
+                                        ids.push(
+                                            (f[0] + fine_row * f[1] + fine_plane * f[2]) as u32,
+                                        );
+                                        colors.push(c);
+                                    }
+                                }
+                            }
+                        }
                     }
                 }
             }
             (ids, colors)
         })
         .collect();
-    Classified::joined(volume.dims, slabs)
+    Classified::joined(fine, slabs)
 }
 
 /// Z-slices a classification task takes.
@@ -704,10 +820,107 @@ fn uniform_in_plane(labels: &[u8], nx: usize, ny: usize) -> Vec<u8> {
 
 /// What classifying one voxel's cell takes.
 struct Cells<'a> {
-    volume: &'a CpuVolume,
     tf: &'a TransferFunction,
     table: &'a ExtinctionTable,
     options: &'a ClassifyOptions,
+    /// Per axis, where the fine voxels' cell samples lie in their coarse voxel's block.
+    samples: [Samples; 3],
+    /// The fine grid's size.
+    fine: [usize; 3],
+}
+
+/// Where the cells of the `f` fine voxels that split one coarse voxel along an axis are
+/// sampled, in the coordinates of the coarse voxel's 3x3x3 [`Block`] (0, 1, 2: the voxel
+/// before, the voxel, the one after).
+struct Samples {
+    /// Per fine voxel, its centre (1 at the coarse voxel's centre).
+    centres: Vec<f32>,
+    /// Per fine voxel, its two samples a quarter of its width either side of its centre, each
+    /// as the lower of the two block values it lies between and the weight of the upper.
+    at: Vec<[(usize, f32); 2]>,
+}
+
+impl Samples {
+    fn new(f: usize) -> Self {
+        let width = 1.0 / f as f64;
+        let centres: Vec<f64> = (0..f).map(|j| 0.5 + (j as f64 + 0.5) * width).collect();
+        let at = centres
+            .iter()
+            .map(|&c| [c - 0.25 * width, c + 0.25 * width].map(Self::between))
+            .collect();
+        Self {
+            centres: centres.into_iter().map(|c| c as f32).collect(),
+            at,
+        }
+    }
+
+    /// The lower block value a coordinate in `[0, 2]` lies after and the weight of the next.
+    fn between(p: f64) -> (usize, f32) {
+        let i = (p.floor().max(0.0) as usize).min(1);
+        (i, (p - i as f64) as f32)
+    }
+}
+
+/// The 3x3x3 values around one voxel (clamped to the grid), `values[z][y][x]`.
+#[derive(Default)]
+struct Block {
+    /// The voxel they surround; `None` before the first load.
+    voxel: Option<[usize; 3]>,
+    values: [[[f32; 3]; 3]; 3],
+}
+
+impl Block {
+    /// Holds the values around voxel `k` of `volume` (kept where they already are).
+    fn load(&mut self, volume: &CpuVolume, k: [usize; 3]) {
+        if self.voxel == Some(k) {
+            return;
+        }
+        self.voxel = Some(k);
+        let dims = volume.dims.map(|n| n as usize);
+        let (row, plane) = (dims[0], dims[0] * dims[1]);
+        if (0..3).all(|a| k[a] >= 1 && k[a] + 1 < dims[a]) {
+            // Inside: the 27 values by offsets from the centre, no clamping.
+            let centre = k[0] + row * k[1] + plane * k[2];
+            let values = &volume.values[centre - 1 - row - plane..=centre + 1 + row + plane];
+            for (dz, layer) in self.values.iter_mut().enumerate() {
+                for (dy, line) in layer.iter_mut().enumerate() {
+                    let start = dz * plane + dy * row;
+                    line.copy_from_slice(&values[start..start + 3]);
+                }
+            }
+        } else {
+            let at = |a: usize, d: usize| (k[a] + d).saturating_sub(1).min(dims[a] - 1);
+            for (dz, layer) in self.values.iter_mut().enumerate() {
+                for (dy, line) in layer.iter_mut().enumerate() {
+                    for (dx, slot) in line.iter_mut().enumerate() {
+                        *slot = volume.values[at(0, dx) + row * at(1, dy) + plane * at(2, dz)];
+                    }
+                }
+            }
+        }
+    }
+
+    /// The trilinear interpolation at `(x, y, z)` in block coordinates, each in `[0, 2]`.
+    fn sample(&self, p: [f32; 3]) -> f32 {
+        let [(ix, tx), (iy, ty), (iz, tz)] = p.map(|c| Samples::between(f64::from(c)));
+        self.lerp([ix, iy, iz], [tx, ty, tz])
+    }
+
+    /// The trilinear interpolation in the cell whose lowest corner is `i`, at weights `t`.
+    #[inline]
+    fn lerp(&self, i: [usize; 3], t: [f32; 3]) -> f32 {
+        let v = &self.values;
+        let line = |z: usize, y: usize| {
+            let l = &v[z][y];
+            l[i[0]] + t[0] * (l[i[0] + 1] - l[i[0]])
+        };
+        let plane = |z: usize| {
+            let a = line(z, i[1]);
+            a + t[1] * (line(z, i[1] + 1) - a)
+        };
+        let a = plane(i[2]);
+        a + t[2] * (plane(i[2] + 1) - a)
+    }
 }
 
 /// Bins a segment of a transfer function (between two of its points) is tabulated in.
@@ -786,66 +999,27 @@ impl ExtinctionTable {
 }
 
 impl Cells<'_> {
-    /// The value of voxel `k + d`, clamped to the grid.
-    #[inline]
-    fn value(&self, k: [usize; 3], d: [isize; 3]) -> f32 {
-        let dims = self.volume.dims;
-        let at = |a: usize| {
-            let n = dims[a] as usize;
-            (k[a] as isize + d[a]).clamp(0, n as isize - 1) as usize
-        };
-        let (nx, ny) = (dims[0] as usize, dims[1] as usize);
-        self.volume.values[at(0) + nx * (at(1) + ny * at(2))]
-    }
-
-    /// The splat of voxel `k`: the mean extinction of the transfer function over its cell (the
-    /// box of one voxel around its centre, where the trilinear interpolation of the values is
-    /// classified at the 2x2x2 points a quarter voxel from the centre along each axis), and
-    /// the mean of their colours weighted by extinction; `None` where that is at or below the
-    /// minimum opacity, or, in shell mode, where no face neighbour's opacity is at or below
-    /// the shell's.
+    /// The splat of fine voxel `j` of the coarse voxel whose values `block` holds: the mean
+    /// extinction of the transfer function over its cell (the box of the fine voxel, where
+    /// the trilinear interpolation of the values is classified at the 2x2x2 points a quarter
+    /// of the fine voxel from its centre along each axis), and the mean of their colours
+    /// weighted by extinction; `None` where that is at or below the minimum opacity, or, in
+    /// shell mode, where no face neighbour's opacity is at or below the shell's.
     ///
     /// The transfer function is applied to the interpolated field, as a ray caster does, and
     /// then averaged: a voxel's splat carries the tissue of its whole cell, so a coarse grid
     /// and a fine one resampled from it draw the same picture. Classifying the centre value
     /// alone made a thin rib on a 1.4 x 1.4 x 2.5 mm grid a row of full-strength splats two
     /// voxels wide, where the interpolated field crosses the threshold over a fraction of them.
-    fn color(&self, k: [usize; 3]) -> Option<SplatColor> {
-        let mut v = [[[0.0f32; 3]; 3]; 3];
-        let dims = self.volume.dims.map(|n| n as usize);
-        if (0..3).all(|a| k[a] >= 1 && k[a] + 1 < dims[a]) {
-            // Inside: the 27 values by offsets from the centre, no clamping.
-            let (row, plane) = (dims[0], dims[0] * dims[1]);
-            let centre = k[0] + row * k[1] + plane * k[2];
-            let values = &self.volume.values[centre - 1 - row - plane..=centre + 1 + row + plane];
-            for (dz, layer) in v.iter_mut().enumerate() {
-                for (dy, line) in layer.iter_mut().enumerate() {
-                    let start = dz * plane + dy * row;
-                    line.copy_from_slice(&values[start..start + 3]);
-                }
-            }
-        } else {
-            for (dz, layer) in v.iter_mut().enumerate() {
-                for (dy, line) in layer.iter_mut().enumerate() {
-                    for (dx, slot) in line.iter_mut().enumerate() {
-                        *slot = self.value(k, [dx as isize - 1, dy as isize - 1, dz as isize - 1]);
-                    }
-                }
-            }
-        }
+    fn color(&self, block: &Block, j: [usize; 3]) -> Option<SplatColor> {
+        let [sx, sy, sz] = [0, 1, 2].map(|a| &self.samples[a].at[j[a]]);
         let mut depth = 0.0f64;
         let mut rgb = [0.0f64; 3];
         for corner in 0..8 {
-            // The octant toward (sx, sy, sz): weights 3/4 on the centre's side, 1/4 beyond.
-            let s = [corner & 1, corner >> 1 & 1, corner >> 2 & 1].map(|b| 2 * b);
-            let mut value = 0.0f32;
-            for (cz, wz) in [(1, 0.75f32), (s[2], 0.25)] {
-                for (cy, wy) in [(1, 0.75f32), (s[1], 0.25)] {
-                    for (cx, wx) in [(1, 0.75f32), (s[0], 0.25)] {
-                        value += wx * wy * wz * v[cz][cy][cx];
-                    }
-                }
-            }
+            let (ix, tx) = sx[corner & 1];
+            let (iy, ty) = sy[corner >> 1 & 1];
+            let (iz, tz) = sz[corner >> 2 & 1];
+            let value = block.lerp([ix, iy, iz], [tx, ty, tz]);
             let [r, g, b, d] = self.table.sample(value);
             if d <= 0.0 {
                 continue;
@@ -865,18 +1039,20 @@ impl Cells<'_> {
             return None;
         }
         if let Some(high) = self.options.shell {
-            let alpha_at = |d: [isize; 3]| self.tf.sample(self.value(k, d))[3];
-            let dims = self.volume.dims.map(|n| n as usize);
-            let at_face = (0..3).any(|a| k[a] == 0 || k[a] + 1 == dims[a]);
-            let faces = [
-                [-1, 0, 0],
-                [1, 0, 0],
-                [0, -1, 0],
-                [0, 1, 0],
-                [0, 0, -1],
-                [0, 0, 1],
-            ];
-            if !at_face && faces.iter().all(|&d| alpha_at(d) > high) {
+            let k = block.voxel.unwrap_or_default();
+            let factors = self.samples.each_ref().map(|s| s.centres.len());
+            let at_face = (0..3).any(|a| {
+                let f = k[a] * factors[a] + j[a];
+                f == 0 || f + 1 == self.fine[a]
+            });
+            // The face neighbours' centres, one fine voxel away: within the block.
+            let centre = [0, 1, 2].map(|a| self.samples[a].centres[j[a]]);
+            let opaque = |a: usize, sign: f32| {
+                let mut p = centre;
+                p[a] += sign / factors[a] as f32;
+                self.tf.sample(block.sample(p))[3] > high
+            };
+            if !at_face && (0..3).all(|a| opaque(a, -1.0) && opaque(a, 1.0)) {
                 return None;
             }
         }
@@ -1029,6 +1205,17 @@ mod tests {
     /// own interpolation, the grid clamped at its faces) classified at the eight points a
     /// quarter voxel from the centre, `-ln(1 - a)` averaged, colours weighted by it.
     fn cell_oracle(volume: &CpuVolume, tf: &TransferFunction, k: [usize; 3]) -> (f64, [f64; 3]) {
+        fine_cell_oracle(volume, tf, [1; 3], k)
+    }
+
+    /// The mean extinction and colour over the cell of voxel `k` of the grid `factors` times
+    /// finer than `volume`'s, by plain trilinear interpolation at the eight quarter points.
+    fn fine_cell_oracle(
+        volume: &CpuVolume,
+        tf: &TransferFunction,
+        factors: [u32; 3],
+        k: [usize; 3],
+    ) -> (f64, [f64; 3]) {
         let n = volume.dims.map(|n| n as f64);
         let at = |p: [f64; 3]| {
             let p: [f64; 3] = std::array::from_fn(|a| p[a].clamp(0.0, n[a] - 1.0));
@@ -1051,7 +1238,8 @@ mod tests {
         let (mut depth, mut rgb) = (0.0, [0.0; 3]);
         for corner in 0..8 {
             let p: [f64; 3] = std::array::from_fn(|a| {
-                k[a] as f64 + if corner >> a & 1 == 1 { 0.25 } else { -0.25 }
+                let f = f64::from(factors[a]);
+                (k[a] as f64 + 0.5 + if corner >> a & 1 == 1 { 0.25 } else { -0.25 }) / f - 0.5
             });
             let c = tf.sample(at(p) as f32).map(f64::from);
             let d = -(1.0 - c[3].min(1.0)).ln();
@@ -1126,6 +1314,116 @@ mod tests {
         assert!(
             kept > centres,
             "cells reach past their centres: {kept} against {centres}"
+        );
+    }
+
+    #[test]
+    fn a_refined_splat_carries_its_fine_cells_field() {
+        // The same kind of field on a small grid, refined unevenly along the axes: every fine
+        // voxel's splat against the plain computation at its own quarter points, the fine
+        // voxels tiling the coarse grid's box.
+        let dims = [4u32, 3, 5];
+        let values: Vec<f32> = (0..4 * 3 * 5)
+            .map(|id| {
+                let k = [id % 4, id / 4 % 3, id / 12];
+                let plane = if k[1] == 1 { 140.0 } else { 0.0 };
+                (k[0] * 17 + k[1] * 5 + k[2] * 11) as f32 + plane
+            })
+            .collect();
+        let volume = CpuVolume {
+            dims,
+            spacing: [1.0, 1.0, 2.5],
+            origin: [0.0; 3],
+            direction: DMat3::IDENTITY,
+            values,
+        };
+        let tf = TransferFunction::new(vec![
+            (50.0, [1.0, 0.2, 0.1, 0.0]),
+            (160.0, [0.2, 0.9, 1.0, 0.8]),
+        ]);
+        let options = ClassifyOptions {
+            min_opacity: 0.0,
+            ..Default::default()
+        };
+        let scale = Opacity::default().scale() as f32;
+        for factors in [[2u32, 3, 1], [1, 2, 4], [3, 3, 3]] {
+            let classified = classify_refined(&volume, &tf, &options, factors).unwrap();
+            let fine = refined_dims(dims, factors).unwrap();
+            assert_eq!(classified.grid.dims(), fine);
+            let (mut kept, mut left) = (0, 0);
+            let count = fine.iter().product::<u32>();
+            for id in 0..count {
+                let k = [
+                    id % fine[0],
+                    id / fine[0] % fine[1],
+                    id / (fine[0] * fine[1]),
+                ]
+                .map(|v| v as usize);
+                let (depth, rgb) = fine_cell_oracle(&volume, &tf, factors, k);
+                let Some(rank) = classified.grid.rank(id) else {
+                    assert!(
+                        depth <= 0.0,
+                        "{factors:?}: {k:?} left out with depth {depth}"
+                    );
+                    left += 1;
+                    continue;
+                };
+                kept += 1;
+                let c = classified.colors[rank as usize];
+                let want = depth as f32 * scale;
+                assert!(
+                    (c.density.to_f32() / want - 1.0).abs() < 2e-3,
+                    "{factors:?}: {k:?}: density {} against {want}",
+                    c.density
+                );
+                for i in 0..3 {
+                    assert!(
+                        (f64::from(c.rgb[i]) - rgb[i] * 255.0).abs() <= 0.6,
+                        "{factors:?}: {k:?}: {:?} against {rgb:?}",
+                        c.rgb
+                    );
+                }
+            }
+            assert!(
+                kept > 10 && left > 10,
+                "{factors:?}: {kept} kept, {left} left"
+            );
+        }
+        // Factors of one: the own grid's classification.
+        let own = classify_with(&volume, &tf, &options).unwrap();
+        let same = classify_refined(&volume, &tf, &options, [1, 1, 1]).unwrap();
+        assert_eq!(own.grid.dims(), same.grid.dims());
+        assert_eq!(own.colors, same.colors);
+    }
+
+    #[test]
+    fn a_refined_gradient_is_the_fields_along_the_fine_axes() {
+        // A field linear in x and z: its gradient is the same everywhere inside, and in the
+        // fine grid's index space each component shrinks by its axis's factor.
+        let dims = [6u32, 5, 7];
+        let values: Vec<f32> = (0..6 * 5 * 7)
+            .map(|id| {
+                let k = [id % 6, id / 6 % 5, id / 30];
+                (3 * k[0] + 4 * k[2]) as f32
+            })
+            .collect();
+        let volume = CpuVolume {
+            dims,
+            spacing: [1.0; 3],
+            origin: [0.0; 3],
+            direction: DMat3::IDENTITY,
+            values,
+        };
+        let factors = [2u32, 1, 4];
+        let n = refined_gradient_snorm8(&volume, factors, [5, 2, 13]).unwrap();
+        let n = n.map(|v| f32::from(v as i8) / 127.0);
+        let want = glam::Vec3::new(-3.0 / 2.0, 0.0, -4.0 / 4.0).normalize();
+        for a in 0..3 {
+            assert!((n[a] - want[a]).abs() < 0.02, "{n:?} against {want}");
+        }
+        assert_eq!(
+            refined_gradient_snorm8(&volume, [1; 3], [2, 2, 2]),
+            gradient_snorm8(&volume, [2, 2, 2])
         );
     }
 

@@ -35,7 +35,7 @@ use glam::Vec3;
 use rayon::prelude::*;
 use strength_reduce::StrengthReducedU32;
 
-use crate::classify::{Classified, gradient_snorm8};
+use crate::classify::{Classified, refined_gradient_snorm8};
 use crate::grid::SparseGrid;
 use crate::volume::CpuVolume;
 
@@ -161,11 +161,12 @@ const BRICK: usize = 4;
 
 impl SplatTexels {
     /// The texels of a classified volume: its colours and densities, and the gradients of the
-    /// volume it was classified from. Built brick by brick from the significant voxels; no
-    /// buffer the size of the whole grid.
-    pub fn new(classified: &Classified, volume: &CpuVolume) -> Self {
+    /// volume it was classified from, on a grid `factors` times finer than the volume's
+    /// ([`crate::classify::classify_refined`]; `[1, 1, 1]` for its own). Built brick by brick
+    /// from the significant voxels; no buffer the size of the whole grid.
+    pub fn new(classified: &Classified, volume: &CpuVolume, factors: [u32; 3]) -> Self {
         Self::build(&classified.grid, |k, rank| {
-            texel(volume, classified, k, rank)
+            texel(volume, factors, classified, k, rank)
         })
     }
 
@@ -265,12 +266,19 @@ impl SplatTexels {
     }
 }
 
-/// The 8-byte texel of significant voxel `k` (rank `rank`) of a classified volume: straight
-/// RGB8, the gradient of `volume` as snorm8 (zero where undefined), the density's f16 bits
-/// little-endian. The GPU's splat pass reads the same bytes as two `u32`.
-pub fn texel(volume: &CpuVolume, classified: &Classified, k: [u32; 3], rank: usize) -> [u8; 8] {
+/// The 8-byte texel of significant voxel `k` (rank `rank`) of a classified volume, its grid
+/// `factors` times finer than `volume`'s: straight RGB8, the gradient of `volume` there as
+/// snorm8 (zero where undefined), the density's f16 bits little-endian. The GPU's splat pass
+/// reads the same bytes as two `u32`.
+pub fn texel(
+    volume: &CpuVolume,
+    factors: [u32; 3],
+    classified: &Classified,
+    k: [u32; 3],
+    rank: usize,
+) -> [u8; 8] {
     let c = classified.colors.get(rank).copied().unwrap_or_default();
-    let n = gradient_snorm8(volume, k).unwrap_or([0; 3]);
+    let n = refined_gradient_snorm8(volume, factors, k).unwrap_or([0; 3]);
     let d = c.density.to_bits().to_le_bytes();
     [c.rgb[0], c.rgb[1], c.rgb[2], n[0], n[1], n[2], d[0], d[1]]
 }

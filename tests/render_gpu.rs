@@ -71,7 +71,9 @@ fn gpu_against_cpu_of(
 ) -> (splatscene::composite::ImageDifference, usize) {
     let ctx = context();
     let scene = volume_scene(volume.clone(), Ordering::IpPbtfImplicit);
+    // The reference composites the volume's own grid.
     let mut renderer = Renderer::new();
+    renderer.set_level_of_detail(false);
     let shot = renderer
         .screenshot(&ctx, &scene, &camera, size, &TRANSPARENT)
         .unwrap();
@@ -579,7 +581,9 @@ fn the_orderings_report_measures_alike_on_gpu_images() {
     views.extend(report::camera_path(&geometry, 3, 2));
     let cpu = report::measure_views(&geometry, &classified, &views, &settings, || {}).unwrap();
     let ctx = context();
+    // As the report's command: every ordering on the volume's own grid.
     let mut renderer = Renderer::new();
+    renderer.set_level_of_detail(false);
     let mut gpu_compositor = Compositor::Gpu {
         ctx: &ctx,
         renderer: &mut renderer,

@@ -153,7 +153,10 @@ fn tiles_match_the_cpu_reference_compositor() {
         background: None,
         ..OPTIONS
     };
-    let shot = Renderer::with_compositor(Compositor::Cpu)
+    // The reference composites the volume's own grid.
+    let mut renderer = Renderer::with_compositor(Compositor::Cpu);
+    renderer.set_level_of_detail(false);
+    let shot = renderer
         .screenshot(&ctx, &scene, &camera, (96, 80), &transparent)
         .unwrap();
     let (reference, drawn) = reference_frame(
@@ -182,8 +185,11 @@ fn early_termination_leaves_out_no_more_than_its_threshold() {
     node.splats.opacity_reference_mm = 0.25;
     scene.set_content(id, NodeContent::Volume(node)).unwrap();
     let camera = camera_of(&scene);
+    // The own grid, whose 1 mm splats are each nearly opaque (a refined one's are not).
     let mut stopping = Renderer::with_compositor(Compositor::Cpu);
     let mut full = Renderer::with_compositor(Compositor::Cpu);
+    stopping.set_level_of_detail(false);
+    full.set_level_of_detail(false);
     full.tile_compositor_mut().opaque = 2.0;
     let a = stopping
         .screenshot(&ctx, &scene, &camera, (96, 80), &OPTIONS)

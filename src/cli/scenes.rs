@@ -454,10 +454,13 @@ pub(crate) fn describe(r: &FrameReport) -> String {
         r.meshes,
         r.triangles,
         r.splats,
-        if r.level > 0 {
-            format!(" (level of detail {})", r.level)
-        } else {
-            String::new()
+        match (r.level, r.refined) {
+            (0, None) => String::new(),
+            (0, Some([x, y, z])) => format!(" (the grid refined {x}x{y}x{z})"),
+            (level, None) => format!(" (level of detail {level})"),
+            (level, Some([x, y, z])) => {
+                format!(" (level of detail {level}; a grid refined {x}x{y}x{z})")
+            }
         },
         ms(r.timings.classify),
         ms(r.timings.order),

@@ -12,10 +12,12 @@ use super::splat_pass::{GpuVolume, SplatPass, projection};
 use super::target::RenderTarget;
 use super::view::ViewSetup;
 use super::{GpuContext, RenderError};
-use crate::classify::{Classified, ClassifyOptions, Opacity, classify_with};
+use crate::classify::{Classified, ClassifyOptions, Opacity, classify_refined, classify_with};
 use crate::composite::Frame;
-use crate::order::{OrderOptions, Orderer, Ordering, ViewCase, VolumeGeometry};
-use crate::scene::{NodeId, Scene, SceneCamera, VolumeNode, placed_geometry};
+use crate::order::{OrderError, OrderOptions, Orderer, Ordering, ViewCase, VolumeGeometry};
+use crate::scene::{
+    NodeId, Scene, SceneCamera, VolumeNode, placed_geometry, placed_grid, volume_placement,
+};
 use crate::tiled::{SplatTexels, TileStats, TiledCompositor};
 use crate::volume::CpuVolume;
 
@@ -82,8 +84,15 @@ pub struct FrameReport {
     pub overlays: usize,
     /// Splats drawn (significant voxels in front of the eye).
     pub splats: usize,
-    /// The coarsest level of detail a volume was drawn at (0: every volume from its own grid).
+    /// The coarsest level of detail a volume was drawn at (0: every volume from its own grid
+    /// or finer).
     pub level: u8,
+    /// The most a volume's grid was refined along each axis, where one was
+    /// ([`Detail::Refined`]).
+    pub refined: Option<[u32; 3]>,
+    /// Whether a volume drawn from its own grid wanted it refined, with refinement off
+    /// ([`Renderer::set_refinement`]).
+    pub unrefined: bool,
     /// Volumes classified this frame (0 when nothing changed).
     pub classified: usize,
     /// What the CPU tile compositor did, when it composited the splats.
@@ -110,9 +119,11 @@ type ClassKey = (usize, usize, u32, u64, u64, u64, Option<u32>);
 
 struct VolumeState {
     key: ClassKey,
-    /// The volume drawn: the node's own at level 0, halved once per level above (for the
-    /// splats' placement and gradients).
+    /// The volume drawn: the node's own at level 0 and refined, halved once per level above
+    /// (for the splats' placement and gradients).
     volume: Arc<CpuVolume>,
+    /// How many times finer than `volume`'s the grid is along each axis.
+    factors: [u32; 3],
     classified: Classified,
     /// The GPU copy, made on the first frame the splat pass draws it.
     gpu: Option<GpuVolume>,
@@ -126,6 +137,7 @@ impl VolumeState {
     fn new(
         key: ClassKey,
         volume: Arc<CpuVolume>,
+        factors: [u32; 3],
         classified: Classified,
         orderer: Orderer,
         ids: Vec<u32>,
@@ -133,6 +145,7 @@ impl VolumeState {
         Self {
             key,
             volume,
+            factors,
             classified,
             gpu: None,
             texels: None,
@@ -142,21 +155,100 @@ impl VolumeState {
     }
 }
 
+impl VolumeState {
+    /// Where the splats of this state's grid lie when its node is placed by `world`.
+    fn geometry(&self, world: DMat4) -> Result<VolumeGeometry, OrderError> {
+        placed_grid(
+            self.classified.grid.dims(),
+            world * volume_placement(&self.volume) * refinement(self.factors),
+        )
+    }
+}
+
+/// Fine voxel indices to coarse ones for a grid `factors` times finer ([`classify_refined`]):
+/// fine voxel `j` of coarse voxel `k` sits at `k - 1/2 + (j + 1/2) / f`.
+fn refinement(factors: [u32; 3]) -> DMat4 {
+    let f = DVec3::from(factors.map(|f| f64::from(f.max(1))));
+    DMat4::from_scale_rotation_translation(
+        f.recip(),
+        glam::DQuat::IDENTITY,
+        0.5 * f.recip() - DVec3::splat(0.5),
+    )
+}
+
+/// How finely a volume is drawn.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Detail {
+    /// Level `n` of its pyramid, 2^n x 2^n x 2^n voxels a splat ([`Classified::halved`]); 0 is
+    /// the volume's own grid.
+    Level(u8),
+    /// Its trilinear field classified on a grid `factors[a]` times finer along each axis `a`
+    /// ([`classify_refined`]), for a grid whose voxels are more than a pixel apart.
+    Refined([u32; 3]),
+}
+
+impl Default for Detail {
+    fn default() -> Self {
+        Detail::Level(0)
+    }
+}
+
 /// The most levels of detail above a volume's own grid (a splat for 8^4 = 4,096 voxels).
 pub const MAX_LEVEL: u8 = 4;
 
-/// The level of detail a volume placed as `geometry` is drawn at in `view`: the coarsest whose
-/// voxels are still at most a pixel apart where the volume comes nearest the eye (its grid's
-/// box, half a voxel beyond the centres), so that the picture keeps the detail the pixels can
-/// show there while a grid two or more times finer than the pixels does not put four or more
-/// splats under each. Level 0 when the eye is inside the box. (A level one coarser, with
-/// voxels up to two pixels apart, was measured on the LIDC2 CT resampled to 0.7 mm at 512 x
-/// 512: 3.4 times faster, but RMSE 0.037 against the reference ray marcher where the full grid
-/// gives 0.024.)
-pub fn level_for(geometry: &VolumeGeometry, view: &ViewSetup) -> u8 {
-    let spacing = geometry.spacing().into_iter().fold(f64::INFINITY, f64::min);
-    let pixels = if view.is_orthographic() {
-        view.focal * spacing
+/// The most a grid is refined along one axis ([`Detail::Refined`]).
+pub const MAX_REFINE: u32 = 8;
+
+/// The most voxels a refined grid has (2^28, a 645^3 grid; the LIDC2 CT's 256 x 256 x 133
+/// grid refined 2 x 2 x 4 at 512 x 512 has 2^27.06): past it the factors are lowered,
+/// largest first.
+pub const MAX_REFINED_VOXELS: u64 = 1 << 28;
+
+/// The most voxels a refined grid has along an axis (the 3D texture size GPUs take).
+const MAX_REFINED_DIM: u64 = 2048;
+
+/// The detail a volume placed as `geometry` is drawn at in `view`, from how many pixels apart
+/// its voxels are along each axis where the volume comes nearest the eye (its grid's box, half
+/// a voxel beyond the centres):
+///
+/// - Where they are 1.5 pixels apart or more along some axis, its own grid refined to about a
+///   pixel along each axis ([`Detail::Refined`], factors the distance rounded, at most
+///   [`MAX_REFINE`] and [`MAX_REFINED_VOXELS`] in all): splats a coarse voxel wide are far
+///   softer than the trilinear field a ray caster samples. On the LIDC2 CT's 1.4 x 1.4 x 2.5
+///   mm grid at 512 x 512 (voxels 1.9 and 3.5 pixels apart) refining it 2 x 2 x 3 brings the
+///   picture within 0.03 of the reference ray marcher, from 0.05 (BENCHMARKS.md, "Grids
+///   coarser than the pixels").
+/// - Else the coarsest level of its pyramid whose voxels are still at most a pixel apart, so
+///   that the picture keeps the detail the pixels can show there while a grid two or more times
+///   finer than the pixels does not put four or more splats under each. (A level one coarser,
+///   with voxels up to two pixels apart, was measured on the LIDC2 CT resampled to 0.7 mm at
+///   512 x 512: 3.4 times faster, but RMSE 0.037 against the reference ray marcher where the
+///   full grid gives 0.024.)
+///
+/// The volume's own grid when the eye is inside the box.
+pub fn detail_for(geometry: &VolumeGeometry, view: &ViewSetup) -> Detail {
+    let Some(apart) = pixels_apart(geometry, view) else {
+        return Detail::Level(0);
+    };
+    if let Some(factors) = refine_factors(geometry.dims(), apart) {
+        return Detail::Refined(factors);
+    }
+    // Coarser while the next level's voxels are still at most a pixel apart.
+    let mut apart = apart.into_iter().fold(f64::INFINITY, f64::min);
+    let mut level = 0;
+    while level < MAX_LEVEL && apart.is_finite() && apart > 0.0 && 2.0 * apart <= 1.0 {
+        apart *= 2.0;
+        level += 1;
+    }
+    Detail::Level(level)
+}
+
+/// How many pixels apart the voxels of a grid placed as `geometry` are along each of its axes
+/// where it comes nearest the eye in `view`; `None` when the eye is inside its box.
+pub fn pixels_apart(geometry: &VolumeGeometry, view: &ViewSetup) -> Option<[f64; 3]> {
+    // The world size of a pixel where the volume comes nearest.
+    let pixel = if view.is_orthographic() {
+        1.0 / view.focal
     } else {
         let dims = geometry.dims().map(|n| f64::from(n) - 0.5);
         let (mut lo, mut hi) = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
@@ -171,18 +263,38 @@ pub fn level_for(geometry: &VolumeGeometry, view: &ViewSetup) -> u8 {
         let eye = view.camera.eye;
         let nearest = (eye.clamp(lo, hi) - eye).length();
         if nearest <= 0.0 {
-            return 0;
+            return None;
         }
-        view.focal * spacing / nearest
+        nearest / view.focal
     };
-    // Coarser while the next level's voxels are still at most a pixel apart.
-    let mut level = 0;
-    let mut apart = pixels;
-    while level < MAX_LEVEL && apart.is_finite() && apart > 0.0 && 2.0 * apart <= 1.0 {
-        apart *= 2.0;
-        level += 1;
+    (pixel.is_finite() && pixel > 0.0).then(|| geometry.spacing().map(|s| s / pixel))
+}
+
+/// The factors a `dims` grid whose voxels are `apart` pixels apart along each axis is refined
+/// by (see [`detail_for`]); `None` where no axis is.
+fn refine_factors(dims: [u32; 3], apart: [f64; 3]) -> Option<[u32; 3]> {
+    let mut factors = [0, 1, 2].map(|a| {
+        let wanted = if apart[a].is_finite() {
+            apart[a].round()
+        } else {
+            1.0
+        };
+        let most = (MAX_REFINED_DIM / u64::from(dims[a].max(1))).max(1) as f64;
+        wanted.clamp(1.0, f64::from(MAX_REFINE).min(most)) as u32
+    });
+    let count = |f: &[u32; 3]| {
+        (0..3)
+            .map(|a| u64::from(dims[a]) * u64::from(f[a]))
+            .product::<u64>()
+    };
+    while count(&factors) > MAX_REFINED_VOXELS.max(count(&[1; 3])) {
+        let a = (0..3).max_by_key(|&a| factors[a]).unwrap_or(0);
+        if factors[a] == 1 {
+            break;
+        }
+        factors[a] -= 1;
     }
-    level
+    (factors != [1; 3]).then_some(factors)
 }
 
 /// Who composites the splats of screenshots.
@@ -218,12 +330,15 @@ pub struct Renderer {
     mesh_pass: Option<MeshPass>,
     splat_pass: Option<SplatPass>,
     meshes: HashMap<NodeId, GpuMesh>,
-    /// Each volume's classified grid at each level of detail made so far (0: its own grid).
-    volumes: HashMap<(NodeId, u8), VolumeState>,
-    /// The level of detail each volume is drawn at in the current frame.
-    levels: HashMap<NodeId, u8>,
+    /// Each volume's classified grid at each level of detail made so far, and at most one
+    /// refinement of its own grid.
+    volumes: HashMap<(NodeId, Detail), VolumeState>,
+    /// The detail each volume is drawn at in the current frame.
+    levels: HashMap<NodeId, Detail>,
     /// Every volume drawn from its own grid (`--lod off`).
     full_grid: bool,
+    /// No volume drawn refined ([`Renderer::set_refinement`]).
+    no_refinement: bool,
     /// Who composites the splats of screenshots.
     compositor: Compositor,
     /// The CPU tile compositor's buffers.
@@ -260,10 +375,20 @@ impl Renderer {
     /// level of its pyramid ([`Classified::halved`], 2 x 2 x 2 voxels a splat a level, up to
     /// [`MAX_LEVEL`]) that [`level_for`] chooses, one level for the whole volume, so that a
     /// grid finer than the image does not cost splats that fall under one pixel; within the
-    /// level the draw order is the node's, over that level's grid. Off, every volume is drawn
-    /// from its own grid.
+    /// level the draw order is the node's, over that level's grid; and a grid coarser than the
+    /// pixels drawn refined ([`Renderer::set_refinement`]). Off, every volume is drawn from its
+    /// own grid.
     pub fn set_level_of_detail(&mut self, on: bool) {
         self.full_grid = !on;
+    }
+
+    /// Whether volumes whose voxels are more than a pixel apart may be drawn from their grid
+    /// refined ([`Detail::Refined`]; on by default, with the level of detail). Its
+    /// classification takes time the first time a view wants it (about a second for 2^27
+    /// fine voxels here), and its frames more splats: a viewer turns it off while the camera
+    /// moves and on once it rests.
+    pub fn set_refinement(&mut self, on: bool) {
+        self.no_refinement = !on;
     }
 
     /// The CPU tile compositor, to set its opacity threshold.
@@ -295,7 +420,7 @@ impl Renderer {
         let mut report = FrameReport::default();
         self.sync_meshes(ctx, scene);
         let started = Instant::now();
-        report.classified = self.sync_volumes(scene, view, options.preview)?;
+        report.classified = self.sync_volumes(scene, view, options.preview, &mut report)?;
         report.timings.classify = started.elapsed();
         let ordered = self.order_volumes(scene, view, options, &mut report)?;
         let started = Instant::now();
@@ -392,7 +517,7 @@ impl Renderer {
         let view = ViewSetup::new(camera, size, scene.bounds())?;
         let mut report = FrameReport::default();
         let started = Instant::now();
-        report.classified = self.sync_volumes(scene, &view, options.preview)?;
+        report.classified = self.sync_volumes(scene, &view, options.preview, &mut report)?;
         report.timings.classify = started.elapsed();
         let ordered = self.order_volumes(scene, &view, options, &mut report)?;
         // What lies under the splats: the meshes on the GPU, or the background alone.
@@ -488,12 +613,16 @@ impl Renderer {
             tiles,
             ..
         } = self;
-        let level = |id: &NodeId| levels.get(id).copied().unwrap_or(0);
+        let level = |id: &NodeId| levels.get(id).copied().unwrap_or_default();
         for (id, _) in ordered {
             if let Some(state) = volumes.get_mut(&(*id, level(id)))
                 && state.texels.is_none()
             {
-                state.texels = Some(SplatTexels::new(&state.classified, &state.volume));
+                state.texels = Some(SplatTexels::new(
+                    &state.classified,
+                    &state.volume,
+                    state.factors,
+                ));
             }
         }
         let mut inputs = Vec::with_capacity(ordered.len());
@@ -573,7 +702,7 @@ impl Renderer {
 
     /// The state a volume is drawn from in the current frame.
     fn drawn_mut(&mut self, id: NodeId) -> Option<&mut VolumeState> {
-        let level = self.levels.get(&id).copied().unwrap_or(0);
+        let level = self.levels.get(&id).copied().unwrap_or_default();
         self.volumes.get_mut(&(id, level))
     }
 
@@ -586,6 +715,7 @@ impl Renderer {
         scene: &Scene,
         view: &ViewSetup,
         preview: bool,
+        report: &mut FrameReport,
     ) -> Result<usize, RenderError> {
         let mut live = Vec::new();
         let mut made = 0;
@@ -598,74 +728,145 @@ impl Renderer {
                 node: name.clone(),
                 message,
             };
-            if self.volumes.get(&(id, 0)).is_none_or(|v| v.key != key) {
-                let style = &node.splats.style;
-                let options = ClassifyOptions {
-                    min_opacity: node.splats.min_opacity,
-                    opacity: Opacity {
-                        reference_mm: node.splats.opacity_reference_mm,
-                        sigma: style.sigma,
-                        cutoff: style.cutoff,
-                    },
-                    shell: node.splats.shell,
-                };
-                let result = classify_with(&node.volume, &node.transfer, &options)
-                    .map_err(|e| fail(e.to_string()))?;
-                // What drawing these splats takes, before any of it is made.
+            let style = &node.splats.style;
+            let options = ClassifyOptions {
+                min_opacity: node.splats.min_opacity,
+                opacity: Opacity {
+                    reference_mm: node.splats.opacity_reference_mm,
+                    sigma: style.sigma,
+                    cutoff: style.cutoff,
+                },
+                shell: node.splats.shell,
+            };
+            // What drawing a classification's splats takes, before any of it is made.
+            let afford = |result: &Classified| {
                 let splats = result.grid.len() as u64;
                 crate::budget::check_memory(
                     format!("drawing {splats} splats"),
                     splats,
                     crate::budget::SPLAT_BYTES,
                 )
-                .map_err(|e| fail(e.to_string()))?;
+                .map_err(|e| fail(e.to_string()))
+            };
+            let own = (id, Detail::Level(0));
+            if self.volumes.get(&own).is_none_or(|v| v.key != key) {
+                let result = classify_with(&node.volume, &node.transfer, &options)
+                    .map_err(|e| fail(e.to_string()))?;
+                afford(&result)?;
                 made += 1;
-                // The coarser levels of the old classification go with it.
-                self.volumes.retain(|(v, level), _| *v != id || *level == 0);
-                let old = self.volumes.remove(&(id, 0));
+                // The other levels of the old classification go with it; its order buffers
+                // are kept.
+                let old = self.volumes.remove(&own);
+                self.volumes.retain(|(v, _), _| *v != id);
                 if result.grid.is_empty() {
                     continue;
                 }
                 let (orderer, ids) = old.map(|o| (o.orderer, o.ids)).unwrap_or_default();
                 self.volumes.insert(
-                    (id, 0),
-                    VolumeState::new(key, Arc::clone(&node.volume), result, orderer, ids),
+                    own,
+                    VolumeState::new(key, Arc::clone(&node.volume), [1; 3], result, orderer, ids),
                 );
             }
-            let Some(full) = self.volumes.get(&(id, 0)) else {
+            let Some(full) = self.volumes.get(&own) else {
                 continue;
             };
             let wanted = if self.full_grid {
-                0
+                Detail::Level(0)
             } else {
                 let geometry =
                     placed_geometry(&full.volume, world).map_err(|e| fail(e.to_string()))?;
-                level_for(&geometry, view)
-            };
-            let wanted = if preview { wanted.max(1) } else { wanted };
-            // Make the levels up to the one wanted, each from the one below; a level whose
-            // grid would have no splat, or that would not shrink the grid, is not made.
-            let mut level = 0;
-            while level < wanted {
-                if !self.volumes.contains_key(&(id, level + 1)) {
-                    let below = &self.volumes[&(id, level)];
-                    if below.volume.dims.iter().all(|&n| n <= 1) {
-                        break;
+                let wanted = detail_for(&geometry, view);
+                // A refinement made already stays while its voxels are still about a pixel
+                // apart, so that a camera orbiting at one distance does not classify anew.
+                let kept = self.volumes.keys().find_map(|(v, d)| match d {
+                    Detail::Refined(f) if *v == id => Some(*f),
+                    _ => None,
+                });
+                match (wanted, kept, pixels_apart(&geometry, view)) {
+                    (Detail::Refined(_), Some(f), Some(apart))
+                        if (0..3).all(|a| {
+                            let drawn = apart[a] / f64::from(f[a]);
+                            drawn < 1.5 && (f[a] == 1 || drawn > 0.5)
+                        }) =>
+                    {
+                        Detail::Refined(f)
                     }
-                    let classified = below.classified.halved().map_err(|e| fail(e.to_string()))?;
-                    if classified.grid.is_empty() {
-                        break;
-                    }
-                    let volume = Arc::new(below.volume.halved());
-                    made += 1;
-                    self.volumes.insert(
-                        (id, level + 1),
-                        VolumeState::new(key, volume, classified, Orderer::new(), Vec::new()),
-                    );
+                    _ => wanted,
                 }
-                level += 1;
-            }
-            self.levels.insert(id, level);
+            };
+            let wanted = match wanted {
+                Detail::Level(level) if preview => Detail::Level(level.max(1)),
+                Detail::Refined(_) if preview => Detail::Level(1),
+                Detail::Refined(_) if self.no_refinement => {
+                    report.unrefined = true;
+                    Detail::Level(0)
+                }
+                wanted => wanted,
+            };
+            let drawn = match wanted {
+                Detail::Level(wanted) => {
+                    // Make the levels up to the one wanted, each from the one below; a level
+                    // whose grid would have no splat, or that would not shrink the grid, is
+                    // not made.
+                    let mut level = 0;
+                    while level < wanted {
+                        let above = (id, Detail::Level(level + 1));
+                        if !self.volumes.contains_key(&above) {
+                            let below = &self.volumes[&(id, Detail::Level(level))];
+                            if below.volume.dims.iter().all(|&n| n <= 1) {
+                                break;
+                            }
+                            let classified =
+                                below.classified.halved().map_err(|e| fail(e.to_string()))?;
+                            if classified.grid.is_empty() {
+                                break;
+                            }
+                            let volume = Arc::new(below.volume.halved());
+                            made += 1;
+                            self.volumes.insert(
+                                above,
+                                VolumeState::new(
+                                    key,
+                                    volume,
+                                    [1; 3],
+                                    classified,
+                                    Orderer::new(),
+                                    Vec::new(),
+                                ),
+                            );
+                        }
+                        level += 1;
+                    }
+                    Detail::Level(level)
+                }
+                Detail::Refined(factors) => {
+                    let refined = (id, wanted);
+                    if !self.volumes.contains_key(&refined) {
+                        // One refinement a volume is kept: a view that wants another makes it
+                        // anew.
+                        self.volumes
+                            .retain(|(v, d), _| *v != id || matches!(d, Detail::Level(_)));
+                        let result =
+                            classify_refined(&node.volume, &node.transfer, &options, factors)
+                                .map_err(|e| fail(e.to_string()))?;
+                        afford(&result)?;
+                        made += 1;
+                        self.volumes.insert(
+                            refined,
+                            VolumeState::new(
+                                key,
+                                Arc::clone(&node.volume),
+                                factors,
+                                result,
+                                Orderer::new(),
+                                Vec::new(),
+                            ),
+                        );
+                    }
+                    wanted
+                }
+            };
+            self.levels.insert(id, drawn);
         }
         self.volumes.retain(|(id, _), _| live.contains(id));
         Ok(made)
@@ -691,8 +892,7 @@ impl Renderer {
                 node: name.clone(),
                 message,
             };
-            let geometry =
-                placed_geometry(&state.volume, world).map_err(|e| fail(e.to_string()))?;
+            let geometry = state.geometry(world).map_err(|e| fail(e.to_string()))?;
             let case = ViewCase::new(&geometry, pinhole.eye, pinhole.target)
                 .map_err(|e| fail(e.to_string()))?;
             let ordering = options.ordering.unwrap_or(node.splats.ordering);
@@ -711,7 +911,15 @@ impl Renderer {
                 )
                 .map_err(|e| fail(e.to_string()))?;
             report.splats += state.ids.len();
-            report.level = report.level.max(self.levels.get(&id).copied().unwrap_or(0));
+            match self.levels.get(&id).copied().unwrap_or_default() {
+                Detail::Level(level) => report.level = report.level.max(level),
+                Detail::Refined(factors) => {
+                    let most = report.refined.get_or_insert([1; 3]);
+                    for a in 0..3 {
+                        most[a] = most[a].max(factors[a]);
+                    }
+                }
+            }
             ordered.push((id, geometry));
         }
         // Between volumes: farthest centre first (volumes that interpenetrate are not sorted
@@ -738,7 +946,7 @@ impl Renderer {
             ..
         } = self;
         for (id, geometry) in ordered {
-            let level = levels.get(id).copied().unwrap_or(0);
+            let level = levels.get(id).copied().unwrap_or_default();
             let Some(state) = volumes.get_mut(&(*id, level)) else {
                 continue;
             };
@@ -751,7 +959,12 @@ impl Renderer {
                 Some(gpu) => gpu,
                 empty => {
                     let pass = splat_pass.get_or_insert_with(|| SplatPass::new(ctx));
-                    empty.insert(pass.upload(ctx, &state.volume, &state.classified)?)
+                    empty.insert(pass.upload(
+                        ctx,
+                        &state.volume,
+                        state.factors,
+                        &state.classified,
+                    )?)
                 }
             };
             SplatPass::upload_order(ctx, gpu, &state.ids)?;
@@ -827,7 +1040,7 @@ impl Renderer {
         {
             let mut pass = begin(&mut encoder, color, depth, None, "splat pass");
             for (id, _) in ordered {
-                let level = self.levels.get(id).copied().unwrap_or(0);
+                let level = self.levels.get(id).copied().unwrap_or_default();
                 if let Some(gpu) = self.volumes.get(&(*id, level)).and_then(|s| s.gpu.as_ref()) {
                     splat_pass.draw(&mut pass, gpu);
                 }
@@ -1016,4 +1229,68 @@ fn class_key(node: &VolumeNode) -> ClassKey {
 
 fn linear_part(m: DMat4) -> DMat3 {
     DMat3::from_mat4(m)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn refined_voxels_tile_the_coarse_box() {
+        // Fine voxel j of coarse voxel k sits at k - 1/2 + (j + 1/2) / f: the first fine
+        // centre half a fine voxel inside the coarse box, the last as far from its other end.
+        let m = refinement([2, 3, 1]);
+        let first = m.transform_point3(DVec3::ZERO);
+        assert!((first - DVec3::new(-0.25, -1.0 / 3.0, 0.0)).length() < 1e-12);
+        let last = m.transform_point3(DVec3::new(9.0, 5.0, 3.0));
+        assert!((last - DVec3::new(4.25, 1.0 + 1.0 / 3.0, 3.0)).length() < 1e-12);
+    }
+
+    #[test]
+    fn refinement_brings_voxels_to_about_a_pixel_within_its_caps() {
+        // Rounded: 1.4 pixels apart stays, 1.6 doubles, 3.5 becomes 4.
+        assert_eq!(refine_factors([100; 3], [1.4, 1.0, 0.3]), None);
+        assert_eq!(refine_factors([100; 3], [1.6, 3.5, 0.3]), Some([2, 4, 1]));
+        // At most MAX_REFINE an axis, and 2048 voxels along it.
+        assert_eq!(refine_factors([10; 3], [50.0, 1.0, 1.0]), Some([8, 1, 1]));
+        assert_eq!(
+            refine_factors([1000, 4, 4], [5.0, 1.0, 1.0]),
+            Some([2, 1, 1])
+        );
+        // At most MAX_REFINED_VOXELS in all: the largest factor goes down first.
+        let f = refine_factors([512, 512, 512], [4.0, 4.0, 2.0]).unwrap();
+        let count: u64 = (0..3).map(|a| 512 * u64::from(f[a])).product();
+        assert!(count <= MAX_REFINED_VOXELS, "{f:?}");
+        assert!(f.iter().all(|&f| f >= 1) && f != [1; 3], "{f:?}");
+        // Not a number: no refinement.
+        assert_eq!(refine_factors([10; 3], [f64::NAN; 3]), None);
+    }
+
+    #[test]
+    fn the_detail_follows_the_pixels_a_voxel_spans() {
+        // A 100 mm cube of 50 voxels (2 mm) seen from 400 mm at 35 degrees.
+        let geometry = |spacing: f64| {
+            VolumeGeometry::new([50; 3], glam::DAffine3::from_scale(DVec3::splat(spacing))).unwrap()
+        };
+        let camera = SceneCamera::look_at(DVec3::new(50.0, 50.0, -400.0), DVec3::splat(50.0));
+        let view = |pixels: u32| ViewSetup::new(&camera, (pixels, pixels), None).unwrap();
+        let apart = |g: &VolumeGeometry, v: &ViewSetup| pixels_apart(g, v).unwrap()[0];
+        // About 2 pixels apart at 256: refined 2 x 2 x 2.
+        let g = geometry(2.0);
+        let a = apart(&g, &view(256));
+        assert!((1.9..2.1).contains(&a), "{a}");
+        assert_eq!(detail_for(&g, &view(256)), Detail::Refined([2; 3]));
+        // Under half a pixel apart at 48: a level coarser, whose voxels are under a pixel
+        // apart; the next would be more.
+        let a = apart(&g, &view(48));
+        assert!((0.25..0.5).contains(&a), "{a}");
+        assert_eq!(detail_for(&g, &view(48)), Detail::Level(1));
+        // About a pixel apart: the own grid.
+        assert_eq!(detail_for(&g, &view(160)), Detail::Level(0));
+        assert_eq!(detail_for(&g, &view(64)), Detail::Level(0));
+        // The eye inside the box: the own grid.
+        let inside = SceneCamera::look_at(DVec3::splat(50.0), DVec3::new(50.0, 50.0, 400.0));
+        let v = ViewSetup::new(&inside, (256, 256), None).unwrap();
+        assert_eq!(detail_for(&g, &v), Detail::Level(0));
+    }
 }

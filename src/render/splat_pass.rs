@@ -102,7 +102,7 @@ fn texture_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
 /// The 8-byte texel of every voxel of the grid (zero where not significant), as the tile
 /// compositor stores them ([`crate::tiled::SplatTexels`]): the splat pass's one texture. One
 /// z-slice a task, walking the slice's x rows, so only significant voxels are visited.
-fn splat_texels(volume: &CpuVolume, classified: &Classified) -> Vec<u8> {
+fn splat_texels(volume: &CpuVolume, factors: [u32; 3], classified: &Classified) -> Vec<u8> {
     let grid = &classified.grid;
     let [nx, ny, nz] = grid.dims().map(|n| n as usize);
     let mut texels = vec![0u8; nx * ny * nz * 8];
@@ -117,7 +117,8 @@ fn splat_texels(volume: &CpuVolume, classified: &Classified) -> Vec<u8> {
                         if let Some(rank) = grid.rank(id) {
                             let k = [x, y as u32, z as u32];
                             let i = (x as usize + nx * y) * 8;
-                            let t = crate::tiled::texel(volume, classified, k, rank as usize);
+                            let t =
+                                crate::tiled::texel(volume, factors, classified, k, rank as usize);
                             slice[i..i + 8].copy_from_slice(&t);
                         }
                     }
@@ -207,6 +208,7 @@ impl SplatPass {
         &self,
         ctx: &GpuContext,
         volume: &CpuVolume,
+        factors: [u32; 3],
         classified: &Classified,
     ) -> Result<GpuVolume, RenderError> {
         let dims = classified.grid.dims();
@@ -214,11 +216,15 @@ impl SplatPass {
         if dims.iter().any(|&n| n > max) {
             return Err(RenderError::VolumeTooLarge { dims, max });
         }
+        // The texture is dense: 8 bytes a voxel of the grid, significant or not (a refined
+        // grid's included), held once on the CPU while it is written.
+        let voxels: u64 = dims.iter().map(|&n| u64::from(n)).product();
+        crate::budget::check_memory(format!("a {voxels}-voxel splat texture"), voxels, 8)?;
         let texels = texture_3d(
             ctx,
             dims,
             wgpu::TextureFormat::Rg32Uint,
-            &splat_texels(volume, classified),
+            &splat_texels(volume, factors, classified),
             "splat texels",
         );
         let uniforms = ctx.device.create_buffer(&wgpu::BufferDescriptor {

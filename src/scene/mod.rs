@@ -424,13 +424,19 @@ fn content_bounds(content: &NodeContent) -> Option<(DVec3, DVec3)> {
 
 /// The index-to-world placement of a volume under its node's world transform.
 pub fn placed_geometry(volume: &CpuVolume, world: DMat4) -> Result<VolumeGeometry, OrderError> {
-    let m = world * volume_placement(volume);
+    placed_grid(volume.dims, world * volume_placement(volume))
+}
+
+/// The geometry of a `dims` grid whose index coordinates `index_to_world` places; refused
+/// where that is projective.
+pub fn placed_grid(dims: [u32; 3], index_to_world: DMat4) -> Result<VolumeGeometry, OrderError> {
+    let m = index_to_world;
     if !m.row(3).abs_diff_eq(glam::DVec4::W, 1e-12) {
         return Err(OrderError::SingularTransform);
     }
     let linear = glam::DMat3::from_mat4(m);
     VolumeGeometry::new(
-        volume.dims,
+        dims,
         glam::DAffine3::from_mat3_translation(linear, m.w_axis.truncate()),
     )
 }

@@ -231,6 +231,8 @@ pub fn run(scene: Scene, options: ViewerOptions) -> Result<(), ViewerError> {
         last: FrameReport::default(),
         full_frame: Duration::ZERO,
         settle: None,
+        sharpen: None,
+        sharp_at: None,
         annotations_on: true,
         error: None,
     };
@@ -323,6 +325,11 @@ struct App {
     full_frame: Duration,
     /// When a zoom drawn as previews gets its full frame.
     settle: Option<Instant>,
+    /// When a full frame drawn without refining a volume that wanted it gets its refined
+    /// frame ([`Renderer::set_refinement`]).
+    sharpen: Option<Instant>,
+    /// The camera refined frames are drawn at: the one the camera rested at.
+    sharp_at: Option<SceneCamera>,
     /// Whether the annotations show (the `A` key).
     annotations_on: bool,
     error: Option<ViewerError>,
@@ -446,6 +453,10 @@ impl App {
             return Ok(());
         };
         let target = &gpu.target;
+        // Volumes coarser than the pixels are drawn refined only once the camera rests: the
+        // refinement's classification and its splats cost more than a frame.
+        let sharp = !preview && self.sharp_at == Some(self.camera);
+        gpu.renderer.set_refinement(sharp);
         let on_cpu = gpu.renderer.composites_on_cpu(&gpu.ctx);
         if on_cpu {
             // The tile compositor's frame, shown through the present pass like the GPU's.
@@ -505,9 +516,10 @@ impl App {
         gpu.window.pre_present_notify();
         gpu.ctx.queue.present(frame);
         let elapsed = started.elapsed();
-        if !preview {
+        if !preview && !sharp {
             self.full_frame = elapsed;
         }
+        self.sharpen = (!preview && self.last.unrefined).then(|| Instant::now() + SETTLE);
         gpu.window.set_title(&format!(
             "splatscene: {}{} | {preset} | frame {:.0} ms, order {:.1} ms | {} splats{}",
             self.ordering,
@@ -515,7 +527,12 @@ impl App {
             elapsed.as_secs_f64() * 1e3,
             self.last.timings.order.as_secs_f64() * 1e3,
             self.last.splats,
-            if options.preview { " (preview)" } else { "" }
+            match (options.preview, self.last.refined, self.sharpen.is_some()) {
+                (true, _, _) => " (preview)".to_string(),
+                (false, Some([x, y, z]), _) => format!(" (refined {x}x{y}x{z})"),
+                (false, None, true) => " (refining)".to_string(),
+                (false, None, false) => String::new(),
+            }
         ));
         Ok(())
     }
@@ -1600,6 +1617,22 @@ impl ApplicationHandler for App {
             (a, b) => a.or(b),
         };
         let check = self.watched.as_ref().map(|_| self.next_check);
+        if let Some(due) = self.sharpen
+            && self.settle.is_none()
+            && self.drag.is_none()
+        {
+            if Instant::now() >= due {
+                self.sharpen = None;
+                self.sharp_at = Some(self.camera);
+                if let Some(gpu) = &self.gpu {
+                    gpu.window.request_redraw();
+                }
+            } else {
+                let at = check.map_or(due, |c| c.min(due));
+                event_loop.set_control_flow(ControlFlow::WaitUntil(at));
+                return;
+            }
+        }
         match self.settle {
             Some(due) if Instant::now() >= due => {
                 self.settle = None;
