@@ -196,12 +196,16 @@ impl Default for Detail {
 /// The most levels of detail above a volume's own grid (a splat for 8^4 = 4,096 voxels).
 pub const MAX_LEVEL: u8 = 4;
 
+/// A grid whose voxels are more than this many pixels apart along an axis is refined along
+/// it until they are at most this far apart ([`detail_for`]).
+pub const REFINE_TO: f64 = 1.5;
+
 /// The most a grid is refined along one axis ([`Detail::Refined`]).
 pub const MAX_REFINE: u32 = 8;
 
 /// The most voxels a refined grid has (2^28, a 645^3 grid; the LIDC2 CT's 256 x 256 x 133
-/// grid refined 2 x 2 x 4 at 512 x 512 has 2^27.06): past it the factors are lowered,
-/// largest first.
+/// grid refined 2 x 2 x 3 at 512 x 512 has 105M): past it the factors are lowered, largest
+/// first.
 pub const MAX_REFINED_VOXELS: u64 = 1 << 28;
 
 /// The most voxels a refined grid has along an axis (the 3D texture size GPUs take).
@@ -211,13 +215,15 @@ const MAX_REFINED_DIM: u64 = 2048;
 /// its voxels are along each axis where the volume comes nearest the eye (its grid's box, half
 /// a voxel beyond the centres):
 ///
-/// - Where they are 1.5 pixels apart or more along some axis, its own grid refined to about a
-///   pixel along each axis ([`Detail::Refined`], factors the distance rounded, at most
-///   [`MAX_REFINE`] and [`MAX_REFINED_VOXELS`] in all): splats a coarse voxel wide are far
-///   softer than the trilinear field a ray caster samples. On the LIDC2 CT's 1.4 x 1.4 x 2.5
-///   mm grid at 512 x 512 (voxels 1.9 and 3.5 pixels apart) refining it 2 x 2 x 3 brings the
-///   picture within 0.03 of the reference ray marcher, from 0.05 (BENCHMARKS.md, "Grids
-///   coarser than the pixels").
+/// - Where they are more than [`REFINE_TO`] (1.5) pixels apart along some axis, its own grid
+///   refined along each such axis until they are at most that far apart ([`Detail::Refined`],
+///   at most [`MAX_REFINE`] times an axis and [`MAX_REFINED_VOXELS`] in all): splats a coarse
+///   voxel wide are far softer than the trilinear field a ray caster samples. On the LIDC2
+///   CT's 1.4 x 1.4 x 2.5 mm grid at 512 x 512 (voxels 2.2 and 3.9 pixels apart) refining it
+///   2 x 2 x 3 brings the picture to 0.029-0.031 of the reference ray marcher, from
+///   0.049-0.053, and to 0.015-0.017 of the 0.7 mm grid's; refining to a pixel (2 x 2 x 4)
+///   gained 0.001 for 16-26% more frame time, and three times the classification on the
+///   built-in scene (BENCHMARKS.md, "Grids coarser than the pixels").
 /// - Else the coarsest level of its pyramid whose voxels are still at most a pixel apart, so
 ///   that the picture keeps the detail the pixels can show there while a grid two or more times
 ///   finer than the pixels does not put four or more splats under each. (A level one coarser,
@@ -275,7 +281,7 @@ pub fn pixels_apart(geometry: &VolumeGeometry, view: &ViewSetup) -> Option<[f64;
 fn refine_factors(dims: [u32; 3], apart: [f64; 3]) -> Option<[u32; 3]> {
     let mut factors = [0, 1, 2].map(|a| {
         let wanted = if apart[a].is_finite() {
-            apart[a].round()
+            (apart[a] / REFINE_TO).ceil()
         } else {
             1.0
         };
@@ -1248,9 +1254,10 @@ mod tests {
 
     #[test]
     fn refinement_brings_voxels_to_about_a_pixel_within_its_caps() {
-        // Rounded: 1.4 pixels apart stays, 1.6 doubles, 3.5 becomes 4.
-        assert_eq!(refine_factors([100; 3], [1.4, 1.0, 0.3]), None);
-        assert_eq!(refine_factors([100; 3], [1.6, 3.5, 0.3]), Some([2, 4, 1]));
+        // To at most 1.5 pixels: 1.4 pixels apart stays, 1.6 doubles, 3.5 triples, 3.0
+        // doubles.
+        assert_eq!(refine_factors([100; 3], [1.4, 1.5, 0.3]), None);
+        assert_eq!(refine_factors([100; 3], [1.6, 3.5, 3.0]), Some([2, 3, 2]));
         // At most MAX_REFINE an axis, and 2048 voxels along it.
         assert_eq!(refine_factors([10; 3], [50.0, 1.0, 1.0]), Some([8, 1, 1]));
         assert_eq!(
