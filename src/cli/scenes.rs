@@ -53,8 +53,9 @@ pub struct RenderArgs {
     #[arg(long, default_value = "auto")]
     compositor: Compositor,
     /// Level of detail: `on` draws each volume from the level of its pyramid (2x2x2 voxels a
-    /// splat a level) whose voxels are about a pixel apart where it comes nearest the eye;
-    /// `off` from its own grid, every voxel a splat
+    /// splat a level) whose voxels are about a pixel apart where it comes nearest the eye, or,
+    /// where its voxels are more than 1.5 pixels apart, from its field on a grid refined until
+    /// they are not; `off` from its own grid, every voxel a splat
     #[arg(long, default_value = "on", value_parser = ["on", "off"])]
     lod: String,
     /// Transparent background (the PNG's alpha is the coverage).
