@@ -646,10 +646,11 @@ pub fn refined_dims(dims: [u32; 3], factors: [u32; 3]) -> Result<[u32; 3], GridE
 
 /// Classifies the volume's field on a grid `factors[a]` times finer along each axis `a`: each
 /// voxel's box split into `factors[0] x factors[1] x factors[2]` voxels, which keep the
-/// volume's box (see [`CpuVolume::refined`]); `[1, 1, 1]` is the volume's own grid. Each fine
-/// voxel's splat is its own cell of the trilinear field, classified as [`classify_with`]
-/// classifies the own grid's cells, so a grid coarser than the pixels can be drawn with splats
-/// at most a pixel apart: a Gaussian a coarse voxel wide is far softer than the trilinear
+/// volume's box (fine voxel `j` of voxel `k` centred at `k - 1/2 + (j + 1/2) / f`); `[1, 1,
+/// 1]` is the volume's own grid. Each fine voxel's splat is its own cell of the trilinear
+/// field, classified as [`classify_with`] classifies the own grid's cells, so a grid coarser
+/// than the pixels can be drawn with splats about a pixel apart: a Gaussian a coarse voxel
+/// wide is far softer than the trilinear
 /// field a ray caster samples (measured in BENCHMARKS.md, "Grids coarser than the pixels").
 /// The fine grid is never held as values: its cells are interpolated from the volume's.
 pub fn classify_refined(
@@ -1204,8 +1205,52 @@ mod tests {
     /// The definition of a voxel's splat, computed the plain way: the trilinear field (its
     /// own interpolation, the grid clamped at its faces) classified at the eight points a
     /// quarter voxel from the centre, `-ln(1 - a)` averaged, colours weighted by it.
-    fn cell_oracle(volume: &CpuVolume, tf: &TransferFunction, k: [usize; 3]) -> (f64, [f64; 3]) {
-        fine_cell_oracle(volume, tf, [1; 3], k)
+    /// Every voxel of `classified`, the classification of `volume` on the grid `factors` times
+    /// finer, against [`fine_cell_oracle`]: a splat where the cell has opacity, with its
+    /// density and colour; returns how many voxels were kept and left out.
+    fn check_cells(
+        volume: &CpuVolume,
+        tf: &TransferFunction,
+        factors: [u32; 3],
+        classified: &Classified,
+    ) -> (usize, usize) {
+        let fine = refined_dims(volume.dims, factors).unwrap();
+        assert_eq!(classified.grid.dims(), fine);
+        let scale = Opacity::default().scale() as f32;
+        let (mut kept, mut left) = (0, 0);
+        for id in 0..fine.iter().product::<u32>() {
+            let k = [
+                id % fine[0],
+                id / fine[0] % fine[1],
+                id / (fine[0] * fine[1]),
+            ]
+            .map(|v| v as usize);
+            let (depth, rgb) = fine_cell_oracle(volume, tf, factors, k);
+            let Some(rank) = classified.grid.rank(id) else {
+                assert!(
+                    depth <= 0.0,
+                    "{factors:?}: {k:?} left out with depth {depth}"
+                );
+                left += 1;
+                continue;
+            };
+            kept += 1;
+            let c = classified.colors[rank as usize];
+            let want = depth as f32 * scale;
+            assert!(
+                (c.density.to_f32() / want - 1.0).abs() < 2e-3,
+                "{factors:?}: {k:?}: density {} against {want}",
+                c.density
+            );
+            for i in 0..3 {
+                assert!(
+                    (f64::from(c.rgb[i]) - rgb[i] * 255.0).abs() <= 0.6,
+                    "{factors:?}: {k:?}: {:?} against {rgb:?}",
+                    c.rgb
+                );
+            }
+        }
+        (kept, left)
     }
 
     /// The mean extinction and colour over the cell of voxel `k` of the grid `factors` times
@@ -1279,31 +1324,7 @@ mod tests {
             (150.0, [0.2, 0.9, 1.0, 0.7]),
         ]);
         let classified = classify(&volume, &tf, 0.0).unwrap();
-        let scale = Opacity::default().scale() as f32;
-        let mut kept = 0;
-        for id in 0..5 * 4 * 6u32 {
-            let k = [id % 5, id / 5 % 4, id / 20].map(|v| v as usize);
-            let (depth, rgb) = cell_oracle(&volume, &tf, k);
-            let Some(rank) = classified.grid.rank(id) else {
-                assert!(depth <= 0.0, "voxel {k:?} left out with depth {depth}");
-                continue;
-            };
-            kept += 1;
-            let c = classified.colors[rank as usize];
-            let want = depth as f32 * scale;
-            assert!(
-                (c.density.to_f32() / want - 1.0).abs() < 2e-3,
-                "voxel {k:?}: density {} against {want}",
-                c.density
-            );
-            for i in 0..3 {
-                assert!(
-                    (f64::from(c.rgb[i]) - rgb[i] * 255.0).abs() <= 0.6,
-                    "voxel {k:?}: {:?} against {rgb:?}",
-                    c.rgb
-                );
-            }
-        }
+        let (kept, _) = check_cells(&volume, &tf, [1; 3], &classified);
         // Centres at or above 60: k.x * 9 + k.y * 4 + k.z * 6 >= 60, or on the plane.
         let centres = (0..5 * 4 * 6u32)
             .filter(|id| {
@@ -1345,45 +1366,9 @@ mod tests {
             min_opacity: 0.0,
             ..Default::default()
         };
-        let scale = Opacity::default().scale() as f32;
         for factors in [[2u32, 3, 1], [1, 2, 4], [3, 3, 3]] {
             let classified = classify_refined(&volume, &tf, &options, factors).unwrap();
-            let fine = refined_dims(dims, factors).unwrap();
-            assert_eq!(classified.grid.dims(), fine);
-            let (mut kept, mut left) = (0, 0);
-            let count = fine.iter().product::<u32>();
-            for id in 0..count {
-                let k = [
-                    id % fine[0],
-                    id / fine[0] % fine[1],
-                    id / (fine[0] * fine[1]),
-                ]
-                .map(|v| v as usize);
-                let (depth, rgb) = fine_cell_oracle(&volume, &tf, factors, k);
-                let Some(rank) = classified.grid.rank(id) else {
-                    assert!(
-                        depth <= 0.0,
-                        "{factors:?}: {k:?} left out with depth {depth}"
-                    );
-                    left += 1;
-                    continue;
-                };
-                kept += 1;
-                let c = classified.colors[rank as usize];
-                let want = depth as f32 * scale;
-                assert!(
-                    (c.density.to_f32() / want - 1.0).abs() < 2e-3,
-                    "{factors:?}: {k:?}: density {} against {want}",
-                    c.density
-                );
-                for i in 0..3 {
-                    assert!(
-                        (f64::from(c.rgb[i]) - rgb[i] * 255.0).abs() <= 0.6,
-                        "{factors:?}: {k:?}: {:?} against {rgb:?}",
-                        c.rgb
-                    );
-                }
-            }
+            let (kept, left) = check_cells(&volume, &tf, factors, &classified);
             assert!(
                 kept > 10 && left > 10,
                 "{factors:?}: {kept} kept, {left} left"

@@ -19,7 +19,10 @@ pub use blit::{Blit, OVERLAY_FORMAT, overlay_texture, write_overlay};
 pub use context::GpuContext;
 pub use depth_image::{DepthImage, DepthMode};
 pub use output::{encode_png, frame_to_rgba8};
-pub use renderer::{Compositor, FrameOptions, FrameReport, FrameTimings, Renderer, Screenshot};
+pub use renderer::{
+    Compositor, Detail, FrameOptions, FrameReport, FrameTimings, MAX_LEVEL, MAX_REFINE,
+    MAX_REFINED_VOXELS, REFINE_TO, Renderer, Screenshot, detail_for, pixels_apart,
+};
 pub use target::{DEPTH_FORMAT, RenderTarget, color_format, read_texture};
 pub use view::ViewSetup;
 

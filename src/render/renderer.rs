@@ -183,7 +183,8 @@ pub enum Detail {
     /// the volume's own grid.
     Level(u8),
     /// Its trilinear field classified on a grid `factors[a]` times finer along each axis `a`
-    /// ([`classify_refined`]), for a grid whose voxels are more than a pixel apart.
+    /// ([`classify_refined`]), for a grid whose voxels are more than [`REFINE_TO`] pixels
+    /// apart.
     Refined([u32; 3]),
 }
 
@@ -233,10 +234,16 @@ const MAX_REFINED_DIM: u64 = 2048;
 ///
 /// The volume's own grid when the eye is inside the box.
 pub fn detail_for(geometry: &VolumeGeometry, view: &ViewSetup) -> Detail {
-    let Some(apart) = pixels_apart(geometry, view) else {
+    detail_at(geometry.dims(), pixels_apart(geometry, view))
+}
+
+/// [`detail_for`] a `dims` grid whose voxels are `apart` pixels apart along each axis where it
+/// comes nearest the eye (`None`: the eye inside it).
+fn detail_at(dims: [u32; 3], apart: Option<[f64; 3]>) -> Detail {
+    let Some(apart) = apart else {
         return Detail::Level(0);
     };
-    if let Some(factors) = refine_factors(geometry.dims(), apart) {
+    if let Some(factors) = refine_factors(dims, apart) {
         return Detail::Refined(factors);
     }
     // Coarser while the next level's voxels are still at most a pixel apart.
@@ -379,7 +386,7 @@ impl Renderer {
 
     /// Whether volumes are drawn at a level of detail (on by default): each volume from the
     /// level of its pyramid ([`Classified::halved`], 2 x 2 x 2 voxels a splat a level, up to
-    /// [`MAX_LEVEL`]) that [`level_for`] chooses, one level for the whole volume, so that a
+    /// [`MAX_LEVEL`]) that [`detail_for`] chooses, one level for the whole volume, so that a
     /// grid finer than the image does not cost splats that fall under one pixel; within the
     /// level the draw order is the node's, over that level's grid; and a grid coarser than the
     /// pixels drawn refined ([`Renderer::set_refinement`]). Off, every volume is drawn from its
@@ -388,11 +395,11 @@ impl Renderer {
         self.full_grid = !on;
     }
 
-    /// Whether volumes whose voxels are more than a pixel apart may be drawn from their grid
-    /// refined ([`Detail::Refined`]; on by default, with the level of detail). Its
-    /// classification takes time the first time a view wants it (about a second for 2^27
-    /// fine voxels here), and its frames more splats: a viewer turns it off while the camera
-    /// moves and on once it rests.
+    /// Whether volumes whose voxels are more than [`REFINE_TO`] pixels apart may be drawn
+    /// from their grid refined ([`Detail::Refined`]; on by default, with the level of detail).
+    /// Its classification takes time the first time a view wants it (0.35-0.86 s for the
+    /// LIDC2 CT refined 2 x 2 x 3 here), and its frames more splats: a viewer turns it off
+    /// while the camera moves and on once it rests.
     pub fn set_refinement(&mut self, on: bool) {
         self.no_refinement = !on;
     }
@@ -781,18 +788,20 @@ impl Renderer {
             } else {
                 let geometry =
                     placed_geometry(&full.volume, world).map_err(|e| fail(e.to_string()))?;
-                let wanted = detail_for(&geometry, view);
-                // A refinement made already stays while its voxels are still about a pixel
-                // apart, so that a camera orbiting at one distance does not classify anew.
+                let apart = pixels_apart(&geometry, view);
+                let wanted = detail_at(geometry.dims(), apart);
+                // A refinement made already stays while its voxels are still between half a
+                // pixel and REFINE_TO apart, so that a camera orbiting at one distance does not
+                // classify anew.
                 let kept = self.volumes.keys().find_map(|(v, d)| match d {
                     Detail::Refined(f) if *v == id => Some(*f),
                     _ => None,
                 });
-                match (wanted, kept, pixels_apart(&geometry, view)) {
+                match (wanted, kept, apart) {
                     (Detail::Refined(_), Some(f), Some(apart))
                         if (0..3).all(|a| {
                             let drawn = apart[a] / f64::from(f[a]);
-                            drawn < 1.5 && (f[a] == 1 || drawn > 0.5)
+                            drawn <= REFINE_TO && (f[a] == 1 || drawn > 0.5)
                         }) =>
                     {
                         Detail::Refined(f)
