@@ -52,14 +52,14 @@ fn doubled(v: &CpuVolume) -> CpuVolume {
     for z in 0..2 * nz {
         for y in 0..2 * ny {
             for x in 0..2 * nx {
-                values.push(v.values[x / 2 + nx * (y / 2 + ny * (z / 2))]);
+                values.push(v.values.at(x / 2 + nx * (y / 2 + ny * (z / 2))));
             }
         }
     }
     CpuVolume {
         dims: v.dims.map(|n| 2 * n),
         spacing: v.spacing.map(|s| s / 2.0),
-        values,
+        values: values.into(),
         ..v.clone()
     }
 }

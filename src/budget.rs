@@ -9,7 +9,8 @@
 //! The memory budget is what Linux says it can give without swapping (`MemAvailable`), or the
 //! number of bytes in `SPLATSCENE_MEMORY_LIMIT` (a plain count, or with a `K`, `M`, `G` or `T`
 //! suffix, powers of 1024) where that is set. A volume is loaded only when drawing it fits:
-//! [`DRAW_BYTES_PER_VOXEL`] bytes a voxel, so that a small compressed file declaring billions of
+//! its value as held (1, 2 or 4 bytes, see [`crate::volume::Voxels`]) and
+//! [`DRAW_BYTES_PER_VOXEL`] more a voxel, so that a small compressed file declaring billions of
 //! voxels is refused from its header rather than inflated first and refused later.
 
 use std::fmt;
@@ -22,14 +23,15 @@ pub const MAX_SIDE: u32 = 16384;
 /// The most pixels in one image (8192 x 8192: 1 GiB of f32 RGBA in the CPU compositors).
 pub const MAX_PIXELS: u64 = 1 << 26;
 
-/// Bytes a voxel costs from loading to drawing, before the significant ones are known: its
-/// value as f32 (4) and its texel in the splat pass's full-grid texture (8, made on the host
-/// before it is uploaded). What each significant voxel adds ([`SPLAT_BYTES`]) is checked
-/// after classification, so that a large grid that is mostly empty is not refused. Measured
-/// peaks of a whole `render` with the CPU tiles: 5.9 bytes a voxel for the LIDC2 CT resampled
-/// to 512 x 512 x 532 (5.4M splats), 6.4 for a 1024^3 u16 ball with 20% of its voxels
-/// significant (6.8 GB).
-pub const DRAW_BYTES_PER_VOXEL: u64 = 12;
+/// Bytes a voxel costs from loading to drawing besides its value, before the significant ones
+/// are known: the significance bitmap and its ranks, the clear-range labels of the slices
+/// being classified, rounded up. What each significant voxel adds ([`SPLAT_BYTES`]) is checked
+/// after classification, so that a large grid that is mostly empty is not refused, and the GPU
+/// splat pass checks its full-grid texture (8 bytes a voxel) before building it. Measured peaks
+/// of a whole `render` with the CPU tiles, in BENCHMARKS.md ("Values held as stored"): 2.96
+/// bytes a voxel for the 8-bit LIDC2 CT resampled to 512 x 512 x 532 with 5.4M splats (1 for
+/// the value, 1.2 for the splats at [`SPLAT_BYTES`] each).
+pub const DRAW_BYTES_PER_VOXEL: u64 = 1;
 
 /// Bytes a significant voxel costs once classified, on top of [`DRAW_BYTES_PER_VOXEL`]: its
 /// colour (6) and id (4, twice while the slices' lists are joined), its texel for the CPU tiles

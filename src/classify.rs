@@ -4,7 +4,8 @@
 use rayon::prelude::*;
 
 use crate::grid::{GridError, SparseGrid};
-use crate::volume::CpuVolume;
+use crate::volume::voxels::dispatch;
+use crate::volume::{CpuVolume, Voxel, Voxels};
 
 /// Piecewise-linear colour and opacity over the scalar value (straight, not premultiplied,
 /// RGBA). Below the first point and above the last the end values hold.
@@ -168,7 +169,7 @@ const HISTOGRAM_BINS: usize = 4096;
 /// smallest one (the background, usually air or padding, is left out of the histogram), so that
 /// the densest tenth of the object shows. Percentiles come from a histogram of
 /// [`HISTOGRAM_BINS`] bins, one pass over the values.
-pub fn auto_transfer(values: &[f32]) -> AutoTransfer {
+pub fn auto_transfer(values: &Voxels) -> AutoTransfer {
     let (lo, hi) = finite_range(values);
     if lo <= HU_AIR && hi > 0.0 {
         return AutoTransfer {
@@ -192,15 +193,14 @@ pub fn auto_transfer(values: &[f32]) -> AutoTransfer {
 
 /// Whether values are taken for Hounsfield units: they reach -500 (air, lung) and rise above 0,
 /// the rule [`auto_transfer`] chooses `ct-bone` by.
-pub fn is_hounsfield(values: &[f32]) -> bool {
+pub fn is_hounsfield(values: &Voxels) -> bool {
     let (lo, hi) = finite_range(values);
     lo <= HU_AIR && hi > 0.0
 }
 
-fn finite_range(values: &[f32]) -> (f32, f32) {
+fn finite_range(values: &Voxels) -> (f32, f32) {
     values
-        .par_chunks(1 << 16)
-        .map(|chunk| {
+        .par_chunks(1 << 16, |chunk| {
             chunk
                 .iter()
                 .filter(|v| v.is_finite())
@@ -208,14 +208,14 @@ fn finite_range(values: &[f32]) -> (f32, f32) {
                     (lo.min(v), hi.max(v))
                 })
         })
-        .reduce(
-            || (f32::INFINITY, f32::NEG_INFINITY),
-            |a, b| (a.0.min(b.0), a.1.max(b.1)),
-        )
+        .into_iter()
+        .fold((f32::INFINITY, f32::NEG_INFINITY), |a, b| {
+            (a.0.min(b.0), a.1.max(b.1))
+        })
 }
 
 /// Two quantiles of the finite values above `lo` (`lo` and `hi` their range), from a histogram.
-fn percentiles_above_min(values: &[f32], lo: f32, hi: f32, a: f64, b: f64) -> (f32, f32) {
+fn percentiles_above_min(values: &Voxels, lo: f32, hi: f32, a: f64, b: f64) -> (f32, f32) {
     if hi.partial_cmp(&lo) != Some(std::cmp::Ordering::Greater) {
         return (lo.min(0.0), hi.max(1.0));
     }
@@ -224,22 +224,20 @@ fn percentiles_above_min(values: &[f32], lo: f32, hi: f32, a: f64, b: f64) -> (f
         let t = (f64::from(v) - f64::from(lo)) / width;
         ((t * HISTOGRAM_BINS as f64) as usize).min(HISTOGRAM_BINS - 1)
     };
+    // Runs of a million values: a histogram each, a few hundred for the largest volumes.
     let histogram = values
-        .par_chunks(1 << 16)
-        .map(|chunk| {
+        .par_chunks(1 << 20, |chunk| {
             let mut h = vec![0u64; HISTOGRAM_BINS];
             for &v in chunk.iter().filter(|v| v.is_finite() && **v > lo) {
                 h[bin(v)] += 1;
             }
             h
         })
-        .reduce(
-            || vec![0u64; HISTOGRAM_BINS],
-            |mut x, y| {
-                x.iter_mut().zip(&y).for_each(|(x, y)| *x += y);
-                x
-            },
-        );
+        .into_iter()
+        .fold(vec![0u64; HISTOGRAM_BINS], |mut x, y| {
+            x.iter_mut().zip(&y).for_each(|(x, y)| *x += y);
+            x
+        });
     let total: u64 = histogram.iter().sum();
     let at = |q: f64| {
         let wanted = (q * total as f64).ceil() as u64;
@@ -531,7 +529,6 @@ fn trilinear(volume: &CpuVolume, p: [f64; 3]) -> f32 {
         volume
             .values
             .get(x + dims[0] * (y + dims[1] * z))
-            .copied()
             .unwrap_or(0.0)
     };
     let line = |y: usize, z: usize| {
@@ -558,13 +555,8 @@ fn snorm8(v: glam::Vec3) -> Option<[u8; 3]> {
 fn differences(volume: &CpuVolume, k: [u32; 3]) -> glam::Vec3 {
     let [nx, ny, nz] = volume.dims.map(|n| n as usize);
     let [x, y, z] = k.map(|c| c as usize);
-    let value = |x: usize, y: usize, z: usize| {
-        volume
-            .values
-            .get(x + nx * (y + ny * z))
-            .copied()
-            .unwrap_or(0.0)
-    };
+    let value =
+        |x: usize, y: usize, z: usize| volume.values.get(x + nx * (y + ny * z)).unwrap_or(0.0);
     let diff = |k: usize, n: usize, at: &dyn Fn(usize) -> f32| {
         let (lo, hi) = (k.saturating_sub(1), (k + 1).min(n.max(1) - 1));
         if hi <= lo {
@@ -667,9 +659,7 @@ pub fn classify_refined(
         });
     }
     let fine = refined_dims(volume.dims, factors)?;
-    let [nx, ny, nz] = volume.dims.map(|n| n as usize);
-    let [fx, fy, fz] = factors.map(|f| f as usize);
-    let plane = nx * ny;
+    let nz = volume.dims[2] as usize;
     let clear = ClearIntervals::new(tf);
     let table = ExtinctionTable::new(tf);
     let cells = Cells {
@@ -679,56 +669,68 @@ pub fn classify_refined(
         samples: factors.map(|f| Samples::new(f as usize)),
         fine: fine.map(|n| n as usize),
     };
-    let slabs: Vec<(Vec<u32>, Vec<SplatColor>)> = (0..nz.div_ceil(SLAB))
-        .into_par_iter()
-        .map(|slab| {
-            let (mut ids, mut colors) = (Vec::new(), Vec::new());
-            let z0 = slab * SLAB;
-            let z1 = (z0 + SLAB).min(nz);
-            // Per z-slice of the slab, with the slices beside it: which voxels' cells lie in
-            // one clear interval of the transfer function. A fine voxel's cell lies in the
-            // 3x3x3 voxels around the coarse voxel it splits, and trilinear interpolation
-            // stays in the interval its corners lie in, so the same test skips it.
-            let labels: Vec<Vec<u8>> = (z0.saturating_sub(1)..(z1 + 1).min(nz))
-                .map(|z| {
-                    uniform_in_plane(&clear.labels(&volume.values[z * plane..][..plane]), nx, ny)
-                })
-                .collect();
-            let first = z0.saturating_sub(1);
-            let (fine_row, fine_plane) = (nx * fx, nx * fx * ny * fy);
-            let mut block = Block::default();
-            for z in z0..z1 {
-                let below = &labels[z.saturating_sub(1) - first];
-                let here = &labels[z - first];
-                let above = &labels[(z + 1).min(nz - 1) - first];
-                for jz in 0..fz {
-                    for y in 0..ny {
-                        for jy in 0..fy {
-                            for x in 0..nx {
-                                let i = x + nx * y;
-                                let label = here[i];
-                                if label != 0 && below[i] == label && above[i] == label {
-                                    continue;
-                                }
-                                block.load(volume, [x, y, z]);
-                                for jx in 0..fx {
-                                    if let Some(c) = cells.color(&block, [jx, jy, jz]) {
-                                        let f = [x * fx + jx, y * fy + jy, z * fz + jz];
-                                        ids.push(
-                                            (f[0] + fine_row * f[1] + fine_plane * f[2]) as u32,
-                                        );
-                                        colors.push(c);
-                                    }
-                                }
+    let slabs: Vec<(Vec<u32>, Vec<SplatColor>)> = dispatch!(&volume.values, values => {
+        (0..nz.div_ceil(SLAB))
+            .into_par_iter()
+            .map(|slab| classify_slab(values, volume.dims, factors, slab, &clear, &cells))
+            .collect()
+    });
+    Classified::joined(fine, slabs)
+}
+
+/// The splats of z-slices `slab * SLAB ..` of a grid of `dims` holding `values`, refined by
+/// `factors`: their fine ids and colours, in id order.
+fn classify_slab<T: Voxel>(
+    values: &[T],
+    dims: [u32; 3],
+    factors: [u32; 3],
+    slab: usize,
+    clear: &ClearIntervals,
+    cells: &Cells,
+) -> (Vec<u32>, Vec<SplatColor>) {
+    let [nx, ny, nz] = dims.map(|n| n as usize);
+    let [fx, fy, fz] = factors.map(|f| f as usize);
+    let plane = nx * ny;
+    let (mut ids, mut colors) = (Vec::new(), Vec::new());
+    let z0 = slab * SLAB;
+    let z1 = (z0 + SLAB).min(nz);
+    // Per z-slice of the slab, with the slices beside it: which voxels' cells lie in one clear
+    // interval of the transfer function. A fine voxel's cell lies in the 3x3x3 voxels around
+    // the coarse voxel it splits, and trilinear interpolation stays in the interval its
+    // corners lie in, so the same test skips it.
+    let labels: Vec<Vec<u8>> = (z0.saturating_sub(1)..(z1 + 1).min(nz))
+        .map(|z| uniform_in_plane(&clear.labels(&values[z * plane..][..plane]), nx, ny))
+        .collect();
+    let first = z0.saturating_sub(1);
+    let (fine_row, fine_plane) = (nx * fx, nx * fx * ny * fy);
+    let mut block = Block::default();
+    for z in z0..z1 {
+        let below = &labels[z.saturating_sub(1) - first];
+        let here = &labels[z - first];
+        let above = &labels[(z + 1).min(nz - 1) - first];
+        for jz in 0..fz {
+            for y in 0..ny {
+                for jy in 0..fy {
+                    for x in 0..nx {
+                        let i = x + nx * y;
+                        let label = here[i];
+                        if label != 0 && below[i] == label && above[i] == label {
+                            continue;
+                        }
+                        block.load(values, dims, [x, y, z]);
+                        for jx in 0..fx {
+                            if let Some(c) = cells.color(&block, [jx, jy, jz]) {
+                                let f = [x * fx + jx, y * fy + jy, z * fz + jz];
+                                ids.push((f[0] + fine_row * f[1] + fine_plane * f[2]) as u32);
+                                colors.push(c);
                             }
                         }
                     }
                 }
             }
-            (ids, colors)
-        })
-        .collect();
-    Classified::joined(fine, slabs)
+        }
+    }
+    (ids, colors)
 }
 
 /// Z-slices a classification task takes.
@@ -777,18 +779,22 @@ impl ClearIntervals {
     }
 
     /// The number of the clear range holding each value, 0 for none (NaN included).
-    fn labels(&self, values: &[f32]) -> Vec<u8> {
+    fn labels<T: Voxel>(&self, values: &[T]) -> Vec<u8> {
         // One clear range (the usual transfer function, transparent below a threshold): a
         // comparison the compiler vectorises.
         if let [(lo, hi)] = self.ranges[..] {
             return values
                 .iter()
-                .map(|&v| u8::from(v >= lo && v <= hi))
+                .map(|v| {
+                    let v = v.to_f32();
+                    u8::from(v >= lo && v <= hi)
+                })
                 .collect();
         }
         values
             .iter()
-            .map(|&v| {
+            .map(|v| {
+                let v = v.to_f32();
                 self.ranges
                     .iter()
                     .position(|&(lo, hi)| v >= lo && v <= hi)
@@ -872,21 +878,22 @@ struct Block {
 
 impl Block {
     /// Holds the values around voxel `k` of `volume` (kept where they already are).
-    fn load(&mut self, volume: &CpuVolume, k: [usize; 3]) {
+    fn load<T: Voxel>(&mut self, values: &[T], dims: [u32; 3], k: [usize; 3]) {
         if self.voxel == Some(k) {
             return;
         }
         self.voxel = Some(k);
-        let dims = volume.dims.map(|n| n as usize);
+        let dims = dims.map(|n| n as usize);
         let (row, plane) = (dims[0], dims[0] * dims[1]);
         if (0..3).all(|a| k[a] >= 1 && k[a] + 1 < dims[a]) {
             // Inside: the 27 values by offsets from the centre, no clamping.
             let centre = k[0] + row * k[1] + plane * k[2];
-            let values = &volume.values[centre - 1 - row - plane..=centre + 1 + row + plane];
+            let values = &values[centre - 1 - row - plane..=centre + 1 + row + plane];
             for (dz, layer) in self.values.iter_mut().enumerate() {
                 for (dy, line) in layer.iter_mut().enumerate() {
                     let start = dz * plane + dy * row;
-                    line.copy_from_slice(&values[start..start + 3]);
+                    let run = &values[start..start + 3];
+                    *line = [run[0].to_f32(), run[1].to_f32(), run[2].to_f32()];
                 }
             }
         } else {
@@ -894,7 +901,7 @@ impl Block {
             for (dz, layer) in self.values.iter_mut().enumerate() {
                 for (dy, line) in layer.iter_mut().enumerate() {
                     for (dx, slot) in line.iter_mut().enumerate() {
-                        *slot = volume.values[at(0, dx) + row * at(1, dy) + plane * at(2, dz)];
+                        *slot = values[at(0, dx) + row * at(1, dy) + plane * at(2, dz)].to_f32();
                     }
                 }
             }
@@ -1072,7 +1079,7 @@ mod tests {
     #[test]
     fn the_automatic_transfer_function_follows_the_values() {
         let ct: Vec<f32> = (0..1000).map(|i| -1024.0 + 3.0 * i as f32).collect();
-        let auto = auto_transfer(&ct);
+        let auto = auto_transfer(&ct.clone().into());
         assert!(
             auto.hounsfield && auto.reason.starts_with("ct-bone"),
             "{}",
@@ -1083,7 +1090,7 @@ mod tests {
         // spans the 90th to 99.5th percentile of the object's values.
         let mut bytes = vec![0.0f32; 10_000];
         bytes.extend((1..=200).flat_map(|v| std::iter::repeat_n(v as f32, 10)));
-        let auto = auto_transfer(&bytes);
+        let auto = auto_transfer(&bytes.clone().into());
         assert!(!auto.hounsfield);
         let points = auto.transfer.points();
         let (from, to) = (points[0].0, points[points.len() - 1].0);
@@ -1094,13 +1101,15 @@ mod tests {
         assert!(auto.reason.contains("percentile"), "{}", auto.reason);
         // Constant or empty data still give a usable function.
         for values in [vec![7.0; 10], Vec::new(), vec![f32::NAN; 3]] {
-            let auto = auto_transfer(&values);
+            let auto = auto_transfer(&values.clone().into());
             assert!(
                 auto.transfer.points().iter().all(|(v, _)| v.is_finite()),
                 "{values:?}"
             );
         }
-        assert!(is_hounsfield(&[-600.0, 40.0]) && !is_hounsfield(&[0.0, 4000.0]));
+        assert!(
+            is_hounsfield(&vec![-600.0, 40.0].into()) && !is_hounsfield(&vec![0.0, 4000.0].into())
+        );
     }
     use glam::DMat3;
 
@@ -1276,7 +1285,7 @@ mod tests {
                     w *= if up { t } else { 1.0 - t };
                 }
                 let [nx, ny, _] = volume.dims.map(|n| n as usize);
-                sum += w * f64::from(volume.values[q[0] + nx * (q[1] + ny * q[2])]);
+                sum += w * f64::from(volume.values.at(q[0] + nx * (q[1] + ny * q[2])));
             }
             sum
         };
@@ -1317,7 +1326,7 @@ mod tests {
             spacing: [0.5, 1.0, 2.0],
             origin: [0.0; 3],
             direction: DMat3::IDENTITY,
-            values,
+            values: values.into(),
         };
         let tf = TransferFunction::new(vec![
             (60.0, [1.0, 0.2, 0.1, 0.0]),
@@ -1356,7 +1365,7 @@ mod tests {
             spacing: [1.0, 1.0, 2.5],
             origin: [0.0; 3],
             direction: DMat3::IDENTITY,
-            values,
+            values: values.into(),
         };
         let tf = TransferFunction::new(vec![
             (50.0, [1.0, 0.2, 0.1, 0.0]),
@@ -1397,7 +1406,7 @@ mod tests {
             spacing: [1.0; 3],
             origin: [0.0; 3],
             direction: DMat3::IDENTITY,
-            values,
+            values: values.into(),
         };
         let factors = [2u32, 1, 4];
         let n = refined_gradient_snorm8(&volume, factors, [5, 2, 13]).unwrap();
@@ -1477,7 +1486,7 @@ mod tests {
     #[test]
     fn the_shell_keeps_the_surface_of_an_opaque_block() {
         // A 6^3 grid with an opaque 4^3 block inside: its 2^3 core has only opaque neighbours.
-        let values = (0..216u32)
+        let values: Voxels = (0..216u32)
             .map(|id| {
                 let k = [id % 6, id / 6 % 6, id / 36];
                 if k.iter().all(|&c| (1..=4).contains(&c)) {
@@ -1528,7 +1537,7 @@ mod tests {
             spacing: [1.0; 3],
             origin: [0.0; 3],
             direction: DMat3::IDENTITY,
-            values,
+            values: values.into(),
         };
         let classified = classify(
             &volume,
@@ -1544,7 +1553,7 @@ mod tests {
         let [r, _, _, a] = c.premultiplied(1.0);
         assert!((r - a).abs() < 1e-6, "premultiplied");
         let all_clear = CpuVolume {
-            values: vec![-5.0; 24],
+            values: vec![-5.0; 24].into(),
             ..volume
         };
         let none = classify(

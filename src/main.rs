@@ -536,10 +536,10 @@ fn load_for_report(
     Ok((path.display().to_string(), volume, tf, classified))
 }
 
-fn value_range(values: &[f32]) -> (f32, f32) {
+fn value_range(values: &splatscene::volume::Voxels) -> (f32, f32) {
     values
         .iter()
-        .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &v| {
+        .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), v| {
             (lo.min(v), hi.max(v))
         })
 }

@@ -616,8 +616,8 @@ fn a_dense_grid_larger_than_memory_is_refused_before_allocating() {
 
 #[test]
 fn splats_past_the_memory_budget_are_refused_after_classification() {
-    // A 64^3 raw volume, every voxel significant: the grid fits a 5 MiB budget (12 bytes a
-    // voxel, 3 MiB), its 262,144 splats (30 bytes each, 7.5 MiB) do not.
+    // A 64^3 raw volume, every voxel significant: the grid fits a 5 MiB budget (2 bytes a
+    // voxel, 0.5 MiB), its 262,144 splats (30 bytes each, 7.5 MiB) do not.
     let raw = temp_path("dense64.raw");
     std::fs::write(&raw, vec![200u8; 64 * 64 * 64]).unwrap();
     let out = temp_path("dense64.png");

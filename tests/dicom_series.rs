@@ -117,7 +117,7 @@ fn block_mean(
     let [nx, ny, _] = volume.dims.map(|n| n as usize);
     let ids = ys.flat_map(|y| xs.clone().map(move |x| x + nx * (y + ny * z)));
     let (sum, count) = ids.fold((0.0, 0), |(s, n), id| {
-        (s + f64::from(volume.values[id]), n + 1)
+        (s + f64::from(volume.values.at(id)), n + 1)
     });
     sum / f64::from(count)
 }
@@ -184,7 +184,10 @@ fn shared_series_values_are_hounsfield_units_in_slice_order() {
             .decode_pixel_data()
             .and_then(|p| p.to_vec())
             .expect("decode slice");
-        assert!(hu == volume.values[k * plane..(k + 1) * plane], "slice {k}");
+        assert!(
+            hu == volume.values.to_f32_vec()[k * plane..(k + 1) * plane],
+            "slice {k}"
+        );
     }
 
     let corner = block_mean(&volume, 10, 0..32, 0..32);
@@ -198,8 +201,8 @@ fn shared_series_values_are_hounsfield_units_in_slice_order() {
     let (min, max) = volume
         .values
         .iter()
-        .fold((f32::MAX, f32::MIN), |(lo, hi), &v| (lo.min(v), hi.max(v)));
-    let bone = volume.values.iter().filter(|&&v| v > 300.0).count() as f64;
+        .fold((f32::MAX, f32::MIN), |(lo, hi), v| (lo.min(v), hi.max(v)));
+    let bone = volume.values.iter().filter(|&v| v > 300.0).count() as f64;
     let share = bone / volume.values.len() as f64;
     eprintln!("HU range {min}..{max}, {:.2}% above 300 HU", share * 100.0);
     assert!(min >= -1100.0 && max > 300.0 && max < 4000.0);
@@ -616,8 +619,8 @@ fn an_oblique_series_with_non_square_pixels_is_placed_as_dicom_defines() {
     }
     // The values are the original ones: only the placement changed.
     let original = load_dicom_series(&shared).expect("the shared series");
-    let mut sorted = volume.values.clone();
-    let mut expected = original.values.clone();
+    let mut sorted = volume.values.to_f32_vec();
+    let mut expected = original.values.to_f32_vec();
     sorted.sort_by(f32::total_cmp);
     expected.sort_by(f32::total_cmp);
     assert_eq!(sorted, expected);
@@ -779,4 +782,46 @@ fn a_slice_of_the_series_cut_short_is_an_error_unless_skipped() {
     assert_eq!(load_dicom_series(&dir).expect("the series loads"), original);
     fs::remove_dir_all(&dir).expect("clean up");
     fs::remove_dir_all(&native).expect("clean up");
+}
+
+/// Integer samples with an integer rescale are held in 16 bits, the type the loader reads them
+/// into first; a series whose values leave that range is read again as f32, with the same
+/// numbers a plain computation gives.
+#[test]
+fn integral_rescales_are_held_in_16_bits_and_wider_values_in_f32() {
+    use splatscene::volume::ScalarType;
+    let Some(shared) = series_dir() else { return };
+    let volume = load_dicom_series(&shared).expect("load the shared series");
+    assert_eq!(volume.values.scalar_type(), ScalarType::I16);
+    // The same slices with RescaleIntercept 40000 higher: values past i16.
+    let dir = copy_series(&shared, "wide_intercept", |_| false);
+    let vr = |name: &str| name.parse().expect("a VR name");
+    for file in series_files(&dir) {
+        let mut obj = open_file(&file).expect("open slice");
+        let intercept: f64 = obj
+            .element(tags::RESCALE_INTERCEPT)
+            .expect("a RescaleIntercept")
+            .to_str()
+            .expect("text")
+            .trim()
+            .parse()
+            .expect("a number");
+        obj.put_str(
+            tags::RESCALE_INTERCEPT,
+            vr("DS"),
+            format!("{}", intercept + 40000.0),
+        );
+        obj.write_to_file(&file).expect("rewrite slice");
+    }
+    let wide = load_dicom_series(&dir).expect("load the raised series");
+    assert_eq!(wide.values.scalar_type(), ScalarType::F32);
+    assert_eq!(wide.values.len(), volume.values.len());
+    let off = wide
+        .values
+        .iter()
+        .zip(volume.values.iter())
+        .filter(|&(w, v)| w != v + 40000.0)
+        .count();
+    assert_eq!(off, 0, "values not raised by exactly 40000");
+    fs::remove_dir_all(&dir).expect("clean up");
 }

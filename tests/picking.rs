@@ -394,7 +394,7 @@ fn the_voxel_walk_finds_the_first_opaque_voxel_as_dense_sampling_does() {
             if inside {
                 let v = k.floor().as_uvec3();
                 let id = (v.x + dims[0] * (v.y + dims[1] * v.z)) as usize;
-                if node.transfer.sample(node.volume.values[id])[3] > options.opacity_threshold {
+                if node.transfer.sample(node.volume.values.at(id))[3] > options.opacity_threshold {
                     reference = Some(([v.x, v.y, v.z], t));
                 }
             }

@@ -132,14 +132,14 @@ fn check_same_grid(
 fn value_at(v: &CpuVolume, index: DVec3) -> f64 {
     let [i, j, k] = index.to_array().map(|x| x as usize);
     let [nx, ny, _] = v.dims.map(|n| n as usize);
-    f64::from(v.values[i + nx * (j + ny * k)])
+    f64::from(v.values.at(i + nx * (j + ny * k)))
 }
 
 /// Sum, minimum and maximum of the values against the reference's.
 fn check_values(v: &CpuVolume, values: &Value, what: &str) {
-    let sum: f64 = v.values.iter().map(|&x| f64::from(x)).sum();
-    let min = v.values.iter().copied().fold(f32::INFINITY, f32::min);
-    let max = v.values.iter().copied().fold(f32::NEG_INFINITY, f32::max);
+    let sum: f64 = v.values.iter().map(f64::from).sum();
+    let min = v.values.iter().fold(f32::INFINITY, f32::min);
+    let max = v.values.iter().fold(f32::NEG_INFINITY, f32::max);
     let close = |a: f64, b: &Value| {
         let b = b.as_f64().unwrap();
         (a - b).abs() <= 1e-4 * b.abs().max(1.0)
@@ -598,7 +598,7 @@ fn check_spot_values(v: &CpuVolume, values: &Value, lossy: bool, what: &str) {
         .values
         .iter()
         .filter(|x| x.is_finite())
-        .map(|&x| f64::from(x))
+        .map(f64::from)
         .collect();
     let stats = values.get("finite").unwrap_or(values);
     let mean = finite.iter().sum::<f64>() / finite.len() as f64;

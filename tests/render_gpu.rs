@@ -171,7 +171,7 @@ fn splats_behind_a_mesh_are_hidden_and_write_no_depth() {
     };
     // The same voxels with everything behind the wall (y > 9.5) made air.
     let mut front = volume.clone();
-    for (id, v) in front.values.iter_mut().enumerate() {
+    for (id, v) in front.values.make_f32().iter_mut().enumerate() {
         if id / 20 % 20 > 10 {
             *v = -1000.0;
         }
@@ -277,7 +277,7 @@ fn pipelines_are_built_only_for_content() {
 
     // A volume whose every voxel is transparent gives no splats and no splat pipeline.
     let mut air = shells(12, [1.0; 3]);
-    air.values.iter_mut().for_each(|v| *v = -1000.0);
+    air.values.make_f32().iter_mut().for_each(|v| *v = -1000.0);
     let empty = volume_scene(air, Ordering::IpPbtfImplicit);
     let report = Renderer::new()
         .screenshot(&ctx, &empty, &camera, (32, 32), &TRANSPARENT)
@@ -392,7 +392,7 @@ fn twenty_million_splats_render() {
         spacing: [0.5; 3],
         origin: [0.0; 3],
         direction: glam::DMat3::IDENTITY,
-        values: vec![1300.0; (n * n * n) as usize],
+        values: vec![1300.0; (n * n * n) as usize].into(),
     };
     let scene = volume_scene(volume, Ordering::IpPbtfImplicit);
     let bounds = scene.bounds().unwrap();
@@ -444,7 +444,7 @@ fn clipped_voxels_vanish_and_the_rest_draw_as_before() {
     add_wall(&mut clipped);
     // The same voxels made air where the clipping cuts them, and the wall without its cut part.
     let mut cut = volume.clone();
-    for (id, v) in cut.values.iter_mut().enumerate() {
+    for (id, v) in cut.values.make_f32().iter_mut().enumerate() {
         let (x, z) = (id % 20, id / 400);
         if x > 7 || !(2..=17).contains(&z) {
             *v = -1000.0;
@@ -509,7 +509,7 @@ fn slab_alpha(ctx: &GpuContext, sigma: f64, spacing: f64, reference_mm: f64) -> 
         spacing: [spacing; 3],
         origin: [0.0; 3],
         direction: glam::DMat3::IDENTITY,
-        values: vec![500.0; (n_xy * n_xy * n_z) as usize],
+        values: vec![500.0; (n_xy * n_xy * n_z) as usize].into(),
     };
     let mut scene = volume_scene(volume, Ordering::IpPbtfImplicit);
     let id = scene.find("volume").unwrap();

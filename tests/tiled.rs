@@ -178,7 +178,11 @@ fn early_termination_leaves_out_no_more_than_its_threshold() {
     let ctx = context();
     // A dense, nearly opaque block: most splats lie behind opaque pixels.
     let mut volume = shells(24, [1.0; 3]);
-    volume.values.iter_mut().for_each(|v| *v = 1800.0);
+    volume
+        .values
+        .make_f32()
+        .iter_mut()
+        .for_each(|v| *v = 1800.0);
     let mut scene = volume_scene(volume, Ordering::IpPbtfImplicit);
     // Opacity 0.8 per quarter millimetre: each 1 mm splat nearly opaque.
     let id = scene.find("volume").unwrap();
@@ -218,7 +222,11 @@ fn splats_left_out_behind_opaque_pixels_change_nothing() {
     // batches find most pixels opaque. Perspective, turned, and orthographic; an image whose
     // sides are multiples of neither a tile nor a word of the opaque pixels' rows.
     let mut volume = shells(36, [1.0; 3]);
-    volume.values.iter_mut().for_each(|v| *v = 1800.0);
+    volume
+        .values
+        .make_f32()
+        .iter_mut()
+        .for_each(|v| *v = 1800.0);
     let scene = volume_scene(volume, Ordering::IpPbtfImplicit);
     let flat = SceneCamera {
         projection: Projection::Orthographic { height: 40.0 },

@@ -57,7 +57,7 @@ fn summarise(values: impl Iterator<Item = u32>, top: u32) -> Summary {
 
 /// The loaded values as integers, refusing any that are not exact non-negative integers.
 fn integers(volume: &CpuVolume) -> impl Iterator<Item = u32> + '_ {
-    volume.values.iter().map(|&v| {
+    volume.values.iter().map(|v| {
         assert!(
             v >= 0.0 && v.fract() == 0.0,
             "value {v} is not a non-negative integer"
@@ -68,7 +68,7 @@ fn integers(volume: &CpuVolume) -> impl Iterator<Item = u32> + '_ {
 
 fn voxel(volume: &CpuVolume, [x, y, z]: [u32; 3]) -> f32 {
     let [nx, ny, _] = volume.dims;
-    volume.values[(x + nx * (y + ny * z)) as usize]
+    volume.values.at((x + nx * (y + ny * z)) as usize)
 }
 
 fn engine_path() -> PathBuf {

@@ -48,7 +48,7 @@ fn data_dir() -> Option<PathBuf> {
 
 fn voxel(volume: &CpuVolume, [x, y, z]: [u32; 3]) -> f32 {
     let [nx, ny, _] = volume.dims;
-    volume.values[(x + nx * (y + ny * z)) as usize]
+    volume.values.at((x + nx * (y + ny * z)) as usize)
 }
 
 /// Loads through format detection and checks the size, spacing and stored type.
@@ -91,7 +91,7 @@ fn byte_summary(values: impl Iterator<Item = u8>) -> (u64, [u64; 16]) {
 }
 
 fn as_bytes(volume: &CpuVolume) -> impl Iterator<Item = u8> + '_ {
-    volume.values.iter().map(|&v| {
+    volume.values.iter().map(|v| {
         assert!(
             (0.0..=255.0).contains(&v) && v.fract() == 0.0,
             "value {v} is not a byte"
@@ -216,7 +216,7 @@ fn nrrd_pattern_stack_matches_its_slice_files() {
         }
     }
     assert_eq!(
-        loaded.volume.values.iter().map(|&v| v as i64).sum::<i64>(),
+        loaded.volume.values.iter().map(|v| v as i64).sum::<i64>(),
         sum
     );
     // Measured once with NumPy over the 93 files: sum 193392317, range 0..=3926.
@@ -262,10 +262,10 @@ fn vti_hydrogen_matches_independent_figures() {
     let v = &loaded.volume;
     // Measured once in Python: the base64 header and 32 zlib blocks decoded with the `base64`
     // and `zlib` modules, the floats read with NumPy (little-endian float32, x fastest).
-    let sum: f64 = v.values.iter().map(|&x| f64::from(x)).sum();
+    let sum: f64 = v.values.iter().map(f64::from).sum();
     assert!((sum - 4856.008970333326).abs() < 1e-6, "{sum}");
-    assert_eq!(v.values.iter().filter(|&&x| x > 0.5).count(), 1184);
-    assert_eq!(v.values.iter().filter(|&&x| x == 0.0).count(), 12544);
+    assert_eq!(v.values.iter().filter(|&x| x > 0.5).count(), 1184);
+    assert_eq!(v.values.iter().filter(|&x| x == 0.0).count(), 12544);
     assert_eq!(voxel(v, [10, 20, 30]), 0.015506);
     assert_eq!(voxel(v, [31, 31, 40]), 1.0);
     let info = volume_info(&path).unwrap();
@@ -322,8 +322,8 @@ fn nifti_abdomen_ct_is_in_hounsfield_units_with_its_sform() {
         1e-9
     ));
     // Air near -1000 HU, bone above 300 HU; counts measured once with NumPy.
-    let air = v.values.iter().filter(|&&x| x < -900.0).count();
-    let bone = v.values.iter().filter(|&&x| x > 300.0).count();
+    let air = v.values.iter().filter(|&x| x < -900.0).count();
+    let bone = v.values.iter().filter(|&x| x > 300.0).count();
     assert_eq!((air, bone), (445_487, 14_401));
     assert_eq!(voxel(v, [0, 0, 0]), -1023.0);
     assert_eq!(voxel(v, [60, 50, 56]), 281.0);
@@ -353,8 +353,8 @@ fn nifti_aorta_ct_has_metal_bright_voxels_and_a_flipped_sform() {
         1e-9
     ));
     // The stent graft: 3032 voxels above 2000 HU, up to 3343 (NumPy, once).
-    let metal = v.values.iter().filter(|&&x| x > 2000.0).count();
-    let max = v.values.iter().copied().fold(f32::MIN, f32::max);
+    let metal = v.values.iter().filter(|&x| x > 2000.0).count();
+    let max = v.values.iter().fold(f32::MIN, f32::max);
     assert_eq!((metal, max), (3032, 3343.0));
     let info = volume_info(&path).unwrap();
     assert_eq!(
@@ -470,7 +470,7 @@ fn four_dimensional_nifti_frames() {
         };
     let sum = |path: &Path, frame: Option<u32>| -> f64 {
         let loaded = load_volume_frame(path, None, frame).unwrap_or_else(|e| panic!("{e}"));
-        loaded.volume.values.iter().map(|&v| f64::from(v)).sum()
+        loaded.volume.values.iter().map(f64::from).sum()
     };
     let functional = dir.join("functional.nii");
     let first = load_volume_with_info(&functional).unwrap().volume;

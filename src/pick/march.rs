@@ -107,7 +107,6 @@ fn walk_kept<T>(
             .volume
             .values
             .get(x + nx * (y + ny * z))
-            .copied()
             .unwrap_or(f32::NAN);
         let opacity = node.transfer.sample(value)[3];
         let kept = || {

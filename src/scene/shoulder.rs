@@ -49,7 +49,7 @@ pub fn cut_away_anterior_humerus(volume: &mut CpuVolume, marks: &ShoulderLandmar
 fn soften_where(volume: &mut CpuVolume, inside: impl Fn(DVec3) -> bool) {
     let [nx, ny, _] = volume.dims.map(|n| n as usize);
     let placement = super::volume_placement(volume);
-    for (id, value) in volume.values.iter_mut().enumerate() {
+    for (id, value) in volume.values.make_f32().iter_mut().enumerate() {
         let k = DVec3::new(
             (id % nx) as f64,
             (id / nx % ny) as f64,

@@ -75,11 +75,11 @@ use dicom_transfer_syntax_registry::{TransferSyntaxIndex, TransferSyntaxRegistry
 use glam::{DMat3, DVec3};
 use rayon::prelude::*;
 
-use super::CpuVolume;
 pub use super::loader::SeriesChoice;
 use super::loader::{Placement, io_error};
 use super::loader::{ScalarType, VolumeError, checked_voxels};
 pub use super::loader::{SeriesSummary, describe_series};
+use super::{CpuVolume, Voxels};
 
 /// Bytes before the `DICM` magic in a DICOM file.
 const PREAMBLE_LEN: usize = 128;
@@ -672,15 +672,76 @@ fn build_volume(
     let first = &slices[0];
     let count = u32::try_from(slices.len()).map_err(|_| dicom_error(at, "too many slices"))?;
     let dims = [u32::from(first.columns), u32::from(first.rows), count];
-    let mut values = allocate(at, dims, &slices)?;
+    // Integer samples with integer rescales are held as 16-bit integers (two bytes a voxel
+    // where f32 takes four) unless a value turns out not to fit; then the stack is decoded again
+    // as f32.
+    let integral = slices.iter().all(|s| {
+        s.slope.fract() == 0.0
+            && s.intercept.fract() == 0.0
+            && matches!(
+                s.stored,
+                Some(ScalarType::U8 | ScalarType::I8 | ScalarType::U16 | ScalarType::I16)
+            )
+    });
+    let narrow = if integral {
+        decode_stack::<i16>(at, dims, &slices)?.map(Voxels::I16)
+    } else {
+        None
+    };
+    let values = match narrow {
+        Some(values) => values,
+        None => match decode_stack::<f32>(at, dims, &slices)? {
+            Some(values) => Voxels::F32(values),
+            None => unreachable!("every modality value fits f32 once its ends are checked"),
+        },
+    };
+    let volume = CpuVolume {
+        dims,
+        spacing: placement.spacing,
+        origin: placement.origin,
+        direction: placement.direction,
+        values,
+    };
+    Ok((volume, slices[0].stored))
+}
+
+/// A slice and the place its values go.
+type SliceOut<'a, T> = (&'a SliceHeader, &'a mut [T]);
+
+/// A type modality values are written in.
+trait Modality: Copy + Default + Send + Sync {
+    /// The value, `None` where this type cannot hold it exactly.
+    fn from_modality(v: f64) -> Option<Self>;
+}
+
+impl Modality for f32 {
+    fn from_modality(v: f64) -> Option<Self> {
+        Some(v as f32)
+    }
+}
+
+impl Modality for i16 {
+    fn from_modality(v: f64) -> Option<Self> {
+        let fits = v.fract() == 0.0 && v >= f64::from(i16::MIN) && v <= f64::from(i16::MAX);
+        fits.then_some(v as i16)
+    }
+}
+
+/// The stack's modality values in `T`, each file decoded once and its frames written to their
+/// places; `None` when a value does not fit `T`.
+fn decode_stack<T: Modality>(
+    at: &Path,
+    dims: [u32; 3],
+    slices: &[SliceHeader],
+) -> Result<Option<Vec<T>>, VolumeError> {
+    let mut values = allocate::<T>(at, dims, slices)?;
     let plane = values.len() / slices.len();
-    // Each file is decoded once, its frames copied to their places in the stack.
     let mut by_file: BTreeMap<&Path, Vec<(usize, &SliceHeader)>> = BTreeMap::new();
     for (k, slice) in slices.iter().enumerate() {
         by_file.entry(&slice.path).or_default().push((k, slice));
     }
-    let mut chunks: Vec<Option<&mut [f32]>> = values.chunks_mut(plane).map(Some).collect();
-    let work: Vec<(&Path, Vec<SliceOut>)> = by_file
+    let mut chunks: Vec<Option<&mut [T]>> = values.chunks_mut(plane).map(Some).collect();
+    let work: Vec<(&Path, Vec<SliceOut<T>>)> = by_file
         .into_iter()
         .map(|(path, list)| {
             let outs = list
@@ -694,19 +755,9 @@ fn build_volume(
         .into_par_iter()
         .map(|(path, outs)| decode_file(path, outs))
         .collect();
-    first_error(decoded)?;
-    let volume = CpuVolume {
-        dims,
-        spacing: placement.spacing,
-        origin: placement.origin,
-        direction: placement.direction,
-        values,
-    };
-    Ok((volume, slices[0].stored))
+    let fits = first_error(decoded)?.into_iter().all(|fits| fits);
+    Ok(fits.then_some(values))
 }
-
-/// A slice and the place its values go.
-type SliceOut<'a> = (&'a SliceHeader, &'a mut [f32]);
 
 /// The first error in file order, so that a folder with several bad files always reports the
 /// same one whatever the thread timing.
@@ -1419,10 +1470,19 @@ fn check_gaps(dir: &Path, slices: &[SliceHeader], depths: &[f64]) -> Result<(), 
 }
 
 /// The zeroed output, after checking its size against the grid limit and the files' bytes.
-fn allocate(dir: &Path, dims: [u32; 3], slices: &[SliceHeader]) -> Result<Vec<f32>, VolumeError> {
-    let count = checked_voxels(dir, dims)?;
+fn allocate<T: Modality>(
+    dir: &Path,
+    dims: [u32; 3],
+    slices: &[SliceHeader],
+) -> Result<Vec<T>, VolumeError> {
+    let held = if size_of::<T>() == 2 {
+        ScalarType::I16
+    } else {
+        ScalarType::F32
+    };
+    let count = checked_voxels(dir, dims, held)?;
     let file_bytes: u64 = slices.iter().map(|s| s.file_len).sum::<u64>().max(1);
-    let out_bytes = count.saturating_mul(size_of::<f32>() as u64);
+    let out_bytes = count.saturating_mul(size_of::<T>() as u64);
     if out_bytes
         > file_bytes
             .saturating_mul(MAX_EXPANSION)
@@ -1438,13 +1498,13 @@ fn allocate(dir: &Path, dims: [u32; 3], slices: &[SliceHeader]) -> Result<Vec<f3
     let count = usize::try_from(count).map_err(|_| too_big())?;
     let mut values = Vec::new();
     values.try_reserve_exact(count).map_err(|_| too_big())?;
-    values.resize(count, 0.0);
+    values.resize(count, T::default());
     Ok(values)
 }
 
 /// Decodes the pixel data of one file and writes each of its slices (frames) into its place
-/// (Rows x Columns values, rows in order).
-fn decode_file(path: &Path, outs: Vec<SliceOut>) -> Result<(), VolumeError> {
+/// (Rows x Columns values, rows in order); `false` when a value does not fit `T`.
+fn decode_file<T: Modality>(path: &Path, outs: Vec<SliceOut<T>>) -> Result<bool, VolumeError> {
     guarded(path, || {
         let obj = open(path)?;
         let first = outs.first().map(|(s, _)| *s).ok_or("no slices")?;
@@ -1474,10 +1534,11 @@ fn decode_file(path: &Path, outs: Vec<SliceOut>) -> Result<(), VolumeError> {
                 }
             }
         };
+        let mut fits = true;
         for (slice, out) in outs {
-            samples.modality_values(slice, out)?;
+            fits &= samples.modality_values(slice, out)?;
         }
-        Ok(())
+        Ok(fits)
     })
 }
 
@@ -1651,7 +1712,12 @@ impl<'a> Samples<'a> {
     /// are read little-endian: the codecs write them so, and native pixel data come in the
     /// machine's order, which is little-endian on the x86-64 and aarch64 targets of this
     /// project.
-    fn modality_values(&self, slice: &SliceHeader, out: &mut [f32]) -> Result<(), String> {
+    /// `false` (and the slice left part written) when a value does not fit `T`.
+    fn modality_values<T: Modality>(
+        &self,
+        slice: &SliceHeader,
+        out: &mut [T],
+    ) -> Result<bool, String> {
         if !(slice.slope.is_finite() && slice.intercept.is_finite()) {
             return Err(format!(
                 "rescale slope {} or intercept {} is not finite",
@@ -1695,9 +1761,12 @@ impl<'a> Samples<'a> {
             } else {
                 f64::from(top >> shift)
             };
-            *value = (sample * slice.slope + slice.intercept) as f32;
+            match T::from_modality(sample * slice.slope + slice.intercept) {
+                Some(v) => *value = v,
+                None => return Ok(false),
+            }
         }
-        Ok(())
+        Ok(true)
     }
 }
 
@@ -1795,6 +1864,17 @@ mod tests {
         assert_eq!(bare_data_set(&raw), None);
         assert!(!is_dicom(&raw));
         assert!(!is_dicom(&explicit[..12]));
+    }
+
+    #[test]
+    fn sixteen_bit_modality_values_are_exact_integers_in_range() {
+        assert_eq!(i16::from_modality(-1024.0), Some(-1024));
+        assert_eq!(i16::from_modality(32767.0), Some(i16::MAX));
+        assert_eq!(i16::from_modality(-32768.0), Some(i16::MIN));
+        for wide in [32768.0, -32769.0, 0.5, f64::NAN, f64::INFINITY] {
+            assert_eq!(i16::from_modality(wide), None, "{wide}");
+        }
+        assert_eq!(f32::from_modality(0.25), Some(0.25));
     }
 
     #[test]

@@ -10,7 +10,7 @@ use std::path::{Path, PathBuf};
 use glam::{DMat3, DVec3};
 use serde_json::{Value, json};
 
-use super::CpuVolume;
+use super::{CpuVolume, Voxels};
 
 mod error;
 mod values;
@@ -141,15 +141,23 @@ pub fn scalar_type_name(scalar: ScalarType) -> &'static str {
 
 /// Minimum, maximum and mean of the finite values, or `None` when there are none. The mean
 /// is summed in `f64` so that large volumes do not lose precision.
-fn value_range(values: &[f32]) -> Option<(f64, f64, f64)> {
-    let (mut min, mut max, mut sum, mut n) = (f64::INFINITY, f64::NEG_INFINITY, 0.0, 0u64);
-    for &v in values.iter().filter(|v| v.is_finite()) {
-        let v = f64::from(v);
-        min = min.min(v);
-        max = max.max(v);
-        sum += v;
-        n += 1;
-    }
+fn value_range(values: &Voxels) -> Option<(f64, f64, f64)> {
+    let runs = values.par_chunks(1 << 16, |run| {
+        let (mut min, mut max, mut sum, mut n) = (f64::INFINITY, f64::NEG_INFINITY, 0.0, 0u64);
+        for &v in run.iter().filter(|v| v.is_finite()) {
+            let v = f64::from(v);
+            min = min.min(v);
+            max = max.max(v);
+            sum += v;
+            n += 1;
+        }
+        (min, max, sum, n)
+    });
+    let (min, max, sum, n) = runs
+        .into_iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY, 0.0, 0u64), |a, b| {
+            (a.0.min(b.0), a.1.max(b.1), a.2 + b.2, a.3 + b.3)
+        });
     (n > 0).then(|| (min, max, sum / n as f64))
 }
 
@@ -387,7 +395,7 @@ pub(super) fn inflate_values(
     bytes: u64,
     format: ScalarFormat,
     total: usize,
-    out: &mut Vec<f32>,
+    out: &mut Voxels,
 ) -> Result<(), VolumeError> {
     // A multiple of every value size, so that chunks never split a value.
     const CHUNK: usize = 1 << 16;
@@ -408,7 +416,7 @@ pub(super) fn inflate_values(
                 actual: done + got as u64,
             });
         }
-        reserve_capped(out, want / size, total);
+        out.reserve_capped(want / size, total);
         decode(&buffer[..want], format.scalar, format.order, out);
         done += want as u64;
     }
@@ -467,14 +475,15 @@ pub(super) fn text_values(
     path: &Path,
     text: &str,
     count: usize,
-    out: &mut Vec<f32>,
+    out: &mut Voxels,
 ) -> Result<(), VolumeError> {
     let before = out.len();
+    let out_f32 = out.make_f32();
     for word in text.split_whitespace().take(count.saturating_add(1)) {
         let value: f64 = word.parse().map_err(|_| {
             header_error(path, format!("{word:?} in the text data is not a number"))
         })?;
-        out.push(value as f32);
+        out_f32.push(value as f32);
     }
     let got = out.len() - before;
     if got != count {
@@ -527,18 +536,6 @@ pub(super) fn format_pattern(pattern: &str, n: i64) -> Option<String> {
     }
     out.push_str(rest);
     used.then_some(out)
-}
-
-/// Grows `out` to take `adding` more values, doubling as a `Vec` would but never past `total`.
-fn reserve_capped(out: &mut Vec<f32>, adding: usize, total: usize) {
-    let needed = out.len() + adding;
-    if needed > out.capacity() {
-        let target = out
-            .capacity()
-            .saturating_mul(2)
-            .clamp(needed, total.max(needed));
-        out.reserve_exact(target - out.len());
-    }
 }
 
 /// Fills as much of `buffer` as the reader can give; fewer bytes only at the end of the data.
@@ -674,10 +671,13 @@ pub(super) mod tests {
         };
         let data: Vec<u8> = (0..20u8).collect();
         let compressed = gzip(&data);
-        let mut out = Vec::new();
+        let mut out = Voxels::new(format.scalar);
         let mut reader = MultiGzDecoder::new(&compressed[..]);
         inflate_values(path, &mut reader, 16, format, 8, &mut out).unwrap();
-        assert_eq!(out[..2], [1.0, 2.0 * 256.0 + 3.0]);
+        let Voxels::U16(out) = out else {
+            panic!("u16 values held as {:?}", out.scalar_type())
+        };
+        assert_eq!(out[..2], [1, 2 * 256 + 3]);
         assert!(out.capacity() <= 8, "{}", out.capacity());
         let err = expect_end(path, &mut reader, 16).unwrap_err();
         assert!(
@@ -685,7 +685,8 @@ pub(super) mod tests {
             "{err}"
         );
         let mut reader = MultiGzDecoder::new(&compressed[..]);
-        let err = inflate_values(path, &mut reader, 24, format, 12, &mut Vec::new()).unwrap_err();
+        let err =
+            inflate_values(path, &mut reader, 24, format, 12, &mut Voxels::default()).unwrap_err();
         assert!(
             matches!(
                 err,
@@ -698,7 +699,7 @@ pub(super) mod tests {
             "{err}"
         );
         let mut reader = MultiGzDecoder::new(&compressed[..compressed.len() - 4]);
-        let err = inflate_values(path, &mut reader, 20, format, 10, &mut Vec::new())
+        let err = inflate_values(path, &mut reader, 20, format, 10, &mut Voxels::default())
             .and_then(|()| expect_end(path, &mut reader, 20))
             .unwrap_err();
         assert!(matches!(err, VolumeError::Decompress { .. }), "{err}");

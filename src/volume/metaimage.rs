@@ -33,7 +33,8 @@ use super::loader::{
 };
 use super::loader::{check_data_files, checked_voxels};
 use super::{
-    ByteOrder, CpuVolume, RawSpec, ScalarFormat, ScalarType, VolumeError, load_raw, load_raw_slices,
+    ByteOrder, CpuVolume, RawSpec, ScalarFormat, ScalarType, VolumeError, Voxels, load_raw,
+    load_raw_slices,
 };
 
 /// Longest header read; real ones are well under a kilobyte.
@@ -64,7 +65,7 @@ pub fn load_metaimage(path: &Path) -> Result<LoadedVolume, VolumeError> {
         scalar: header.scalar,
         order: header.order,
     };
-    let count = checked_voxels(path, header.dims)?;
+    let count = checked_voxels(path, header.dims, header.scalar)?;
     let bytes = count
         .checked_mul(header.scalar.size() as u64)
         .ok_or_else(|| header_error(path, "declared size overflows"))?;
@@ -96,7 +97,7 @@ pub fn load_metaimage(path: &Path) -> Result<LoadedVolume, VolumeError> {
             .map_err(io_error(&file))?;
         let mut reader = ZlibDecoder::new(BufReader::new(f));
         let total = usize::try_from(count).map_err(|_| header_error(path, "too many voxels"))?;
-        let mut values = Vec::new();
+        let mut values = Voxels::new(format.scalar);
         inflate_values(&file, &mut reader, bytes, format, total, &mut values)?;
         expect_end(&file, &mut reader, bytes)?;
         values
@@ -123,7 +124,7 @@ pub fn load_metaimage(path: &Path) -> Result<LoadedVolume, VolumeError> {
 }
 
 /// The volume of `values`, placed as the header says.
-fn finish(path: &Path, header: &Header, values: Vec<f32>) -> Result<LoadedVolume, VolumeError> {
+fn finish(path: &Path, header: &Header, values: Voxels) -> Result<LoadedVolume, VolumeError> {
     // LPS to RAS: x and y change sign.
     let flip = DVec3::new(-1.0, -1.0, 1.0);
     let columns = [0, 1, 2].map(|i| header.axes[i] * flip * header.spacing[i]);
@@ -336,7 +337,7 @@ impl Header {
         let folder = path.parent().unwrap_or(Path::new(""));
         // The grid's size and memory first: no list is read and no name built for a grid
         // that would be refused.
-        checked_voxels(path, dims)?;
+        checked_voxels(path, dims, scalar)?;
         let words: Vec<&str> = file.split_whitespace().collect();
         let data = match words.as_slice() {
             [local] if local.eq_ignore_ascii_case("local") => Data::Local,

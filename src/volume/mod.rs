@@ -14,6 +14,7 @@ pub mod nifti;
 pub mod nrrd;
 pub mod phantom;
 pub mod raw;
+pub mod voxels;
 pub mod vtk;
 
 pub use loader::{ByteOrder, ParseScalarError, ScalarFormat, ScalarType, VolumeError};
@@ -21,6 +22,7 @@ pub use phantom::{
     ShoulderLandmarks, shoulder_landmarks, shoulder_phantom, shoulder_phantom_default,
 };
 pub use raw::{RawSpec, load_raw, load_raw_slices, slice_stack};
+pub use voxels::{Voxel, Voxels};
 
 /// Scalar values on an `nx x ny x nz` grid (x fastest), with their placement in the world:
 /// voxel `k` sits at `origin + direction * (spacing * k)`.
@@ -34,8 +36,9 @@ pub struct CpuVolume {
     pub origin: [f64; 3],
     /// Orientation of the grid axes (columns are unit axis directions).
     pub direction: DMat3,
-    /// One value per voxel, id = x + nx * (y + ny * z); Hounsfield units for CT.
-    pub values: Vec<f32>,
+    /// One value per voxel, id = x + nx * (y + ny * z), in the type they were stored in;
+    /// Hounsfield units for CT.
+    pub values: Voxels,
 }
 
 impl CpuVolume {
@@ -68,7 +71,7 @@ impl CpuVolume {
                     for z in k * step[2]..((k + 1) * step[2]).min(nz) {
                         for y in j * step[1]..((j + 1) * step[1]).min(ny) {
                             for x in i * step[0]..((i + 1) * step[0]).min(nx) {
-                                sum += f64::from(self.values[x + nx * (y + ny * z)]);
+                                sum += f64::from(self.values.at(x + nx * (y + ny * z)));
                                 count += 1;
                             }
                         }
@@ -87,7 +90,7 @@ impl CpuVolume {
             spacing,
             origin: origin.into(),
             direction: self.direction,
-            values,
+            values: values.into(),
         }
     }
 }
@@ -106,14 +109,14 @@ mod tests {
             spacing: [0.5, 1.0, 2.0],
             origin: [10.0, -3.0, 7.0],
             direction: DMat3::from_rotation_z(0.3),
-            values: (0..20).map(|v| v as f32).collect(),
+            values: (0..20).map(|v| v as f32).collect::<Vec<_>>().into(),
         };
         let half = volume.halved();
         assert_eq!(half.dims, [3, 2, 1]);
         assert_eq!(half.spacing, [1.0, 2.0, 2.0]);
         // Block (0, 0): ids 0, 1, 5, 6; block (2, 1): the odd end, ids 14 and 19.
-        assert_eq!(half.values[0], (1 + 5 + 6) as f32 / 4.0);
-        assert_eq!(half.values[5], (14 + 19) as f32 / 2.0);
+        assert_eq!(half.values.at(0), (1 + 5 + 6) as f32 / 4.0);
+        assert_eq!(half.values.at(5), (14 + 19) as f32 / 2.0);
         // A whole block's coarse voxel sits at the mean of its fine voxels' centres.
         let (fine, coarse) = (volume.geometry().unwrap(), half.geometry().unwrap());
         let mean = [0.0, 1.0]

@@ -49,7 +49,10 @@ use super::loader::{
     GZIP_MAGIC, LoadedVolume, NiftiTransform, Placement, VolumeFormat, expect_end, header_error,
     inflate_values, io_error, read_head, skip_inflated, unsupported,
 };
-use super::{ByteOrder, CpuVolume, RawSpec, ScalarFormat, ScalarType, VolumeError, load_raw};
+use super::voxels::{Voxel, dispatch};
+use super::{
+    ByteOrder, CpuVolume, RawSpec, ScalarFormat, ScalarType, VolumeError, Voxels, load_raw,
+};
 
 /// Bytes of a NIfTI-1 (and Analyze 7.5) header.
 const NIFTI1_BYTES: usize = 348;
@@ -461,9 +464,23 @@ struct Layout {
 impl Layout {
     fn from_header(path: &Path, header: &Header) -> Result<Self, VolumeError> {
         let (dims, frames) = dims(path, &header.dim)?;
-        let count = checked_voxels(path, dims)?;
+        // The grid is checked before the type, whose error comes second. Values a rescale
+        // changes are counted as f32 (an integer rescale holds them in 2 bytes, less).
+        let scalar = scalar_type(path, header.datatype);
+        let inter = if header.scl_inter.is_nan() {
+            0.0
+        } else {
+            header.scl_inter
+        };
+        let slope = header.scl_slope;
+        let kept = slope == 0.0 || slope.is_nan() || (slope == 1.0 && inter == 0.0);
+        let held = match scalar {
+            Ok(scalar) if kept => scalar,
+            _ => ScalarType::F32,
+        };
+        let count = checked_voxels(path, dims, held)?;
         let format = ScalarFormat {
-            scalar: scalar_type(path, header.datatype)?,
+            scalar: scalar?,
             order: header.order,
         };
         // A pair's data start at vox_offset in the .img (usually 0); a single file's past
@@ -518,7 +535,7 @@ impl Layout {
             .map_err(|_| header_error(path, "declared size overflows"))?;
         let start = self.frame_start(path)?;
         skip_inflated(path, reader, start - header_bytes, bytes)?;
-        let mut values = Vec::new();
+        let mut values = Voxels::new(self.format.scalar);
         inflate_values(path, reader, bytes, self.format, count, &mut values)?;
         // The frames after this one must be there too, and nothing past them.
         let after = bytes
@@ -610,8 +627,9 @@ fn scalar_type(path: &Path, datatype: i16) -> Result<ScalarType, VolumeError> {
 
 /// Applies `scl_slope` and `scl_inter`; a slope of 0 or NaN means none (as the standard and
 /// nibabel say). An infinite slope or intercept, or a rescale that takes a value past `f32`,
-/// means nothing and is a header error.
-fn rescale(path: &Path, values: &mut [f32], slope: f64, inter: f64) -> Result<(), VolumeError> {
+/// means nothing and is a header error. Integers rescaled by an integer slope and intercept
+/// stay 16-bit where every result fits ([`rescaled_integers`]); other results are `f32`.
+fn rescale(path: &Path, values: &mut Voxels, slope: f64, inter: f64) -> Result<(), VolumeError> {
     if slope == 0.0 || slope.is_nan() {
         return Ok(());
     }
@@ -623,6 +641,11 @@ fn rescale(path: &Path, values: &mut [f32], slope: f64, inter: f64) -> Result<()
     if slope == 1.0 && inter == 0.0 {
         return Ok(());
     }
+    if let Some(exact) = rescaled_integers(values, slope, inter) {
+        *values = exact;
+        return Ok(());
+    }
+    let values = values.make_f32();
     for v in values.iter_mut() {
         *v = (f64::from(*v) * slope + inter) as f32;
     }
@@ -633,6 +656,41 @@ fn rescale(path: &Path, values: &mut [f32], slope: f64, inter: f64) -> Result<()
         return Err(header_error(path, message));
     }
     Ok(())
+}
+
+/// Integer values rescaled by an integer `slope` and `inter` as 16-bit integers, where every
+/// result fits `i16` (or else `u16`): CT stored unsigned with an intercept of -1024 keeps two
+/// bytes a voxel. `None` for fractions, floats, or results past both.
+fn rescaled_integers(values: &Voxels, slope: f64, inter: f64) -> Option<Voxels> {
+    if slope.fract() != 0.0 || inter.fract() != 0.0 || matches!(values, Voxels::F32(_)) {
+        return None;
+    }
+    let runs = values.par_chunks(1 << 16, |run| {
+        run.iter()
+            .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &v| {
+                (lo.min(v), hi.max(v))
+            })
+    });
+    let (lo, hi) = runs
+        .into_iter()
+        .fold((f32::INFINITY, f32::NEG_INFINITY), |a, b| {
+            (a.0.min(b.0), a.1.max(b.1))
+        });
+    if lo > hi {
+        return None;
+    }
+    let ends = [f64::from(lo) * slope + inter, f64::from(hi) * slope + inter];
+    let (lo, hi) = (ends[0].min(ends[1]), ends[0].max(ends[1]));
+    let map = |v: f32| f64::from(v) * slope + inter;
+    if lo >= f64::from(i16::MIN) && hi <= f64::from(i16::MAX) {
+        let out = dispatch!(values, v => v.iter().map(|x| map(x.to_f32()) as i16).collect());
+        Some(Voxels::I16(out))
+    } else if lo >= 0.0 && hi <= f64::from(u16::MAX) {
+        let out = dispatch!(values, v => v.iter().map(|x| map(x.to_f32()) as u16).collect());
+        Some(Voxels::U16(out))
+    } else {
+        None
+    }
 }
 
 /// Millimetres per unit of the header's spatial unit (`xyzt_units & 7`): metres 1000,
@@ -707,6 +765,41 @@ mod tests {
         let path = dir.join(name);
         std::fs::write(&path, bytes).unwrap();
         path
+    }
+
+    #[test]
+    fn integer_rescales_stay_16_bit_and_others_become_f32() {
+        let dir = scratch("nifti-held");
+        // u16 CT with intercept -1024, as many scanners' converters write it.
+        let stored = [0u16, 1024, 4095, 30000];
+        let file = |slope: f32, inter: f32, name: &str| {
+            let mut bytes = header_bytes([2, 1, 2], 512, 16);
+            put_f32(&mut bytes, 112, &[slope, inter]);
+            bytes.extend(stored.iter().flat_map(|v| v.to_le_bytes()));
+            load_nifti(&write(&dir, name, &bytes))
+                .unwrap()
+                .volume
+                .values
+        };
+        let hu = file(1.0, -1024.0, "hu.nii");
+        assert_eq!(hu.scalar_type(), ScalarType::I16);
+        assert_eq!(hu, [-1024.0, 0.0, 3071.0, 28976.0]);
+        // Past i16 but within u16: u16.
+        let shifted = file(2.0, 100.0, "shifted.nii");
+        assert_eq!(shifted.scalar_type(), ScalarType::U16);
+        assert_eq!(shifted, [100.0, 2148.0, 8290.0, 60100.0]);
+        // Past both: f32, exactly.
+        let wide = file(3.0, -5.0, "wide.nii");
+        assert_eq!(wide.scalar_type(), ScalarType::F32);
+        assert_eq!(wide, [-5.0, 3067.0, 12280.0, 89995.0]);
+        // A fractional slope: f32.
+        let half = file(0.5, 0.0, "half.nii");
+        assert_eq!(half.scalar_type(), ScalarType::F32);
+        assert_eq!(half, [0.0, 512.0, 2047.5, 15000.0]);
+        // No rescale: as stored.
+        let plain = file(1.0, 0.0, "plain.nii");
+        assert_eq!(plain.scalar_type(), ScalarType::U16);
+        assert_eq!(plain, stored.map(f32::from));
     }
 
     #[test]
@@ -979,7 +1072,7 @@ mod tests {
         let v = load_nifti(&write(&dir, "good.nii", &bytes)).unwrap().volume;
         assert_eq!(
             (v.dims, v.values.clone()),
-            ([2, 1, 2], vec![1.0, 2.0, 3.0, 4.0])
+            ([2, 1, 2], vec![1.0f32, 2.0, 3.0, 4.0].into())
         );
         assert_eq!((v.spacing, v.origin), ([2.0, 3.0, 4.0], [5.0, 6.0, 7.0]));
         assert_eq!(v.direction, DMat3::from_cols(DVec3::Y, -DVec3::X, DVec3::Z));

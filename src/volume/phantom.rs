@@ -316,7 +316,7 @@ pub fn shoulder_phantom(dims: [u32; 3], spacing: [f64; 3]) -> CpuVolume {
         spacing,
         origin: [0.0; 3],
         direction: DMat3::IDENTITY,
-        values,
+        values: values.into(),
     }
 }
 
@@ -343,7 +343,7 @@ mod tests {
             i as usize
         });
         let [nx, ny, _] = volume.dims.map(|n| n as usize);
-        volume.values[k[0] + nx * (k[1] + ny * k[2])]
+        volume.values.at(k[0] + nx * (k[1] + ny * k[2]))
     }
 
     type Probe = (&'static str, DVec3, [f32; 2]);
@@ -409,7 +409,7 @@ mod tests {
     fn bone_is_a_plausible_share_of_the_volume() {
         let volume = shoulder_phantom_default();
         assert_eq!(volume.values.len(), 112 * 80 * 112);
-        let bone = volume.values.iter().filter(|&&v| v > 300.0).count();
+        let bone = volume.values.iter().filter(|&v| v > 300.0).count();
         let share = bone as f64 / volume.values.len() as f64;
         println!(
             "phantom: {bone} of {} voxels above 300 HU ({:.1}%)",
@@ -420,7 +420,7 @@ mod tests {
         let (lo, hi) = volume
             .values
             .iter()
-            .fold((f32::MAX, f32::MIN), |(lo, hi), &v| (lo.min(v), hi.max(v)));
+            .fold((f32::MAX, f32::MIN), |(lo, hi), v| (lo.min(v), hi.max(v)));
         assert_eq!(lo, -1000.0);
         assert!((1300.0..=1500.0).contains(&hi), "brightest voxel {hi}");
     }
@@ -430,7 +430,7 @@ mod tests {
         let a = shoulder_phantom([24, 20, 28], [3.2, 3.5, 4.0]);
         assert_eq!(a, shoulder_phantom([24, 20, 28], [3.2, 3.5, 4.0]));
         assert!(
-            a.values.iter().any(|&v| v > 1000.0),
+            a.values.iter().any(|v| v > 1000.0),
             "coarse grid still shows cortex"
         );
         assert_eq!(shoulder_phantom([1, 1, 1], [1.0; 3]).values.len(), 1);

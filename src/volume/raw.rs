@@ -11,9 +11,9 @@ use std::path::{Path, PathBuf};
 
 use glam::DMat3;
 
-use super::CpuVolume;
 pub use super::loader::{ByteOrder, ParseScalarError, ScalarFormat, ScalarType, VolumeError};
 use super::loader::{checked_voxels, decode};
+use super::{CpuVolume, Voxels};
 
 /// What a headerless raw file holds and where the volume sits in the world.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -48,7 +48,7 @@ impl RawSpec {
 
     /// Checks what does not depend on the file contents; returns the voxel count.
     fn check(&self, path: &Path) -> Result<usize, VolumeError> {
-        let count = checked_voxels(path, self.dims)?;
+        let count = checked_voxels(path, self.dims, self.scalar)?;
         let finite = self
             .spacing
             .iter()
@@ -81,7 +81,7 @@ impl RawSpec {
         }
     }
 
-    fn volume(&self, values: Vec<f32>) -> CpuVolume {
+    fn volume(&self, values: Voxels) -> CpuVolume {
         CpuVolume {
             dims: self.dims,
             spacing: self.spacing,
@@ -99,7 +99,8 @@ pub fn load_raw(path: &Path, spec: &RawSpec) -> Result<CpuVolume, VolumeError> {
     let count = spec.check(path)?;
     let needed = spec.needed_bytes(path, count as u64)?;
     check_length(path, needed)?;
-    let mut values = Vec::with_capacity(count);
+    let mut values = Voxels::new(spec.scalar);
+    values.reserve_capped(count, count);
     read_values(path, spec, count as u64, &mut values)?;
     Ok(spec.volume(values))
 }
@@ -124,7 +125,8 @@ pub fn load_raw_slices(paths: &[PathBuf], spec: &RawSpec) -> Result<CpuVolume, V
     for path in paths {
         check_length(path, needed)?;
     }
-    let mut values = Vec::with_capacity(count);
+    let mut values = Voxels::new(spec.scalar);
+    values.reserve_capped(count, count);
     for path in paths {
         read_values(path, spec, per_slice, &mut values)?;
     }
@@ -231,13 +233,13 @@ fn check_length(path: &Path, needed: u64) -> Result<(), VolumeError> {
 }
 
 /// Reads `count` values after the header, in chunks, so that no second full-size byte buffer
-/// is needed next to the `f32` values. A file that shrank since its length was checked gives
+/// is needed next to the values. A file that shrank since its length was checked gives
 /// an I/O error (unexpected end of file).
 fn read_values(
     path: &Path,
     spec: &RawSpec,
     count: u64,
-    out: &mut Vec<f32>,
+    out: &mut Voxels,
 ) -> Result<(), VolumeError> {
     const CHUNK_BYTES: usize = 1 << 20;
     let io = |source| VolumeError::Io {
@@ -318,7 +320,7 @@ mod tests {
         ];
         for (name, bytes, value) in cases {
             let f = format(name);
-            let mut out = Vec::new();
+            let mut out = Voxels::new(f.scalar);
             decode(&bytes, f.scalar, f.order, &mut out);
             assert_eq!(out, [value], "{name}");
         }

@@ -38,7 +38,9 @@ use super::loader::{
     io_error, text_values, unsupported,
 };
 use super::loader::{checked_voxels, decode};
-use super::{ByteOrder, CpuVolume, RawSpec, ScalarFormat, ScalarType, VolumeError, load_raw};
+use super::{
+    ByteOrder, CpuVolume, RawSpec, ScalarFormat, ScalarType, VolumeError, Voxels, load_raw,
+};
 
 /// Loads a legacy VTK `STRUCTURED_POINTS` file with binary scalars.
 pub fn load_vtk_legacy(path: &Path) -> Result<LoadedVolume, VolumeError> {
@@ -70,7 +72,8 @@ pub fn load_vtk_legacy(path: &Path) -> Result<LoadedVolume, VolumeError> {
 /// and further arrays there) ends them.
 fn legacy_ascii_values(path: &Path, header: &LegacyHeader) -> Result<CpuVolume, VolumeError> {
     use std::io::{Read, Seek, SeekFrom};
-    let count = usize::try_from(grid_count(path, header.dims)?)
+    // Text values are held as f32.
+    let count = usize::try_from(grid_count(path, header.dims, ScalarType::F32)?)
         .map_err(|_| header_error(path, "declared size overflows"))?;
     let mut file = crate::input::open_regular(path).map_err(io_error(path))?;
     let len = file.metadata().map_err(io_error(path))?.len();
@@ -119,7 +122,7 @@ fn legacy_ascii_values(path: &Path, header: &LegacyHeader) -> Result<CpuVolume, 
         spacing: [1.0; 3],
         origin: [0.0; 3],
         direction: DMat3::IDENTITY,
-        values,
+        values: values.into(),
     })
 }
 
@@ -225,7 +228,9 @@ impl PartialLegacy {
             return Err(missing("DATASET STRUCTURED_POINTS"));
         }
         let dims = self.dims.ok_or_else(|| missing("DIMENSIONS"))?;
-        let count = grid_count(path, dims)?;
+        let scalar = self.scalar.ok_or_else(|| missing("SCALARS"))?;
+        let held = if self.ascii { ScalarType::F32 } else { scalar };
+        let count = grid_count(path, dims, held)?;
         let points = self.points.ok_or_else(|| missing("POINT_DATA"))?;
         if points != count {
             let message = format!("POINT_DATA {points} but DIMENSIONS {dims:?} make {count}");
@@ -236,7 +241,7 @@ impl PartialLegacy {
             dims,
             spacing: self.spacing.unwrap_or([1.0; 3]),
             origin: self.origin.unwrap_or([0.0; 3]),
-            scalar: self.scalar.ok_or_else(|| missing("SCALARS"))?,
+            scalar,
             data_offset,
         })
     }
@@ -248,8 +253,8 @@ fn numbers<T: std::str::FromStr>(words: &[&str]) -> Option<[T; 3]> {
     parsed?.try_into().ok()
 }
 
-fn grid_count(path: &Path, dims: [u32; 3]) -> Result<u64, VolumeError> {
-    checked_voxels(path, dims)
+fn grid_count(path: &Path, dims: [u32; 3], scalar: ScalarType) -> Result<u64, VolumeError> {
+    checked_voxels(path, dims, scalar)
 }
 
 /// A legacy scalar type name: `Some(None)` for a known type that is not read, `None` for an
@@ -278,8 +283,14 @@ pub fn load_vti(path: &Path) -> Result<LoadedVolume, VolumeError> {
     let grid = Grid::read(path, &xml)?;
     let array = xml.scalars_array()?;
     let format = array_format(path, &array, encoding.order)?;
-    let count = grid_count(path, grid.dims)?;
-    let values = encoding.values(path, xml.array_data(&array)?, format, count)?;
+    let blob = xml.array_data(&array)?;
+    // Text values are held as f32.
+    let held = match blob {
+        Blob::Ascii(_) => ScalarType::F32,
+        _ => format.scalar,
+    };
+    let count = grid_count(path, grid.dims, held)?;
+    let values = encoding.values(path, blob, format, count)?;
     let volume = CpuVolume {
         dims: grid.dims,
         spacing: [1.0; 3],
@@ -685,7 +696,7 @@ impl Encoding {
         blob: Blob<'_>,
         format: ScalarFormat,
         count: u64,
-    ) -> Result<Vec<f32>, VolumeError> {
+    ) -> Result<Voxels, VolumeError> {
         let overflow = || header_error(path, "declared size overflows");
         let bytes = count
             .checked_mul(format.scalar.size() as u64)
@@ -693,7 +704,7 @@ impl Encoding {
         let count = usize::try_from(count).map_err(|_| overflow())?;
         if let Blob::Ascii(text) = blob {
             // VTK never compresses text arrays.
-            let mut out = Vec::with_capacity(count.min(1 << 24));
+            let mut out = Voxels::F32(Vec::with_capacity(count.min(1 << 24)));
             text_values(path, text, count, &mut out)?;
             return Ok(out);
         }
@@ -733,7 +744,8 @@ impl Encoding {
                 expected: bytes,
                 actual: body.len() as u64,
             })?;
-        let mut out = Vec::with_capacity(count);
+        let mut out = Voxels::new(format.scalar);
+        out.reserve_capped(count, count);
         decode(values, format.scalar, format.order, &mut out);
         Ok(out)
     }
@@ -793,7 +805,7 @@ impl Encoding {
         data: &[u8],
         format: ScalarFormat,
         (count, bytes): (usize, u64),
-    ) -> Result<Vec<f32>, VolumeError> {
+    ) -> Result<Voxels, VolumeError> {
         let word = |i: u64| {
             let word = usize::try_from(i)
                 .ok()
@@ -807,7 +819,7 @@ impl Encoding {
             format.scalar.size() as u64,
             bytes,
         )?;
-        let mut out = Vec::new();
+        let mut out = Voxels::new(format.scalar);
         let mut at = 0usize;
         for i in 0..blocks {
             let end = usize::try_from(word(3 + i)?)

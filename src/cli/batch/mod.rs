@@ -809,7 +809,14 @@ fn job_hash(
         {
             h.update(&x.to_le_bytes());
         }
-        h.update(bytemuck::cast_slice(&v.values));
+        // The values as f32 whatever type holds them, so that a volume's hash does not
+        // depend on how it is held.
+        let mut run = vec![0.0f32; v.values.len().min(1 << 20)];
+        for start in (0..v.values.len()).step_by(1 << 20) {
+            let n = run.len().min(v.values.len() - start);
+            v.values.read(start, &mut run[..n]);
+            h.update(bytemuck::cast_slice(&run[..n]));
+        }
         inputs.push(InputRecord {
             kind: "volume".into(),
             path: spec.path.clone(),

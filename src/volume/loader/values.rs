@@ -9,6 +9,7 @@ use thiserror::Error;
 
 use super::VolumeError;
 use crate::grid::voxel_count;
+use crate::volume::Voxels;
 
 /// Three numbers as people write them: `(0.5, 0.5, inf)`.
 pub(crate) fn triple(v: &[f64; 3]) -> String {
@@ -62,21 +63,25 @@ pub(crate) fn check_data_files(
     Ok(())
 }
 
-/// The voxel count of a grid of `dims` that the file at `path` declares, checked against the
-/// grid limit and against the memory that drawing it takes
-/// ([`crate::budget::DRAW_BYTES_PER_VOXEL`] a voxel), before anything is allocated.
-pub(crate) fn checked_voxels(path: &Path, dims: [u32; 3]) -> Result<u64, VolumeError> {
+/// The voxel count of a grid of `dims` of `scalar` values that the file at `path` declares,
+/// checked against the grid limit and against the memory that drawing it takes (each value as
+/// [`Voxels`] hold it and [`crate::budget::DRAW_BYTES_PER_VOXEL`] more), before anything is
+/// allocated.
+pub(crate) fn checked_voxels(
+    path: &Path,
+    dims: [u32; 3],
+    scalar: ScalarType,
+) -> Result<u64, VolumeError> {
     let count = voxel_count(dims).map_err(|source| VolumeError::Grid {
         path: path.into(),
         source,
     })?;
     let what = format!("a {}x{}x{} grid", dims[0], dims[1], dims[2]);
-    crate::budget::check_memory(what, count, crate::budget::DRAW_BYTES_PER_VOXEL).map_err(
-        |source| VolumeError::OverBudget {
-            path: path.into(),
-            source,
-        },
-    )?;
+    let each = Voxels::held_bytes(scalar) as u64 + crate::budget::DRAW_BYTES_PER_VOXEL;
+    crate::budget::check_memory(what, count, each).map_err(|source| VolumeError::OverBudget {
+        path: path.into(),
+        source,
+    })?;
     Ok(count)
 }
 
@@ -204,27 +209,36 @@ impl FromStr for ScalarFormat {
 
 /// Appends the values in `bytes` (whole values only; a trailing partial value is ignored).
 /// Shared with the header formats' loaders, which read compressed or embedded data.
-pub(crate) fn decode(bytes: &[u8], scalar: ScalarType, order: ByteOrder, out: &mut Vec<f32>) {
+pub(crate) fn decode(bytes: &[u8], scalar: ScalarType, order: ByteOrder, out: &mut Voxels) {
     let big = order == ByteOrder::Big;
-    match scalar {
-        ScalarType::U8 => out.extend(bytes.iter().map(|&b| f32::from(b))),
-        ScalarType::I8 => out.extend(bytes.iter().map(|&b| f32::from(b as i8))),
-        ScalarType::U16 => extend(bytes, big, out, |w| f32::from(u16::from_le_bytes(w))),
-        ScalarType::I16 => extend(bytes, big, out, |w| f32::from(i16::from_le_bytes(w))),
-        ScalarType::U32 => extend(bytes, big, out, |w| u32::from_le_bytes(w) as f32),
-        ScalarType::I32 => extend(bytes, big, out, |w| i32::from_le_bytes(w) as f32),
-        ScalarType::F32 => extend(bytes, big, out, f32::from_le_bytes),
-        ScalarType::F64 => extend(bytes, big, out, |w| f64::from_le_bytes(w) as f32),
+    match (scalar, out) {
+        (ScalarType::U8, Voxels::U8(out)) => out.extend_from_slice(bytes),
+        (ScalarType::I8, Voxels::I8(out)) => out.extend(bytes.iter().map(|&b| b as i8)),
+        (ScalarType::U16, Voxels::U16(out)) => extend(bytes, big, out, u16::from_le_bytes),
+        (ScalarType::I16, Voxels::I16(out)) => extend(bytes, big, out, i16::from_le_bytes),
+        (_, out) => {
+            let out = out.make_f32();
+            match scalar {
+                ScalarType::U8 => out.extend(bytes.iter().map(|&b| f32::from(b))),
+                ScalarType::I8 => out.extend(bytes.iter().map(|&b| f32::from(b as i8))),
+                ScalarType::U16 => extend(bytes, big, out, |w| f32::from(u16::from_le_bytes(w))),
+                ScalarType::I16 => extend(bytes, big, out, |w| f32::from(i16::from_le_bytes(w))),
+                ScalarType::U32 => extend(bytes, big, out, |w| u32::from_le_bytes(w) as f32),
+                ScalarType::I32 => extend(bytes, big, out, |w| i32::from_le_bytes(w) as f32),
+                ScalarType::F32 => extend(bytes, big, out, f32::from_le_bytes),
+                ScalarType::F64 => extend(bytes, big, out, |w| f64::from_le_bytes(w) as f32),
+            }
+        }
     }
 }
 
 /// Converts each `N`-byte word, reversed first when big-endian, so that every type needs only
 /// its little-endian conversion.
-fn extend<const N: usize>(
+fn extend<const N: usize, T>(
     bytes: &[u8],
     big: bool,
-    out: &mut Vec<f32>,
-    convert: impl Fn([u8; N]) -> f32,
+    out: &mut Vec<T>,
+    convert: impl Fn([u8; N]) -> T,
 ) {
     let (words, _) = bytes.as_chunks::<N>();
     out.extend(words.iter().map(|&w| {
