@@ -5,7 +5,10 @@
 //! [`GridError::TooLarge`] rather than wrapping. Besides a bitmap (with a rank index, so that the
 //! attributes of the significant voxels can be stored compactly), the grid keeps run-length rows
 //! along each of the three axes: the inner loop of every ordering walks runs, so empty space costs
-//! nothing there. A dense grid is the case where every voxel is significant.
+//! nothing there. An axis's rows are built the first time they are asked for: a view needs one
+//! or two of them. A dense grid is the case where every voxel is significant.
+
+use std::sync::OnceLock;
 
 use thiserror::Error;
 
@@ -79,7 +82,8 @@ pub struct SparseGrid {
     bits: Vec<u64>,
     /// Number of set bits before each word of `bits`.
     word_rank: Vec<u32>,
-    rows: [AxisRows; 3],
+    /// Per axis, its rows once asked for.
+    rows: [OnceLock<AxisRows>; 3],
 }
 
 /// The two axes other than `axis`, in increasing order.
@@ -128,7 +132,7 @@ impl SparseGrid {
         let rows = std::array::from_fn(|axis| {
             let (b, c) = other_axes(axis);
             let n_rows = dims[b] as usize * dims[c] as usize;
-            AxisRows {
+            OnceLock::from(AxisRows {
                 offsets: (0..=n_rows as u32).collect(),
                 runs: vec![
                     Run {
@@ -137,7 +141,7 @@ impl SparseGrid {
                     };
                     n_rows
                 ],
-            }
+            })
         });
         Ok(Self {
             dims,
@@ -186,24 +190,13 @@ impl SparseGrid {
             word_rank.push(total as u32);
             total += u64::from(w.count_ones());
         }
-        let mut grid = Self {
+        Self {
             dims,
             count: total,
             bits,
             word_rank,
             rows: Default::default(),
-        };
-        // The three axes' run tables are independent walks over the bitmap: one task each.
-        let [x, y, z] = {
-            let g = &grid;
-            let (x, (y, z)) = rayon::join(
-                || g.build_rows(0),
-                || rayon::join(|| g.build_rows(1), || g.build_rows(2)),
-            );
-            [x, y, z]
-        };
-        grid.rows = [x, y, z];
-        grid
+        }
     }
 
     /// Builds the run-length rows along `axis` in two passes over the bitmap: count the runs that
@@ -334,7 +327,7 @@ impl SparseGrid {
     #[inline]
     pub fn row(&self, axis: usize, k_b: u32, k_c: u32) -> &[Run] {
         let (b, _) = other_axes(axis);
-        let rows = &self.rows[axis];
+        let rows = self.rows[axis].get_or_init(|| self.build_rows(axis));
         let r = k_b as usize + self.dims[b] as usize * k_c as usize;
         &rows.runs[rows.offsets[r] as usize..rows.offsets[r + 1] as usize]
     }

@@ -64,22 +64,24 @@ impl CpuVolume {
         let out = [0, 1, 2].map(|a| self.dims[a].div_ceil(step[a] as u32));
         let [ox, oy, oz] = out.map(|n| n as usize);
         let mut values = Vec::with_capacity(ox * oy * oz);
-        for k in 0..oz {
-            for j in 0..oy {
-                for i in 0..ox {
-                    let (mut sum, mut count) = (0.0f64, 0u32);
-                    for z in k * step[2]..((k + 1) * step[2]).min(nz) {
-                        for y in j * step[1]..((j + 1) * step[1]).min(ny) {
-                            for x in i * step[0]..((i + 1) * step[0]).min(nx) {
-                                sum += f64::from(self.values.at(x + nx * (y + ny * z)));
-                                count += 1;
+        voxels::dispatch!(&self.values, held => {
+            for k in 0..oz {
+                for j in 0..oy {
+                    for i in 0..ox {
+                        let (mut sum, mut count) = (0.0f64, 0u32);
+                        for z in k * step[2]..((k + 1) * step[2]).min(nz) {
+                            for y in j * step[1]..((j + 1) * step[1]).min(ny) {
+                                for x in i * step[0]..((i + 1) * step[0]).min(nx) {
+                                    sum += f64::from(held[x + nx * (y + ny * z)].to_f32());
+                                    count += 1;
+                                }
                             }
                         }
+                        values.push((sum / f64::from(count)) as f32);
                     }
-                    values.push((sum / f64::from(count)) as f32);
                 }
             }
-        }
+        });
         let spacing = [0, 1, 2].map(|a| self.spacing[a] * step[a] as f64);
         // The first block's centre: half a fine voxel along each halved axis.
         let shift =
