@@ -168,7 +168,7 @@ const HISTOGRAM_BINS: usize = 4096;
 /// unknown scalars) a ramp from the 90th to the 99.5th percentile of the values above the
 /// smallest one (the background, usually air or padding, is left out of the histogram), so that
 /// the densest tenth of the object shows. Percentiles come from a histogram of
-/// [`HISTOGRAM_BINS`] bins, one pass over the values.
+/// 4096 bins, one pass over the values.
 pub fn auto_transfer(values: &Voxels) -> AutoTransfer {
     let (lo, hi) = finite_range(values);
     if lo <= HU_AIR && hi > 0.0 {

@@ -107,7 +107,7 @@ const ALWAYS_ALLOWED_BYTES: u64 = 16 << 20;
 /// Most frames read from one multi-frame object, far above any CT or dose grid.
 const MAX_FRAMES: u32 = 65_536;
 
-/// Whether `bytes` (the start of a file; [`SNIFF_LEN`] bytes tell every case) look like
+/// Whether `bytes` (the start of a file; the first 512 bytes tell every case) look like
 /// DICOM: the `DICM` magic after the 128-byte preamble or at the very start, or a bare data
 /// set (see the [module documentation](self)).
 pub fn is_dicom(bytes: &[u8]) -> bool {

@@ -4,7 +4,7 @@
 //! as `f32`; a 1024^3 16-bit micro-CT 2 GiB against 4. Every reader of the values (the
 //! classification, picking, statistics) takes them as `f32` one at a time or a run at a time,
 //! and the hot loops are written once, generic over [`Voxel`], and instantiated per stored type
-//! by [`dispatch`].
+//! by the crate-internal `dispatch!`.
 //!
 //! 8- and 16-bit integers are kept as they are; 32-bit integers and 64-bit floats, which `f32`
 //! was already the drawing precision of, are held as `f32`, as are values a rescale made
