@@ -16,8 +16,8 @@ use rayon::prelude::*;
 use thiserror::Error;
 
 use crate::camera::{Camera, CameraError};
+use crate::geometry::VolumeGeometry;
 use crate::grid::SparseGrid;
-use crate::order::VolumeGeometry;
 
 /// Why a frame could not be composited.
 #[derive(Debug, Error, Clone, PartialEq)]

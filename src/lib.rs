@@ -1,8 +1,9 @@
 //! splatscene: shoulder-prosthesis planning scenes, with CT volumes drawn as one splat per
 //! significant voxel in the IP-PBTF visibility order (Botha & Post 2005).
 //!
-//! The GPU-free core:
+//! The GPU-free core (ARCHITECTURE.md gives the floors the modules stand on):
 //! - [`grid`]: sparse sets of significant voxels with run-length rows (space skipping);
+//! - [`geometry`], [`measure`]: where a grid sits in the world; measurements as values;
 //! - [`order`]: the view case and every visibility ordering (BTF, WBTF, PBTF, IP-PBTF explicit
 //!   and implicit, the exact sort, and a bucketed distance order);
 //! - [`composite`]: a CPU reference compositor of Gaussian splats and the error measure;
@@ -32,8 +33,10 @@ pub mod budget;
 pub mod camera;
 pub mod classify;
 pub mod composite;
+pub mod geometry;
 pub mod grid;
 pub mod input;
+pub mod measure;
 pub mod mesh;
 pub mod order;
 pub mod output;

@@ -2,7 +2,7 @@
 
 use glam::{DAffine3, DMat3, DVec3};
 
-use super::VolumeGeometry;
+use crate::geometry::VolumeGeometry;
 
 /// About two thirds of the ids, scattered: a sparse set of significant voxels.
 pub(crate) fn sparse(id: u32) -> bool {

@@ -60,9 +60,10 @@ use std::str::FromStr;
 
 use thiserror::Error;
 
+pub use crate::geometry::{GeometryError, VolumeGeometry};
 use crate::grid::{GridError, SparseGrid};
 use traverse::{Collect, Inner, Plan, walk};
-pub use view::{AxisCase, AxisView, CaseKind, ViewCase, VolumeGeometry};
+pub use view::{AxisCase, AxisView, CaseKind, ViewCase};
 
 /// Why an ordering could not be computed.
 #[derive(Debug, Error, Clone, PartialEq)]
@@ -76,12 +77,9 @@ pub enum OrderError {
     /// Eye and target coincide, so there is no view direction.
     #[error("the eye and the target coincide: no view direction")]
     DegenerateView,
-    /// Spacing must be finite and positive.
-    #[error("voxel spacing {0:?} must be finite and positive on every axis")]
-    BadSpacing([f64; 3]),
-    /// The voxel-to-world transform cannot be inverted.
-    #[error("the voxel-to-world transform is not finite and invertible")]
-    SingularTransform,
+    /// The grid cannot be placed in the world.
+    #[error(transparent)]
+    Geometry(#[from] GeometryError),
     /// The grid and the view were made for different grid sizes.
     #[error("the view was computed for a {view:?} grid but the voxels are on a {grid:?} grid")]
     DimsMismatch {

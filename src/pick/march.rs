@@ -4,7 +4,7 @@
 use glam::DVec3;
 
 use super::{Ray, VolumeHit};
-use crate::order::VolumeGeometry;
+use crate::geometry::VolumeGeometry;
 use crate::scene::{Clipping, NodeId, VolumeNode};
 
 /// The first voxel of `node` along `ray`, nearer than `max_distance`, whose opacity under the

@@ -14,7 +14,8 @@ use super::view::ViewSetup;
 use super::{GpuContext, RenderError};
 use crate::classify::{Classified, ClassifyOptions, Opacity, classify_refined, classify_with};
 use crate::composite::Frame;
-use crate::order::{OrderError, OrderOptions, Orderer, Ordering, ViewCase, VolumeGeometry};
+use crate::geometry::{GeometryError, VolumeGeometry};
+use crate::order::{OrderOptions, Orderer, Ordering, ViewCase};
 use crate::scene::{
     NodeId, Scene, SceneCamera, VolumeNode, placed_geometry, placed_grid, volume_placement,
 };
@@ -157,7 +158,7 @@ impl VolumeState {
 
 impl VolumeState {
     /// Where the splats of this state's grid lie when its node is placed by `world`.
-    fn geometry(&self, world: DMat4) -> Result<VolumeGeometry, OrderError> {
+    fn geometry(&self, world: DMat4) -> Result<VolumeGeometry, GeometryError> {
         placed_grid(
             self.classified.grid.dims(),
             world * volume_placement(&self.volume) * refinement(self.factors),

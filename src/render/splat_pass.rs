@@ -15,7 +15,7 @@ use super::target::{DEPTH_FORMAT, color_format};
 use super::view::ViewSetup;
 use super::{GpuContext, RenderError};
 use crate::classify::{Classified, view_step_mm};
-use crate::order::VolumeGeometry;
+use crate::geometry::VolumeGeometry;
 use crate::scene::{ClipPlane, Clipping, SplatSettings};
 use crate::volume::CpuVolume;
 

@@ -60,10 +60,10 @@ use super::{
     SceneCamera, SceneMeasurement, SplatSettings, VolumeNode,
 };
 use crate::classify::{TransferFunction, auto_transfer};
+use crate::measure::MeasureKind;
 use crate::mesh::prosthesis::seat_in_phantom;
 use crate::mesh::{MeshError, load_mesh};
 use crate::order::Ordering;
-use crate::pick::measure::MeasureKind;
 use crate::volume::detect::{LoadOptions, SeriesChoice};
 use crate::volume::phantom::{DEFAULT_DIMS, DEFAULT_SPACING};
 use crate::volume::{

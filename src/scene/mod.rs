@@ -9,9 +9,10 @@ use thiserror::Error;
 
 use crate::classify::TransferFunction;
 use crate::composite::SplatStyle;
+use crate::geometry::{GeometryError, VolumeGeometry};
+use crate::measure::{MeasureKind, Measurement};
 use crate::mesh::{CpuMesh, Material};
-use crate::order::{OrderError, Ordering, VolumeGeometry};
-use crate::pick::measure::{MeasureKind, Measurement};
+use crate::order::Ordering;
 use crate::volume::CpuVolume;
 
 mod clip;
@@ -423,16 +424,16 @@ fn content_bounds(content: &NodeContent) -> Option<(DVec3, DVec3)> {
 }
 
 /// The index-to-world placement of a volume under its node's world transform.
-pub fn placed_geometry(volume: &CpuVolume, world: DMat4) -> Result<VolumeGeometry, OrderError> {
+pub fn placed_geometry(volume: &CpuVolume, world: DMat4) -> Result<VolumeGeometry, GeometryError> {
     placed_grid(volume.dims, world * volume_placement(volume))
 }
 
 /// The geometry of a `dims` grid whose index coordinates `index_to_world` places; refused
 /// where that is projective.
-pub fn placed_grid(dims: [u32; 3], index_to_world: DMat4) -> Result<VolumeGeometry, OrderError> {
+pub fn placed_grid(dims: [u32; 3], index_to_world: DMat4) -> Result<VolumeGeometry, GeometryError> {
     let m = index_to_world;
     if !m.row(3).abs_diff_eq(glam::DVec4::W, 1e-12) {
-        return Err(OrderError::SingularTransform);
+        return Err(GeometryError::SingularTransform);
     }
     let linear = glam::DMat3::from_mat4(m);
     VolumeGeometry::new(

@@ -3,7 +3,7 @@
 
 use glam::{DMat4, DQuat, DVec3};
 
-use crate::pick::measure::{MeasureKind, Measurement};
+use crate::measure::{MeasureKind, Measurement};
 use crate::scene::{NodeId, Projection, Scene, SceneCamera, SceneError, SceneMeasurement};
 
 /// One edit of the plan, with what undoes it.

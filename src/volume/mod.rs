@@ -2,7 +2,7 @@
 
 use glam::{DAffine3, DMat3};
 
-use crate::order::{OrderError, VolumeGeometry};
+use crate::geometry::{GeometryError, VolumeGeometry};
 
 pub mod dat;
 pub mod detect;
@@ -43,9 +43,9 @@ pub struct CpuVolume {
 
 impl CpuVolume {
     /// The voxel-to-world placement of this volume.
-    pub fn geometry(&self) -> Result<VolumeGeometry, OrderError> {
+    pub fn geometry(&self) -> Result<VolumeGeometry, GeometryError> {
         if self.spacing.iter().any(|s| !s.is_finite() || *s <= 0.0) {
-            return Err(OrderError::BadSpacing(self.spacing));
+            return Err(GeometryError::BadSpacing(self.spacing));
         }
         let linear = self.direction * DMat3::from_diagonal(self.spacing.into());
         VolumeGeometry::new(
