@@ -18,7 +18,9 @@ use splatscene::scene::{Projection, SceneCamera};
 use splatscene::volume::VolumeError;
 use splatscene::volume::detect::detect_format;
 
-use crate::{parse_f32x2, parse_f64x2, parse_f64x3, parse_finite_f32, parse_size, parse_u32x3};
+use super::args::{
+    parse_f32x2, parse_f64x2, parse_f64x3, parse_finite_f32, parse_size, parse_u32x3,
+};
 
 /// How a volume file is read where its format leaves a choice: the DICOM series, the 4-D
 /// NIfTI frame, the NIfTI transform, the frame of a format that states none. `render`,

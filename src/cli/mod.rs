@@ -1,5 +1,10 @@
-//! Command-line commands that look at scenes.
+//! The commands of the command line, one module each, and what they share.
 
+pub mod args;
 pub mod batch;
+pub mod files;
+pub mod info;
 pub mod input;
+pub mod order;
+pub mod orderings;
 pub mod scenes;

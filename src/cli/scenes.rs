@@ -18,8 +18,9 @@ use splatscene::render::{
 };
 use splatscene::scene::{Scene, SceneCamera};
 
+use super::args::{parse_f64x3, parse_opacity, parse_u32x2};
+use super::files::write_replacing;
 use super::input::{View, ViewArgs};
-use crate::{parse_f64x3, parse_opacity, parse_u32x2, write_replacing};
 
 /// `splatscene render`.
 #[derive(clap::Args)]
@@ -601,7 +602,7 @@ fn same_file(a: &Path, b: &Path) -> bool {
     // Links followed as writing follows them; then the file itself where it exists, else its
     // folder's real path and its name.
     let resolve = |p: &Path| {
-        let p = &crate::follow_links(p).ok()?;
+        let p = &splatscene::output::follow_links(p).ok()?;
         std::fs::canonicalize(p).ok().or_else(|| {
             let dir = match p.parent() {
                 Some(d) if !d.as_os_str().is_empty() => d,

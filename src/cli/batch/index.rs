@@ -210,7 +210,7 @@ impl Index {
     pub fn write(&self, path: &Path) -> Result<()> {
         super::refuse_link(path)?;
         let text = serde_json::to_string_pretty(self)?;
-        crate::write_atomic(path, text.as_bytes())?;
+        splatscene::output::write_atomic(path, text.as_bytes())?;
         Ok(())
     }
 

@@ -733,7 +733,7 @@ fn write_output(out: &Path, file: &Path, bytes: &[u8]) -> Result<()> {
         std::fs::create_dir_all(parent)
             .with_context(|| format!("{}: cannot create", parent.display()))?;
     }
-    crate::write_atomic(&path, bytes)?;
+    splatscene::output::write_atomic(&path, bytes)?;
     Ok(())
 }
 
