@@ -28,6 +28,7 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
+#[cfg(feature = "annotate")]
 pub mod annotate;
 pub mod budget;
 pub mod camera;
@@ -42,8 +43,10 @@ pub mod order;
 pub mod output;
 pub mod pick;
 pub mod render;
+#[cfg(feature = "report")]
 pub mod report;
 pub mod scene;
 pub mod tiled;
+#[cfg(feature = "viewer")]
 pub mod viewer;
 pub mod volume;

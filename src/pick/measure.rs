@@ -49,6 +49,7 @@ impl MarkerStyle {
     }
 }
 
+#[cfg(feature = "annotate")]
 /// Draws the scene's own measurements into it (markers and lines, as [`annotate`] does) and
 /// returns their values as text with where to write them.
 ///

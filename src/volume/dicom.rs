@@ -1673,6 +1673,7 @@ impl<'a> Samples<'a> {
 
     /// The samples of 12-bit JPEG frames (see `volume::jpeg12`): one fragment a frame, or
     /// every fragment together for a file of one frame.
+    #[cfg(feature = "codecs")]
     fn from_jpeg12(
         obj: &DefaultDicomObject,
         (columns, rows): (usize, usize),
@@ -1706,6 +1707,20 @@ impl<'a> Samples<'a> {
                 .map_err(|m| format!("frame {}: {m}", k + 1))?;
         }
         Self::checked(data, 16, stored, stored - 1, signed)
+    }
+
+    /// 12-bit JPEG needs libjpeg-turbo, which this build leaves out.
+    #[cfg(not(feature = "codecs"))]
+    fn from_jpeg12(
+        _obj: &DefaultDicomObject,
+        _size: (usize, usize),
+        _frames: u32,
+    ) -> Result<Self, String> {
+        Err(
+            "12-bit JPEG needs the C codecs, which this build of splatscene leaves out \
+             (the `codecs` feature)"
+                .into(),
+        )
     }
 
     /// Converts one slice's samples to modality values (HU for CT) with its rescale. Samples

@@ -7,6 +7,7 @@ use crate::geometry::{GeometryError, VolumeGeometry};
 pub mod dat;
 pub mod detect;
 pub mod dicom;
+#[cfg(feature = "codecs")]
 mod jpeg12;
 pub mod loader;
 pub mod metaimage;
