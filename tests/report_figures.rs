@@ -598,6 +598,41 @@ fn annotations_name_the_patient_directions_and_the_scale_of_each_view() {
         "{said}"
     );
     assert!(!said.contains("orientation marker"), "{said}");
+    // The bar is as long as it says: 80 mm over 200 pixels is 2.5 pixels a millimetre, so
+    // 10 mm is 25 pixels. The bar is the longest run of changed pixels in one row of the lower
+    // left, against the same view with the letters alone.
+    let letters = dir.join("letters.png");
+    render(&[
+        "--view",
+        "superior",
+        "--annotate",
+        "letters",
+        "--orthographic",
+        "80",
+        "--out",
+        s(&letters),
+    ]);
+    let (a, b) = (read(&letters), read(&figure));
+    let longest = (150..200)
+        .map(|j| {
+            let (mut best, mut run) = (0, 0);
+            for i in 0..120 {
+                run = if a.get_pixel(i, j) != b.get_pixel(i, j) {
+                    run + 1
+                } else {
+                    0
+                };
+                best = best.max(run);
+            }
+            best
+        })
+        .max()
+        .unwrap_or(0);
+    // The line's round caps and anti-aliasing add a pixel or two at its ends.
+    assert!(
+        (24..=29).contains(&longest),
+        "a 10 mm bar at 2.5 px/mm drawn {longest} px long"
+    );
     // An oblique view names both directions of each edge.
     let said = render(&[
         "--view",

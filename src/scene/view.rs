@@ -225,13 +225,18 @@ mod tests {
             );
             assert!(f.up.dot(DVec3::NEG_Z) > 0.0, "{yaw},{pitch}: {f:?}");
         }
-        // Yaw turns about the axis: the eye keeps its height along it.
+        // Yaw turns about the axis: the eye keeps its height along it, and a positive yaw
+        // carries the eye toward what was screen right (the scene turns the other way), a
+        // quarter turn of it all the way there.
         let yawed = camera.orbit_about(DVec3::NEG_Z, 90.0, 0.0);
+        let right = frame(&camera).right;
         assert!(
-            yawed.eye.z.abs() < 1e-9 && yawed.eye.x.abs() > 299.0,
-            "{}",
+            yawed.eye.z.abs() < 1e-9 && yawed.eye.dot(right) > 299.0,
+            "{} against screen right {right}",
             yawed.eye
         );
+        let nudged = camera.orbit_about(DVec3::NEG_Z, 5.0, 0.0);
+        assert!(nudged.eye.dot(right) > 0.0, "{}", nudged.eye);
         // Positive pitch raises the eye toward the up axis (-z here).
         assert!(camera.orbit_about(DVec3::NEG_Z, 0.0, 10.0).eye.z < -50.0);
     }
