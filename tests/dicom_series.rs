@@ -825,3 +825,40 @@ fn integral_rescales_are_held_in_16_bits_and_wider_values_in_f32() {
     assert_eq!(off, 0, "values not raised by exactly 40000");
     fs::remove_dir_all(&dir).expect("clean up");
 }
+
+/// A file's series is the one its SeriesInstanceUID names: three slices copied into a second
+/// series with the same SeriesNumber (as scanners number a reconstruction of the same
+/// acquisition) and their own UIDs and places stay apart from the first.
+#[test]
+fn a_file_picks_its_series_by_uid_not_by_number() {
+    let Some(shared) = series_dir() else { return };
+    let dir = copy_series(&shared, "same-number", |_| false);
+    let files = series_files(&dir);
+    let vr = |name: &str| name.parse().expect("a VR name");
+    let number = open_file(&files[0])
+        .expect("open slice")
+        .element(tags::SERIES_NUMBER)
+        .map(|e| e.to_str().expect("text").trim().to_string())
+        .unwrap_or_else(|_| "1".into());
+    let mut copies = Vec::new();
+    for (k, file) in files.iter().take(3).enumerate() {
+        let mut obj = open_file(file).expect("open slice");
+        obj.put_str(tags::SERIES_INSTANCE_UID, vr("UI"), "2.25.6006");
+        obj.put_str(tags::SERIES_NUMBER, vr("IS"), number.as_str());
+        obj.put_str(tags::SOP_INSTANCE_UID, vr("UI"), format!("2.25.6006{k}"));
+        obj.put_str(
+            tags::IMAGE_POSITION_PATIENT,
+            vr("DS"),
+            format!("0\\0\\{}", 1000 + 5 * k),
+        );
+        let copy = dir.join(format!("recon-{k}.dcm"));
+        obj.write_to_file(&copy).expect("write the copy");
+        copies.push(copy);
+    }
+    let original = load_dicom_series(&shared).expect("load the shared series");
+    let own = splatscene::volume::detect::load_volume(&files[0]).expect("a file's own series");
+    assert_eq!(own, original, "the first series, without the second's slices");
+    let recon = splatscene::volume::detect::load_volume(&copies[0]).expect("the second series");
+    assert_eq!(recon.dims, [512, 512, 3]);
+    fs::remove_dir_all(&dir).expect("clean up");
+}
