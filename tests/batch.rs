@@ -301,6 +301,28 @@ fn shards_merge_into_the_unsharded_batch() {
     assert_eq!(pictures(&sharded), pictures(&whole));
 }
 
+/// Shards are merged only when they were made from the same manifest: the same file changed
+/// between two shards' runs is another manifest, whatever its path.
+#[test]
+fn shards_of_a_manifest_changed_between_runs_are_not_merged() {
+    let dir = scratch("changed-manifest");
+    let manifest = small_manifest(&dir);
+    let m = manifest.to_str().unwrap();
+    let sharded = dir.join("sharded");
+    let s = sharded.to_str().unwrap();
+    ok(&["batch", m, "--out", s, "--shard", "2/2"]);
+    let text = std::fs::read_to_string(&manifest).unwrap();
+    std::fs::write(
+        &manifest,
+        text.replace("sizes = [[96, 72]]", "sizes = [[80, 60]]"),
+    )
+    .unwrap();
+    ok(&["batch", m, "--out", s, "--shard", "1/2"]);
+    let stderr = fails(&["batch", "--merge", s]);
+    assert!(stderr.contains("another manifest"), "{stderr}");
+    assert!(!sharded.join("index.json").exists(), "nothing merged");
+}
+
 #[test]
 fn manifest_problems_are_all_reported_before_anything_is_drawn() {
     let dir = scratch("problems");

@@ -857,7 +857,10 @@ fn a_file_picks_its_series_by_uid_not_by_number() {
     }
     let original = load_dicom_series(&shared).expect("load the shared series");
     let own = splatscene::volume::detect::load_volume(&files[0]).expect("a file's own series");
-    assert_eq!(own, original, "the first series, without the second's slices");
+    assert_eq!(
+        own, original,
+        "the first series, without the second's slices"
+    );
     let recon = splatscene::volume::detect::load_volume(&copies[0]).expect("the second series");
     assert_eq!(recon.dims, [512, 512, 3]);
     fs::remove_dir_all(&dir).expect("clean up");
