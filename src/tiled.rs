@@ -1153,12 +1153,29 @@ fn composite_tile_lanes(
     }
 }
 
-/// Whether the processor runs [`avx2`]'s code.
+/// The environment variable that, set to `off`, keeps the tile compositor on its portable
+/// loops on any processor, so that they are tested where AVX2 is there too (CI runs the image
+/// tests both ways). Read once a process.
+pub const SIMD_VAR: &str = "SPLATSCENE_SIMD";
+
+/// Whether [`avx2`]'s code runs: the processor has it and [`SIMD_VAR`] does not turn it off.
 #[cfg(target_arch = "x86_64")]
 fn has_avx2() -> bool {
-    std::arch::is_x86_feature_detected!("avx2")
-        && std::arch::is_x86_feature_detected!("fma")
-        && std::arch::is_x86_feature_detected!("popcnt")
+    static USE: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+    *USE.get_or_init(|| {
+        let wanted = match std::env::var(SIMD_VAR).as_deref() {
+            Ok("off") => false,
+            Ok("on") | Err(_) => true,
+            Ok(other) => {
+                eprintln!("warning: {SIMD_VAR}={other:?} has no effect: give off or on");
+                true
+            }
+        };
+        wanted
+            && std::arch::is_x86_feature_detected!("avx2")
+            && std::arch::is_x86_feature_detected!("fma")
+            && std::arch::is_x86_feature_detected!("popcnt")
+    })
 }
 
 /// Lanes of the pixel loop: a group of pixels along a row, starting where a footprint does.
