@@ -1,7 +1,8 @@
 // One splat per significant voxel: an ellipsoidal Gaussian projected in perspective with the
 // local affine approximation (EWA), premultiplied "over" in instance order, depth-tested
-// against the meshes without writing depth. The math follows the CPU reference compositor in
-// src/composite.rs, so GPU frames can be checked against it.
+// against the meshes without writing depth. The footprint is shaders/footprint.wgsl, prepended
+// to this file (src/splat/footprint.rs on the CPU), so GPU frames can be checked against the
+// CPU compositors.
 // Keep in sync with SplatUniforms in src/render/splat_pass.rs.
 
 struct Splat {
@@ -92,26 +93,18 @@ fn vs_main(@builtin(vertex_index) corner: u32, @location(0) id: u32) -> VsOut {
             return discarded();
         }
     }
-    let f = u.screen.z;
-    var j0 = vec3<f32>(f, 0.0, 0.0);
-    var j1 = vec3<f32>(0.0, -f, 0.0);
-    var centre = vec2<f32>(u.screen.x + f * p.x, u.screen.y - f * p.y);
     var z = clamp((u.depth.z - p.z) / (u.depth.z - u.depth.y), 0.0, 1.0);
     if !ortho {
-        let iz = 1.0 / p.z;
-        j0 = vec3<f32>(f * iz, 0.0, -f * p.x * iz * iz);
-        j1 = vec3<f32>(0.0, -f * iz, f * p.y * iz * iz);
-        centre = vec2<f32>(u.screen.x + f * p.x * iz, u.screen.y - f * p.y * iz);
-        z = u.depth.x * iz;
+        z = u.depth.x * (1.0 / p.z);
     }
     let cov = mat3x3<f32>(u.cov0.xyz, u.cov1.xyz, u.cov2.xyz);
-    let a = dot(j0, cov * j0) + u.screen.w;
-    let b = dot(j0, cov * j1);
-    let c = dot(j1, cov * j1) + u.screen.w;
-    let det = a * c - b * b;
-    if !(det > 0.0) {
+    let fp = footprint(p, cov, u.screen.z, u.screen.xy, u.screen.w, ortho);
+    if !fp.ok {
         return discarded();
     }
+    let centre = fp.centre;
+    let a = fp.cov.x;
+    let c = fp.cov.z;
     // The ellipse q = cut-off spans exactly +-radius*sqrt(a) by +-radius*sqrt(c) pixels.
     let radius = sqrt(u.size.z);
     let corner_sign = vec2<f32>(f32(corner & 1u) * 2.0 - 1.0, f32((corner >> 1u) & 1u) * 2.0 - 1.0);
@@ -120,7 +113,7 @@ fn vs_main(@builtin(vertex_index) corner: u32, @location(0) id: u32) -> VsOut {
     var out: VsOut;
     out.clip = vec4<f32>(pixel.x / u.size.x * 2.0 - 1.0, 1.0 - pixel.y / u.size.y * 2.0, z, 1.0);
     out.offset = offset;
-    out.conic = vec3<f32>(c / det, -b / det, a / det);
+    out.conic = footprint_conic(fp);
     var rgb = unpack4x8unorm(texel.x).xyz;
     let strength = u.n0.w;
     let g = vec3<f32>(unpack4x8snorm(texel.x).w, unpack4x8snorm(texel.y).xy);
@@ -133,10 +126,8 @@ fn vs_main(@builtin(vertex_index) corner: u32, @location(0) id: u32) -> VsOut {
         }
     }
     // Mip-Splatting's 2-D filter: the pixel variance widens the footprint, and the opacity
-    // shrinks so that its integral over the image is kept (see `kept_integral` in
-    // src/tiled.rs).
-    let own = (a - u.screen.w) * (c - u.screen.w) - b * b;
-    let alpha = peak * min(sqrt(max(own / det, 0.0)), 1.0);
+    // shrinks so that its integral over the image is kept.
+    let alpha = peak * fp.kept;
     out.color = vec4<f32>(rgb * alpha, alpha);
     return out;
 }

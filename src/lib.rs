@@ -6,7 +6,8 @@
 //! - [`geometry`], [`measure`]: where a grid sits in the world; measurements as values;
 //! - [`order`]: the view case and every visibility ordering (BTF, WBTF, PBTF, IP-PBTF explicit
 //!   and implicit, the exact sort, and a bucketed distance order);
-//! - [`composite`]: a CPU reference compositor of Gaussian splats and the error measure;
+//! - [`splat`]: the splats' shared footprint, the reference compositor (the oracle and the
+//!   error measure) and the CPU tile compositor (the fast one);
 //! - [`volume`], [`classify`]: CT volumes, loaders, the built-in phantom, transfer functions;
 //! - [`mesh`]: triangle meshes with glTF, OBJ and STL loaders, and the prosthesis generator;
 //! - [`scene`]: the scene graph, camera, lights, scene files and the built-in shoulder scene.
@@ -33,7 +34,6 @@ pub mod annotate;
 pub mod budget;
 pub mod camera;
 pub mod classify;
-pub mod composite;
 pub mod geometry;
 pub mod grid;
 pub mod input;
@@ -46,7 +46,7 @@ pub mod render;
 #[cfg(feature = "report")]
 pub mod report;
 pub mod scene;
-pub mod tiled;
+pub mod splat;
 #[cfg(feature = "viewer")]
 pub mod viewer;
 pub mod volume;

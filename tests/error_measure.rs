@@ -6,8 +6,8 @@
 use glam::DVec3;
 use splatscene::camera::Camera;
 use splatscene::classify::{TransferFunction, classify, view_step_mm};
-use splatscene::composite::{SplatStyle, SplatVolume, compare, composite};
 use splatscene::order::{OrderOptions, Orderer, Ordering, ViewCase};
+use splatscene::splat::reference::{SplatStyle, SplatVolume, compare, composite};
 use splatscene::volume::CpuVolume;
 
 /// Nested spherical shells of "bone" (denser outside) in a 28^3 grid.

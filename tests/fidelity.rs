@@ -14,9 +14,9 @@ use std::sync::Arc;
 
 use glam::{DMat3, DMat4, DVec3};
 use splatscene::classify::TransferFunction;
-use splatscene::composite::{Frame, ImageDifference, compare};
 use splatscene::render::{FrameOptions, Renderer};
 use splatscene::scene::{NodeContent, Projection, Scene, SceneCamera, SplatSettings, VolumeNode};
+use splatscene::splat::reference::{Frame, ImageDifference, compare};
 use splatscene::volume::CpuVolume;
 
 mod common;

@@ -6,11 +6,11 @@ use std::sync::Arc;
 
 use glam::{DMat4, DVec3};
 use splatscene::classify::{TransferFunction, classify};
-use splatscene::composite::{SplatStyle, compare};
 use splatscene::mesh::{CpuMesh, Material};
 use splatscene::order::Ordering;
 use splatscene::render::{FrameOptions, GpuContext, Renderer};
 use splatscene::scene::{MeshNode, NodeContent, Scene, SceneCamera};
+use splatscene::splat::reference::{SplatStyle, compare};
 use splatscene::volume::CpuVolume;
 
 mod common;
@@ -29,7 +29,7 @@ fn render_fixed_view(
     size: (u32, u32),
     bounds: Option<(DVec3, DVec3)>,
     options: &FrameOptions,
-) -> (splatscene::composite::Frame, Vec<f32>) {
+) -> (splatscene::splat::reference::Frame, Vec<f32>) {
     let view = splatscene::render::ViewSetup::new(camera, size, bounds).unwrap();
     let target = splatscene::render::RenderTarget::new(ctx, size.0, size.1).unwrap();
     Renderer::new()
@@ -60,7 +60,7 @@ const TRANSPARENT: FrameOptions = FrameOptions {
 fn gpu_against_cpu(
     camera: SceneCamera,
     size: (u32, u32),
-) -> (splatscene::composite::ImageDifference, usize) {
+) -> (splatscene::splat::reference::ImageDifference, usize) {
     gpu_against_cpu_of(shells(20, [1.0, 1.0, 1.5]), camera, size)
 }
 
@@ -68,7 +68,7 @@ fn gpu_against_cpu_of(
     volume: CpuVolume,
     camera: SceneCamera,
     size: (u32, u32),
-) -> (splatscene::composite::ImageDifference, usize) {
+) -> (splatscene::splat::reference::ImageDifference, usize) {
     let ctx = context();
     let scene = volume_scene(volume.clone(), Ordering::IpPbtfImplicit);
     // The reference composites the volume's own grid.
@@ -97,7 +97,7 @@ fn gpu_against_cpu_of(
 /// splats of 0.7 voxels and opacity per splat: 0.0003-0.0004 and 0.0127-0.0133, the four
 /// largest differences of the perspective frame such edge pixels (moving the reference's
 /// cut-off by 0.1% changed each of them by the same amount).
-fn assert_matches_reference(d: &splatscene::composite::ImageDifference) {
+fn assert_matches_reference(d: &splatscene::splat::reference::ImageDifference) {
     let style = SplatStyle::default();
     let edge_jump = (-0.5 * (style.cutoff / style.sigma).powi(2)).exp();
     assert!(d.rmse < 0.0035, "{d:?}");

@@ -1,4 +1,5 @@
-//! Every WGSL file in `shaders/` parses and validates with naga, with no GPU involved.
+//! Every WGSL file in `shaders/` parses and validates with naga, with no GPU involved (those
+//! that use the shared footprint with `footprint.wgsl` before them, as the renderer builds them).
 
 #[test]
 fn every_shader_parses_and_validates() {
@@ -9,7 +10,11 @@ fn every_shader_parses_and_validates() {
         if path.extension().is_none_or(|e| e != "wgsl") {
             continue;
         }
-        let source = std::fs::read_to_string(&path).unwrap();
+        let mut source = std::fs::read_to_string(&path).unwrap();
+        // A shader that calls the shared footprint has it prepended, as the renderer does.
+        if source.contains("footprint(") && !path.ends_with("footprint.wgsl") {
+            source = std::fs::read_to_string(dir.join("footprint.wgsl")).unwrap() + &source;
+        }
         let module = naga::front::wgsl::parse_str(&source)
             .unwrap_or_else(|e| panic!("{}: {}", path.display(), e.emit_to_string(&source)));
         naga::valid::Validator::new(

@@ -3,11 +3,11 @@
 
 use glam::DVec3;
 use splatscene::camera::Camera;
-use splatscene::composite::{SplatStyle, SplatVolume, compare, composite};
 use splatscene::grid::SparseGrid;
 use splatscene::order::{
     CaseKind, OrderError, OrderOptions, Orderer, Ordering, ViewCase, VolumeGeometry, reference,
 };
+use splatscene::splat::reference::{SplatStyle, SplatVolume, compare, composite};
 
 const GRID_ORDERINGS: [Ordering; 5] = [
     Ordering::Btf,

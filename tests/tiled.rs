@@ -8,11 +8,11 @@ use std::sync::Arc;
 
 use glam::{DMat4, DVec3};
 use splatscene::classify::TransferFunction;
-use splatscene::composite::{Frame, ImageDifference, SplatStyle, compare};
 use splatscene::mesh::{CpuMesh, Material};
 use splatscene::order::Ordering;
 use splatscene::render::{Compositor, FrameOptions, GpuContext, Renderer};
 use splatscene::scene::{ClipPlane, MeshNode, NodeContent, Projection, Scene, SceneCamera};
+use splatscene::splat::reference::{Frame, ImageDifference, SplatStyle, compare};
 
 mod common;
 use common::{data_file, reference_frame, rotated_anisotropic, shells, volume_scene};
@@ -211,7 +211,7 @@ fn early_termination_leaves_out_no_more_than_its_threshold() {
         "most splat-tile pairs are skipped: {sa:?}"
     );
     let d = compare(&a.frame, &b.frame).unwrap();
-    let bound = f64::from(1.0 - splatscene::tiled::OPAQUE);
+    let bound = f64::from(1.0 - splatscene::splat::tiled::OPAQUE);
     assert!(d.max_abs <= bound + 1e-5, "{d:?} against {bound}");
 }
 

@@ -78,7 +78,7 @@ pub(crate) fn run_orderings(args: OrderingsArgs) -> Result<()> {
         );
     }
     // Sizes, the font and the folder of the plot, checked before minutes of measuring.
-    splatscene::composite::check_frame_size(args.size.0, args.size.1).context("--size")?;
+    splatscene::splat::reference::check_frame_size(args.size.0, args.size.1).context("--size")?;
     for (flag, views) in [
         ("--orbit-views", args.orbit_views),
         ("--fly-in-views", args.fly_in_views),

@@ -2,7 +2,7 @@
 
 use image::{ImageBuffer, RgbaImage};
 
-use crate::composite::Frame;
+use crate::splat::reference::Frame;
 
 /// A premultiplied frame as straight 8-bit RGBA (what PNG stores): opaque where the frame is,
 /// and with the frame's coverage as alpha over a transparent background.

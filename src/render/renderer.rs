@@ -13,13 +13,13 @@ use super::target::RenderTarget;
 use super::view::ViewSetup;
 use super::{GpuContext, RenderError};
 use crate::classify::{Classified, ClassifyOptions, Opacity, classify_refined, classify_with};
-use crate::composite::Frame;
 use crate::geometry::{GeometryError, VolumeGeometry};
 use crate::order::{OrderOptions, Orderer, Ordering, ViewCase};
 use crate::scene::{
     NodeId, Scene, SceneCamera, VolumeNode, placed_geometry, placed_grid, volume_placement,
 };
-use crate::tiled::{SplatTexels, TileStats, TiledCompositor};
+use crate::splat::reference::Frame;
+use crate::splat::tiled::{SplatTexels, TileStats, TiledCompositor};
 use crate::volume::CpuVolume;
 
 /// Per-frame choices that are not part of the scene.
@@ -320,7 +320,7 @@ pub enum Compositor {
     /// The GPU's splat pass (the library's default).
     #[default]
     Gpu,
-    /// The CPU tile compositor ([`crate::tiled`]); meshes keep their GPU pass.
+    /// The CPU tile compositor ([`crate::splat::tiled`]); meshes keep their GPU pass.
     Cpu,
 }
 
@@ -526,7 +526,7 @@ impl Renderer {
         size: (u32, u32),
         options: &FrameOptions,
     ) -> Result<Screenshot, RenderError> {
-        crate::composite::check_frame_size(size.0, size.1)
+        crate::splat::reference::check_frame_size(size.0, size.1)
             .map_err(|e| RenderError::BadCamera(e.to_string()))?;
         let view = ViewSetup::new(camera, size, scene.bounds())?;
         let mut report = FrameReport::default();

@@ -100,7 +100,7 @@ fn texture_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
 }
 
 /// The 8-byte texel of every voxel of the grid (zero where not significant), as the tile
-/// compositor stores them ([`crate::tiled::SplatTexels`]): the splat pass's one texture. One
+/// compositor stores them ([`crate::splat::tiled::SplatTexels`]): the splat pass's one texture. One
 /// z-slice a task, walking the slice's x rows, so only significant voxels are visited.
 fn splat_texels(volume: &CpuVolume, factors: [u32; 3], classified: &Classified) -> Vec<u8> {
     let grid = &classified.grid;
@@ -117,8 +117,13 @@ fn splat_texels(volume: &CpuVolume, factors: [u32; 3], classified: &Classified) 
                         if let Some(rank) = grid.rank(id) {
                             let k = [x, y as u32, z as u32];
                             let i = (x as usize + nx * y) * 8;
-                            let t =
-                                crate::tiled::texel(volume, factors, classified, k, rank as usize);
+                            let t = crate::splat::tiled::texel(
+                                volume,
+                                factors,
+                                classified,
+                                k,
+                                rank as usize,
+                            );
                             slice[i..i + 8].copy_from_slice(&t);
                         }
                     }
@@ -128,10 +133,20 @@ fn splat_texels(volume: &CpuVolume, factors: [u32; 3], classified: &Classified) 
     texels
 }
 
+/// The splat pass's shader: the footprint shared with the CPU compositors
+/// (`shaders/footprint.wgsl`), then the pass itself (`shaders/splat.wgsl`).
+const SPLAT_WGSL: &str = concat!(
+    include_str!("../../shaders/footprint.wgsl"),
+    include_str!("../../shaders/splat.wgsl")
+);
+
 impl SplatPass {
     pub(crate) fn new(ctx: &GpuContext) -> Self {
         let device = &ctx.device;
-        let module = device.create_shader_module(wgpu::include_wgsl!("../../shaders/splat.wgsl"));
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("splat.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(SPLAT_WGSL.into()),
+        });
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("splat"),
             entries: &[
@@ -381,10 +396,10 @@ pub(crate) fn projection(
     view: &ViewSetup,
     settings: &SplatSettings,
     clipping: &Clipping,
-) -> crate::tiled::SplatProjection {
+) -> crate::splat::tiled::SplatProjection {
     let u = uniforms(geometry, view, settings, clipping);
     let v = |r: [f32; 4]| glam::Vec3::new(r[0], r[1], r[2]);
-    crate::tiled::SplatProjection {
+    crate::splat::tiled::SplatProjection {
         m: u.m.map(v),
         eye_index: v(u.eye),
         near_cut: u.eye[3],
@@ -402,7 +417,7 @@ pub(crate) fn projection(
         normal: u.normal.map(v),
         shading: u.normal[0][3],
         clip: u.clip[..u.dims[3] as usize].to_vec(),
-        alpha: crate::tiled::alpha_table(u.depth[3]),
+        alpha: crate::splat::tiled::alpha_table(u.depth[3]),
     }
 }
 

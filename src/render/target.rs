@@ -2,7 +2,7 @@
 //! packed tightly on the CPU).
 
 use super::{GpuContext, RenderError};
-use crate::composite::Frame;
+use crate::splat::reference::Frame;
 
 /// Colour format of offscreen targets on `device`: 32-bit float where the device blends it
 /// (wgpu's `FLOAT32_BLENDABLE`, which [`GpuContext`] asks for when the adapter has it), else

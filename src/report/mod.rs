@@ -11,15 +11,15 @@ use glam::DVec3;
 
 use crate::camera::Camera;
 use crate::classify::{Classified, view_step_mm};
-use crate::composite::{
-    CompositeError, FragmentStats, Frame, ImageDifference, SplatStyle, SplatVolume,
-    check_frame_size, compare, composite,
-};
 use crate::order::{
     CaseKind, OrderError, OrderOptions, Orderer, Ordering, ViewCase, VolumeGeometry,
 };
 use crate::render::{FrameOptions, GpuContext, RenderError, Renderer};
 use crate::scene::{Projection, Scene, SceneCamera};
+use crate::splat::reference::{
+    CompositeError, FragmentStats, Frame, ImageDifference, SplatStyle, SplatVolume,
+    check_frame_size, compare, composite,
+};
 
 /// Settings of a report run.
 #[derive(Debug, Clone, PartialEq)]
@@ -127,7 +127,7 @@ pub enum ReportError {
 
 /// Where the report composites its frames.
 pub enum Compositor<'a> {
-    /// The CPU reference compositor ([`crate::composite`]): no GPU needed, and it also counts
+    /// The CPU reference compositor ([`crate::splat::reference`]): no GPU needed, and it also counts
     /// adjacent inversions.
     Cpu,
     /// The renderer on a GPU adapter: `scene` holds the volume (placed at the identity, with

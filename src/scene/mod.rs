@@ -8,11 +8,11 @@ use glam::{DMat4, DVec3};
 use thiserror::Error;
 
 use crate::classify::TransferFunction;
-use crate::composite::SplatStyle;
 use crate::geometry::{GeometryError, VolumeGeometry};
 use crate::measure::{MeasureKind, Measurement};
 use crate::mesh::{CpuMesh, Material};
 use crate::order::Ordering;
+use crate::splat::reference::SplatStyle;
 use crate::volume::CpuVolume;
 
 mod clip;

@@ -9,9 +9,9 @@ use std::sync::Arc;
 use glam::{DMat3, DMat4, DVec3};
 use splatscene::camera::Camera;
 use splatscene::classify::{TransferFunction, classify, view_step_mm};
-use splatscene::composite::{Frame, SplatStyle, SplatVolume, composite};
 use splatscene::order::{OrderOptions, Orderer, Ordering, ViewCase};
 use splatscene::scene::{NodeContent, Scene, SplatSettings, VolumeNode};
+use splatscene::splat::reference::{Frame, SplatStyle, SplatVolume, composite};
 use splatscene::volume::CpuVolume;
 
 /// Nested shells of "bone" in an n^3 grid (denser outside).

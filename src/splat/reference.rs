@@ -18,6 +18,7 @@ use thiserror::Error;
 use crate::camera::{Camera, CameraError};
 use crate::geometry::VolumeGeometry;
 use crate::grid::SparseGrid;
+use crate::splat::footprint::{Lens, footprint};
 
 /// Why a frame could not be composited.
 #[derive(Debug, Error, Clone, PartialEq)]
@@ -161,7 +162,7 @@ impl FragmentStats {
 
 /// A splat projected to the screen.
 #[derive(Debug, Clone, Copy)]
-struct Footprint {
+struct Placed {
     centre: [f64; 2],
     /// Inverse 2D covariance (conic): `q = a dx^2 + 2 b dx dy + c dy^2`.
     conic: [f64; 3],
@@ -246,7 +247,7 @@ fn project(
     volume: &SplatVolume<'_>,
     order: &[u32],
     style: &SplatStyle,
-) -> Result<Vec<Footprint>, CompositeError> {
+) -> Result<Vec<Placed>, CompositeError> {
     let frame = camera.frame()?;
     let grid = volume.grid;
     if volume.colors.len() != grid.len() {
@@ -275,11 +276,16 @@ fn project(
         .fold(f64::INFINITY, f64::min);
     let near = camera.near.max(0.1 * min_spacing);
     let radius = style.cutoff / style.sigma;
-    let (cx, cy, f) = (
-        0.5 * f64::from(camera.width),
-        0.5 * f64::from(camera.height),
-        frame.focal,
-    );
+    let lens = Lens {
+        focal: frame.focal,
+        centre: [
+            0.5 * f64::from(camera.width),
+            0.5 * f64::from(camera.height),
+        ],
+        pixel_variance: style.pixel_variance,
+        orthographic: false,
+    };
+    let cov = cov.transpose().to_cols_array_2d();
     let (w, h) = (i64::from(camera.width), i64::from(camera.height));
     let mut out = Vec::with_capacity(order.len());
     for (position, &id) in order.iter().enumerate() {
@@ -295,17 +301,14 @@ fn project(
         if p.z <= near {
             continue;
         }
-        let (iz, iz2) = (1.0 / p.z, 1.0 / (p.z * p.z));
-        let j0 = DVec3::new(f * iz, 0.0, -f * p.x * iz2);
-        let j1 = DVec3::new(0.0, -f * iz, f * p.y * iz2);
-        let a = j0.dot(cov * j0) + style.pixel_variance;
-        let b = j0.dot(cov * j1);
-        let c = j1.dot(cov * j1) + style.pixel_variance;
-        let det = a * c - b * b;
-        if det.is_nan() || det <= 0.0 || det.is_infinite() {
+        let Some(footprint) = footprint(p.to_array(), &cov, &lens) else {
+            continue;
+        };
+        let ([a, _, c], centre) = (footprint.cov, footprint.centre);
+        let det = a * c - footprint.cov[1] * footprint.cov[1];
+        if det.is_infinite() {
             continue;
         }
-        let centre = [cx + f * p.x * iz, cy - f * p.y * iz];
         let (ex, ey) = (radius * a.sqrt(), radius * c.sqrt());
         let bounds = [
             ((centre[0] - ex - 0.5).floor() as i64).max(0),
@@ -316,20 +319,11 @@ fn project(
         if bounds[0] > bounds[1] || bounds[2] > bounds[3] {
             continue;
         }
-        // Mip-Splatting's 2-D filter: the widened footprint keeps the unwidened one's
-        // integral (see `kept_integral` in src/tiled.rs; computed here on its own, in f64).
-        let v = style.pixel_variance;
-        let own = (a - v) * (c - v) - b * b;
-        let kept = if own > 0.0 {
-            (own / det).sqrt().min(1.0) as f32
-        } else {
-            0.0
-        };
-        out.push(Footprint {
+        out.push(Placed {
             centre,
-            conic: [c / det, -b / det, a / det],
+            conic: footprint.conic(),
             bounds,
-            color: color.map(|v| v * kept),
+            color: color.map(|v| v * footprint.kept as f32),
             depth: p.length(),
         });
     }

@@ -1,0 +1,300 @@
+//! A sort-free tile compositor for splats on the CPU, with the mathematics of the GPU splat
+//! pass (`shaders/splat.wgsl`): the same EWA footprint, the same 8-bit colours and normals, the
+//! same headlight shading, clip planes and depth test against the mesh depth.
+//!
+//! An a-priori visibility order (IP-PBTF and the others) needs no sort, and binning keeps it:
+//! splats are projected in draw order and appended to each 16x16-pixel tile their footprint
+//! touches, so each tile holds its splats in draw order, and each tile is composited on its
+//! own, in parallel, front to back (the reverse of a back-to-front order) with the "under"
+//! operator `C += (1 - A) c; A += (1 - A) a`. A pixel whose opacity reaches [`OPAQUE`] takes
+//! no more splats, and a tile whose pixels all do takes none: early ray termination, for
+//! splats, so the hidden inside of a bone costs nothing. What a stopped pixel leaves out is at
+//! most `1 - OPAQUE` of every channel.
+//!
+//! The order is walked nearest first in batches (4,096 splats, doubling to 32,768): each batch
+//! is projected and binned, then composited, before the next. A splat's pixel rectangle follows
+//! from its centre alone (the covariance is the volume's), so a splat whose rectangle holds
+//! only pixels opaque by then (a bit per pixel) is left out before its texel is even read;
+//! stretches of the order whose box of voxels is hidden are left out before each splat's
+//! centre is. Projection is the part of a frame that early termination alone does not shrink.
+//!
+//! The pixel loop works on rows of 8 pixels held as planes. It is written twice: in plain
+//! loops the compiler vectorises for the x86-64 baseline (SSE2) and any other processor, and
+//! in AVX2 and FMA intrinsics, chosen at run time where the processor has them, since the
+//! compiler neither fuses multiply-adds nor gathers lane masks well on its own (no `wide`: it
+//! picks its instructions from the features the whole build targets, so it cannot follow a
+//! choice made at run time). Projection runs 8 splats a vector in the AVX2
+//! build too. rayon runs the chunks of a batch and the tiles in parallel. Every buffer lives in the
+//! [`TiledCompositor`] and is reused from frame to frame; none grows with the volume past one
+//! batch.
+
+mod bin;
+mod mask;
+mod project;
+mod simd;
+#[cfg(test)]
+mod tests;
+mod texels;
+mod tile;
+
+use std::sync::atomic::AtomicBool;
+use std::time::Duration;
+
+use rayon::prelude::*;
+
+use bin::{ChunkBins, bin_chunk};
+use mask::OpaqueMask;
+use project::{Group, Projected, group_hidden};
+pub use project::{SplatProjection, alpha_table};
+pub use simd::SIMD_VAR;
+pub use texels::{SplatTexels, texel};
+use tile::{Batch, TilePixels};
+
+/// Tile side in pixels.
+pub const TILE: usize = 16;
+/// A pixel whose accumulated opacity reaches this takes no more splats; a tile whose pixels
+/// all do stops.
+pub const OPAQUE: f32 = 0.996;
+
+/// What a frame cost, in splats and time.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct TileStats {
+    /// Projecting the splats.
+    pub project: Duration,
+    /// Binning them to tiles.
+    pub bin: Duration,
+    /// Compositing the tiles and laying them over what lies under them.
+    pub tiles: Duration,
+    /// Splats in the draw orders.
+    pub splats: usize,
+    /// Splats projected onto the image (in front of the eye, kept by the clip planes, on
+    /// screen).
+    pub projected: usize,
+    /// Splats left out before their texel was read because every pixel of their footprint was
+    /// opaque already (and, once every pixel of the image is opaque, all the splats left).
+    pub culled: usize,
+    /// Splats that reached at least one pixel still open: all the others added nothing to
+    /// the image.
+    pub drew: usize,
+    /// Splat-tile pairs composited: the splat reached a pixel of the tile still open.
+    pub composited: usize,
+    /// Splat-tile pairs skipped because every pixel the splat covers in the tile had turned
+    /// opaque (within the batch that held them, after the opaque pixels were last taken
+    /// for culling).
+    pub skipped_opaque: usize,
+    /// Tiles whose pixels all turned opaque.
+    pub tiles_opaque: usize,
+}
+
+/// The compositor, with its buffers kept between frames.
+#[derive(Debug)]
+pub struct TiledCompositor {
+    /// The accumulated opacity past which a pixel takes no more splats ([`OPAQUE`] by
+    /// default; above 1 no pixel and no tile ever stops).
+    pub opaque: f32,
+    /// Leave out, before projecting them, splats whose footprint covers opaque pixels alone
+    /// (on by default; the image is the same either way, see [`TiledCompositor::composite`]).
+    pub cull_hidden: bool,
+    projected: Vec<Projected>,
+    bins: Vec<ChunkBins>,
+    tiles: Vec<TilePixels>,
+    /// The pixels opaque when the batch began.
+    mask: OpaqueMask,
+    /// Per splat of the batch, whether it reached a pixel still open.
+    drew: Vec<AtomicBool>,
+}
+
+/// The first batch of splats (the nearest) and the largest; batches double in between, so
+/// that tiles close early in a frame while later batches still keep both threads busy.
+const FIRST_BATCH: usize = 4096;
+/// See [`FIRST_BATCH`].
+const MAX_BATCH: usize = 1 << 15;
+/// Splats whose voxels' box is tested against the opaque pixels before each is tested alone.
+const GROUP: usize = 32;
+
+impl Default for TiledCompositor {
+    fn default() -> Self {
+        Self {
+            opaque: OPAQUE,
+            cull_hidden: true,
+            projected: Vec::new(),
+            bins: Vec::new(),
+            tiles: Vec::new(),
+            mask: OpaqueMask::default(),
+            drew: Vec::new(),
+        }
+    }
+}
+
+impl TiledCompositor {
+    /// A compositor with nothing allocated yet.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Composites the volumes' splats over `under` (premultiplied RGBA, the background and the
+    /// meshes, row by row, `size` pixels) with the meshes' reversed `depth` per pixel (0 where
+    /// none). `volumes` come far to near, each with its draw order back to front. The result
+    /// replaces `under`.
+    ///
+    /// The splats are taken nearest first in batches (the first small, then doubling): a batch
+    /// is projected, binned and composited before the next, and a splat of a later batch whose
+    /// footprint can only touch pixels that are opaque by then is not projected at all. This
+    /// leaves out nothing that compositing every splat would have drawn: such a splat's
+    /// splat-tile pairs would all have been skipped.
+    pub fn composite(
+        &mut self,
+        size: (u32, u32),
+        volumes: &[(SplatProjection, &SplatTexels, &[u32])],
+        depth: &[f32],
+        under: &mut [[f32; 4]],
+    ) -> TileStats {
+        let (w, h) = (size.0 as usize, size.1 as usize);
+        let (tx, ty) = (w.div_ceil(TILE), h.div_ceil(TILE));
+        let mut stats = TileStats {
+            splats: volumes.iter().map(|(_, _, ids)| ids.len()).sum(),
+            ..TileStats::default()
+        };
+        let started = std::time::Instant::now();
+        self.tiles.resize_with(tx * ty, TilePixels::default);
+        self.tiles
+            .par_iter_mut()
+            .enumerate()
+            .for_each(|(t, tile)| tile.reset((t % tx) * TILE, (t / tx) * TILE, (w, h), depth));
+        self.mask.reset(w, h);
+        let mut open_pixels = w * h;
+        stats.tiles += started.elapsed();
+        let screen = Screen { w, h };
+        // Nearest first: the volumes near to far, each one's order from its end.
+        let mut batch = FIRST_BATCH;
+        'volumes: for (v, (projection, texels, ids)) in volumes.iter().enumerate().rev() {
+            let mut end = ids.len();
+            while end > 0 {
+                let begin = end.saturating_sub(batch);
+                let ids = &ids[begin..end];
+                end = begin;
+                batch = (batch * 2).min(MAX_BATCH);
+                if open_pixels == 0 && self.cull_hidden {
+                    // Every tile is opaque: nothing further can show.
+                    let farther: usize = volumes[..v].iter().map(|(_, _, ids)| ids.len()).sum();
+                    stats.culled += ids.len() + end + farther;
+                    break 'volumes;
+                }
+                let chunk = (ids.len() / 4).clamp(2048, 1 << 15);
+                let chunks = ids.len().div_ceil(chunk);
+                // Project and bin each chunk (one task: no wait in between), keeping the order
+                // within each tile.
+                let started = std::time::Instant::now();
+                if self.projected.len() < ids.len() {
+                    self.projected.resize(ids.len(), Projected::default());
+                }
+                if self.bins.len() < chunks {
+                    self.bins.resize_with(chunks, ChunkBins::default);
+                }
+                if self.drew.len() < ids.len() {
+                    self.drew.resize_with(ids.len(), AtomicBool::default);
+                }
+                // No test while no pixel is opaque.
+                let mask = (self.cull_hidden && open_pixels < w * h).then_some(&self.mask);
+                let (culled, project_time, bin_time) = self.projected[..ids.len()]
+                    .par_chunks_mut(chunk)
+                    .zip(ids.par_chunks(chunk))
+                    .zip(self.bins[..chunks].par_iter_mut())
+                    .enumerate()
+                    .map(|(c, ((out, ids), bins))| {
+                        let started = std::time::Instant::now();
+                        let mut culled = 0;
+                        let group = Group {
+                            u: projection,
+                            texels,
+                            screen: &screen,
+                            mask,
+                        };
+                        // The chunk's splats on the image, in order, packed at the front of
+                        // its share of the buffer.
+                        let mut kept = 0;
+                        for ids in ids.chunks(GROUP) {
+                            if let Some(mask) = mask
+                                && group_hidden(projection, ids, &screen, mask)
+                            {
+                                culled += ids.len();
+                                continue;
+                            }
+                            let (hidden, placed) = group.project(ids, &mut out[kept..]);
+                            culled += hidden;
+                            kept += placed;
+                        }
+                        let projected = started.elapsed();
+                        bin_chunk(&out[..kept], (c * chunk) as u32, tx, ty, bins);
+                        (culled, projected, started.elapsed() - projected)
+                    })
+                    .reduce(
+                        || (0, Duration::ZERO, Duration::ZERO),
+                        |a, b| (a.0 + b.0, a.1 + b.1, a.2 + b.2),
+                    );
+                // The phase's time, shared between its two stages as their processor time.
+                let wall = started.elapsed().as_secs_f64();
+                let share = project_time.as_secs_f64()
+                    / (project_time + bin_time)
+                        .as_secs_f64()
+                        .max(f64::MIN_POSITIVE);
+                stats.project += Duration::from_secs_f64(wall * share);
+                stats.bin += Duration::from_secs_f64(wall * (1.0 - share));
+                stats.culled += culled;
+                stats.projected += self.bins[..chunks]
+                    .iter()
+                    .map(|b| b.projected)
+                    .sum::<usize>();
+                // Composite every tile, nearest splat first.
+                let started = std::time::Instant::now();
+                let batch = Batch {
+                    projected: &self.projected,
+                    bins: &self.bins[..chunks],
+                    opaque: self.opaque,
+                    drew: &self.drew,
+                };
+                self.tiles.par_iter_mut().enumerate().for_each(|(t, tile)| {
+                    let origin = ((t % tx) * TILE, (t / tx) * TILE);
+                    tile.composite(t, origin, batch);
+                });
+                for (t, tile) in self.tiles.iter().enumerate() {
+                    self.mask
+                        .set_tile((t % tx) * TILE, (t / tx) * TILE, &tile.rows);
+                }
+                // Counted and cleared through `&mut`: plain loads and stores, no locked
+                // instruction per splat.
+                stats.drew += self.drew[..ids.len()]
+                    .iter_mut()
+                    .map(|d| usize::from(std::mem::take(d.get_mut())))
+                    .sum::<usize>();
+                open_pixels = self.tiles.iter().map(|t| t.open as usize).sum();
+                stats.tiles += started.elapsed();
+            }
+        }
+        let started = std::time::Instant::now();
+        for tile in &self.tiles {
+            stats.composited += tile.composited;
+            stats.skipped_opaque += tile.skipped;
+            stats.tiles_opaque += usize::from(tile.open == 0);
+        }
+        // The splats over what lies under them.
+        let tiles = &self.tiles;
+        under.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
+            for (x, px) in row.iter_mut().enumerate() {
+                let tile = &tiles[(y / TILE) * tx + x / TILE];
+                let i = (y % TILE) * TILE + x % TILE;
+                let s = [tile.r[i], tile.g[i], tile.b[i], tile.a[i]];
+                let keep = 1.0 - s[3];
+                *px = std::array::from_fn(|k| s[k] + keep * px[k]);
+            }
+        });
+        stats.tiles += started.elapsed();
+        stats
+    }
+}
+
+/// The image's size in pixels.
+struct Screen {
+    w: usize,
+    h: usize,
+}

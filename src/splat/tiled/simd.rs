@@ -1,0 +1,443 @@
+//! The AVX2 and FMA code of the tile compositor, chosen at run time where the processor has
+//! it, and the switch that keeps the portable loops on ([`SIMD_VAR`]).
+
+/// The environment variable that, set to `off`, keeps the tile compositor on its portable
+/// loops on any processor, so that they are tested where AVX2 is there too (CI runs the image
+/// tests both ways). Read once a process.
+pub const SIMD_VAR: &str = "SPLATSCENE_SIMD";
+
+/// Whether [`avx2`]'s code runs: the processor has it and [`SIMD_VAR`] does not turn it off.
+#[cfg(target_arch = "x86_64")]
+pub(super) fn has_avx2() -> bool {
+    static USE: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+    *USE.get_or_init(|| {
+        let wanted = match std::env::var(SIMD_VAR).as_deref() {
+            Ok("off") => false,
+            Ok("on") | Err(_) => true,
+            Ok(other) => {
+                eprintln!("warning: {SIMD_VAR}={other:?} has no effect: give off or on");
+                true
+            }
+        };
+        wanted
+            && std::arch::is_x86_feature_detected!("avx2")
+            && std::arch::is_x86_feature_detected!("fma")
+            && std::arch::is_x86_feature_detected!("popcnt")
+    })
+}
+
+/// The pixel loop written with AVX2 and FMA intrinsics, for processors that have them (see
+/// [`has_avx2`]): the same arithmetic as [`composite_splat_lanes`], 8 lanes a vector, with
+/// fused multiply-adds and the lanes that turn opaque read as one mask. (The plain loops
+/// built for AVX2 gave neither: the compiler does not fuse `a * b + c` on its own, and it
+/// gathered the lanes' bits with a dozen shuffles.)
+#[cfg(target_arch = "x86_64")]
+pub(super) mod avx2 {
+    use std::arch::x86_64::*;
+
+    use crate::splat::tiled::TILE;
+    use crate::splat::tiled::project::{Group, Projected, voxel};
+    use crate::splat::tiled::tile::{
+        Batch, LANES, Lanes, TilePixels, TileRect, composite_tile_lanes,
+    };
+
+    /// [`composite_tile_lanes`] with [`composite_splat`].
+    ///
+    /// # Safety
+    ///
+    /// The processor must have AVX2, FMA and POPCNT.
+    #[target_feature(enable = "avx2,fma,popcnt")]
+    #[allow(unsafe_code)]
+    pub(in crate::splat::tiled) unsafe fn composite_tile(
+        tile: &mut TilePixels,
+        t: usize,
+        origin: (usize, usize),
+        batch: Batch<'_>,
+    ) {
+        composite_tile_lanes(tile, t, origin, batch, |tile, origin, p, rect, opaque| {
+            composite_splat(tile, origin, p, rect, opaque)
+        });
+    }
+
+    /// [`super::composite_splat_lanes`] in AVX2 vectors.
+    #[target_feature(enable = "avx2,fma,popcnt")]
+    #[inline]
+    fn composite_splat(
+        tile: &mut TilePixels,
+        origin: (usize, usize),
+        p: &Projected,
+        (lx0, lx1, ly0, ly1, span): TileRect,
+        opaque: f32,
+    ) -> u32 {
+        let dx0 = origin.0 as f32 + 0.5 - p.centre[0];
+        let [ca, cb, cc] = p.conic;
+        let conic_a = _mm256_set1_ps(ca);
+        let cutoff = _mm256_set1_ps(p.cutoff);
+        let depth = _mm256_set1_ps(p.depth);
+        let [cr, cg, cbl, calpha] = p.color.map(|c| _mm256_set1_ps(c));
+        let opaque = _mm256_set1_ps(opaque);
+        let one = _mm256_set1_ps(1.0);
+        let iota = _mm256_setr_ps(0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0);
+        let bits = lane_bits();
+        let mut turned = 0;
+        for ly in ly0..=ly1 {
+            let open = tile.rows[ly] & span;
+            if open == 0 {
+                continue;
+            }
+            let dy = (origin.1 + ly) as f32 + 0.5 - p.centre[1];
+            let (by, qy) = (_mm256_set1_ps(2.0 * cb * dy), _mm256_set1_ps(cc * dy * dy));
+            let mut closing = 0u32;
+            for start in (lx0..=lx1).step_by(LANES) {
+                let lanes_open = (u32::from(open) >> start) & 0xff;
+                if lanes_open == 0 {
+                    continue;
+                }
+                let Some(Lanes {
+                    r,
+                    g,
+                    b,
+                    a,
+                    depth: d,
+                }) = tile.lanes(ly * TILE + start)
+                else {
+                    continue;
+                };
+                let dx = _mm256_add_ps(_mm256_set1_ps(dx0 + start as f32), iota);
+                let q = _mm256_fmadd_ps(_mm256_fmadd_ps(conic_a, dx, by), dx, qy);
+                let falloff = exp_neg_half(q);
+                let mask = _mm256_and_si256(_mm256_set1_epi32(lanes_open as i32), bits);
+                let open = _mm256_castsi256_ps(_mm256_cmpeq_epi32(mask, bits));
+                #[allow(unsafe_code)]
+                // SAFETY: each plane's group is an array of LANES floats.
+                unsafe {
+                    let d = _mm256_loadu_ps(d.as_ptr());
+                    let live = _mm256_and_ps(
+                        _mm256_and_ps(open, _mm256_cmp_ps::<_CMP_LE_OQ>(q, cutoff)),
+                        _mm256_cmp_ps::<_CMP_GE_OQ>(depth, d),
+                    );
+                    let alpha = _mm256_loadu_ps(a.as_ptr());
+                    let weight =
+                        _mm256_and_ps(live, _mm256_mul_ps(_mm256_sub_ps(one, alpha), falloff));
+                    for (plane, c) in [(r, cr), (g, cg), (b, cbl)] {
+                        let v = _mm256_fmadd_ps(weight, c, _mm256_loadu_ps(plane.as_ptr()));
+                        _mm256_storeu_ps(plane.as_mut_ptr(), v);
+                    }
+                    let after = _mm256_fmadd_ps(weight, calpha, alpha);
+                    _mm256_storeu_ps(a.as_mut_ptr(), after);
+                    let done = _mm256_and_ps(live, _mm256_cmp_ps::<_CMP_GE_OQ>(after, opaque));
+                    closing |= (_mm256_movemask_ps(done) as u32) << start;
+                }
+            }
+            // Lanes past the row's end were never open: `closing` has no bit there.
+            tile.rows[ly] &= !(closing as u16);
+            turned += closing.count_ones();
+        }
+        turned
+    }
+
+    /// [`super::Group::project`] for up to [`LANES`] splats: [`super::project`] with the
+    /// splats' arithmetic in vectors. Reading the voxels' ids and texels, testing the opaque pixels
+    /// and writing the results stay a lane at a time.
+    ///
+    /// # Safety
+    ///
+    /// The processor must have AVX2, FMA and POPCNT.
+    #[target_feature(enable = "avx2,fma,popcnt")]
+    #[allow(unsafe_code)]
+    pub(in crate::splat::tiled) unsafe fn project(
+        group: &Group<'_>,
+        ids: &[u32],
+        out: &mut [Projected],
+    ) -> (usize, usize) {
+        let n = ids.len().min(out.len()).min(LANES);
+        if n == 0 {
+            return (0, 0);
+        }
+        let u = group.u;
+        let mut voxels = [[0u32; 3]; LANES];
+        let mut k = [[0.0f32; LANES]; 3];
+        for l in 0..LANES {
+            // Lanes past the end repeat the last splat; their results are dropped.
+            voxels[l] = voxel(u, ids[l.min(n - 1)]);
+            for axis in 0..3 {
+                k[axis][l] = voxels[l][axis] as f32;
+            }
+        }
+        let splat = |v: f32| _mm256_set1_ps(v);
+        let [kx, ky, kz] = k.map(|k| lanes(&k));
+        let d = [
+            _mm256_sub_ps(kx, splat(u.eye_index.x)),
+            _mm256_sub_ps(ky, splat(u.eye_index.y)),
+            _mm256_sub_ps(kz, splat(u.eye_index.z)),
+        ];
+        let [px, py, pz] = [0, 1, 2].map(|r| dot3(u.m[r], d));
+        let f = splat(u.focal);
+        // Perspective: f / z scales the centre and the Jacobian, whose third column is the
+        // centre's slope; orthographic: f alone, and no slope.
+        let (fiz, slope_x, slope_y, depth, front) = if u.orthographic {
+            let depth = _mm256_div_ps(_mm256_sub_ps(splat(u.far), pz), splat(u.far - u.near));
+            let depth = _mm256_min_ps(_mm256_max_ps(depth, splat(0.0)), splat(1.0));
+            let zero = splat(0.0);
+            (
+                f,
+                zero,
+                zero,
+                depth,
+                _mm256_cmp_ps::<_CMP_GT_OQ>(pz, splat(u.near)),
+            )
+        } else {
+            let iz = _mm256_div_ps(splat(1.0), pz);
+            (
+                _mm256_mul_ps(f, iz),
+                _mm256_mul_ps(px, iz),
+                _mm256_mul_ps(py, iz),
+                _mm256_mul_ps(splat(u.near), iz),
+                _mm256_cmp_ps::<_CMP_GT_OQ>(pz, splat(u.near_cut)),
+            )
+        };
+        let cx = _mm256_fmadd_ps(fiz, px, splat(u.centre[0]));
+        let cy = _mm256_fnmadd_ps(fiz, py, splat(u.centre[1]));
+        let (centre_x, centre_y) = (unlanes(cx), unlanes(cy));
+        // The screen covariance J S J^T + pixel variance, with J's rows f/z (1, 0, -x/z) and
+        // f/z (0, -1, y/z) (S symmetric).
+        let s = |r: usize, c: usize| splat(u.cov[r][c]);
+        let fiz2 = _mm256_mul_ps(fiz, fiz);
+        let pv = splat(u.pixel_variance);
+        let sxx = _mm256_mul_ps(slope_x, slope_x);
+        let syy = _mm256_mul_ps(slope_y, slope_y);
+        let sxy = _mm256_mul_ps(slope_x, slope_y);
+        let two = splat(2.0);
+        let a = _mm256_fmadd_ps(
+            _mm256_fmadd_ps(
+                s(2, 2),
+                sxx,
+                _mm256_fnmadd_ps(_mm256_mul_ps(two, s(0, 2)), slope_x, s(0, 0)),
+            ),
+            fiz2,
+            pv,
+        );
+        let c = _mm256_fmadd_ps(
+            _mm256_fmadd_ps(
+                s(2, 2),
+                syy,
+                _mm256_fnmadd_ps(_mm256_mul_ps(two, s(1, 2)), slope_y, s(1, 1)),
+            ),
+            fiz2,
+            pv,
+        );
+        // -S01 + S02 y/z + S12 x/z - S22 (x/z)(y/z)
+        let b = _mm256_mul_ps(
+            _mm256_fnmadd_ps(
+                s(2, 2),
+                sxy,
+                _mm256_fmadd_ps(s(0, 2), slope_y, _mm256_fmsub_ps(s(1, 2), slope_x, s(0, 1))),
+            ),
+            fiz2,
+        );
+        let det = _mm256_fmsub_ps(a, c, _mm256_mul_ps(b, b));
+        let mut placed = _mm256_and_ps(front, _mm256_cmp_ps::<_CMP_GT_OQ>(det, splat(0.0)));
+        let radius = splat(u.cutoff.sqrt());
+        let half = splat(0.5);
+        let ex = _mm256_fmadd_ps(radius, _mm256_sqrt_ps(a), half);
+        let ey = _mm256_fmadd_ps(radius, _mm256_sqrt_ps(c), half);
+        let (w, h) = (group.screen.w as f32, group.screen.h as f32);
+        let lim =
+            |v: __m256, hi: f32| _mm256_min_ps(_mm256_max_ps(v, splat(-1.0)), splat(hi + 1.0));
+        let edge = |v: __m256, hi: f32| lim(_mm256_sub_ps(v, half), hi);
+        let x0 = _mm256_ceil_ps(edge(_mm256_sub_ps(cx, ex), w));
+        let x1 = _mm256_floor_ps(edge(_mm256_add_ps(cx, ex), w));
+        let y0 = _mm256_ceil_ps(edge(_mm256_sub_ps(cy, ey), h));
+        let y1 = _mm256_floor_ps(edge(_mm256_add_ps(cy, ey), h));
+        let x0 = _mm256_max_ps(x0, splat(0.0));
+        let x1 = _mm256_min_ps(x1, splat(w - 1.0));
+        let y0 = _mm256_max_ps(y0, splat(0.0));
+        let y1 = _mm256_min_ps(y1, splat(h - 1.0));
+        placed = _mm256_and_ps(placed, _mm256_cmp_ps::<_CMP_LE_OQ>(x0, x1));
+        placed = _mm256_and_ps(placed, _mm256_cmp_ps::<_CMP_LE_OQ>(y0, y1));
+        let rect = [x0, y0, x1, y1].map(|v| unlanes_i32(_mm256_cvtps_epi32(v)));
+        // Which lanes go on: placed on the image, not hidden, with a texel that has opacity.
+        let placed = _mm256_movemask_ps(placed) as u32;
+        let mut culled = 0;
+        let mut texel = [[0.0f32; LANES]; 7];
+        let mut go = 0u32;
+        for l in 0..n {
+            if placed >> l & 1 == 0 {
+                continue;
+            }
+            if let Some(mask) = group.mask
+                && mask.covers_rect([rect[0][l], rect[1][l], rect[2][l], rect[3][l]])
+            {
+                culled += 1;
+                continue;
+            }
+            let [x, y, z] = voxels[l];
+            let Some(t) = group.texels.get(x, y, z) else {
+                continue;
+            };
+            let peak = u.alpha_of(t);
+            if peak <= 0.0 {
+                continue;
+            }
+            go |= 1 << l;
+            for c in 0..3 {
+                texel[c][l] = f32::from(t[c]);
+                texel[3 + c][l] = f32::from(t[3 + c] as i8);
+            }
+            texel[6][l] = peak;
+        }
+        if go == 0 {
+            return (culled, 0);
+        }
+        let mut keep = _mm256_castsi256_ps(_mm256_cmpeq_epi32(
+            _mm256_and_si256(_mm256_set1_epi32(go as i32), lane_bits()),
+            lane_bits(),
+        ));
+        for c in &u.clip {
+            let side = _mm256_fmadd_ps(
+                splat(c[0]),
+                px,
+                _mm256_fmadd_ps(splat(c[1]), py, _mm256_mul_ps(splat(c[2]), pz)),
+            );
+            keep = _mm256_and_ps(keep, _mm256_cmp_ps::<_CMP_LE_OQ>(side, splat(c[3])));
+        }
+        let inv_det = _mm256_div_ps(splat(1.0), det);
+        // Headlight shading where the gradient is defined (w > 63).
+        let inv255 = splat(1.0 / 255.0);
+        let mut rgb = [0, 1, 2].map(|i| _mm256_mul_ps(lanes(&texel[i]), inv255));
+        if u.shading > 0.0 {
+            let g = [3, 4, 5].map(|i| lanes(&texel[i]));
+            let [nx, ny, nz] = [0, 1, 2].map(|r| dot3(u.normal[r], g));
+            let len2 = _mm256_fmadd_ps(nx, nx, _mm256_fmadd_ps(ny, ny, _mm256_mul_ps(nz, nz)));
+            let abs_nz = _mm256_andnot_ps(splat(-0.0), nz);
+            let lambert = _mm256_and_ps(
+                _mm256_div_ps(abs_nz, _mm256_sqrt_ps(len2)),
+                _mm256_cmp_ps::<_CMP_GT_OQ>(len2, splat(0.0)),
+            );
+            let scale = _mm256_fmadd_ps(splat(u.shading), lambert, splat(1.0 - u.shading));
+            // An undefined gradient is stored as zero.
+            let shaded = _mm256_cmp_ps::<_CMP_GT_OQ>(len2, splat(0.0));
+            let scale = _mm256_blendv_ps(splat(1.0), scale, shaded);
+            rgb = rgb.map(|v| _mm256_mul_ps(v, scale));
+        }
+        // The peak opacity times the share of the footprint's integral the pixel variance
+        // keeps (see `kept_integral`).
+        let own = _mm256_fmsub_ps(
+            _mm256_sub_ps(a, pv),
+            _mm256_sub_ps(c, pv),
+            _mm256_mul_ps(b, b),
+        );
+        let kept = _mm256_min_ps(
+            _mm256_sqrt_ps(_mm256_max_ps(_mm256_div_ps(own, det), splat(0.0))),
+            splat(1.0),
+        );
+        let alpha = _mm256_mul_ps(lanes(&texel[6]), kept);
+        let [r, g, bl] = rgb.map(|v| unlanes(_mm256_mul_ps(v, alpha)));
+        let alpha = unlanes(alpha);
+        let conic = [
+            unlanes(_mm256_mul_ps(c, inv_det)),
+            unlanes(_mm256_mul_ps(_mm256_sub_ps(splat(0.0), b), inv_det)),
+            unlanes(_mm256_mul_ps(a, inv_det)),
+        ];
+        let depth = unlanes(depth);
+        let keep = _mm256_movemask_ps(keep) as u32;
+        let mut kept = 0;
+        for l in (0..n).filter(|l| keep >> l & 1 != 0) {
+            out[kept] = Projected {
+                centre: [centre_x[l], centre_y[l]],
+                conic: [conic[0][l], conic[1][l], conic[2][l]],
+                color: [r[l], g[l], bl[l], alpha[l]],
+                depth: depth[l],
+                cutoff: u.cutoff,
+                x0: rect[0][l],
+                y0: rect[1][l],
+                x1: rect[2][l],
+                y1: rect[3][l],
+            };
+            kept += 1;
+        }
+        (culled, kept)
+    }
+
+    /// `row . v` for vectors of three lanes.
+    #[target_feature(enable = "avx2,fma")]
+    #[inline]
+    fn dot3(row: glam::Vec3, v: [__m256; 3]) -> __m256 {
+        _mm256_fmadd_ps(
+            _mm256_set1_ps(row.x),
+            v[0],
+            _mm256_fmadd_ps(
+                _mm256_set1_ps(row.y),
+                v[1],
+                _mm256_mul_ps(_mm256_set1_ps(row.z), v[2]),
+            ),
+        )
+    }
+
+    /// Bit `l` in lane `l`.
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    fn lane_bits() -> __m256i {
+        _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128)
+    }
+
+    #[target_feature(enable = "avx")]
+    #[inline]
+    fn lanes(v: &[f32; LANES]) -> __m256 {
+        #[allow(unsafe_code)]
+        // SAFETY: `v` holds 8 floats.
+        unsafe {
+            _mm256_loadu_ps(v.as_ptr())
+        }
+    }
+
+    #[target_feature(enable = "avx")]
+    #[inline]
+    fn unlanes(v: __m256) -> [f32; LANES] {
+        let mut out = [0.0; LANES];
+        #[allow(unsafe_code)]
+        // SAFETY: `out` holds 8 floats.
+        unsafe {
+            _mm256_storeu_ps(out.as_mut_ptr(), v)
+        };
+        out
+    }
+
+    #[target_feature(enable = "avx")]
+    #[inline]
+    fn unlanes_i32(v: __m256i) -> [i32; LANES] {
+        let mut out = [0; LANES];
+        #[allow(unsafe_code)]
+        // SAFETY: `out` holds 8 integers.
+        unsafe {
+            _mm256_storeu_si256(out.as_mut_ptr().cast(), v)
+        };
+        out
+    }
+
+    /// `exp(-q / 2)` per lane, as [`super::exp_neg`] computes `exp(-x)`.
+    #[target_feature(enable = "avx2,fma")]
+    #[inline]
+    fn exp_neg_half(q: __m256) -> __m256 {
+        const ROUND: f32 = 12_582_912.0;
+        let t = _mm256_max_ps(
+            _mm256_mul_ps(q, _mm256_set1_ps(-0.5 * std::f32::consts::LOG2_E)),
+            _mm256_set1_ps(-126.0),
+        );
+        let shifted = _mm256_add_ps(t, _mm256_set1_ps(ROUND));
+        let n = _mm256_sub_epi32(
+            _mm256_castps_si256(shifted),
+            _mm256_set1_epi32(ROUND.to_bits() as i32),
+        );
+        let g = _mm256_mul_ps(
+            _mm256_sub_ps(t, _mm256_sub_ps(shifted, _mm256_set1_ps(ROUND))),
+            _mm256_set1_ps(std::f32::consts::LN_2),
+        );
+        let mut poly = _mm256_set1_ps(1.0 / 720.0);
+        for c in [1.0 / 120.0, 1.0 / 24.0, 1.0 / 6.0, 1.0 / 2.0, 1.0, 1.0] {
+            poly = _mm256_fmadd_ps(poly, g, _mm256_set1_ps(c));
+        }
+        let scale = _mm256_slli_epi32::<23>(_mm256_add_epi32(n, _mm256_set1_epi32(127)));
+        _mm256_mul_ps(poly, _mm256_castsi256_ps(scale))
+    }
+}

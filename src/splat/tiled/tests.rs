@@ -1,0 +1,370 @@
+//! Unit tests of the tile compositor's stages.
+
+use super::bin::*;
+use super::mask::*;
+use super::project::*;
+use super::simd::*;
+use super::texels::*;
+use super::tile::*;
+use super::*;
+use crate::grid::SparseGrid;
+use glam::Vec3;
+use strength_reduce::StrengthReducedU32;
+
+#[test]
+fn exp_neg_is_within_its_stated_error() {
+    let worst = |top: f32| {
+        (0..=100_000)
+            .map(|i| {
+                let x = top * i as f32 / 100_000.0;
+                let exact = (-f64::from(x)).exp();
+                ((f64::from(exp_neg(x)) - exact) / exact).abs()
+            })
+            .fold(0.0f64, f64::max)
+    };
+    // Over the footprints' range (half the cut-off, 4.1 by default), and far past it.
+    assert!(worst(8.0) < 8e-7, "relative error {}", worst(8.0));
+    assert!(worst(80.0) < 5e-6, "relative error {}", worst(80.0));
+    // Far past the cut-off it stays finite and tiny; a NaN gives no NaN.
+    assert!(exp_neg(1e30) < 1e-37 && exp_neg(1e30) >= 0.0);
+    assert!(exp_neg(f32::NAN).is_finite());
+}
+
+/// Splats of varied size, shape and colour around a tile at (16, 32).
+fn splats() -> Vec<Projected> {
+    let mut state = 0x2545_f491u32;
+    let mut next = move || {
+        state ^= state << 13;
+        state ^= state >> 17;
+        state ^= state << 5;
+        state as f32 / u32::MAX as f32
+    };
+    (0..400)
+        .map(|_| {
+            let centre = [12.0 + 24.0 * next(), 28.0 + 24.0 * next()];
+            let (sx, sy) = (0.3 + 3.0 * next(), 0.3 + 3.0 * next());
+            let b = (next() - 0.5) * 0.9 * (sx * sy).sqrt();
+            let (a, c) = (sx, sy);
+            let det = a * c - b * b;
+            let cutoff = 9.0;
+            let (ex, ey) = (3.0 * a.sqrt() + 0.5, 3.0 * c.sqrt() + 0.5);
+            let alpha = 0.1 + 0.8 * next();
+            Projected {
+                centre,
+                conic: [c / det, -b / det, a / det],
+                color: [next() * alpha, next() * alpha, next() * alpha, alpha],
+                depth: next(),
+                cutoff,
+                x0: (centre[0] - ex - 0.5).ceil() as i32,
+                x1: (centre[0] + ex - 0.5).floor() as i32,
+                y0: (centre[1] - ey - 0.5).ceil() as i32,
+                y1: (centre[1] + ey - 0.5).floor() as i32,
+            }
+        })
+        .collect()
+}
+
+/// Bins holding splats `0..n` for tile 0, so that tile 0 takes them in that order (the
+/// nearest, taken first, is last in a list).
+fn one_list(n: usize) -> ChunkBins {
+    ChunkBins {
+        starts: vec![0, n as u32],
+        entries: (0..n as u32).rev().collect(),
+        ..ChunkBins::default()
+    }
+}
+
+fn batch<'a>(projected: &'a [Projected], bins: &'a [ChunkBins]) -> Batch<'a> {
+    Batch {
+        projected,
+        bins,
+        opaque: OPAQUE,
+        drew: (0..projected.len())
+            .map(|_| AtomicBool::new(false))
+            .collect::<Vec<_>>()
+            .leak(),
+    }
+}
+
+fn fresh_tile(depth: &[f32]) -> TilePixels {
+    let mut tile = TilePixels::default();
+    // A 40x40 image whose depth varies, with the tile at (16, 32) cut by its bottom edge.
+    tile.reset(16, 32, (40, 40), depth);
+    tile
+}
+
+#[test]
+fn the_lanes_composite_as_a_pixel_by_pixel_loop_does() {
+    let depth: Vec<f32> = (0..40 * 40).map(|i| (i % 7) as f32 * 0.1).collect();
+    let mut tile = fresh_tile(&depth);
+    let mut reference = vec![[0.0f32; 4]; PIXELS];
+    let splats = splats();
+    let bins = [one_list(splats.len())];
+    tile.composite(0, (16, 32), batch(&splats, &bins));
+    for &p in &splats {
+        // The old scalar loop, pixel by pixel over the quad's rectangle, with libm's exp.
+        for y in p.y0.max(32)..=p.y1.min(32 + 15).min(39) {
+            for x in p.x0.max(16)..=p.x1.min(16 + 15).min(39) {
+                let px = &mut reference[(y as usize - 32) * TILE + x as usize - 16];
+                if px[3] >= OPAQUE || p.depth < depth[y as usize * 40 + x as usize] {
+                    continue;
+                }
+                let (dx, dy) = (x as f32 + 0.5 - p.centre[0], y as f32 + 0.5 - p.centre[1]);
+                let q = p.conic[0] * dx * dx + 2.0 * p.conic[1] * dx * dy + p.conic[2] * dy * dy;
+                if q > p.cutoff {
+                    continue;
+                }
+                let weight = (1.0 - px[3]) * (-0.5 * q).exp();
+                for (v, c) in px.iter_mut().zip(p.color) {
+                    *v += weight * c;
+                }
+            }
+        }
+    }
+    let bits: u32 = tile.rows.iter().map(|r| r.count_ones()).sum();
+    assert_eq!(tile.open, bits);
+    assert!(tile.open < 8 * 16, "some pixels turned opaque");
+    assert_eq!(tile.composited + tile.skipped, splats.len());
+    let mut worst = 0.0f32;
+    let mut covered = 0;
+    for (i, want) in reference.iter().enumerate() {
+        let got = [tile.r[i], tile.g[i], tile.b[i], tile.a[i]];
+        for k in 0..4 {
+            worst = worst.max((got[k] - want[k]).abs());
+        }
+        covered += usize::from(want[3] > 0.5);
+        // Pixels below the image's edge take nothing.
+        if i / TILE >= 40 - 32 {
+            assert_eq!(got, [0.0; 4]);
+        }
+    }
+    assert!(
+        covered > 100,
+        "the splats cover the tile ({covered} pixels)"
+    );
+    assert!(worst < 1e-5, "largest difference {worst}");
+}
+
+#[test]
+fn the_avx2_kernel_gives_the_pixels_of_the_baseline_kernel() {
+    #[cfg(target_arch = "x86_64")]
+    if has_avx2() {
+        let depth: Vec<f32> = (0..40 * 40).map(|i| (i % 7) as f32 * 0.1).collect();
+        let (mut wide, mut narrow) = (fresh_tile(&depth), fresh_tile(&depth));
+        let (splats, bins) = (splats(), [one_list(400)]);
+        #[allow(unsafe_code)]
+        // SAFETY: the features were checked above.
+        unsafe {
+            avx2::composite_tile(&mut wide, 0, (16, 32), batch(&splats, &bins))
+        };
+        composite_tile_lanes(
+            &mut narrow,
+            0,
+            (16, 32),
+            batch(&splats, &bins),
+            composite_splat_lanes,
+        );
+        // The same pixels turn opaque; values differ by the fused multiply-adds' rounding.
+        assert_eq!(wide.rows, narrow.rows);
+        assert_eq!(wide.open, narrow.open);
+        assert_eq!(wide.composited, narrow.composited);
+        let planes = [
+            (&wide.r, &narrow.r),
+            (&wide.g, &narrow.g),
+            (&wide.b, &narrow.b),
+            (&wide.a, &narrow.a),
+        ];
+        for (w, n) in planes {
+            let worst = w
+                .iter()
+                .zip(n)
+                .map(|(a, b)| (a - b).abs())
+                .fold(0.0, f32::max);
+            assert!(worst < 2e-6, "largest difference {worst}");
+        }
+        assert!(narrow.a.iter().filter(|&&a| a > 0.5).count() > 100);
+    }
+}
+
+/// A 20x18x16 grid of texels, a third of them transparent, with varied colours and
+/// gradients (some undefined), seen by a camera turned off its axes.
+fn grid_and_view(orthographic: bool) -> (SplatProjection, SplatTexels) {
+    let dims = [20u32, 18, 16];
+    let count = (dims[0] * dims[1] * dims[2]) as usize;
+    let mut state = 0x9e37_79b9u32;
+    let mut next = move || {
+        state ^= state << 13;
+        state ^= state >> 17;
+        state ^= state << 5;
+        state
+    };
+    // A third of the voxels left out; densities from clear to nearly opaque; a quarter of
+    // the gradients undefined (zero).
+    let mut ids = Vec::new();
+    let mut texel_of = std::collections::HashMap::new();
+    for id in 0..count as u32 {
+        let (c, n) = (next().to_le_bytes(), next().to_le_bytes());
+        if c[3] % 3 == 0 {
+            continue;
+        }
+        let density = half::f16::from_f32(f32::from(c[3]) / 64.0)
+            .to_bits()
+            .to_le_bytes();
+        let g = if n[3] % 4 == 0 {
+            [0; 3]
+        } else {
+            [n[0], n[1], n[2]]
+        };
+        ids.push(id);
+        texel_of.insert(
+            id,
+            [c[0], c[1], c[2], g[0], g[1], g[2], density[0], density[1]],
+        );
+    }
+    let grid = SparseGrid::from_sorted_ids(dims, &ids).unwrap();
+    let texels = SplatTexels::build(&grid, |[x, y, z], _| {
+        texel_of[&(x + dims[0] * (y + dims[1] * z))]
+    });
+    let turn = glam::Mat3::from_euler(glam::EulerRot::XYZ, 0.4, -0.7, 0.2);
+    let m = [turn.row(0), turn.row(1), turn.row(2)];
+    let cov = glam::Mat3::from_diagonal(Vec3::new(0.3, 0.5, 0.2));
+    let cov = turn * cov * turn.transpose();
+    let u = SplatProjection {
+        m,
+        eye_index: Vec3::new(9.0, 8.0, 8.0) - turn.transpose() * Vec3::new(0.0, 0.0, 30.0),
+        near_cut: 0.5,
+        cov: [cov.row(0), cov.row(1), cov.row(2)],
+        centre: [32.0, 24.0],
+        focal: if orthographic { 2.5 } else { 70.0 },
+        pixel_variance: 0.3,
+        cutoff: 8.2,
+        orthographic,
+        near: 1.0,
+        far: 60.0,
+        dims,
+        row: StrengthReducedU32::new(dims[0]),
+        plane: StrengthReducedU32::new(dims[0] * dims[1]),
+        normal: [turn.row(0), turn.row(1), turn.row(2)],
+        shading: 0.7,
+        clip: vec![[0.3, -0.2, 0.9, 29.0]],
+        alpha: alpha_table(0.8),
+    };
+    (u, texels)
+}
+
+#[test]
+fn a_group_rectangle_holds_every_footprint_of_its_splats_and_no_more() {
+    for orthographic in [false, true] {
+        let (u, _) = grid_and_view(orthographic);
+        let s = Screen { w: 64, h: 48 };
+        let count = u.dims.iter().product::<u32>();
+        // Stretches as the order gives them (runs along rows), spread ones, single voxels.
+        let mut stretches: Vec<Vec<u32>> = (0..count / 32)
+            .map(|c| (c * 32..c * 32 + 32).collect())
+            .collect();
+        stretches.extend((0..97).map(|k| (0..32).map(|i| (k * 31 + i * 211) % count).collect()));
+        stretches.extend((0..count).step_by(7).map(|id| vec![id]));
+        let mut tested = 0;
+        for ids in &stretches {
+            let rects: Vec<[i32; 4]> = ids
+                .iter()
+                .filter_map(|&id| {
+                    place(&u, camera_centre(&u, voxel(&u, id)), 64, 48).map(|at| at.rect)
+                })
+                .collect();
+            let Some(group) = group_rect(&u, ids, &s) else {
+                continue;
+            };
+            for r in &rects {
+                assert!(
+                    group[0] <= r[0] && group[1] <= r[1] && group[2] >= r[2] && group[3] >= r[3],
+                    "{group:?} does not hold {r:?}"
+                );
+            }
+            if let [r] = rects[..] {
+                // One splat: its own rectangle, give or take the pixel that rounding may add.
+                assert!(
+                    (0..4).all(|k| (group[k] - r[k]).abs() <= 1),
+                    "{group:?} against {r:?}"
+                );
+                tested += 1;
+            }
+        }
+        assert!(tested > 100, "{tested} single splats");
+    }
+}
+
+#[test]
+fn the_avx2_projection_places_splats_as_the_scalar_one_does() {
+    #[cfg(target_arch = "x86_64")]
+    if has_avx2() {
+        for orthographic in [false, true] {
+            let (u, texels) = grid_and_view(orthographic);
+            let screen = Screen { w: 64, h: 48 };
+            // Every pixel opaque but those of four squares of 8x8 and one pixel, then
+            // none.
+            let mut mask = OpaqueMask::default();
+            mask.reset(64, 48);
+            mask.bits.fill(u64::MAX);
+            for (x0, y0) in [(16, 8), (24, 16), (40, 16), (32, 32)] {
+                for y in y0..y0 + 8 {
+                    mask.bits[y] &= !(0xff << x0);
+                }
+            }
+            mask.bits[3] &= !(1 << 50);
+            for mask in [Some(&mask), None] {
+                let group = Group {
+                    u: &u,
+                    texels: &texels,
+                    screen: &screen,
+                    mask,
+                };
+                let ids: Vec<u32> = (0..20 * 18 * 16).rev().collect();
+                let mut wide = vec![Projected::default(); ids.len()];
+                let mut each = wide.clone();
+                let (mut culled, mut kept) = ([0; 2], [0; 2]);
+                for ids in ids.chunks(GROUP) {
+                    for ids in ids.chunks(5) {
+                        #[allow(unsafe_code)]
+                        // SAFETY: the features were checked above.
+                        let (c, k) = unsafe { avx2::project(&group, ids, &mut wide[kept[0]..]) };
+                        culled[0] += c;
+                        kept[0] += k;
+                    }
+                    let (c, k) = group.project_each(ids, &mut each[kept[1]..]);
+                    culled[1] += c;
+                    kept[1] += k;
+                }
+                assert_eq!(culled[0], culled[1]);
+                assert_eq!(culled[0] > 0, mask.is_some());
+                assert_eq!(kept[0], kept[1]);
+                wide.truncate(kept[0]);
+                each.truncate(kept[1]);
+                let mut shown = 0;
+                for (a, b) in wide.iter().zip(&each) {
+                    assert_eq!(
+                        [a.x0, a.x1, a.y0, a.y1],
+                        [b.x0, b.x1, b.y0, b.y1],
+                        "{a:?} {b:?}"
+                    );
+                    assert!(b.x0 <= b.x1 && b.y0 <= b.y1, "{b:?}");
+                    shown += 1;
+                    let close = |x: f32, y: f32| (x - y).abs() <= 1e-4 * (1.0 + y.abs());
+                    let values = |p: &Projected| {
+                        [
+                            p.centre.as_slice(),
+                            &p.conic,
+                            &p.color,
+                            &[p.depth, p.cutoff],
+                        ]
+                        .concat()
+                    };
+                    for (x, y) in values(a).into_iter().zip(values(b)) {
+                        assert!(close(x, y), "{a:?} {b:?}");
+                    }
+                }
+                assert!(shown > 300, "{shown} splats shown");
+            }
+        }
+    }
+}
