@@ -1,0 +1,826 @@
+//! Resolving and loading what a scene file names: paths (`builtin:`, `data:`, relative),
+//! volumes, meshes and their placement, clip planes, measurements and lights.
+
+use std::path::{Component, Path, PathBuf};
+use std::sync::Arc;
+
+use glam::{DMat4, DQuat, DVec3, EulerRot};
+
+use super::camera::camera;
+use super::{
+    DATA_ENV, DataRoot, LightsSpec, LoadedScene, MeasurementSpec, MeshSpec, SceneFile,
+    SceneFileError, TransformSpec, VolumeSpec, data_dir, describe_data_dir, mm, named_apart,
+    shortened, validate,
+};
+use crate::classify::{TransferFunction, auto_transfer};
+use crate::mesh::load_mesh;
+use crate::mesh::prosthesis::seat_in_phantom;
+use crate::order::Ordering;
+use crate::scene::patient::OrientationCode;
+use crate::scene::shoulder::{
+    add_model, cut_away_anterior_humerus, prosthesis_model, resect_humeral_head,
+};
+use crate::scene::{
+    ClipPlane, Clipping, Light, Lights, MAX_CLIP_PLANES, NodeContent, NodeId, Scene,
+    SceneMeasurement, SplatSettings, VolumeNode,
+};
+use crate::volume::detect::{LoadOptions, SeriesChoice};
+use crate::volume::phantom::{DEFAULT_DIMS, DEFAULT_SPACING};
+use crate::volume::{
+    CpuVolume, RawSpec, ScalarFormat, VolumeError, load_raw, load_raw_slices, shoulder_landmarks,
+    shoulder_phantom_default, slice_stack,
+};
+
+impl SceneFile {
+    /// Loads everything the file names; relative paths are taken from `base`.
+    pub fn load(&self, path: &Path, base: &Path) -> Result<LoadedScene, SceneFileError> {
+        let invalid = |message: String| SceneFileError::Invalid {
+            path: path.into(),
+            message,
+        };
+        // The cheap checks come first, so that a typo is reported before volumes are read.
+        validate::check(self).map_err(&invalid)?;
+        let size = self.output.size.map(|[w, h]| (w, h));
+        let ordering = match &self.output.ordering {
+            Some(name) => Some(
+                name.parse::<Ordering>()
+                    .map_err(|e| invalid(format!("output.ordering: {e}")))?,
+            ),
+            None => None,
+        };
+        let data = DataRoot::from_env();
+        let mut scene = Scene::new();
+        for (i, spec) in self.volumes.iter().enumerate() {
+            let node = load_volume(spec, path, base, &data, &invalid)?;
+            let name = spec
+                .name
+                .clone()
+                .unwrap_or_else(|| format!("volume {}", i + 1));
+            let local = transform(&spec.transform).map_err(&invalid)?;
+            scene
+                .add(name, local, None, NodeContent::Volume(node))
+                .map_err(|e| invalid(e.to_string()))?;
+        }
+        let mut meshes = Vec::with_capacity(self.meshes.len());
+        // Each mesh file is read once; nodes that name it again share its triangles.
+        let mut loaded_files = MeshFiles::default();
+        for (i, spec) in self.meshes.iter().enumerate() {
+            let files = &mut loaded_files;
+            let id = load_mesh_spec(&mut scene, spec, i, (path, base, &data), files, &invalid)?;
+            meshes.push((
+                scene
+                    .node(id)
+                    .map_err(|e| invalid(e.to_string()))?
+                    .name
+                    .clone(),
+                id,
+            ));
+        }
+        for (i, spec) in self.measurements.iter().enumerate() {
+            let m = measurement(&scene, spec, i).map_err(&invalid)?;
+            scene.measurements.push(m);
+        }
+        scene.clipping = clipping(self).map_err(&invalid)?;
+        if let (Some((lo, hi)), Some((vlo, vhi))) = (scene.clipping.crop, scene.volume_bounds())
+            && !(lo.cmplt(vhi).all() && vlo.cmplt(hi).all())
+        {
+            return Err(invalid(format!(
+                "crop_box from {} to {} mm lies wholly outside the volumes, which span {} to {} mm: it would leave nothing to draw",
+                mm(lo),
+                mm(hi),
+                mm(vlo),
+                mm(vhi)
+            )));
+        }
+        for warning in scale_warnings(&scene, &meshes) {
+            eprintln!("warning: {}: {warning}", path.display());
+        }
+        scene.lights = lights(&self.lights);
+        scene.up = self.camera.as_ref().and_then(|c| c.up).map(DVec3::from);
+        let aspect = size.map_or(4.0 / 3.0, |(w, h)| f64::from(w) / f64::from(h));
+        scene.camera = Some(camera(self.camera.as_ref(), &scene, aspect).map_err(&invalid)?);
+        let background = if self.output.transparent {
+            None
+        } else {
+            Some(self.output.background.unwrap_or([0.06, 0.07, 0.09]))
+        };
+        Ok(LoadedScene {
+            scene,
+            size,
+            background,
+            ordering,
+        })
+    }
+}
+
+impl SceneFile {
+    /// What cannot be found among the files the scene names, one message each, without
+    /// reading them: paths that do not resolve or do not exist. Relative paths are taken from
+    /// `base`, `data:` paths from [`data_dir`].
+    pub fn missing_files(&self, base: &Path) -> Vec<String> {
+        let data = data_dir();
+        let named = self
+            .volumes
+            .iter()
+            .enumerate()
+            .map(|(i, v)| (format!("volume {}", i + 1), &v.name, &v.path))
+            .chain(
+                self.meshes
+                    .iter()
+                    .enumerate()
+                    .map(|(i, m)| (format!("mesh {}", i + 1), &m.name, &m.path)),
+            );
+        let mut missing = Vec::new();
+        for (what, name, path) in named {
+            if path.starts_with("builtin:") {
+                continue;
+            }
+            let what = match name {
+                Some(n) => format!("{what} ({n})"),
+                None => what,
+            };
+            match resolve_path(path, base, &data) {
+                Err(e) => missing.push(format!("{what}: {e}")),
+                Ok(file) if !file.exists() => missing.push(if path.starts_with("data:") {
+                    format!(
+                        "{what}: {} not found: `data:` paths are read from ${DATA_ENV} ({})",
+                        file.display(),
+                        describe_data_dir(std::env::var_os(DATA_ENV).as_deref())
+                    )
+                } else {
+                    format!("{what}: {} not found", file.display())
+                }),
+                Ok(_) => {}
+            }
+        }
+        missing
+    }
+}
+
+/// Reads a scene file and loads what it names.
+pub fn load_scene_file(path: &Path) -> Result<LoadedScene, SceneFileError> {
+    let file = SceneFile::read(path)?;
+    let base = path.parent().unwrap_or(Path::new("."));
+    file.load(path, base)
+}
+
+impl SceneFile {
+    /// The files and folders this scene's volumes and meshes name, resolved as loading resolves
+    /// them (built-in names and paths that cannot be resolved left out): what a run must never
+    /// write, known before anything is loaded.
+    pub fn named_paths(&self, base: &Path) -> Vec<PathBuf> {
+        let data = DataRoot::from_env();
+        self.volumes
+            .iter()
+            .map(|v| &v.path)
+            .chain(self.meshes.iter().map(|m| &m.path))
+            .filter(|p| !p.starts_with("builtin:"))
+            .filter_map(|p| resolve_path(p, base, &data.dir).ok())
+            .collect()
+    }
+}
+
+/// Where a volume or mesh `path` of a scene file points (see the module documentation): a
+/// `data:` path inside `data_dir`, a relative path inside `base` (the scene file's folder), an
+/// absolute path as it is. Built-in names are not paths and must be handled before.
+///
+/// # Errors
+///
+/// A message when a `data:` path is empty, absolute, or climbs out of the data folder.
+pub fn resolve_path(path: &str, base: &Path, data_dir: &Path) -> Result<PathBuf, String> {
+    let Some(rest) = path.strip_prefix("data:") else {
+        let p = Path::new(path);
+        return Ok(if p.is_absolute() {
+            p.into()
+        } else {
+            base.join(p)
+        });
+    };
+    let rel = Path::new(rest);
+    let mut names = 0;
+    for component in rel.components() {
+        match component {
+            Component::Normal(_) => names += 1,
+            Component::CurDir => {}
+            // A data: path that leaves the data folder would make scene files depend on what
+            // lies around it, which is what the prefix exists to avoid.
+            Component::ParentDir | Component::RootDir | Component::Prefix(_) => {
+                return Err(format!(
+                    "{path:?}: a data: path must stay inside the data folder (relative, no ..)"
+                ));
+            }
+        }
+    }
+    if names == 0 {
+        return Err(format!(
+            "{path:?}: a data: path needs a file name after data:"
+        ));
+    }
+    Ok(data_dir.join(rel))
+}
+
+/// [`resolve_path`] with the scene's error types, and a missing `data:` file reported as
+/// [`SceneFileError::DataNotFound`] (which says what to set) instead of a bare read error.
+pub(super) fn resolve_spec_path(
+    path: &str,
+    scene_file: &Path,
+    base: &Path,
+    data: &DataRoot,
+    invalid: &dyn Fn(String) -> SceneFileError,
+) -> Result<PathBuf, SceneFileError> {
+    let resolved = resolve_path(path, base, &data.dir).map_err(invalid)?;
+    if path.starts_with("data:") && !resolved.exists() {
+        return Err(SceneFileError::DataNotFound {
+            path: scene_file.into(),
+            file: resolved,
+            data_var: data.var.clone(),
+        });
+    }
+    Ok(resolved)
+}
+
+pub(super) fn load_volume(
+    spec: &VolumeSpec,
+    scene_file: &Path,
+    base: &Path,
+    data: &DataRoot,
+    invalid: &dyn Fn(String) -> SceneFileError,
+) -> Result<VolumeNode, SceneFileError> {
+    let volume = if spec.path == "builtin:shoulder-phantom" {
+        if spec.dims.is_some() || spec.scalar.is_some() || spec.orientation.is_some() {
+            return Err(invalid(
+                "builtin:shoulder-phantom is made in code: dims, scalar and orientation do not apply"
+                    .into(),
+            ));
+        }
+        let mut volume = shoulder_phantom_default();
+        let marks = shoulder_landmarks(DEFAULT_DIMS, DEFAULT_SPACING);
+        if spec.resect_humeral_head {
+            resect_humeral_head(&mut volume, &marks);
+        }
+        if let Some(reach) = spec.cut_away_anterior_humerus {
+            if !(reach.is_finite() && reach > 0.0) {
+                return Err(invalid(format!(
+                    "cut_away_anterior_humerus {reach} must be a positive number of millimetres"
+                )));
+            }
+            cut_away_anterior_humerus(&mut volume, &marks, reach);
+        }
+        volume
+    } else {
+        if spec.cut_away_anterior_humerus.is_some() {
+            // The cut is placed by the phantom's landmarks, which no other volume has.
+            return Err(invalid(format!(
+                "volume {}: cut_away_anterior_humerus applies to builtin:shoulder-phantom only",
+                spec.path
+            )));
+        }
+        let file = resolve_spec_path(&spec.path, scene_file, base, data, invalid)?;
+        load_raw_volume(spec, &file, invalid)?
+    };
+    let mut transfer = match spec.transfer.as_deref().unwrap_or("auto") {
+        "ramp" => {
+            let [lo, hi] = spec.window.ok_or_else(|| {
+                invalid("the ramp transfer function needs window = [lo, hi]".into())
+            })?;
+            if !(lo.is_finite() && hi.is_finite() && lo < hi) {
+                return Err(invalid(format!(
+                    "window [{lo}, {hi}] must be two finite values, low below high"
+                )));
+            }
+            TransferFunction::ramp(lo, hi, spec.color.unwrap_or([1.0, 0.93, 0.85, 0.6]))
+        }
+        other => {
+            for (key, given) in [
+                ("window", spec.window.is_some()),
+                ("color", spec.color.is_some()),
+            ] {
+                if given {
+                    return Err(invalid(format!(
+                        "{key} applies to transfer = \"ramp\" only, not {other:?} (a preset is stretched with level_width and moved with shift)"
+                    )));
+                }
+            }
+            if other == "auto" {
+                let auto = auto_transfer(&volume.values);
+                eprintln!("{}: transfer function {}", spec.path, auto.reason);
+                auto.transfer
+            } else {
+                TransferFunction::preset(other).ok_or_else(|| {
+                    invalid(format!(
+                        "unknown transfer function {other:?} (auto, ramp, {})",
+                        TransferFunction::PRESETS.join(", ")
+                    ))
+                })?
+            }
+        }
+    };
+    if let Some([level, width]) = spec.level_width {
+        transfer = transfer.windowed(level, width);
+    }
+    if let Some(shift) = spec.shift {
+        transfer = transfer.shifted(shift);
+    }
+    if spec
+        .opacity_reference_mm
+        .is_some_and(|r| !(r.is_finite() && r > 0.0))
+    {
+        return Err(invalid("opacity_reference_mm must be positive".into()));
+    }
+    let min_opacity = spec.min_opacity.unwrap_or(1.0 / 255.0);
+    if !(0.0..1.0).contains(&min_opacity) {
+        return Err(invalid(format!(
+            "min_opacity {min_opacity} is not in [0, 1)"
+        )));
+    }
+    Ok(VolumeNode {
+        volume: Arc::new(volume),
+        transfer: Arc::new(transfer),
+        splats: SplatSettings {
+            min_opacity,
+            opacity_reference_mm: spec.opacity_reference_mm.unwrap_or(1.0),
+            shell: spec.shell.map(|v| v.clamp(0.0, 1.0)),
+            shading: spec
+                .shading
+                .map_or(SplatSettings::default().shading, |v| v.clamp(0.0, 1.0)),
+            ..Default::default()
+        },
+    })
+}
+
+/// The value of a volume key that names a choice, parsed.
+pub(super) fn parse_key<T: std::str::FromStr<Err = String>>(
+    path: &Path,
+    key: &str,
+    value: &Option<String>,
+) -> Result<Option<T>, String> {
+    value
+        .as_deref()
+        .map(str::parse)
+        .transpose()
+        .map_err(|e| format!("volume {}: {key}: {e}", path.display()))
+}
+
+pub(super) fn load_raw_volume(
+    spec: &VolumeSpec,
+    path: &Path,
+    invalid: &dyn Fn(String) -> SceneFileError,
+) -> Result<CpuVolume, SceneFileError> {
+    let raw_keys = [
+        ("dims", spec.dims.is_some()),
+        ("scalar", spec.scalar.is_some()),
+        ("header_bytes", spec.header_bytes.is_some()),
+        ("spacing", spec.spacing.is_some()),
+        ("origin", spec.origin.is_some()),
+        ("orientation", spec.orientation.is_some()),
+    ];
+    let file_keys = [
+        ("series", spec.series.is_some(), "DICOM"),
+        ("skip_unreadable", spec.skip_unreadable.is_some(), "DICOM"),
+        ("frame", spec.frame.is_some(), "4-D NIfTI"),
+        ("nifti_transform", spec.nifti_transform.is_some(), "NIfTI"),
+        (
+            "coordinate_frame",
+            spec.coordinate_frame.is_some(),
+            "files whose format states no frame (a raw volume takes orientation)",
+        ),
+    ];
+    if (spec.dims.is_some() || spec.scalar.is_some())
+        && let Some((key, _, applies)) = file_keys.iter().find(|(_, given, _)| *given)
+    {
+        return Err(invalid(format!(
+            "volume {}: {key} applies to {applies}, not to a raw volume",
+            path.display()
+        )));
+    }
+    if spec.dims.is_none() && spec.scalar.is_none() {
+        // Not described as raw: a format with its own header (NRRD, NIfTI, VTK, Voreen .dat)
+        // or a DICOM series folder, found from the first bytes and the name.
+        let options = LoadOptions {
+            series: spec.series.clone().map(SeriesChoice),
+            skip_unreadable: spec.skip_unreadable.unwrap_or(false),
+            frame: spec.frame,
+            coordinate_frame: parse_key(path, "coordinate_frame", &spec.coordinate_frame)
+                .map_err(invalid)?,
+            nifti_transform: parse_key(path, "nifti_transform", &spec.nifti_transform)
+                .map_err(invalid)?,
+        };
+        let loaded = match crate::volume::detect::load_volume_with(path, &options) {
+            Err(VolumeError::NoHeader { .. }) if looks_like_scene_file(path) => {
+                return Err(invalid(format!(
+                    "volume {}: this is a scene file, not a volume; give it to render or view as the scene, or name the volume file it holds",
+                    path.display()
+                )));
+            }
+            Err(VolumeError::NoHeader { .. }) => {
+                return Err(invalid(format!(
+                    "volume {}: neither a volume format splatscene recognises nor a DICOM folder; a raw volume needs dims and scalar",
+                    path.display()
+                )));
+            }
+            other => other?,
+        };
+        let volume = loaded.volume;
+        // The file's header places the grid; a raw key here would silently do nothing.
+        if let Some((key, _)) = raw_keys.iter().find(|(_, given)| *given) {
+            return Err(invalid(format!(
+                "volume {}: {key} applies to raw volumes only; this file's header places its grid",
+                path.display()
+            )));
+        }
+        return Ok(volume);
+    }
+    let (Some(dims), Some(scalar)) = (spec.dims, &spec.scalar) else {
+        return Err(invalid(format!(
+            "volume {}: a raw volume needs dims and scalar",
+            path.display()
+        )));
+    };
+    let format: ScalarFormat = scalar
+        .parse()
+        .map_err(|e| invalid(format!("volume {}: {e}", path.display())))?;
+    let orientation = match &spec.orientation {
+        Some(code) => code
+            .parse::<OrientationCode>()
+            .map_err(|e| invalid(format!("volume {}: {e}", path.display())))?,
+        None => OrientationCode::RAS,
+    };
+    let raw = RawSpec {
+        header_bytes: spec.header_bytes.unwrap_or(0),
+        spacing: spec.spacing.unwrap_or([1.0; 3]),
+        origin: spec.origin.unwrap_or([0.0; 3]),
+        ..RawSpec::new(dims, format.scalar, format.order)
+    };
+    let is_stack = path.extension().is_some_and(|e| e == "1");
+    let mut volume = if is_stack {
+        load_raw_slices(&slice_stack(path)?, &raw)?
+    } else {
+        load_raw(path, &raw)?
+    };
+    volume.direction = orientation.direction();
+    Ok(volume)
+}
+
+/// The mesh files a scene file's load has read, by resolved path: their parts, with triangles
+/// shared by every node drawn from them.
+#[derive(Default)]
+pub(super) struct MeshFiles {
+    models: std::collections::HashMap<PathBuf, Arc<SharedModel>>,
+}
+
+/// A mesh file's parts, its triangles behind shared pointers.
+pub(super) struct SharedModel {
+    parts: Vec<crate::mesh::MeshPart>,
+    meshes: Vec<Arc<crate::mesh::CpuMesh>>,
+}
+
+impl MeshFiles {
+    /// The model of the file at `key` (a resolved path, or the built-in prosthesis's name),
+    /// read by `load` the first time; its warnings are printed then.
+    fn get(
+        &mut self,
+        key: PathBuf,
+        load: impl FnOnce() -> Result<crate::mesh::Model, SceneFileError>,
+    ) -> Result<Arc<SharedModel>, SceneFileError> {
+        if let Some(model) = self.models.get(&key) {
+            return Ok(Arc::clone(model));
+        }
+        let mut model = load()?;
+        for warning in &model.warnings {
+            eprintln!("warning: {warning}");
+        }
+        let meshes = model
+            .parts
+            .iter_mut()
+            .map(|part| Arc::new(std::mem::take(&mut part.mesh)))
+            .collect();
+        let shared = Arc::new(SharedModel {
+            parts: model.parts,
+            meshes,
+        });
+        self.models.insert(key, Arc::clone(&shared));
+        Ok(shared)
+    }
+}
+
+pub(super) fn load_mesh_spec(
+    scene: &mut Scene,
+    spec: &MeshSpec,
+    index: usize,
+    (scene_file, base, data): (&Path, &Path, &DataRoot),
+    files: &mut MeshFiles,
+    invalid: &dyn Fn(String) -> SceneFileError,
+) -> Result<NodeId, SceneFileError> {
+    let shared = if spec.path == "builtin:prosthesis" {
+        files.get(spec.path.clone().into(), || Ok(prosthesis_model()?))?
+    } else {
+        let path = resolve_spec_path(&spec.path, scene_file, base, data, invalid)?;
+        let key = std::fs::canonicalize(&path).unwrap_or_else(|_| path.clone());
+        files.get(key, || Ok(load_mesh(&path)?))?
+    };
+    let mut model = crate::mesh::Model {
+        parts: shared
+            .parts
+            .iter()
+            .map(|p| crate::mesh::MeshPart {
+                name: p.name.clone(),
+                transform: p.transform,
+                mesh: crate::mesh::CpuMesh::default(),
+                material: p.material,
+            })
+            .collect(),
+        warnings: Vec::new(),
+    };
+    for part in &mut model.parts {
+        if let Some(c) = &spec.color {
+            match c.as_slice() {
+                [r, g, b] => part.material.base_color = [*r, *g, *b, 1.0],
+                [r, g, b, a] => part.material.base_color = [*r, *g, *b, *a],
+                _ => {
+                    return Err(invalid(format!(
+                        "mesh {}: color needs 3 or 4 numbers",
+                        spec.path
+                    )));
+                }
+            }
+        }
+        if let Some(r) = spec.roughness {
+            part.material.roughness = r.clamp(0.0, 1.0);
+        }
+        if let Some(o) = spec.opacity {
+            if !(o > 0.0 && o <= 1.0) {
+                return Err(invalid(format!(
+                    "mesh {}: opacity {o} must lie in (0, 1]",
+                    spec.path
+                )));
+            }
+            part.material.base_color[3] *= o;
+        }
+        if let Some(m) = spec.metallic {
+            part.material.metallic = m.clamp(0.0, 1.0);
+        }
+    }
+    let seat = match spec.seat.as_deref() {
+        None => DMat4::IDENTITY,
+        Some("phantom") => seat_in_phantom(&shoulder_landmarks(DEFAULT_DIMS, DEFAULT_SPACING)),
+        Some(other) => return Err(invalid(format!("unknown seat {other:?} (phantom)"))),
+    };
+    let local = seat * transform(&spec.transform).map_err(invalid)? * file_frame(spec, invalid)?;
+    let name = spec
+        .name
+        .clone()
+        .unwrap_or_else(|| format!("mesh {}", index + 1));
+    add_model(scene, &name, local, &model, Some(&shared.meshes))
+        .ok_or_else(|| invalid(format!("mesh {name}: transform is singular")))
+}
+
+/// The clip planes and the crop box of a scene file, checked.
+pub(super) fn clipping(file: &SceneFile) -> Result<Clipping, String> {
+    let mut clipping = Clipping::default();
+    if file.clip.len() > MAX_CLIP_PLANES {
+        return Err(format!(
+            "{} clip planes: at most {MAX_CLIP_PLANES}",
+            file.clip.len()
+        ));
+    }
+    for (i, c) in file.clip.iter().enumerate() {
+        let finite = c.through.iter().chain(&c.normal).all(|x| x.is_finite());
+        let normal = DVec3::from(c.normal);
+        if !finite || normal.length() == 0.0 {
+            return Err(format!(
+                "clip {}: through and normal must be finite, the normal not zero",
+                i + 1
+            ));
+        }
+        clipping
+            .planes
+            .push(ClipPlane::through(DVec3::from(c.through), normal, c.meshes));
+    }
+    let mut boxes = file
+        .volumes
+        .iter()
+        .enumerate()
+        .filter_map(|(i, v)| v.crop_box.map(|b| (i, b, v.clip_meshes)));
+    if let Some((i, b, meshes)) = boxes.next() {
+        if let Some((j, ..)) = boxes.next() {
+            return Err(format!(
+                "volumes {} and {} both have a crop_box: a scene has one",
+                i + 1,
+                j + 1
+            ));
+        }
+        let (lo, hi) = (DVec3::from(b.min), DVec3::from(b.max));
+        if !(lo.is_finite() && hi.is_finite() && lo.cmplt(hi).all()) {
+            return Err(format!(
+                "volume {}: crop_box min {:?} must lie below max {:?} on every axis",
+                i + 1,
+                b.min,
+                b.max
+            ));
+        }
+        clipping.crop = Some((lo, hi));
+        clipping.crop_meshes = meshes.unwrap_or(false);
+    }
+    if let Some((i, v)) = file
+        .volumes
+        .iter()
+        .enumerate()
+        .find(|(_, v)| v.clip_meshes.is_some() && v.crop_box.is_none())
+    {
+        return Err(format!(
+            "volume {} ({}): clip_meshes has no effect without a crop_box",
+            i + 1,
+            v.path
+        ));
+    }
+    Ok(clipping)
+}
+
+/// Longest measurement label, in characters.
+pub(super) const MAX_LABEL: usize = 200;
+
+/// A scene file's measurement, checked against the scene loaded so far.
+pub(super) fn measurement(
+    scene: &Scene,
+    spec: &MeasurementSpec,
+    index: usize,
+) -> Result<SceneMeasurement, String> {
+    let name = match &spec.label {
+        Some(l) => format!("measurement {} ({:?})", index + 1, shortened(l)),
+        None => format!("measurement {}", index + 1),
+    };
+    if let Some(label) = &spec.label
+        && (label.trim().is_empty()
+            || label.chars().count() > MAX_LABEL
+            || label.chars().any(char::is_control))
+    {
+        return Err(format!(
+            "{name}: label must be 1 to {MAX_LABEL} characters of text on one line"
+        ));
+    }
+    let node = match &spec.node {
+        None => None,
+        Some(n) if named_apart(scene, n) > 1 => {
+            return Err(format!(
+                "{name}: node {:?} names {} meshes or volumes of the scene, so the measurement cannot tell which one it follows; give each its own `name`",
+                shortened(n),
+                named_apart(scene, n)
+            ));
+        }
+        Some(n) => Some(scene.find(n).ok_or_else(|| {
+            let names: Vec<&str> = scene
+                .nodes()
+                .iter()
+                .filter(|node| node.parent().is_none())
+                .map(|node| node.name.as_str())
+                .collect();
+            format!(
+                "{name}: node {:?} is not in the scene (its top nodes: {})",
+                shortened(n),
+                names.join(", ")
+            )
+        })?),
+    };
+    let m = SceneMeasurement {
+        kind: spec.kind,
+        points: spec.points.iter().map(|p| DVec3::from(*p)).collect(),
+        node,
+        label: spec.label.clone(),
+    };
+    scene
+        .measure(&m)
+        .map_err(|e| format!("{name}: points: {e}"))?;
+    Ok(m)
+}
+
+/// Warnings for meshes whose size is under 1/100 or over 100 times the largest volume's: most
+/// likely a file in other units than the scene (an STL in metres in a millimetre CT).
+pub fn scale_warnings(scene: &Scene, meshes: &[(String, NodeId)]) -> Vec<String> {
+    let size = |(lo, hi): (DVec3, DVec3)| (hi - lo).length();
+    let volume = scene
+        .volumes()
+        .filter_map(|(id, ..)| scene.subtree_bounds(id).map(size))
+        .fold(0.0, f64::max);
+    if volume <= 0.0 {
+        return Vec::new();
+    }
+    meshes
+        .iter()
+        .filter_map(|(name, id)| {
+            let mesh = size(scene.subtree_bounds(*id)?);
+            let ratio = mesh / volume;
+            let hint = if ratio < 0.01 {
+                "units = \"m\" or \"cm\" if the file is in metres or centimetres"
+            } else if ratio > 100.0 {
+                "units = \"mm\" with a scale, or check the file's units"
+            } else {
+                return None;
+            };
+            Some(format!(
+                "mesh {name:?} is {mesh:.3} mm across, {ratio:.2e} times the volume ({volume:.1} mm); set {hint}"
+            ))
+        })
+        .collect()
+}
+
+/// Whether a file that is no volume is a scene file: named `.toml`, or text whose first line
+/// that is neither blank nor a comment opens a TOML table.
+pub(super) fn looks_like_scene_file(path: &Path) -> bool {
+    if path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("toml"))
+    {
+        return true;
+    }
+    let mut head = Vec::new();
+    let read = crate::input::open_regular(path).and_then(|f| {
+        use std::io::Read;
+        f.take(4096).read_to_end(&mut head)
+    });
+    read.is_ok()
+        && std::str::from_utf8(&head).is_ok_and(|text| {
+            text.lines()
+                .map(str::trim)
+                .find(|l| !l.is_empty() && !l.starts_with('#'))
+                .is_some_and(|l| l.starts_with('['))
+        })
+}
+
+/// The mesh file's coordinates to scene millimetres in RAS: its `units` scaled, its `frame`
+/// turned.
+pub(super) fn file_frame(
+    spec: &MeshSpec,
+    invalid: &dyn Fn(String) -> SceneFileError,
+) -> Result<DMat4, SceneFileError> {
+    let scale = match spec.units.as_deref() {
+        None | Some("mm") => 1.0,
+        Some("cm") => 10.0,
+        Some("m") => 1000.0,
+        Some(other) => {
+            return Err(invalid(format!(
+                "mesh {}: units {other:?} is not mm, cm or m",
+                spec.path
+            )));
+        }
+    };
+    let turn = match spec
+        .frame
+        .as_deref()
+        .map(str::to_ascii_uppercase)
+        .as_deref()
+    {
+        None | Some("RAS") => DVec3::ONE,
+        // LPS to RAS: x and y change sign.
+        Some("LPS") => DVec3::new(-1.0, -1.0, 1.0),
+        Some(_) => {
+            return Err(invalid(format!(
+                "mesh {}: frame {:?} is not RAS or LPS",
+                spec.path,
+                spec.frame.as_deref().unwrap_or_default()
+            )));
+        }
+    };
+    Ok(DMat4::from_scale(turn * scale))
+}
+
+pub(super) fn transform(spec: &TransformSpec) -> Result<DMat4, String> {
+    let m = match spec.matrix {
+        Some(mut cols) => {
+            // The last row was checked to be 0, 0, 0, 1 within rounding: made exact.
+            [cols[3], cols[7], cols[11], cols[15]] = [0.0, 0.0, 0.0, 1.0];
+            DMat4::from_cols_array(&cols)
+        }
+        None => {
+            let [rx, ry, rz] = spec.rotate_degrees.unwrap_or([0.0; 3]).map(f64::to_radians);
+            DMat4::from_scale_rotation_translation(
+                DVec3::from(spec.scale.unwrap_or([1.0; 3])),
+                DQuat::from_euler(EulerRot::ZYX, rz, ry, rx),
+                DVec3::from(spec.translate.unwrap_or([0.0; 3])),
+            )
+        }
+    };
+    if !m.is_finite() || !m.determinant().is_normal() {
+        return Err("transform: its matrix is not finite and invertible".into());
+    }
+    Ok(m)
+}
+
+pub(super) fn lights(spec: &LightsSpec) -> Lights {
+    let mut lights = Lights::default();
+    if let Some(h) = spec.headlight {
+        lights.headlight = h.max(0.0);
+    }
+    if let Some(a) = spec.ambient {
+        lights.ambient = a.max(0.0);
+    }
+    if let Some(list) = &spec.directional {
+        lights.directional = list
+            .iter()
+            .map(|l| Light {
+                direction: DVec3::from(l.direction),
+                color: l.color,
+            })
+            .collect();
+    }
+    lights
+}

@@ -1,0 +1,163 @@
+//! Saving: a scene file with the plan a scene holds now, paths made absolute, as TOML.
+
+use std::path::{Path, PathBuf};
+
+use glam::{DMat4, DVec3};
+
+use crate::mesh::prosthesis::seat_in_phantom;
+use crate::scene::{NodeId, Projection, Scene, SceneCamera};
+use crate::volume::phantom::{DEFAULT_DIMS, DEFAULT_SPACING};
+use crate::volume::shoulder_landmarks;
+
+use super::load::file_frame;
+use super::{
+    BoxSpec, CameraSpec, ClipSpec, MeasurementSpec, SceneFile, SceneFileError, TransformSpec,
+};
+
+impl SceneFile {
+    /// The same file with every relative volume and mesh path made absolute against `base`
+    /// (the scene file's folder), so that it can be saved anywhere; `builtin:` and `data:`
+    /// paths are kept as they are.
+    pub fn with_paths_from(&self, base: &Path) -> Self {
+        let fix = |path: &str| {
+            let p = Path::new(path);
+            if path.starts_with("builtin:") || path.starts_with("data:") || p.is_absolute() {
+                path.to_owned()
+            } else {
+                std::path::absolute(base.join(p))
+                    .unwrap_or_else(|_| base.join(p))
+                    .to_string_lossy()
+                    .into_owned()
+            }
+        };
+        let mut file = self.clone();
+        for v in &mut file.volumes {
+            v.path = fix(&v.path);
+        }
+        for m in &mut file.meshes {
+            m.path = fix(&m.path);
+        }
+        file
+    }
+
+    /// The same file with the plan `scene` holds now: each mesh's transform as the node stands
+    /// (written as a matrix, so that the file loads to the same placement), and the scene's
+    /// measurements (those attached to a node by the node's name). `scene` must have been
+    /// loaded from this file: its mesh files are the top nodes after the volumes, in order.
+    ///
+    /// # Errors
+    ///
+    /// A message when a mesh's placement cannot be expressed (a singular seat or frame) or a
+    /// mesh node is missing.
+    pub fn with_plan(&self, scene: &Scene) -> Result<Self, String> {
+        let mut file = self.clone();
+        let roots: Vec<NodeId> = (0..scene.nodes().len())
+            .map(NodeId)
+            .filter(|id| scene.nodes()[id.0].parent().is_none())
+            .collect();
+        let invalid = |message: String| SceneFileError::Invalid {
+            path: PathBuf::new(),
+            message,
+        };
+        for (i, spec) in file.meshes.iter_mut().enumerate() {
+            let id = *roots
+                .get(self.volumes.len() + i)
+                .ok_or_else(|| format!("mesh {}: no node in the scene", i + 1))?;
+            let local = scene.node(id).map_err(|e| e.to_string())?.local();
+            let seat = match spec.seat.as_deref() {
+                Some("phantom") => {
+                    seat_in_phantom(&shoulder_landmarks(DEFAULT_DIMS, DEFAULT_SPACING))
+                }
+                _ => DMat4::IDENTITY,
+            };
+            let frame = file_frame(spec, &invalid).map_err(|e| e.to_string())?;
+            let (ds, df) = (seat.determinant(), frame.determinant());
+            if !(ds.is_normal() && df.is_normal()) {
+                return Err(format!("mesh {}: its seat or frame is singular", i + 1));
+            }
+            // Round-off of turns by whole angles (1e-17 for 0) is written as 0.
+            let matrix = (seat.inverse() * local * frame.inverse())
+                .to_cols_array()
+                .map(|x| if x.abs() < 1e-12 { 0.0 } else { x });
+            spec.transform = TransformSpec {
+                matrix: Some(matrix),
+                ..TransformSpec::default()
+            };
+        }
+        file.clip = scene
+            .clipping
+            .planes
+            .iter()
+            .map(|p| ClipSpec {
+                through: (p.normal * (p.offset / p.normal.length_squared())).to_array(),
+                normal: p.normal.to_array(),
+                meshes: p.meshes,
+            })
+            .collect();
+        for v in &mut file.volumes {
+            v.crop_box = None;
+            v.clip_meshes = None;
+        }
+        if let Some((lo, hi)) = scene.clipping.crop {
+            let v = file
+                .volumes
+                .first_mut()
+                .ok_or("a crop box needs a volume to keep it in the scene file")?;
+            v.crop_box = Some(BoxSpec {
+                min: lo.to_array(),
+                max: hi.to_array(),
+            });
+            v.clip_meshes = scene.clipping.crop_meshes.then_some(true);
+        }
+        file.measurements = scene
+            .measurements
+            .iter()
+            .map(|m| MeasurementSpec {
+                kind: m.kind,
+                points: m.points.iter().map(|p| p.to_array()).collect(),
+                label: m.label.clone(),
+                node: m
+                    .node
+                    .and_then(|id| scene.node(id).ok())
+                    .map(|n| n.name.clone()),
+            })
+            .collect();
+        Ok(file)
+    }
+
+    /// The file as TOML text, as [`SceneFile::parse`] reads it back.
+    pub fn to_toml(&self) -> Result<String, String> {
+        toml::to_string(self).map_err(|e| e.to_string())
+    }
+}
+
+impl CameraSpec {
+    /// The spec that gives `camera` back: its eye, target and projection, and as `up` the
+    /// scene's up axis `scene_up` where the camera is upright about it (so that the saved
+    /// scene orbits as this one does), else the camera's own up.
+    pub fn from_camera(camera: &SceneCamera, scene_up: DVec3) -> Self {
+        let forward = (camera.target - camera.eye).normalize_or_zero();
+        let screen_up = camera.up.normalize_or_zero();
+        let right = forward.cross(screen_up);
+        let upright = scene_up.try_normalize().is_some_and(|u| {
+            u.dot(right).abs() < 1e-9 * (1.0 + right.length())
+                && forward.cross(u).length() > 1e-6
+                && u.dot(screen_up) > 0.0
+        });
+        let up = if upright { scene_up } else { camera.up };
+        let (fov, orthographic_height) = match camera.projection {
+            Projection::Perspective { fov_y_degrees } => (Some(fov_y_degrees), None),
+            Projection::Orthographic { height } => (None, Some(height)),
+        };
+        Self {
+            eye: Some(camera.eye.to_array()),
+            target: Some(camera.target.to_array()),
+            up: Some(up.to_array()),
+            view: None,
+            view_from: None,
+            fov,
+            orthographic_height,
+            near: camera.near,
+        }
+    }
+}
