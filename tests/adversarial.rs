@@ -13,6 +13,8 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::{Duration, Instant};
 
+mod common;
+
 /// What a case must end in.
 enum Expect {
     /// Failure, with each of these words in the message.
@@ -1329,7 +1331,7 @@ fn all_cases() -> Vec<Case> {
 fn crafted_inputs_end_in_clear_errors_or_correct_results() {
     let cases = all_cases();
     assert!(cases.len() >= 150, "only {} cases", cases.len());
-    let root = std::env::temp_dir().join(format!("splatscene-adversarial-{}", std::process::id()));
+    let root = common::scratch("adversarial");
     let mut failures = Vec::new();
     let mut slowest = (Duration::ZERO, "");
     for case in &cases {
@@ -1390,7 +1392,6 @@ fn crafted_inputs_end_in_clear_errors_or_correct_results() {
             ));
         }
     }
-    std::fs::remove_dir_all(&root).ok();
     eprintln!(
         "{} cases; the slowest, {}, took {:?}",
         cases.len(),

@@ -5,58 +5,17 @@
 
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output, Stdio};
+use std::process::{Command, Stdio};
 
 use serde_json::Value;
 
-#[path = "common/pictures.rs"]
-mod pictures;
-use pictures::pictures;
+mod common;
+use common::pictures::pictures;
+use common::{fails, ok, repo, scratch, stderr};
 
-fn splatscene(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_splatscene"))
-        .args(args)
-        .env("NODEVICE_SELECT", "1")
-        .env_remove("SLURM_ARRAY_TASK_ID")
-        .env_remove("SLURM_ARRAY_TASK_COUNT")
-        .output()
-        .expect("run splatscene")
-}
-
-fn ok(args: &[&str]) -> String {
-    let out = splatscene(args);
-    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
-    assert!(
-        out.status.success(),
-        "splatscene {}: {stderr}",
-        args.join(" ")
-    );
-    stderr
-}
-
-fn fails(args: &[&str]) -> String {
-    let out = splatscene(args);
-    assert!(
-        !out.status.success(),
-        "splatscene {} succeeded",
-        args.join(" ")
-    );
-    String::from_utf8_lossy(&out.stderr).into_owned()
-}
-
-/// A fresh folder for one test's files.
-fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("splatscene-batch-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
-
-fn repo(rel: &str) -> String {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join(rel)
-        .display()
-        .to_string()
+/// Runs a command that must succeed; what it said on stderr.
+fn ok_stderr(args: &[&str]) -> String {
+    stderr(&ok(args))
 }
 
 /// A 20^3 u8 volume: a ball of 200 in a cube of 10.
@@ -103,7 +62,7 @@ volume = {{ path = "ball.raw", dims = [20, 20, 20], scalar = "u8", orientation =
 views = ["superior", {{ name = "oblique", view_from = [1, 1, -1] }}]
 orderings = ["ip-pbtf", "btf"]
 "#,
-        repo("examples/scenes/shoulder.toml")
+        repo("examples/scenes/shoulder.toml").display()
     );
     let path = dir.join("manifest.toml");
     std::fs::write(&path, text).unwrap();
@@ -193,7 +152,7 @@ fn a_batch_renders_every_picture_with_an_index_and_leaves_finished_jobs_alone() 
         .unwrap()
         .modified()
         .unwrap();
-    let stderr = ok(&["batch", m, "--out", o]);
+    let stderr = ok_stderr(&["batch", m, "--out", o]);
     assert!(stderr.contains("0 rendered, 3 up to date"), "{stderr}");
     assert_eq!(
         std::fs::metadata(out.join("ball-anterior.png"))
@@ -220,12 +179,12 @@ fn a_batch_renders_every_picture_with_an_index_and_leaves_finished_jobs_alone() 
     );
     assert_eq!(pictures(&out), before, "the same pictures again");
     ok(&["batch", m, "--out", o]);
-    let stderr = ok(&["batch", m, "--out", o, "--force"]);
+    let stderr = ok_stderr(&["batch", m, "--out", o, "--force"]);
     assert!(stderr.contains("3 rendered, 0 up to date"), "{stderr}");
     // Turning the level of detail off draws every job again; the same setting again, none.
-    let stderr = ok(&["batch", m, "--out", o, "--lod", "off"]);
+    let stderr = ok_stderr(&["batch", m, "--out", o, "--lod", "off"]);
     assert!(stderr.contains("3 rendered, 0 up to date"), "{stderr}");
-    let stderr = ok(&["batch", m, "--out", o, "--lod", "off"]);
+    let stderr = ok_stderr(&["batch", m, "--out", o, "--lod", "off"]);
     assert!(stderr.contains("0 rendered, 3 up to date"), "{stderr}");
     assert!(
         fails(&["batch", m, "--out", o, "--lod", "half"]).contains("half"),
@@ -247,7 +206,7 @@ fn batch_pictures_are_those_of_render() {
     let single = dir.join("single.png");
     ok(&[
         "render",
-        &repo("examples/scenes/shoulder.toml"),
+        &repo("examples/scenes/shoulder.toml").display().to_string(),
         "--view",
         "right",
         "--size",
@@ -349,7 +308,7 @@ orderings = ["sideways"]
 contents = ["meshes"]
 out = "../escape-{{view}}.png"
 "#,
-        repo("examples/scenes/shoulder.toml")
+        repo("examples/scenes/shoulder.toml").display()
     );
     let manifest = dir.join("bad.toml");
     std::fs::write(&manifest, text).unwrap();
@@ -393,7 +352,7 @@ scene = "{0}"
 name = "two"
 scene = "{0}"
 "#,
-        repo("examples/scenes/shoulder.toml")
+        repo("examples/scenes/shoulder.toml").display().to_string()
     );
     std::fs::write(&manifest, text).unwrap();
     let stderr = fails(&[
@@ -522,7 +481,7 @@ fn a_killed_batch_resumes_without_redoing_finished_jobs() {
     let mut text = std::fs::read_to_string(&manifest).unwrap();
     text.push_str(&format!(
         "\n[[job]]\nname = \"slow\"\nscene = \"{}\"\nviews = [\"anterior\", \"posterior\", \"left\", \"right\", \"superior\", \"inferior\"]\nsizes = [[640, 480], [800, 600]]\norderings = [\"ip-pbtf\", \"btf\", \"pbtf\"]\n",
-        repo("examples/scenes/shoulder.toml")
+        repo("examples/scenes/shoulder.toml").display()
     ));
     std::fs::write(&manifest, text).unwrap();
     let out = dir.join("out");
@@ -553,7 +512,7 @@ fn a_killed_batch_resumes_without_redoing_finished_jobs() {
             ("slow".into(), "pending".into())
         ]
     );
-    let stderr = ok(&[
+    let stderr = ok_stderr(&[
         "batch",
         manifest.to_str().unwrap(),
         "--out",

@@ -6,20 +6,13 @@ use glam::DVec3;
 use splatscene::grid::SparseGrid;
 use splatscene::order::{OrderOptions, Ordering, ViewCase, VolumeGeometry, order};
 
-fn splatscene(args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_splatscene"))
-        .args(args)
-        .output()
-        .expect("run splatscene")
-}
-
-fn temp_path(name: &str) -> std::path::PathBuf {
-    std::env::temp_dir().join(format!("splatscene-cli-{}-{name}", std::process::id()))
-}
+mod common;
+use common::{command, scratch, splatscene};
 
 #[test]
 fn order_writes_little_endian_ids_matching_the_library() {
-    let out = temp_path("order.bin");
+    let dir = scratch("cli");
+    let out = dir.join("order.bin");
     for name in [
         "btf",
         "wbtf",
@@ -69,7 +62,6 @@ fn order_writes_little_endian_ids_matching_the_library() {
             "{name}"
         );
     }
-    std::fs::remove_file(&out).ok();
 }
 
 #[test]
@@ -136,7 +128,8 @@ fn bad_arguments_fail_with_a_message() {
 
 #[test]
 fn render_writes_the_built_in_scene_at_any_size_with_depth() {
-    let (out, depth) = (temp_path("shoulder.png"), temp_path("shoulder-depth.png"));
+    let dir = scratch("cli");
+    let (out, depth) = (dir.join("shoulder.png"), dir.join("shoulder-depth.png"));
     let result = splatscene(&[
         "render",
         "--out",
@@ -171,15 +164,14 @@ fn render_writes_the_built_in_scene_at_any_size_with_depth() {
         near < far && far == u16::MAX,
         "the prosthesis has depth, the background is far"
     );
-    std::fs::remove_file(&out).ok();
-    std::fs::remove_file(&depth).ok();
 }
 
 #[test]
 fn a_small_picture_draws_a_coarser_level_unless_told_not_to() {
     // The built-in scene at 40x30: its voxels fall well under a pixel, so a coarser level of
     // the pyramid is drawn and the stage line says which; `--lod off` draws the full grid.
-    let out = temp_path("small-lod.png");
+    let dir = scratch("cli");
+    let out = dir.join("small-lod.png");
     let run = |lod: &str| {
         let result = splatscene(&[
             "render",
@@ -211,14 +203,14 @@ fn a_small_picture_draws_a_coarser_level_unless_told_not_to() {
     assert!(coarse * 4 < full, "{coarse} splats against {full}");
     let bad = splatscene(&["render", "--out", out.to_str().unwrap(), "--lod", "maybe"]);
     assert!(!bad.status.success());
-    std::fs::remove_file(&out).ok();
 }
 
 #[test]
 fn render_without_an_adapter_names_the_package_to_install() {
     // No adapter of a backend this build lacks: wgpu finds nothing at all.
-    let out = temp_path("none.png");
-    let result = Command::new(env!("CARGO_BIN_EXE_splatscene"))
+    let dir = scratch("cli");
+    let out = dir.join("none.png");
+    let result = command()
         .args(["render", "--out", out.to_str().unwrap(), "--size", "8x8"])
         .env("WGPU_BACKEND", "metal")
         .output()
@@ -279,7 +271,8 @@ fn measure_distances_and_angles_and_draws_them() {
         (d["kind"].as_str(), d["value"].as_f64(), d["unit"].as_str()),
         (Some("distance"), Some(5.0), Some("mm"))
     );
-    let out = temp_path("measure.png");
+    let dir = scratch("cli");
+    let out = dir.join("measure.png");
     let a = json(&splatscene(&[
         "measure",
         "--pixel",
@@ -320,7 +313,6 @@ fn measure_distances_and_angles_and_draws_them() {
         p[0] > 150 && p[1] > 100 && p[2] < 80,
         "marker at the vertex: {p:?}"
     );
-    std::fs::remove_file(&out).ok();
     let one = splatscene(&["measure", "--point", "1,2,3"]);
     assert!(!one.status.success());
 }
@@ -371,7 +363,7 @@ fn info_describes_volumes_as_json_and_names_bad_files() {
 
 #[test]
 fn render_with_an_eye_keeps_the_scene_files_up_vector() {
-    let dir = std::env::temp_dir().join(format!("splatscene-up-{}", std::process::id()));
+    let dir = scratch("up");
     std::fs::create_dir_all(&dir).unwrap();
     let scene = dir.join("down.toml");
     std::fs::write(
@@ -416,7 +408,6 @@ fn render_with_an_eye_keeps_the_scene_files_up_vector() {
         a, b,
         "the same eye and target give the same picture, up included"
     );
-    std::fs::remove_dir_all(&dir).ok();
 }
 
 #[test]
@@ -437,7 +428,7 @@ fn orderings_on_a_raw_volume_show_ordering_errors() {
     }
     // Open SciVis neghip (volvis.org). A one-colour transfer function would make every order
     // composite alike; the report's must not.
-    let out = std::env::temp_dir().join(format!("splatscene-orderings-{}", std::process::id()));
+    let out = scratch("orderings");
     let result = splatscene(&[
         "orderings",
         raw.to_str().unwrap(),
@@ -482,7 +473,6 @@ fn orderings_on_a_raw_volume_show_ordering_errors() {
         "error grows with the bucket width:\n{table}"
     );
     assert!(out.join("error-vs-time.svg").exists());
-    std::fs::remove_dir_all(&out).ok();
 }
 
 #[test]
@@ -522,7 +512,7 @@ fn bucket_width_options_are_checked() {
 
 #[test]
 fn out_follows_links_and_writes_into_pipes_without_replacing_them() {
-    let dir = std::env::temp_dir().join(format!("splatscene-out-{}", std::process::id()));
+    let dir = scratch("out");
     std::fs::create_dir_all(&dir).unwrap();
     let order = |out: &std::path::Path| {
         let result = splatscene(&[
@@ -571,12 +561,11 @@ fn out_follows_links_and_writes_into_pipes_without_replacing_them() {
         use std::os::unix::fs::FileTypeExt;
         assert!(std::fs::metadata(&fifo).unwrap().file_type().is_fifo());
     }
-    std::fs::remove_dir_all(&dir).ok();
 }
 
 #[test]
 fn render_refuses_one_file_for_colour_and_depth() {
-    let dir = std::env::temp_dir().join(format!("splatscene-same-{}", std::process::id()));
+    let dir = scratch("same");
     std::fs::create_dir_all(&dir).unwrap();
     let out = dir.join("shot.png");
     let again = dir.join(".").join("shot.png");
@@ -593,7 +582,6 @@ fn render_refuses_one_file_for_colour_and_depth() {
     let said = String::from_utf8_lossy(&result.stderr);
     assert!(said.contains("the same file as --out"), "{said}");
     assert!(!out.exists(), "refused before rendering");
-    std::fs::remove_dir_all(&dir).ok();
 }
 
 #[test]
@@ -618,11 +606,12 @@ fn a_dense_grid_larger_than_memory_is_refused_before_allocating() {
 fn splats_past_the_memory_budget_are_refused_after_classification() {
     // A 64^3 raw volume, every voxel significant: the grid fits a 5 MiB budget (2 bytes a
     // voxel, 0.5 MiB), its 262,144 splats (30 bytes each, 7.5 MiB) do not.
-    let raw = temp_path("dense64.raw");
+    let dir = scratch("cli");
+    let raw = dir.join("dense64.raw");
     std::fs::write(&raw, vec![200u8; 64 * 64 * 64]).unwrap();
-    let out = temp_path("dense64.png");
+    let out = dir.join("dense64.png");
     let render = |limit: &str| {
-        Command::new(env!("CARGO_BIN_EXE_splatscene"))
+        command()
             .env("SPLATSCENE_MEMORY_LIMIT", limit)
             .env("RUST_BACKTRACE", "0")
             .args([
@@ -658,8 +647,6 @@ fn splats_past_the_memory_budget_are_refused_after_classification() {
         "{}",
         String::from_utf8_lossy(&drawn.stderr)
     );
-    std::fs::remove_file(&raw).ok();
-    std::fs::remove_file(&out).ok();
 }
 
 #[test]
@@ -702,7 +689,7 @@ fn report_sizes_are_checked_before_any_work() {
 
 #[test]
 fn orderings_composite_on_the_gpu_when_asked() {
-    let out = std::env::temp_dir().join(format!("splatscene-gpu-report-{}", std::process::id()));
+    let out = scratch("gpu-report");
     // A plot already there is replaced, and the run says so.
     std::fs::create_dir_all(&out).unwrap();
     std::fs::write(out.join("error-vs-time.svg"), "mine").unwrap();
@@ -748,7 +735,6 @@ fn orderings_composite_on_the_gpu_when_asked() {
         "{said}"
     );
     assert_eq!(said.matches("replaced the existing").count(), 1, "{said}");
-    std::fs::remove_dir_all(&out).ok();
 }
 
 #[test]
@@ -792,7 +778,7 @@ fn info_and_scene_files_take_the_nifti_transform_and_the_coordinate_frame() {
         "{err}"
     );
     // Scene files: the same keys, checked where they are read.
-    let dir = temp_path("scene-keys");
+    let dir = scratch("scene-keys");
     std::fs::create_dir_all(&dir).unwrap();
     let scene = |name: &str, volume: &str| {
         let path = dir.join(name);
@@ -831,15 +817,13 @@ fn info_and_scene_files_take_the_nifti_transform_and_the_coordinate_frame() {
         &format!("path = {nifti:?}\ncoordinate_frame = \"LPS\""),
     );
     assert!(!ok && err.contains("states its own patient frame"), "{err}");
-    std::fs::remove_dir_all(&dir).ok();
 }
 
 #[test]
 fn a_depth_path_that_links_to_the_colour_output_is_refused_even_before_it_exists() {
-    let dir = temp_path("dangling");
+    let dir = scratch("dangling");
     std::fs::create_dir_all(&dir).unwrap();
     let link = dir.join("link.png");
-    std::fs::remove_file(&link).ok();
     std::os::unix::fs::symlink("c.png", &link).unwrap();
     let out = dir.join("c.png");
     let result = splatscene(&[
@@ -855,5 +839,4 @@ fn a_depth_path_that_links_to_the_colour_output_is_refused_even_before_it_exists
     assert!(!result.status.success(), "{said}");
     assert!(said.contains("the same file as --out"), "{said}");
     assert!(!out.exists(), "nothing is written");
-    std::fs::remove_dir_all(&dir).ok();
 }

@@ -19,33 +19,11 @@ use glam::{DMat3, DVec3};
 use splatscene::volume::dicom::{is_dicom, load_dicom_series};
 use splatscene::volume::{CpuVolume, VolumeError};
 
-fn series_dir() -> Option<PathBuf> {
-    let data = std::env::var_os("SPLATSCENE_DATA")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data"));
-    let dir = data.join("volumes/totalseg_ct/example_ct_dicom");
-    if !dir.is_dir() {
-        assert!(
-            std::env::var_os("CI").is_none(),
-            "{} is missing under CI: set SPLATSCENE_DATA",
-            dir.display()
-        );
-        eprintln!(
-            "skipped: {} not found (set SPLATSCENE_DATA to the shared data directory)",
-            dir.display()
-        );
-        return None;
-    }
-    Some(dir)
-}
+mod common;
+use common::{Scratch, scratch};
 
-/// An empty scratch folder for one test, unique to this process.
-fn scratch(test: &str) -> PathBuf {
-    let dir = Path::new(env!("CARGO_TARGET_TMPDIR"))
-        .join(format!("dicom_series-{test}-{}", std::process::id()));
-    let _ = fs::remove_dir_all(&dir);
-    fs::create_dir_all(&dir).expect("create scratch folder");
-    dir
+fn series_dir() -> Option<PathBuf> {
+    common::data_file("volumes/totalseg_ct/example_ct_dicom")
 }
 
 fn series_files(dir: &Path) -> Vec<PathBuf> {
@@ -262,7 +240,6 @@ fn folder_without_image_slices_is_an_error() {
     assert!(is_dicom(&bytes));
     fs::write(dir.join("notes.txt"), "not DICOM").expect("write text file");
     expect_dicom_error(load_dicom_series(&dir), &dir, "no DICOM image slices");
-    fs::remove_dir_all(&dir).expect("clean up");
 }
 
 #[test]
@@ -270,11 +247,10 @@ fn missing_folder_is_an_io_error() {
     let parent = scratch("missing");
     let dir = parent.join("absent");
     assert!(matches!(load_dicom_series(&dir), Err(VolumeError::Io { path, .. }) if path == dir));
-    fs::remove_dir_all(&parent).expect("clean up");
 }
 
 /// Copies the shared series into a scratch folder, leaving out the files `skip` picks.
-fn copy_series(from: &Path, test: &str, skip: impl Fn(&Path) -> bool) -> PathBuf {
+fn copy_series(from: &Path, test: &str, skip: impl Fn(&Path) -> bool) -> Scratch {
     let dir = scratch(test);
     for file in series_files(from).iter().filter(|f| !skip(f)) {
         let name = file.file_name().expect("file name");
@@ -344,7 +320,6 @@ fn a_folder_of_two_series_lists_them_and_loads_the_one_chosen() {
     let own =
         splatscene::volume::detect::load_volume(&dir.join(file)).expect("a file's own series");
     assert_eq!(own, original);
-    fs::remove_dir_all(&dir).expect("clean up");
 }
 
 #[test]
@@ -359,7 +334,6 @@ fn a_missing_slice_is_reported_with_its_position() {
         &dir,
         "missing slice: gap of 4.000 mm where the step is 2.000 mm",
     );
-    fs::remove_dir_all(&dir).expect("clean up");
 }
 
 #[test]
@@ -371,7 +345,6 @@ fn a_slice_without_position_names_the_file() {
     obj.remove_element(tags::IMAGE_POSITION_PATIENT);
     obj.write_to_file(&victim).expect("write slice");
     expect_dicom_error(load_dicom_series(&dir), &victim, "no ImagePositionPatient");
-    fs::remove_dir_all(&dir).expect("clean up");
 }
 
 /// Overwrites the value of the first explicit-VR little-endian element `header` (tag, VR and
@@ -398,7 +371,6 @@ fn mismatched_pixel_spacing_names_the_file() {
     );
     fs::write(&victim, bytes).expect("write slice");
     expect_dicom_error(load_dicom_series(&dir), &victim, "PixelSpacing differs");
-    fs::remove_dir_all(&dir).expect("clean up");
 }
 
 #[test]
@@ -419,7 +391,6 @@ fn rows_smaller_than_the_coded_image_is_an_error_not_a_panic() {
         matches!(result, Err(VolumeError::Dicom { ref path, .. }) if *path == file),
         "{result:?}"
     );
-    fs::remove_dir_all(&dir).expect("clean up");
 }
 
 #[test]
@@ -463,7 +434,6 @@ fn truncated_files_give_typed_errors() {
     // Cut before the magic, the file is no longer DICOM and the folder holds no image.
     fs::write(&file, &bytes[..100]).expect("write truncated slice");
     expect_dicom_error(load_dicom_series(&dir), &dir, "no DICOM image slices");
-    fs::remove_dir_all(&dir).expect("clean up");
 }
 
 #[test]
@@ -522,7 +492,6 @@ fn a_file_picks_its_own_series_and_grid_and_the_rest_of_the_folder_is_ignored() 
     // The folder itself holds one series whose images disagree: refused, naming one.
     let err = load_dicom_series(&dir).expect_err("mixed orientations in a series");
     assert!(err.to_string().contains("ImageOrientationPatient"), "{err}");
-    fs::remove_dir_all(&dir).expect("clean up");
 }
 
 #[test]
@@ -534,7 +503,6 @@ fn a_dangling_link_in_the_folder_is_counted_not_fatal() {
     let original = load_dicom_series(&shared).expect("load the shared series");
     let loaded = load_dicom_series(&dir).expect("the series beside a dangling link");
     assert_eq!(loaded, original);
-    fs::remove_dir_all(&dir).expect("clean up");
 }
 
 #[test]
@@ -559,7 +527,6 @@ fn a_gantry_tilted_stack_is_refused() {
         obj.write_to_file(&h.path).expect("write slice");
     }
     expect_dicom_error(load_dicom_series(&dir), &dir, "gantry tilt");
-    fs::remove_dir_all(&dir).expect("clean up");
 }
 
 /// The shared series rewritten as an oblique stack with non-square pixels: each slice's
@@ -624,7 +591,6 @@ fn an_oblique_series_with_non_square_pixels_is_placed_as_dicom_defines() {
     sorted.sort_by(f32::total_cmp);
     expected.sort_by(f32::total_cmp);
     assert_eq!(sorted, expected);
-    fs::remove_dir_all(&dir).expect("clean up");
 }
 
 /// Images without a SOPInstanceUID: a byte-for-byte copy at the same position is one image,
@@ -645,7 +611,6 @@ fn images_without_instance_uids_keep_their_slices_and_drop_their_copies() {
     assert_eq!(own, original);
     let copy = splatscene::volume::detect::load_volume(&dir.join("zz-copy.dcm")).expect("copy");
     assert_eq!(copy, original);
-    fs::remove_dir_all(&dir).expect("clean up");
 }
 
 /// An image of the same series with another size (a reformat or a thumbnail saved with it)
@@ -674,7 +639,6 @@ fn an_image_of_another_size_in_the_series_is_left_out() {
     let original = load_dicom_series(&shared).expect("the shared series");
     let own = splatscene::volume::detect::load_volume(&files[0]).expect("a file's own series");
     assert_eq!(own, original);
-    fs::remove_dir_all(&dir).expect("clean up");
 }
 
 /// A series holding two time points (every position twice, each image its own instance) is
@@ -691,12 +655,11 @@ fn two_time_points_in_one_series_are_named_as_such() {
             .expect("write the second time point");
     }
     expect_dicom_error(load_dicom_series(&dir), &dir, "several time points");
-    fs::remove_dir_all(&dir).expect("clean up");
 }
 
 /// Five neighbouring slices of the shared series written again with native (uncompressed)
 /// pixel data, in which a cut inside the pixel data stops the parser, as in most CT series.
-fn native_series(shared: &Path, test: &str) -> PathBuf {
+fn native_series(shared: &Path, test: &str) -> Scratch {
     let dir = scratch(test);
     let vr = |name: &str| name.parse().expect("a VR name");
     for (k, h) in headers_in_order(shared).iter().skip(10).take(5).enumerate() {
@@ -759,7 +722,6 @@ fn a_slice_of_the_series_cut_short_is_an_error_unless_skipped() {
         assert_eq!(loaded.volume.dims[2], original.dims[2] - 1, "{end}");
         let loaded = load_volume_with(&other, &skip).expect("load the file's series without it");
         assert_eq!(loaded.volume.dims[2], original.dims[2] - 1, "{end}");
-        fs::remove_dir_all(&dir).expect("clean up");
     }
     // A cut file of another series stays ignored.
     let dir = copy_series(&native, "cut-other", |_| false);
@@ -780,8 +742,6 @@ fn a_slice_of_the_series_cut_short_is_an_error_unless_skipped() {
     let bytes = fs::read(&stranger).expect("read it");
     fs::write(&stranger, &bytes[..bytes.len() / 2]).expect("cut it");
     assert_eq!(load_dicom_series(&dir).expect("the series loads"), original);
-    fs::remove_dir_all(&dir).expect("clean up");
-    fs::remove_dir_all(&native).expect("clean up");
 }
 
 /// Integer samples with an integer rescale are held in 16 bits, the type the loader reads them
@@ -823,7 +783,6 @@ fn integral_rescales_are_held_in_16_bits_and_wider_values_in_f32() {
         .filter(|&(w, v)| w != v + 40000.0)
         .count();
     assert_eq!(off, 0, "values not raised by exactly 40000");
-    fs::remove_dir_all(&dir).expect("clean up");
 }
 
 /// A file's series is the one its SeriesInstanceUID names: three slices copied into a second
@@ -863,5 +822,4 @@ fn a_file_picks_its_series_by_uid_not_by_number() {
     );
     let recon = splatscene::volume::detect::load_volume(&copies[0]).expect("the second series");
     assert_eq!(recon.dims, [512, 512, 3]);
-    fs::remove_dir_all(&dir).expect("clean up");
 }

@@ -17,28 +17,8 @@ use std::time::{Duration, Instant};
 
 use splatscene::mesh::{MeshError, Model, load_mesh, read_gltf_accessor};
 
-/// The data directory, or `None` (with a note) when it does not exist.
-fn data_dir() -> Option<PathBuf> {
-    let dir = std::env::var_os("SPLATSCENE_DATA").map_or_else(
-        || Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data"),
-        PathBuf::from,
-    );
-    if dir.is_dir() {
-        Some(dir)
-    } else {
-        // Under CI the data must be there: a skipped corpus would pass without testing.
-        assert!(
-            std::env::var_os("CI").is_none(),
-            "{} is missing under CI: set SPLATSCENE_DATA",
-            dir.display()
-        );
-        eprintln!(
-            "note: data directory {} not found; mesh corpus test skipped",
-            dir.display()
-        );
-        None
-    }
-}
+mod common;
+use common::data_dir;
 
 /// Every file under `dir`, recursively, sorted.
 fn files_under(dir: &Path) -> Vec<PathBuf> {

@@ -1,7 +1,6 @@
 //! Picking: the BVH against brute force over every triangle, on real meshes and adversarial
 //! geometry; picks against the rendered depth buffer; the voxel walk against dense sampling.
 
-use std::path::PathBuf;
 use std::sync::Arc;
 
 use glam::{DMat4, DVec3};
@@ -11,11 +10,7 @@ use splatscene::render::{FrameOptions, GpuContext, Renderer};
 use splatscene::scene::shoulder::{add_model, prosthesis_model, shoulder_scene};
 use splatscene::scene::{MeshNode, NodeContent, Scene, placed_geometry};
 
-fn data_dir() -> PathBuf {
-    std::env::var_os("SPLATSCENE_DATA")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/data"))
-}
+mod common;
 
 /// A small deterministic generator (xorshift), so that failures repeat.
 struct Rng(u64);
@@ -113,7 +108,9 @@ fn mesh_scene(meshes: &[(CpuMesh, DMat4)]) -> Scene {
 }
 
 fn shoulder_bones(scale: f64, offset: DVec3) -> Option<Scene> {
-    let dir = data_dir().join("meshes/myosim_shoulder");
+    let dir = common::data_dir()
+        .expect("the shared test data")
+        .join("meshes/myosim_shoulder");
     if !dir.is_dir() {
         assert!(
             std::env::var_os("CI").is_none(),
@@ -158,7 +155,9 @@ fn bvh_equals_brute_force_on_the_shoulder_bones_and_the_prosthesis() {
 
 #[test]
 fn bvh_equals_brute_force_on_gltf_files() {
-    let dir = data_dir().join("gltf/gltf_rs");
+    let dir = common::data_dir()
+        .expect("the shared test data")
+        .join("gltf/gltf_rs");
     if !dir.is_dir() {
         assert!(
             std::env::var_os("CI").is_none(),

@@ -22,6 +22,9 @@ const MM: f64 = 1e-3;
 /// Direction components within this of the reference.
 const DIRECTION: f64 = 1e-4;
 
+mod common;
+use common::scratch;
+
 fn data_dir(folder: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("tests/data")
@@ -639,17 +642,6 @@ fn check_spot_values(v: &CpuVolume, values: &Value, lossy: bool, what: &str) {
     }
 }
 
-/// A fresh folder for files a test writes.
-fn scratch(tag: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!(
-        "splatscene-reader-references-{tag}-{}",
-        std::process::id()
-    ));
-    std::fs::remove_dir_all(&dir).ok();
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
-
 #[test]
 fn dicom_without_preamble_or_meta_group_loads_the_same() {
     let original = data_dir("dicom-multiframe").join("rtdose.dcm");
@@ -672,5 +664,4 @@ fn dicom_without_preamble_or_meta_group_loads_the_same() {
         assert_eq!(loaded.format, VolumeFormat::Dicom, "{name}");
         assert_eq!(loaded.volume, want.volume, "{name}");
     }
-    std::fs::remove_dir_all(dir).ok();
 }

@@ -9,6 +9,9 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
+mod common;
+use common::{Scratch, have, scratch};
+
 /// The `splatscene` commands of the README's shell blocks, each split into arguments.
 fn readme_commands() -> Vec<Vec<String>> {
     let text = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("README.md"))
@@ -71,18 +74,10 @@ fn split_words(line: &str) -> Vec<String> {
     words
 }
 
-fn have(tool: &str) -> bool {
-    Command::new("sh")
-        .args(["-c", &format!("command -v {tool}")])
-        .output()
-        .is_ok_and(|o| o.status.success())
-}
-
 /// A scratch folder `root/work` with `examples` linked from the repository and
 /// `root/shared/data` linked to the shared data, so that the README's relative paths resolve.
-fn workspace(data: &Path) -> PathBuf {
-    let root = std::env::temp_dir().join(format!("splatscene-readme-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&root);
+fn workspace(data: &Path) -> Scratch {
+    let root = scratch("readme");
     let work = root.join("work");
     std::fs::create_dir_all(&work).unwrap();
     std::fs::create_dir_all(root.join("shared")).unwrap();
@@ -90,7 +85,7 @@ fn workspace(data: &Path) -> PathBuf {
     std::os::unix::fs::symlink(repo.join("examples"), work.join("examples")).unwrap();
     std::os::unix::fs::symlink(std::path::absolute(data).unwrap(), root.join("shared/data"))
         .unwrap();
-    work
+    root
 }
 
 /// The files a command says it writes: its `--out` and `--depth`, with `{view}` replaced by
@@ -210,7 +205,8 @@ fn every_readme_command_runs() {
     }
     let commands = readme_commands();
     assert!(commands.len() >= 15, "found {} commands", commands.len());
-    let work = workspace(&data);
+    let root = workspace(&data);
+    let work = root.join("work");
     let can_view = have("Xvfb") && have("xdotool");
     for words in &commands {
         let mut args: Vec<String> = words[1..].to_vec();
@@ -255,7 +251,6 @@ fn every_readme_command_runs() {
             words.join(" ")
         );
     }
-    std::fs::remove_dir_all(work.parent().unwrap()).ok();
 }
 
 #[test]

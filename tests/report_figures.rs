@@ -4,68 +4,11 @@
 //! CI (`CI` set) a missing file fails the test instead of skipping it.
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
 
 use image::RgbaImage;
 
-fn splatscene(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_splatscene"))
-        .args(args)
-        .env("NODEVICE_SELECT", "1")
-        .output()
-        .expect("run splatscene")
-}
-
-fn ok(args: &[&str]) -> Output {
-    let out = splatscene(args);
-    assert!(
-        out.status.success(),
-        "splatscene {}: {}",
-        args.join(" "),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    out
-}
-
-fn fails(args: &[&str]) -> String {
-    let out = splatscene(args);
-    assert!(
-        !out.status.success(),
-        "splatscene {} succeeded",
-        args.join(" ")
-    );
-    String::from_utf8_lossy(&out.stderr).into_owned()
-}
-
-/// A fresh folder for one test's files.
-fn scratch(name: &str) -> PathBuf {
-    let dir =
-        std::env::temp_dir().join(format!("splatscene-figures-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
-
-/// A file of the shared data, or `None` (with a note) when it is missing outside CI.
-fn data(rel: &str) -> Option<PathBuf> {
-    let dir = std::env::var_os("SPLATSCENE_DATA")
-        .filter(|v| !v.is_empty())
-        .map_or_else(|| PathBuf::from("../shared/data"), PathBuf::from);
-    let path = dir.join(rel);
-    if path.exists() {
-        return Some(path);
-    }
-    assert!(
-        std::env::var_os("CI").is_none(),
-        "{} is missing: set SPLATSCENE_DATA",
-        path.display()
-    );
-    eprintln!(
-        "skipped: {} is missing (set SPLATSCENE_DATA)",
-        path.display()
-    );
-    None
-}
+mod common;
+use common::{data_file as data, fails, ok, scratch, stderr};
 
 fn s(path: &Path) -> &str {
     path.to_str().unwrap()
@@ -246,7 +189,6 @@ fn a_raw_volume_is_placed_by_its_orientation_and_seen_upright_from_named_views()
         message.contains("XYZ") && message.contains("LPS"),
         "{message}"
     );
-    std::fs::remove_dir_all(&dir).ok();
 }
 
 #[test]
@@ -303,7 +245,6 @@ fn orbits_turn_about_the_scene_up_and_keep_the_picture_upright() {
         correlation(&over, &pole) > 0.99,
         "the pitch stops at the pole"
     );
-    std::fs::remove_dir_all(&dir).ok();
 }
 
 #[test]
@@ -409,7 +350,6 @@ fn a_ct_goes_straight_to_a_picture_with_a_transfer_function_chosen_from_its_valu
         message.contains("origin") && message.contains("raw"),
         "{message}"
     );
-    std::fs::remove_dir_all(&dir).ok();
 }
 
 #[test]
@@ -490,7 +430,6 @@ fn meshes_from_the_command_line_take_units_and_frames_and_a_wrong_scale_is_named
     assert!(message.contains("RAS or LPS"), "{message}");
     let message = fails(&["render", s(&nifti), "--mesh-units", "m", "--out", s(&out)]);
     assert!(message.contains("--mesh"), "{message}");
-    std::fs::remove_dir_all(&dir).ok();
 }
 
 #[test]
@@ -522,7 +461,6 @@ fn several_views_need_a_view_pattern_and_names_are_checked() {
     assert!(message.contains("cancel"), "{message}");
     let message = fails(&["pick", "--view", "anterior,left", "--pixel", "1,1"]);
     assert!(message.contains("one --view"), "{message}");
-    std::fs::remove_dir_all(&dir).ok();
 }
 
 #[test]
@@ -543,7 +481,7 @@ fn annotations_name_the_patient_directions_and_the_scale_of_each_view() {
         let mut args = vec!["render", s(&raw), "--size", "240x200"];
         args.extend(base);
         args.extend(extra);
-        String::from_utf8_lossy(&ok(&args).stderr).into_owned()
+        stderr(&ok(&args))
     };
     let plain = dir.join("plain.png");
     let said = render(&["--view", "anterior", "--out", s(&plain)]);
@@ -648,7 +586,6 @@ fn annotations_name_the_patient_directions_and_the_scale_of_each_view() {
         message.contains("triad") && message.contains("marker"),
         "{message}"
     );
-    std::fs::remove_dir_all(&dir).ok();
 }
 
 #[test]
@@ -676,7 +613,7 @@ fn depth_images_carry_their_calibration_and_show_a_volume_surface() {
         "--depth",
         s(&depth),
     ];
-    let said = String::from_utf8_lossy(&ok(&args).stderr).into_owned();
+    let said = stderr(&ok(&args));
     assert!(
         said.contains("surface depth"),
         "a volume-only scene gets its surface: {said}"
@@ -723,7 +660,6 @@ fn depth_images_carry_their_calibration_and_show_a_volume_surface() {
         message.contains("no meshes") && message.contains("surface"),
         "{message}"
     );
-    std::fs::remove_dir_all(&dir).ok();
 }
 
 #[test]
@@ -781,8 +717,6 @@ fn a_folder_of_several_dicom_series_lists_them_and_renders_the_one_chosen() {
     let empty = scratch("no-series");
     let message = fails(&["info", s(&empty)]);
     assert!(message.contains("no DICOM series"), "{message}");
-    std::fs::remove_dir_all(&dir).ok();
-    std::fs::remove_dir_all(&empty).ok();
 }
 
 #[test]
@@ -813,5 +747,4 @@ fn the_built_in_scene_takes_meshes_and_transfer_functions_like_any_scene() {
         message.contains("--orientation") && message.contains("built-in"),
         "{message}"
     );
-    std::fs::remove_dir_all(&dir).ok();
 }

@@ -16,20 +16,9 @@ use std::time::{Duration, Instant};
 
 use serde_json::Value;
 
-#[path = "common/pictures.rs"]
-mod pictures;
-use pictures::pictures;
-
-fn repo() -> &'static Path {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-}
-
-fn have(tool: &str) -> bool {
-    Command::new("sh")
-        .args(["-c", &format!("command -v {tool}")])
-        .output()
-        .is_ok_and(|o| o.status.success())
-}
+mod common;
+use common::pictures::pictures;
+use common::{have, ok, repo, scratch};
 
 fn is_root() -> bool {
     Command::new("id")
@@ -46,7 +35,7 @@ struct Cluster {
 
 impl Cluster {
     fn start(dir: &Path) -> Self {
-        let out = Command::new(repo().join("examples/slurm/local-cluster.sh"))
+        let out = Command::new(repo("examples/slurm/local-cluster.sh"))
             .arg("start")
             .arg(dir)
             .output()
@@ -117,28 +106,11 @@ impl Cluster {
 
 impl Drop for Cluster {
     fn drop(&mut self) {
-        let _ = Command::new(repo().join("examples/slurm/local-cluster.sh"))
+        let _ = Command::new(repo("examples/slurm/local-cluster.sh"))
             .arg("stop")
             .arg(&self.dir)
             .status();
     }
-}
-
-fn splatscene(args: &[&str]) -> String {
-    let out = Command::new(env!("CARGO_BIN_EXE_splatscene"))
-        .args(args)
-        .env("NODEVICE_SELECT", "1")
-        .env_remove("SLURM_ARRAY_TASK_ID")
-        .env_remove("SLURM_ARRAY_TASK_COUNT")
-        .output()
-        .expect("run splatscene");
-    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
-    assert!(
-        out.status.success(),
-        "splatscene {}: {stderr}",
-        args.join(" ")
-    );
-    stderr
 }
 
 fn index(path: &Path) -> Value {
@@ -175,7 +147,7 @@ fn manifest(dir: &Path) -> PathBuf {
         }
     }
     std::fs::write(dir.join("ball.raw"), ball).unwrap();
-    let scene = repo().join("examples/scenes/shoulder.toml");
+    let scene = repo("examples/scenes/shoulder.toml");
     let ball = r#"volume = { path = "ball.raw", dims = [20, 20, 20], scalar = "u8" }"#;
     let text = format!(
         r#"
@@ -243,24 +215,22 @@ fn a_slurm_array_renders_what_one_process_renders_and_resumes_a_killed_task() {
         eprintln!("skipped: the local Slurm cluster runs as root");
         return;
     }
-    let dir = std::env::temp_dir().join(format!("splatscene-slurm-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = scratch("slurm");
     let manifest = manifest(&dir);
     let m = manifest.to_str().unwrap();
 
     // The reference: the manifest unsharded, in one process.
     let whole = dir.join("whole");
-    splatscene(&["batch", m, "--out", whole.to_str().unwrap()]);
+    ok(&["batch", m, "--out", whole.to_str().unwrap()]);
 
     let cluster = Cluster::start(&dir.join("cluster"));
-    let sbatch_script = repo().join("examples/slurm/planning-report.sbatch");
+    let sbatch_script = repo("examples/slurm/planning-report.sbatch");
     let script = sbatch_script.to_str().unwrap();
 
     // The array and its merge job, as a user submits them.
     let shards = dir.join("shards");
     let said = cluster.run(
-        repo().join("examples/slurm/submit.sh").to_str().unwrap(),
+        repo("examples/slurm/submit.sh").to_str().unwrap(),
         &[m, shards.to_str().unwrap(), "3"],
         &dir,
     );
@@ -331,7 +301,7 @@ fn a_slurm_array_renders_what_one_process_renders_and_resumes_a_killed_task() {
         &["--parsable", "--wait", "--array=1-3", script, m, k],
         &dir,
     );
-    splatscene(&["batch", "--merge", k]);
+    ok(&["batch", "--merge", k]);
     assert_eq!(
         statuses(&index(&shard2)),
         ["ball-quick up-to-date", "shoulder-slow rendered"]
@@ -346,5 +316,4 @@ fn a_slurm_array_renders_what_one_process_renders_and_resumes_a_killed_task() {
     }
     assert_eq!(pictures(&killed), pictures(&whole));
     drop(cluster);
-    let _ = std::fs::remove_dir_all(&dir);
 }

@@ -289,7 +289,8 @@ fn auto_takes_the_cpu_on_a_cpu_adapter() {
         "the library's default is the GPU"
     );
     assert!(Renderer::with_compositor(Compositor::Cpu).composites_on_cpu(&ctx));
-    let out = std::env::temp_dir().join(format!("splatscene-tiled-{}.png", std::process::id()));
+    let dir = common::scratch("tiled");
+    let out = dir.join("out.png");
     let result = std::process::Command::new(env!("CARGO_BIN_EXE_splatscene"))
         .args(["render", "--size", "64x48", "--out"])
         .arg(&out)
@@ -309,13 +310,12 @@ fn auto_takes_the_cpu_on_a_cpu_adapter() {
         !bad.status.success() && said.contains("auto, gpu or cpu"),
         "{said}"
     );
-    std::fs::remove_file(&out).ok();
 }
 
 #[test]
 fn a_volume_renders_without_any_gpu_adapter_and_meshes_say_what_they_need() {
     // A machine without an adapter: no Vulkan driver to load, and no other backend tried.
-    let dir = std::env::temp_dir().join(format!("splatscene-no-adapter-{}", std::process::id()));
+    let dir = common::scratch("no-adapter");
     std::fs::create_dir_all(&dir).unwrap();
     let raw = dir.join("block.raw");
     let mut bytes = vec![0u8; 16 * 16 * 16];
@@ -366,7 +366,6 @@ fn a_volume_renders_without_any_gpu_adapter_and_meshes_say_what_they_need() {
         !meshes.status.success() && said.contains("mesa-vulkan-drivers"),
         "{said}"
     );
-    std::fs::remove_dir_all(&dir).ok();
 }
 
 /// A real volume alone, seen as `benches/compositors.rs` and the VTK peer script see it: fitted

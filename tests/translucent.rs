@@ -3,8 +3,10 @@
 //! `a` times its opaque colour plus `1 - a` times the picture without it. Checked on the
 //! built-in scene with the GPU's splat pass and with the CPU tile compositor.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::Command;
+
+mod common;
 
 fn render(dir: &Path, name: &str, mesh: &str, compositor: &str) -> image::RgbaImage {
     let scene = dir.join(format!("{name}.toml"));
@@ -32,9 +34,7 @@ fn render(dir: &Path, name: &str, mesh: &str, compositor: &str) -> image::RgbaIm
 
 #[test]
 fn a_translucent_mesh_blends_over_what_lies_behind_it() {
-    let dir: PathBuf =
-        std::env::temp_dir().join(format!("splatscene-translucent-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
+    let dir = common::scratch("translucent");
     std::fs::create_dir_all(&dir).unwrap();
     let mesh = |opacity: f32| {
         format!(
@@ -71,5 +71,4 @@ fn a_translucent_mesh_blends_over_what_lies_behind_it() {
         );
         assert_ne!(half, opaque);
     }
-    let _ = std::fs::remove_dir_all(&dir);
 }

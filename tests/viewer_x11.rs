@@ -15,16 +15,12 @@ use std::process::{Child, Command, Stdio};
 use std::sync::mpsc::{Receiver, channel};
 use std::time::{Duration, Instant};
 
+mod common;
+use common::{have, scratch};
+
 /// The tests start X servers and windows: one at a time, so that two never pick the same free
 /// display number.
 static ONE_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
-
-fn have(tool: &str) -> bool {
-    Command::new("sh")
-        .args(["-c", &format!("command -v {tool}")])
-        .output()
-        .is_ok_and(|o| o.status.success())
-}
 
 /// Kills the child when dropped, so a failed assertion leaves no X server or viewer behind.
 struct Guard(Child);
@@ -535,11 +531,8 @@ fn line(lines: &Receiver<String>, prefix: &str) -> String {
 /// and its window once it exists.
 fn open_viewer(display: &str, args: &[&str]) -> (Guard, Receiver<String>, String) {
     // The viewer's stderr goes to a file, shown if its window never comes.
-    let log = std::env::temp_dir().join(format!(
-        "splatscene-viewer-{}-{}.log",
-        std::process::id(),
-        display.trim_start_matches(':')
-    ));
+    let logs = scratch("viewer-log");
+    let log = logs.join("viewer.log");
     let mut viewer = Command::new(env!("CARGO_BIN_EXE_splatscene"))
         .args(args)
         .env("DISPLAY", display)
@@ -571,7 +564,6 @@ fn open_viewer(display: &str, args: &[&str]) -> (Guard, Receiver<String>, String
         }
         std::thread::sleep(Duration::from_millis(100));
     };
-    std::fs::remove_file(&log).ok();
     (viewer, lines, window)
 }
 
@@ -920,8 +912,7 @@ fn viewer_picks_switches_orderings_and_takes_screenshots_under_xvfb() {
         return;
     }
     let (_xvfb, display) = start_xvfb();
-    let dir: PathBuf =
-        std::env::temp_dir().join(format!("splatscene-viewer-{}", std::process::id()));
+    let dir = scratch("viewer");
     std::fs::create_dir_all(&dir).unwrap();
     eprintln!("screenshots in {}", dir.display());
     let (viewer, lines, window) = open_viewer(
@@ -1048,9 +1039,6 @@ fn viewer_picks_switches_orderings_and_takes_screenshots_under_xvfb() {
         viewer.0.try_wait().ok().flatten()
     });
     assert!(status.success(), "{status:?}");
-    if std::env::var_os("SPLATSCENE_KEEP").is_none() {
-        std::fs::remove_dir_all(&dir).ok();
-    }
 }
 
 /// Grey values of a PNG, row by row.
@@ -1104,8 +1092,7 @@ fn viewer_orbits_upright_and_saves_views_that_render_reproduces() {
         eprintln!("skipped: {} is missing (set SPLATSCENE_DATA)", ct.display());
         return;
     }
-    let dir: PathBuf =
-        std::env::temp_dir().join(format!("splatscene-viewer-views-{}", std::process::id()));
+    let dir = scratch("viewer-views");
     std::fs::create_dir_all(&dir).unwrap();
     eprintln!("screenshots in {}", dir.display());
     let scene = dir.join("lidc2-up-minus-z.toml");
@@ -1255,9 +1242,6 @@ fn viewer_orbits_upright_and_saves_views_that_render_reproduces() {
     wait_for("the viewer to quit", 30, || {
         viewer.0.try_wait().ok().flatten()
     });
-    if std::env::var_os("SPLATSCENE_KEEP").is_none() {
-        std::fs::remove_dir_all(&dir).ok();
-    }
 }
 
 /// A world point from a pick line's hit.
@@ -1365,10 +1349,9 @@ fn a_plan_made_in_the_viewer_is_saved_undone_measured_and_reloaded_under_xvfb() 
         return;
     }
     let (_xvfb, display) = start_xvfb();
-    let dir: PathBuf = std::env::temp_dir().join(format!("splatscene-plan-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
+    let dir = scratch("plan");
     std::fs::create_dir_all(&dir).unwrap();
-    // Each step's screenshot stays in this folder when the test fails.
+    // Each step's screenshot stays in this folder with SPLATSCENE_KEEP set.
     eprintln!("screenshots in {}", dir.display());
     let original = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/scenes/shoulder.toml");
     let case = dir.join("case");
@@ -1697,7 +1680,4 @@ fn a_plan_made_in_the_viewer_is_saved_undone_measured_and_reloaded_under_xvfb() 
         viewer.0.try_wait().ok().flatten()
     });
     assert!(status.success(), "{status:?}");
-    if std::env::var_os("SPLATSCENE_KEEP").is_none() {
-        let _ = std::fs::remove_dir_all(&dir);
-    }
 }

@@ -10,24 +10,14 @@
 //! The CT head is the Stanford volume archive's CT head, public domain, credit "University of
 //! North Carolina".
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::Instant;
 
 use splatscene::volume::{
     ByteOrder, CpuVolume, RawSpec, ScalarType, VolumeError, load_raw, load_raw_slices, slice_stack,
 };
 
-fn data_dir() -> PathBuf {
-    let dir = std::env::var_os("SPLATSCENE_DATA")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data"));
-    assert!(
-        dir.is_dir(),
-        "test data directory {} not found: set SPLATSCENE_DATA to the shared data directory",
-        dir.display()
-    );
-    dir
-}
+mod common;
 
 /// Range, sum and a 16-bin histogram over `0..=top`, computed the same way for the file's
 /// integers and the loaded floats.
@@ -72,7 +62,9 @@ fn voxel(volume: &CpuVolume, [x, y, z]: [u32; 3]) -> f32 {
 }
 
 fn engine_path() -> PathBuf {
-    data_dir().join("volumes/engine/engine_256x256x128_uint8.raw")
+    common::data_dir()
+        .expect("the shared test data")
+        .join("volumes/engine/engine_256x256x128_uint8.raw")
 }
 
 #[test]
@@ -137,7 +129,9 @@ fn engine_with_a_wrong_size_gives_typed_errors_naming_the_file() {
 
 #[test]
 fn ct_head_slice_stack_matches_its_big_endian_bytes() {
-    let first = data_dir().join("volumes/stanford_cthead/CThead.1");
+    let first = common::data_dir()
+        .expect("the shared test data")
+        .join("volumes/stanford_cthead/CThead.1");
     let start = Instant::now();
     let paths = slice_stack(&first).unwrap();
     let spec = RawSpec {

@@ -28,22 +28,11 @@ use splatscene::volume::{
     ByteOrder, CpuVolume, RawSpec, ScalarType, VolumeError, load_raw, load_raw_slices, slice_stack,
 };
 
-/// The shared data directory, or `None` (with a note) when it is not there.
-fn data_dir() -> Option<PathBuf> {
-    let dir = std::env::var_os("SPLATSCENE_DATA")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data"));
-    if dir.is_dir() {
-        Some(dir.join("volumes"))
-    } else {
-        assert!(
-            std::env::var_os("CI").is_none(),
-            "{} is missing under CI: set SPLATSCENE_DATA",
-            dir.display()
-        );
-        println!("note: test data {} not found; skipping", dir.display());
-        None
-    }
+mod common;
+
+/// The shared data's volumes, or `None` where the data is missing outside CI.
+fn volumes_dir() -> Option<PathBuf> {
+    Some(common::data_dir()?.join("volumes"))
 }
 
 fn voxel(volume: &CpuVolume, [x, y, z]: [u32; 3]) -> f32 {
@@ -102,7 +91,7 @@ fn as_bytes(volume: &CpuVolume) -> impl Iterator<Item = u8> + '_ {
 
 #[test]
 fn dat_volumes_match_their_raw_bytes() {
-    let Some(dir) = data_dir() else { return };
+    let Some(dir) = volumes_dir() else { return };
     let dir = dir.join("datraw_small");
     let cases = [
         (
@@ -146,7 +135,7 @@ fn dat_volumes_match_their_raw_bytes() {
 
 #[test]
 fn headerless_volumes_ask_for_raw_options_and_load_with_them() {
-    let Some(dir) = data_dir() else { return };
+    let Some(dir) = volumes_dir() else { return };
     let engine = dir.join("engine/engine_256x256x128_uint8.raw");
     let lidc = dir.join("lidc2/lidc2_256x256x133_uint8.raw");
     let head = dir.join("stanford_cthead/CThead.1");
@@ -186,7 +175,7 @@ fn headerless_volumes_ask_for_raw_options_and_load_with_them() {
 
 #[test]
 fn nrrd_pattern_stack_matches_its_slice_files() {
-    let Some(dir) = data_dir() else { return };
+    let Some(dir) = volumes_dir() else { return };
     let dir = dir.join("vtk_headsq");
     let loaded = load_checked(
         &dir.join("quarter.nhdr"),
@@ -225,7 +214,7 @@ fn nrrd_pattern_stack_matches_its_slice_files() {
 
 #[test]
 fn legacy_vtk_iron_protein_matches_its_bytes() {
-    let Some(dir) = data_dir() else { return };
+    let Some(dir) = volumes_dir() else { return };
     let path = dir.join("vtk_ironprot/ironProt.vtk");
     let loaded = load_checked(
         &path,
@@ -250,7 +239,7 @@ fn legacy_vtk_iron_protein_matches_its_bytes() {
 
 #[test]
 fn vti_hydrogen_matches_independent_figures() {
-    let Some(dir) = data_dir() else { return };
+    let Some(dir) = volumes_dir() else { return };
     let path = dir.join("vtk_hydrogen/hydrogen.vti");
     let loaded = load_checked(
         &path,
@@ -303,7 +292,7 @@ fn nifti_voxels(path: &Path) -> Vec<f32> {
 
 #[test]
 fn nifti_abdomen_ct_is_in_hounsfield_units_with_its_sform() {
-    let Some(dir) = data_dir() else { return };
+    let Some(dir) = volumes_dir() else { return };
     let path = dir.join("totalseg_ct/example_ct.nii.gz");
     let loaded = load_checked(
         &path,
@@ -331,7 +320,7 @@ fn nifti_abdomen_ct_is_in_hounsfield_units_with_its_sform() {
 
 #[test]
 fn nifti_aorta_ct_has_metal_bright_voxels_and_a_flipped_sform() {
-    let Some(dir) = data_dir() else { return };
+    let Some(dir) = volumes_dir() else { return };
     let path = dir.join("totalseg_ct/aorta_ct_cropped.nii.gz");
     let loaded = load_checked(
         &path,
@@ -368,7 +357,7 @@ fn nifti_aorta_ct_has_metal_bright_voxels_and_a_flipped_sform() {
 /// Every data file that format detection recognises (except DICOM, loaded elsewhere) loads.
 #[test]
 fn every_recognised_volume_file_loads() {
-    let Some(dir) = data_dir() else { return };
+    let Some(dir) = volumes_dir() else { return };
     let mut stack = vec![dir];
     let mut loaded = 0;
     while let Some(dir) = stack.pop() {
@@ -456,7 +445,7 @@ fn metaimage_files_written_by_itk_land_where_itk_puts_them() {
 /// values times `scl_slope` plus `scl_inter`).
 #[test]
 fn four_dimensional_nifti_frames() {
-    let Some(dir) = data_dir() else { return };
+    let Some(dir) = volumes_dir() else { return };
     let dir = dir.join("../reader_tests/nibabel_test_data");
     use splatscene::volume::VolumeError;
     use splatscene::volume::detect::{LoadOptions, LoadedVolume};

@@ -1,8 +1,17 @@
-//! Test volumes shared by the GPU tests and the golden images.
+//! What the tests share: running the command line, scratch folders and the shared data
+//! ([`files`]), test volumes and the reference frame (here), a plain ray marcher
+//! ([`raymarch`]) and picture measures ([`pictures`]).
 
 #![allow(dead_code)]
 
+pub mod files;
+pub mod pictures;
 pub mod raymarch;
+
+#[allow(unused_imports)]
+pub use files::{
+    Scratch, command, data_dir, data_file, fails, have, ok, repo, scratch, splatscene, stderr,
+};
 
 use std::sync::Arc;
 
@@ -94,30 +103,4 @@ pub fn reference_frame(volume: &CpuVolume, pinhole: &Camera, ordering: Ordering)
     };
     let (frame, _) = composite(pinhole, &splats, &ids, &SplatStyle::default()).unwrap();
     (frame, ids.len())
-}
-
-/// A file of the shared test data (`$SPLATSCENE_DATA`, by default `../shared/data`), or
-/// `None` where it is missing outside CI (the caller then skips, saying so). Missing in CI, it
-/// fails: CI has the data, and a silent pass would hide a broken setup.
-pub fn data_file(relative: &str) -> Option<std::path::PathBuf> {
-    let data = std::env::var_os("SPLATSCENE_DATA")
-        .filter(|v| !v.is_empty())
-        .map_or_else(
-            || std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data"),
-            Into::into,
-        );
-    let path = data.join(relative);
-    if path.exists() {
-        return Some(path);
-    }
-    assert!(
-        std::env::var_os("CI").is_none(),
-        "{} is missing",
-        path.display()
-    );
-    eprintln!(
-        "skipped: {} is missing (set SPLATSCENE_DATA)",
-        path.display()
-    );
-    None
 }
