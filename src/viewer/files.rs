@@ -1,0 +1,216 @@
+//! The plan's files: saving it as a new scene file (never over one), screenshots with their
+//! scene file, and reading the scene file again when it changes on disk.
+
+use std::path::Path;
+use std::time::SystemTime;
+
+use super::plan::History;
+use super::{App, ViewerError};
+use crate::pick::Picker;
+use crate::render::{encode_png, frame_to_rgba8};
+use crate::scene::file::{CameraSpec, SceneFile};
+
+impl App {
+    /// Saves the plan as a new scene file: beside the scene's own file (NAME-plan.toml, then
+    /// NAME-plan-2.toml...), or in the screenshot folder; never over an existing file.
+    pub(super) fn save_plan(&mut self) {
+        let size = self
+            .gpu
+            .as_ref()
+            .map_or(self.options.size, |g| g.target.size);
+        let text = match self.plan_file(size) {
+            Ok(text) => text,
+            Err(e) => {
+                self.say(format!("the plan was not saved: {e}"));
+                eprintln!("the plan was not saved: {e}");
+                return;
+            }
+        };
+        let (dir, stem) = match &self.options.scene_path {
+            Some(p) => (
+                p.parent().unwrap_or(Path::new(".")).to_path_buf(),
+                p.file_stem()
+                    .map_or("splatscene".into(), |s| s.to_string_lossy().into_owned()),
+            ),
+            None => (self.options.screenshot_dir.clone(), "splatscene".into()),
+        };
+        for n in 1..10_000 {
+            let name = match n {
+                1 => format!("{stem}-plan.toml"),
+                n => format!("{stem}-plan-{n}.toml"),
+            };
+            let path = dir.join(name);
+            let file = std::fs::OpenOptions::new()
+                .write(true)
+                .create_new(true)
+                .open(&path);
+            match file {
+                Ok(mut f) => {
+                    use std::io::Write;
+                    if let Err(e) = f.write_all(text.as_bytes()) {
+                        let _ = std::fs::remove_file(&path);
+                        self.say(format!("the plan was not saved: {}: {e}", path.display()));
+                        eprintln!("the plan was not saved: {}: {e}", path.display());
+                        return;
+                    }
+                    self.edit.history.mark_saved();
+                    self.say(format!("saved plan {}", path.display()));
+                    return;
+                }
+                Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {}
+                Err(e) => {
+                    // Nothing is lost: the plan stays in the viewer, to be saved elsewhere.
+                    self.say(format!(
+                        "the plan was not saved: {}: {e} (it is kept here)",
+                        path.display()
+                    ));
+                    eprintln!("the plan was not saved: {}: {e}", path.display());
+                    return;
+                }
+            }
+        }
+        self.say("the plan was not saved: no free name".into());
+    }
+    /// Reads the scene file again, keeping the camera; the viewer's edits are dropped.
+    pub(super) fn reload(&mut self) {
+        let Some((path, _)) = self.watched.clone() else {
+            self.say("no scene file to reload".into());
+            return;
+        };
+        let loaded = SceneFile::read(&path).and_then(|file| {
+            let base = path.parent().unwrap_or(Path::new("."));
+            let loaded = file.load(&path, base)?;
+            Ok((file.with_paths_from(base), loaded))
+        });
+        self.watched = Some((path.clone(), modified(&path)));
+        match loaded {
+            Ok((file, loaded)) => {
+                // The file's clipping, measurements and placements replace the viewer's.
+                self.edit.scene = loaded.scene;
+                self.picker = Picker::new(&self.edit.scene);
+                self.options.scene_file = Some(file);
+                self.remember_transfers();
+                self.edit.history = History::new();
+                self.edit.selected = None;
+                self.edit.measuring = None;
+                self.edit.chosen = None;
+                self.edit.marker = None;
+                self.say(format!("reloaded {}", path.display()));
+            }
+            Err(e) => {
+                self.say(format!("not reloaded: {e}"));
+                eprintln!("not reloaded: {e}");
+            }
+        }
+    }
+    /// Reloads the scene file when it changed on disk, unless that would drop unsaved edits.
+    pub(super) fn watch(&mut self) {
+        let Some((path, seen)) = &self.watched else {
+            return;
+        };
+        let now = modified(path);
+        if now.is_none() || now == *seen {
+            return;
+        }
+        if self.edit.history.unsaved() {
+            let text = format!(
+                "{} changed on disk: F5 reads it again (the unsaved edits here would be dropped; Ctrl+S saves them first)",
+                path.display()
+            );
+            self.watched = Some((path.clone(), now));
+            self.say(text);
+        } else {
+            self.reload();
+        }
+    }
+    pub(super) fn screenshot(&mut self) -> Result<(), ViewerError> {
+        let Some(gpu) = &self.gpu else {
+            return Ok(());
+        };
+        let image = match &gpu.cpu_frame.1 {
+            Some(image) => image.clone(),
+            None => frame_to_rgba8(&gpu.target.read_color(&gpu.ctx)?),
+        };
+        let size = image.dimensions();
+        let png = encode_png(&image).map_err(|e| ViewerError::Window(e.to_string()))?;
+        let dir = &self.options.screenshot_dir;
+        // The first number whose picture and scene file are both free, each created
+        // exclusively: nothing is replaced or written through a link.
+        let mut saved = None;
+        for n in 1..=100_000 {
+            let path = dir.join(format!("splatscene-view-{n}.png"));
+            if std::fs::symlink_metadata(path.with_extension("toml")).is_ok() {
+                continue;
+            }
+            match crate::output::write_new(&path, &png) {
+                Ok(true) => {
+                    saved = Some(path);
+                    break;
+                }
+                Ok(false) => continue,
+                Err(e) => {
+                    eprintln!("screenshot: {e}");
+                    return Ok(());
+                }
+            }
+        }
+        let Some(path) = saved else {
+            eprintln!("screenshot: no free name in {}", dir.display());
+            return Ok(());
+        };
+        println!("screenshot {}", path.display());
+        match self.plan_file(size) {
+            Err(e) => eprintln!("view: no scene file: {e}"),
+            Ok(text) => {
+                let toml = path.with_extension("toml");
+                match crate::output::write_new(&toml, text.as_bytes()) {
+                    Ok(true) => println!("view {}", toml.display()),
+                    Ok(false) => eprintln!("view {}: taken meanwhile; not written", toml.display()),
+                    Err(e) => eprintln!("view: {e}"),
+                }
+            }
+        }
+        Ok(())
+    }
+    /// The scene file of what the window shows: the scene's own file with the plan (mesh
+    /// transforms, measurements), the camera, the ordering, the image size and the transfer
+    /// function chosen with `T`.
+    pub(super) fn plan_file(&self, size: (u32, u32)) -> Result<String, String> {
+        let file = self
+            .options
+            .scene_file
+            .as_ref()
+            .ok_or("the scene has no scene file")?;
+        let mut file = file.with_plan(&self.edit.scene)?;
+        file.camera = Some(CameraSpec::from_camera(
+            &self.camera,
+            self.edit.scene.up_axis(),
+        ));
+        file.output.size = Some([size.0, size.1]);
+        file.output.ordering = Some(self.ordering.to_string());
+        for volume in &mut file.volumes {
+            if let Some(p) = self.preset {
+                volume.transfer = Some(p.to_owned());
+                volume.window = None;
+                volume.color = None;
+                volume.level_width = None;
+                volume.shift = None;
+            }
+            // A window over any function (preset, ramp or auto) is its level_width: the
+            // loader stretches the function over it, as the drag did.
+            if let Some((level, width)) = self.window {
+                volume.level_width = Some([level, width]);
+                volume.shift = None;
+            }
+        }
+        let text = file.to_toml()?;
+        Ok(format!(
+            "# Saved by splatscene's viewer: `splatscene render THIS.toml --out view.png` draws\n# the same picture, and `splatscene view THIS.toml` opens the plan again.\n\n{text}"
+        ))
+    }
+}
+
+/// When a file was last modified, if it can be told.
+pub(super) fn modified(path: &Path) -> Option<SystemTime> {
+    std::fs::metadata(path).and_then(|m| m.modified()).ok()
+}

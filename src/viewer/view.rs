@@ -1,0 +1,418 @@
+//! Drawing the window: the frame (previews while moving, refined when the camera rests), the
+//! scene as drawn (the selection tinted, the clip plane and crop box outlined), the on-screen
+//! text and the key help.
+
+use std::time::{Duration, Instant};
+
+use glam::DVec3;
+
+use super::action::{KEYS, STEP};
+use super::plan;
+use super::{App, PREVIEW_ABOVE, SETTLE, ViewerError};
+use crate::annotate::{Anchor, Label, Painter, annotate_image};
+use crate::pick::measure::{MarkerStyle, Measurement, annotate, draw_scene_measurements};
+use crate::render::{FrameOptions, RenderError, ViewSetup, frame_to_rgba8, write_overlay};
+use crate::scene::{ClipPlane, NodeContent, NodeId, Scene};
+
+impl App {
+    pub(super) fn view(&self) -> Option<Result<ViewSetup, RenderError>> {
+        let gpu = self.gpu.as_ref()?;
+        Some(ViewSetup::new(
+            &self.camera,
+            gpu.target.size,
+            self.edit.scene.bounds(),
+        ))
+    }
+    /// Whether moving the camera draws previews: asked for, and full frames are slow.
+    pub(super) fn previews_when_moving(&self) -> bool {
+        self.options.preview_while_moving && self.full_frame > PREVIEW_ABOVE
+    }
+    /// Whether this frame is a preview: the camera is being dragged or zoomed, and full frames
+    /// are slow.
+    pub(super) fn previewing(&self) -> bool {
+        self.previews_when_moving()
+            && (self.settle.is_some() || self.drag.as_ref().is_some_and(|d| d.moved))
+    }
+    pub(super) fn redraw(&mut self) -> Result<(), ViewerError> {
+        let Some(view) = self.view().transpose()? else {
+            return Ok(());
+        };
+        let preview = self.previewing();
+        let options = FrameOptions {
+            ordering: Some(self.ordering),
+            background: Some(self.options.background),
+            measure: false,
+            preview,
+        };
+        let started = std::time::Instant::now();
+        let (drawn, labels) = self.drawn_scene();
+        let hud = self.hud_lines();
+        let preset = self.transfer_label();
+        let Some(gpu) = &mut self.gpu else {
+            return Ok(());
+        };
+        let target = &gpu.target;
+        // Volumes coarser than the pixels are drawn refined only once the camera rests: the
+        // refinement's classification and its splats cost more than a frame.
+        let sharp = !preview && self.sharp_at == Some(self.camera);
+        gpu.renderer.set_refinement(sharp);
+        let on_cpu = gpu.renderer.composites_on_cpu(&gpu.ctx);
+        if on_cpu {
+            // The tile compositor's frame, shown through the present pass like the GPU's.
+            let shot =
+                gpu.renderer
+                    .screenshot(&gpu.ctx, &drawn, &self.camera, target.size, &options)?;
+            self.last = shot.report;
+            let image = frame_to_rgba8(&shot.frame);
+            let (w, h) = target.size;
+            write_overlay(&gpu.ctx, &gpu.cpu_frame.0, image.as_raw(), w, h);
+            gpu.cpu_frame.1 = Some(image);
+        } else {
+            self.last = gpu.renderer.render(
+                &gpu.ctx,
+                &drawn,
+                &view,
+                &target.color_view,
+                &target.depth_view,
+                &options,
+            )?;
+            gpu.cpu_frame.1 = None;
+        }
+        let frame = match gpu.surface.get_current_texture() {
+            wgpu::CurrentSurfaceTexture::Success(frame)
+            | wgpu::CurrentSurfaceTexture::Suboptimal(frame) => frame,
+            other => {
+                // Lost or outdated: configure again and draw on the next request.
+                log::warn!("surface: {other:?}");
+                gpu.surface.configure(&gpu.ctx.device, &gpu.config);
+                gpu.window.request_redraw();
+                return Ok(());
+            }
+        };
+        let surface_view = frame.texture.create_view(&Default::default());
+        let (w, h) = target.size;
+        let mut image = image::RgbaImage::new(w, h);
+        if let (Some(parts), true) = (&self.options.annotations, self.annotations_on)
+            && let Err(e) = annotate_image(
+                &mut image,
+                &self.camera,
+                &self.edit.scene.patient_frame(),
+                &labels,
+                parts,
+            )
+        {
+            eprintln!("annotations off: {e}");
+            self.annotations_on = false;
+        }
+        let help = self.help;
+        draw_hud(&mut image, &hud, help);
+        write_overlay(&gpu.ctx, &gpu.overlay, image.as_raw(), w, h);
+        let overlay = Some(gpu.overlay.create_view(&Default::default()));
+        let cpu_view = on_cpu.then(|| gpu.cpu_frame.0.create_view(&Default::default()));
+        let source = cpu_view.as_ref().unwrap_or(&target.color_view);
+        gpu.blit
+            .copy(&gpu.ctx, source, overlay.as_ref(), &surface_view);
+        gpu.window.pre_present_notify();
+        gpu.ctx.queue.present(frame);
+        let elapsed = started.elapsed();
+        if !preview && !sharp {
+            self.full_frame = elapsed;
+        }
+        self.sharpen = (!preview && self.last.unrefined).then(|| Instant::now() + SETTLE);
+        gpu.window.set_title(&format!(
+            "splatscene: {}{} | {preset} | frame {:.0} ms, order {:.1} ms | {} splats{}",
+            self.ordering,
+            if on_cpu { " (CPU tiles)" } else { "" },
+            elapsed.as_secs_f64() * 1e3,
+            self.last.timings.order.as_secs_f64() * 1e3,
+            self.last.splats,
+            match (options.preview, self.last.refined, self.sharpen.is_some()) {
+                (true, _, _) => " (preview)".to_string(),
+                (false, Some([x, y, z]), _) => format!(" (refined {x}x{y}x{z})"),
+                (false, None, true) => " (refining)".to_string(),
+                (false, None, false) => String::new(),
+            }
+        ));
+        Ok(())
+    }
+    /// The scene as drawn: the plan's measurements, the points of the one being clicked and
+    /// the last pick marked, the selected mesh tinted; and the measurements' values with where
+    /// to write them.
+    pub(super) fn drawn_scene(&self) -> (Scene, Vec<Label>) {
+        let mut scene = self.edit.scene.clone();
+        let labels = match draw_scene_measurements(&mut scene) {
+            Ok(labels) => labels,
+            Err(e) => {
+                eprintln!("measurements: {e}");
+                Vec::new()
+            }
+        };
+        let style = MarkerStyle::for_scene(&self.edit.scene);
+        let pending = self
+            .edit
+            .measuring
+            .iter()
+            .flat_map(|m| m.points.iter().map(|(p, _)| *p));
+        let snap = self.edit.snapping.flatten();
+        for point in pending.chain(self.edit.marker).chain(snap) {
+            let _ = annotate(&mut scene, &Measurement::point(point), &style);
+        }
+        // The crop box's edges and each clip plane's cut through the scene's box, thin.
+        let thin = MarkerStyle {
+            point_radius: style.line_radius,
+            line_radius: 0.5 * style.line_radius,
+            ..style
+        };
+        let mut outline = Vec::new();
+        if let Some((lo, hi)) = self.edit.scene.clipping.crop {
+            outline.extend(box_edges(lo, hi));
+        }
+        if let Some((lo, hi)) = self.edit.scene.bounds() {
+            for plane in &self.edit.scene.clipping.planes {
+                outline.extend(plane_outline(plane, lo, hi));
+            }
+        }
+        for (a, b) in outline {
+            let _ = annotate(&mut scene, &Measurement::distance(a, b), &thin);
+        }
+        if let Some(top) = self.edit.selected {
+            tint(&mut scene, top);
+        }
+        (scene, labels)
+    }
+    /// The lines of on-screen text.
+    pub(super) fn hud_lines(&self) -> Vec<String> {
+        let ms = |d: Duration| d.as_secs_f64() * 1e3;
+        let transfer = self.transfer_label();
+        let mut lines = vec![format!(
+            "{} | {transfer} | frame {:.0} ms, order {:.1} ms, classify {:.0} ms | {} splats",
+            self.ordering,
+            ms(self.full_frame),
+            ms(self.last.timings.order),
+            ms(self.last.timings.classify),
+            self.last.splats
+        )];
+        if let Some(top) = self.edit.selected
+            && let Ok(node) = self.edit.scene.node(top)
+        {
+            let (_, turn, at) = node.local().to_scale_rotation_translation();
+            let (_, angle) = turn.to_axis_angle();
+            let (_, pivot) = plan::pivot(&self.edit.scene, top);
+            lines.push(format!(
+                "selected {}: at ({:.1}, {:.1}, {:.1}) mm, turned {:.1}\u{b0}; pivot {pivot}; steps {STEP} mm, {STEP}\u{b0} (Shift x10)",
+                node.name,
+                at.x,
+                at.y,
+                at.z,
+                angle.to_degrees()
+            ));
+        }
+        match self.edit.snapping {
+            Some(None) => {
+                lines.push("snap: click a point of the selected mesh (Escape cancels)".into());
+            }
+            Some(Some(_)) => {
+                lines.push("snap: click where that point goes (Escape cancels)".into());
+            }
+            None => {}
+        }
+        if let Some(m) = &self.edit.measuring {
+            lines.push(format!(
+                "measure {}: point {} of {} (click; X clears, M next kind)",
+                m.kind.name(),
+                m.points.len() + 1,
+                m.kind.point_count()
+            ));
+        }
+        if let Some(text) = &self.edit.labelling {
+            lines.push(format!("label: {text}_ (Enter keeps it, Escape cancels)"));
+        }
+        for (i, m) in self.edit.scene.measurements.iter().enumerate() {
+            let value = self
+                .edit
+                .scene
+                .measure(m)
+                .map(|v| crate::pick::measure::label_text(&v, m.label.as_deref()))
+                .unwrap_or_else(|e| format!("({e})"));
+            let mark = if self.edit.chosen == Some(i) {
+                ">"
+            } else {
+                " "
+            };
+            lines.push(format!("{mark} {}. {value}", i + 1));
+        }
+        if let Some(pick) = &self.last_pick {
+            lines.push(format!("pick: {pick}"));
+        }
+        if self.edit.history.unsaved() {
+            lines.push("unsaved edits (Ctrl+S saves the plan)".into());
+        }
+        if let Some((text, at)) = &self.message
+            && at.elapsed() < Duration::from_secs(6)
+        {
+            lines.push(text.clone());
+        }
+        lines.push("H: keys".into());
+        lines
+    }
+    /// The name of the scene's own transfer function (of its first volume).
+    pub(super) fn transfer_name(&self) -> String {
+        if self.edit.scene.volumes().next().is_none() {
+            return "no volume".into();
+        }
+        let Some(spec) = self
+            .options
+            .scene_file
+            .as_ref()
+            .and_then(|f| f.volumes.first())
+        else {
+            return "the scene's transfer function".into();
+        };
+        let mut name = spec.transfer.clone().unwrap_or_else(|| "auto".into());
+        if let Some([lo, hi]) = spec.window {
+            name.push_str(&format!(" {lo}..{hi}"));
+        }
+        if let Some([level, width]) = spec.level_width {
+            name.push_str(&format!(" level {level} width {width}"));
+        }
+        if let Some(shift) = spec.shift {
+            name.push_str(&format!(" shifted {shift:+}"));
+        }
+        name
+    }
+    pub(super) fn request_redraw(&self) {
+        if let Some(gpu) = &self.gpu {
+            gpu.window.request_redraw();
+        }
+    }
+}
+
+/// Tints the meshes under `top` toward amber, so that the selection shows.
+pub(super) fn tint(scene: &mut Scene, top: NodeId) {
+    let mut stack = vec![top];
+    while let Some(id) = stack.pop() {
+        let Ok(node) = scene.node(id) else {
+            continue;
+        };
+        stack.extend_from_slice(node.children());
+        if let NodeContent::Mesh(mesh) = &node.content {
+            let mut mesh = mesh.clone();
+            let c = &mut mesh.material.base_color;
+            for (channel, amber) in c.iter_mut().zip([1.0, 0.55, 0.1]) {
+                *channel = 0.55 * *channel + 0.45 * amber;
+            }
+            let _ = scene.set_content(id, NodeContent::Mesh(mesh));
+        }
+    }
+}
+
+/// Darkens a rectangle of the overlay, so that text over a bright picture stays readable.
+pub(super) fn shade(image: &mut image::RgbaImage, x0: u32, y0: u32, x1: u32, y1: u32) {
+    let (w, h) = image.dimensions();
+    for y in y0.min(h)..y1.min(h) {
+        for x in x0.min(w)..x1.min(w) {
+            let p = image.get_pixel_mut(x, y);
+            if p[3] < 170 {
+                *p = image::Rgba([0, 0, 0, 170]);
+            }
+        }
+    }
+}
+
+/// Writes the on-screen text into the top left of `image`, and the keys over it when `help`.
+pub(super) fn draw_hud(image: &mut image::RgbaImage, lines: &[String], help: bool) {
+    if help {
+        let top = 28 + 16 * (lines.len() as u32 + 1);
+        shade(image, 4, top - 4, 480, top + 16 * KEYS.len() as u32 + 4);
+    }
+    let Ok(mut painter) = Painter::new(image) else {
+        return;
+    };
+    painter.text_px = 13.0;
+    painter.halo_px = 1.5;
+    let step = 16.0;
+    // Below the top edge's direction letter and any caption.
+    let mut y = 28.0;
+    for line in lines {
+        painter.text(line, 10.0, y, Anchor::TopLeft, [235, 235, 235, 255]);
+        y += step;
+    }
+    if help {
+        y += step;
+        for (keys, what) in KEYS {
+            painter.text(keys, 10.0, y, Anchor::TopLeft, [255, 200, 90, 255]);
+            painter.text(what, 130.0, y, Anchor::TopLeft, [235, 235, 235, 255]);
+            y += step;
+        }
+    }
+}
+
+/// The twelve edges of the box `lo`..`hi`.
+pub(super) fn box_edges(lo: DVec3, hi: DVec3) -> Vec<(DVec3, DVec3)> {
+    let corner = |i: u32| {
+        DVec3::new(
+            if i & 1 == 0 { lo.x } else { hi.x },
+            if i & 2 == 0 { lo.y } else { hi.y },
+            if i & 4 == 0 { lo.z } else { hi.z },
+        )
+    };
+    let mut edges = Vec::with_capacity(12);
+    for a in 0..8u32 {
+        for bit in [1, 2, 4] {
+            if a & bit == 0 {
+                edges.push((corner(a), corner(a | bit)));
+            }
+        }
+    }
+    edges
+}
+
+/// Where a clip plane cuts the box `lo`..`hi`: the sides of that polygon.
+pub(super) fn plane_outline(plane: &ClipPlane, lo: DVec3, hi: DVec3) -> Vec<(DVec3, DVec3)> {
+    let Some(n) = plane.normal.try_normalize() else {
+        return Vec::new();
+    };
+    let d = plane.offset / plane.normal.length();
+    let mut points: Vec<DVec3> = Vec::new();
+    for (a, b) in box_edges(lo, hi) {
+        let (da, db) = (n.dot(a) - d, n.dot(b) - d);
+        if (da <= 0.0) != (db <= 0.0) {
+            points.push(a + (b - a) * (da / (da - db)));
+        }
+    }
+    if points.len() < 3 {
+        return Vec::new();
+    }
+    // Around their centre, in the plane.
+    let centre = points.iter().copied().sum::<DVec3>() / points.len() as f64;
+    let u = (points[0] - centre).normalize_or(n.any_orthonormal_vector());
+    let v = n.cross(u);
+    points.sort_by(|p, q| {
+        let angle = |x: &DVec3| (*x - centre).dot(v).atan2((*x - centre).dot(u));
+        angle(p).total_cmp(&angle(q))
+    });
+    (0..points.len())
+        .map(|i| (points[i], points[(i + 1) % points.len()]))
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_clip_plane_is_outlined_where_it_cuts_the_box() {
+        let plane = ClipPlane::through(DVec3::new(0.0, 0.0, 0.5), DVec3::Z * 2.0, false);
+        let sides = plane_outline(&plane, DVec3::ZERO, DVec3::ONE);
+        assert_eq!(sides.len(), 4);
+        let mut length = 0.0;
+        for (a, b) in &sides {
+            assert!((a.z - 0.5).abs() < 1e-12 && (b.z - 0.5).abs() < 1e-12);
+            length += a.distance(*b);
+        }
+        assert!((length - 4.0).abs() < 1e-12, "a unit square: {length}");
+        let outside = ClipPlane::through(DVec3::splat(5.0), DVec3::X, false);
+        assert!(plane_outline(&outside, DVec3::ZERO, DVec3::ONE).is_empty());
+        assert_eq!(box_edges(DVec3::ZERO, DVec3::ONE).len(), 12);
+    }
+}
