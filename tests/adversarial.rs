@@ -8,6 +8,9 @@
 //! files the user had must be as they were unless the command names them as its output. The
 //! inputs are generated here (a named pipe `fifo` and a link `zero` to `/dev/zero` in every
 //! case's folder); nothing large is stored.
+//!
+//! One file on purpose, past the usual length: it is the catalogue of crafted cases (more than
+//! 150, a format at a time), read as one list; what runs them is the short end of the file.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;

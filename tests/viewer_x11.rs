@@ -8,6 +8,10 @@
 //!
 //! Needs `xvfb`, `xdotool` and `x11-apps` (CI installs them). Without them the test says so
 //! and passes, except under CI (`CI` set), where it fails.
+//!
+//! One file on purpose, past the usual length: each test is one user's session from start to
+//! quit, step by step with its screenshot checks; what a window does not decide (key mapping,
+//! edits, undo) is unit-tested in `src/viewer/action.rs` and `src/viewer/edit.rs`.
 
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};

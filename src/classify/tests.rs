@@ -1,0 +1,520 @@
+use super::*;
+
+#[test]
+fn uniform_in_plane_keeps_labels_whose_clamped_square_holds_them_alone() {
+    // Planes of every small shape, labels from a fixed hash, against the 3x3 test done
+    // voxel by voxel.
+    for (nx, ny) in [(1, 1), (1, 4), (4, 1), (2, 2), (5, 3), (7, 6)] {
+        for seed in 0..20u32 {
+            let labels: Vec<u8> = (0..nx * ny)
+                .map(|i| {
+                    let h = (i as u32 ^ seed.wrapping_mul(2654435761)).wrapping_mul(40503);
+                    [0u8, 1, 1, 1, 2][(h >> 7) as usize % 5]
+                })
+                .collect();
+            let got = uniform_in_plane(&labels, nx, ny);
+            for y in 0..ny {
+                for x in 0..nx {
+                    let label = labels[y * nx + x];
+                    let mut alone = true;
+                    for dy in [-1i64, 0, 1] {
+                        for dx in [-1i64, 0, 1] {
+                            let qx = (x as i64 + dx).clamp(0, nx as i64 - 1) as usize;
+                            let qy = (y as i64 + dy).clamp(0, ny as i64 - 1) as usize;
+                            alone &= labels[qy * nx + qx] == label;
+                        }
+                    }
+                    let want = if alone { label } else { 0 };
+                    assert_eq!(got[y * nx + x], want, "{nx}x{ny} seed {seed} at {x},{y}");
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn the_automatic_transfer_function_follows_the_values() {
+    let ct: Vec<f32> = (0..1000).map(|i| -1024.0 + 3.0 * i as f32).collect();
+    let auto = auto_transfer(&ct.clone().into());
+    assert!(
+        auto.hounsfield && auto.reason.starts_with("ct-bone"),
+        "{}",
+        auto.reason
+    );
+    assert_eq!(auto.transfer, TransferFunction::ct_bone());
+    // 8-bit data: most voxels background (0), the object spread over 1 to 200: the ramp
+    // spans the 90th to 99.5th percentile of the object's values.
+    let mut bytes = vec![0.0f32; 10_000];
+    bytes.extend((1..=200).flat_map(|v| std::iter::repeat_n(v as f32, 10)));
+    let auto = auto_transfer(&bytes.clone().into());
+    assert!(!auto.hounsfield);
+    let points = auto.transfer.points();
+    let (from, to) = (points[0].0, points[points.len() - 1].0);
+    assert!(
+        (from - 180.0).abs() < 1.0 && (to - 199.0).abs() < 1.0,
+        "{from} to {to}"
+    );
+    assert!(auto.reason.contains("percentile"), "{}", auto.reason);
+    // Constant or empty data still give a usable function.
+    for values in [vec![7.0; 10], Vec::new(), vec![f32::NAN; 3]] {
+        let auto = auto_transfer(&values.clone().into());
+        assert!(
+            auto.transfer.points().iter().all(|(v, _)| v.is_finite()),
+            "{values:?}"
+        );
+    }
+    assert!(is_hounsfield(&vec![-600.0, 40.0].into()) && !is_hounsfield(&vec![0.0, 4000.0].into()));
+}
+use glam::DMat3;
+
+#[test]
+fn sample_interpolates_and_clamps() {
+    let tf = TransferFunction::ramp(100.0, 200.0, [1.0, 0.5, 0.0, 0.8]);
+    assert_eq!(tf.sample(50.0)[3], 0.0);
+    assert!((tf.sample(150.0)[3] - 0.4).abs() < 1e-6);
+    assert_eq!(tf.sample(500.0), [1.0, 0.5, 0.0, 0.8]);
+    assert_eq!(tf.sample(f32::NAN)[3], 0.0);
+}
+
+#[test]
+fn presets_windows_and_shifts() {
+    for name in TransferFunction::PRESETS {
+        let tf = TransferFunction::preset(name).unwrap();
+        assert!(tf.points().len() >= 2, "{name}");
+        assert_eq!(tf.sample(-5000.0)[3], 0.0, "{name}: air is clear");
+    }
+    assert!(TransferFunction::preset("ct-lung").is_none());
+    let bone = TransferFunction::ct_bone();
+    assert_eq!(bone.shifted(100.0).sample(400.0), bone.sample(300.0));
+    let w = bone.windowed(500.0, 1000.0);
+    assert_eq!(
+        (w.points()[0].0, w.points().last().unwrap().0),
+        (0.0, 1000.0)
+    );
+    assert_eq!(w.sample(1000.0), bone.sample(1200.0));
+    // The metal preset keeps bone faint and metal nearly opaque.
+    let metal = TransferFunction::ct_metal();
+    assert!(metal.sample(700.0)[3] < 0.15 && metal.sample(3000.0)[3] > 0.8);
+}
+
+#[test]
+fn densities_add_up_to_the_transfer_function_along_a_ray() {
+    // A ray along an index axis crosses one layer of splats per index step; each splat
+    // puts density * step_mm * exp(-r^2 / 2 sigma^2) on it (r its distance from the ray, in
+    // voxels), so per millimetre the ray meets density times the layer's sum of
+    // footprints, whatever the step. That must be the transfer function's extinction,
+    // -ln(1 - a) per millimetre: checked with the layer summed over the lattice by brute
+    // force, for rays through a lattice point and between points, two splat sizes.
+    for (sigma, cutoff) in [(0.7, 2.0), (1.0, 3.0)] {
+        let opacity = Opacity {
+            sigma,
+            cutoff,
+            ..Default::default()
+        };
+        for offset in [[0.0, 0.0], [0.5, 0.5], [0.3, 0.1]] {
+            let mut layer = 0.0;
+            for i in -10i32..=10 {
+                for j in -10i32..=10 {
+                    let (dx, dy) = (f64::from(i) - offset[0], f64::from(j) - offset[1]);
+                    let r2 = dx * dx + dy * dy;
+                    if r2 <= cutoff * cutoff {
+                        layer += (-0.5 * r2 / (sigma * sigma)).exp();
+                    }
+                }
+            }
+            for a in [0.3f32, 0.02, 0.9] {
+                let per_mm = f64::from(opacity.density(a)) * layer;
+                let want = -(1.0 - f64::from(a)).ln();
+                assert!(
+                    (per_mm - want).abs() < 0.01 * want,
+                    "sigma {sigma}, ray at {offset:?}, opacity {a}: {per_mm} against {want}"
+                );
+            }
+        }
+    }
+    let opacity = Opacity::default();
+    assert_eq!(opacity.density(0.0), 0.0);
+    assert_eq!(opacity.density(f32::NAN), 0.0);
+    let opaque = opacity.density(1.0);
+    assert!(
+        opaque.is_finite() && splat_alpha(opaque, 1.0) > 0.9999,
+        "{opaque}"
+    );
+    assert_eq!(splat_alpha(f32::INFINITY, 0.5), 1.0);
+    assert_eq!(splat_alpha(0.3, 0.0), 0.0);
+    // Twice the reference length: half the density.
+    let two = Opacity {
+        reference_mm: 2.0,
+        ..opacity
+    };
+    assert!((two.density(0.5) * 2.0 - opacity.density(0.5)).abs() < 1e-6);
+}
+
+#[test]
+fn the_view_step_follows_the_spacing_along_the_view() {
+    let l = glam::DMat3::from_diagonal(glam::DVec3::new(1.4, 1.4, 2.5));
+    let step = |d: [f64; 3]| view_step_mm(l, glam::DVec3::from(d)).unwrap();
+    assert!((step([1.0, 0.0, 0.0]) - 1.4).abs() < 1e-12);
+    assert!((step([0.0, -3.0, 0.0]) - 1.4).abs() < 1e-12);
+    assert!((step([0.0, 0.0, 1.0]) - 2.5).abs() < 1e-12);
+    // Diagonally in x and z: 1 / sqrt((0.5 / 1.4^2) + (0.5 / 2.5^2)).
+    let want = 1.0 / (0.5 / 1.96 + 0.5 / 6.25f64).sqrt();
+    assert!((step([1.0, 0.0, 1.0]) - want).abs() < 1e-12);
+    assert!(view_step_mm(l, glam::DVec3::ZERO).is_none());
+    assert!(view_step_mm(l, glam::DVec3::NAN).is_none());
+    assert!(view_step_mm(glam::DMat3::ZERO, glam::DVec3::X).is_none());
+}
+
+/// The definition of a voxel's splat, computed the plain way: the trilinear field (its
+/// own interpolation, the grid clamped at its faces) classified at the eight points a
+/// quarter voxel from the centre, `-ln(1 - a)` averaged, colours weighted by it.
+/// Every voxel of `classified`, the classification of `volume` on the grid `factors` times
+/// finer, against [`fine_cell_oracle`]: a splat where the cell has opacity, with its
+/// density and colour; returns how many voxels were kept and left out.
+fn check_cells(
+    volume: &CpuVolume,
+    tf: &TransferFunction,
+    factors: [u32; 3],
+    classified: &Classified,
+) -> (usize, usize) {
+    let fine = refined_dims(volume.dims, factors).unwrap();
+    assert_eq!(classified.grid.dims(), fine);
+    let scale = Opacity::default().scale() as f32;
+    let (mut kept, mut left) = (0, 0);
+    for id in 0..fine.iter().product::<u32>() {
+        let k = [
+            id % fine[0],
+            id / fine[0] % fine[1],
+            id / (fine[0] * fine[1]),
+        ]
+        .map(|v| v as usize);
+        let (depth, rgb) = fine_cell_oracle(volume, tf, factors, k);
+        let Some(rank) = classified.grid.rank(id) else {
+            assert!(
+                depth <= 0.0,
+                "{factors:?}: {k:?} left out with depth {depth}"
+            );
+            left += 1;
+            continue;
+        };
+        kept += 1;
+        let c = classified.colors[rank as usize];
+        let want = depth as f32 * scale;
+        assert!(
+            (c.density.to_f32() / want - 1.0).abs() < 2e-3,
+            "{factors:?}: {k:?}: density {} against {want}",
+            c.density
+        );
+        for i in 0..3 {
+            assert!(
+                (f64::from(c.rgb[i]) - rgb[i] * 255.0).abs() <= 0.6,
+                "{factors:?}: {k:?}: {:?} against {rgb:?}",
+                c.rgb
+            );
+        }
+    }
+    (kept, left)
+}
+
+/// The mean extinction and colour over the cell of voxel `k` of the grid `factors` times
+/// finer than `volume`'s, by plain trilinear interpolation at the eight quarter points.
+fn fine_cell_oracle(
+    volume: &CpuVolume,
+    tf: &TransferFunction,
+    factors: [u32; 3],
+    k: [usize; 3],
+) -> (f64, [f64; 3]) {
+    let n = volume.dims.map(|n| n as f64);
+    let at = |p: [f64; 3]| {
+        let p: [f64; 3] = std::array::from_fn(|a| p[a].clamp(0.0, n[a] - 1.0));
+        let i: [usize; 3] = std::array::from_fn(|a| p[a].floor() as usize);
+        let mut sum = 0.0;
+        for corner in 0..8usize {
+            let mut w = 1.0;
+            let mut q = [0usize; 3];
+            for a in 0..3 {
+                let t = p[a] - i[a] as f64;
+                let up = corner >> a & 1 == 1;
+                q[a] = (i[a] + usize::from(up)).min(volume.dims[a] as usize - 1);
+                w *= if up { t } else { 1.0 - t };
+            }
+            let [nx, ny, _] = volume.dims.map(|n| n as usize);
+            sum += w * f64::from(volume.values.at(q[0] + nx * (q[1] + ny * q[2])));
+        }
+        sum
+    };
+    let (mut depth, mut rgb) = (0.0, [0.0; 3]);
+    for corner in 0..8 {
+        let p: [f64; 3] = std::array::from_fn(|a| {
+            let f = f64::from(factors[a]);
+            (k[a] as f64 + 0.5 + if corner >> a & 1 == 1 { 0.25 } else { -0.25 }) / f - 0.5
+        });
+        let c = tf.sample(at(p) as f32).map(f64::from);
+        let d = -(1.0 - c[3].min(1.0)).ln();
+        depth += d / 8.0;
+        for i in 0..3 {
+            rgb[i] += d / 8.0 * c[i];
+        }
+    }
+    (
+        depth,
+        rgb.map(|v| if depth > 0.0 { v / depth } else { 0.0 }),
+    )
+}
+
+#[test]
+fn a_splat_carries_its_cells_classified_field() {
+    // Values rising along every axis with a thin bright plane, through a ramp: voxels whose
+    // centre is transparent but whose cell reaches into the ramp become splats, and each
+    // splat's density and colour are the cell's, checked against the plain computation.
+    let dims = [5u32, 4, 6];
+    let values: Vec<f32> = (0..5 * 4 * 6)
+        .map(|id| {
+            let k = [id % 5, id / 5 % 4, id / 20];
+            let plane = if k[2] == 3 { 180.0 } else { 0.0 };
+            (k[0] * 9 + k[1] * 4 + k[2] * 6) as f32 + plane
+        })
+        .collect();
+    let volume = CpuVolume {
+        dims,
+        spacing: [0.5, 1.0, 2.0],
+        origin: [0.0; 3],
+        direction: DMat3::IDENTITY,
+        values: values.into(),
+    };
+    let tf = TransferFunction::new(vec![
+        (60.0, [1.0, 0.2, 0.1, 0.0]),
+        (150.0, [0.2, 0.9, 1.0, 0.7]),
+    ]);
+    let classified = classify(&volume, &tf, 0.0).unwrap();
+    let (kept, _) = check_cells(&volume, &tf, [1; 3], &classified);
+    // Centres at or above 60: k.x * 9 + k.y * 4 + k.z * 6 >= 60, or on the plane.
+    let centres = (0..5 * 4 * 6u32)
+        .filter(|id| {
+            let k = [id % 5, id / 5 % 4, id / 20];
+            k[0] * 9 + k[1] * 4 + k[2] * 6 > 60 || k[2] == 3
+        })
+        .count();
+    assert!(
+        kept > centres,
+        "cells reach past their centres: {kept} against {centres}"
+    );
+}
+
+#[test]
+fn a_refined_splat_carries_its_fine_cells_field() {
+    // The same kind of field on a small grid, refined unevenly along the axes: every fine
+    // voxel's splat against the plain computation at its own quarter points, the fine
+    // voxels tiling the coarse grid's box.
+    let dims = [4u32, 3, 5];
+    let values: Vec<f32> = (0..4 * 3 * 5)
+        .map(|id| {
+            let k = [id % 4, id / 4 % 3, id / 12];
+            let plane = if k[1] == 1 { 140.0 } else { 0.0 };
+            (k[0] * 17 + k[1] * 5 + k[2] * 11) as f32 + plane
+        })
+        .collect();
+    let volume = CpuVolume {
+        dims,
+        spacing: [1.0, 1.0, 2.5],
+        origin: [0.0; 3],
+        direction: DMat3::IDENTITY,
+        values: values.into(),
+    };
+    let tf = TransferFunction::new(vec![
+        (50.0, [1.0, 0.2, 0.1, 0.0]),
+        (160.0, [0.2, 0.9, 1.0, 0.8]),
+    ]);
+    let options = ClassifyOptions {
+        min_opacity: 0.0,
+        ..Default::default()
+    };
+    for factors in [[2u32, 3, 1], [1, 2, 4], [3, 3, 3]] {
+        let classified = classify_refined(&volume, &tf, &options, factors).unwrap();
+        let (kept, left) = check_cells(&volume, &tf, factors, &classified);
+        assert!(
+            kept > 10 && left > 10,
+            "{factors:?}: {kept} kept, {left} left"
+        );
+    }
+    // Factors of one: the own grid's classification.
+    let own = classify_with(&volume, &tf, &options).unwrap();
+    let same = classify_refined(&volume, &tf, &options, [1, 1, 1]).unwrap();
+    assert_eq!(own.grid.dims(), same.grid.dims());
+    assert_eq!(own.colors, same.colors);
+}
+
+#[test]
+fn a_refined_gradient_is_the_fields_along_the_fine_axes() {
+    // A field linear in x and z: its gradient is the same everywhere inside, and in the
+    // fine grid's index space each component shrinks by its axis's factor.
+    let dims = [6u32, 5, 7];
+    let values: Vec<f32> = (0..6 * 5 * 7)
+        .map(|id| {
+            let k = [id % 6, id / 6 % 5, id / 30];
+            (3 * k[0] + 4 * k[2]) as f32
+        })
+        .collect();
+    let volume = CpuVolume {
+        dims,
+        spacing: [1.0; 3],
+        origin: [0.0; 3],
+        direction: DMat3::IDENTITY,
+        values: values.into(),
+    };
+    let factors = [2u32, 1, 4];
+    let n = refined_gradient_snorm8(&volume, factors, [5, 2, 13]).unwrap();
+    let n = n.map(|v| f32::from(v as i8) / 127.0);
+    let want = glam::Vec3::new(-3.0 / 2.0, 0.0, -4.0 / 4.0).normalize();
+    for a in 0..3 {
+        assert!((n[a] - want[a]).abs() < 0.02, "{n:?} against {want}");
+    }
+    assert_eq!(
+        refined_gradient_snorm8(&volume, [1; 3], [2, 2, 2]),
+        gradient_snorm8(&volume, [2, 2, 2])
+    );
+}
+
+#[test]
+fn a_coarser_level_keeps_each_blocks_optical_depth_and_emission() {
+    // A 5 x 4 x 3 grid (odd along x and z) of varied splats, some left out: each block's
+    // splat, computed plainly from its children.
+    let dims = [5u32, 4, 3];
+    let mut ids = Vec::new();
+    let mut colors = Vec::new();
+    for id in 0..60u32 {
+        if id % 3 == 1 {
+            continue;
+        }
+        ids.push(id);
+        colors.push(SplatColor {
+            rgb: [
+                (id * 37 % 256) as u8,
+                (id * 91 % 256) as u8,
+                (id * 13 % 256) as u8,
+            ],
+            density: half::f16::from_f32(0.05 + 0.07 * (id % 5) as f32),
+        });
+    }
+    let fine = Classified {
+        grid: SparseGrid::from_sorted_ids(dims, &ids).unwrap(),
+        colors,
+    };
+    let coarse = fine.halved().unwrap();
+    assert_eq!(coarse.grid.dims(), [3, 2, 2]);
+    for block in 0..12u32 {
+        let b = [block % 3, block / 3 % 2, block / 6];
+        let (mut d, mut rgb, mut count) = (0.0f64, [0.0f64; 3], 0);
+        for id in 0..60u32 {
+            let k = [id % 5, id / 5 % 4, id / 20];
+            if (0..3).any(|a| k[a] / 2 != b[a]) {
+                continue;
+            }
+            count += 1;
+            if let Some(rank) = fine.grid.rank(id) {
+                let c = fine.colors[rank as usize];
+                let dc = f64::from(c.density.to_f32());
+                d += dc;
+                for (sum, v) in rgb.iter_mut().zip(c.rgb) {
+                    *sum += dc * f64::from(v);
+                }
+            }
+        }
+        let Some(rank) = coarse.grid.rank(block) else {
+            assert_eq!(d, 0.0, "block {b:?}");
+            continue;
+        };
+        let c = coarse.colors[rank as usize];
+        let want = d / f64::from(count);
+        assert!(
+            (f64::from(c.density.to_f32()) / want - 1.0).abs() < 1e-3,
+            "block {b:?}: {} against {want}",
+            c.density
+        );
+        for (got, sum) in c.rgb.iter().zip(rgb) {
+            assert!((f64::from(*got) - sum / d).abs() <= 0.5, "block {b:?}");
+        }
+    }
+}
+
+#[test]
+fn the_shell_keeps_the_surface_of_an_opaque_block() {
+    // A 6^3 grid with an opaque 4^3 block inside: its 2^3 core has only opaque neighbours.
+    let values: Voxels = (0..216u32)
+        .map(|id| {
+            let k = [id % 6, id / 6 % 6, id / 36];
+            if k.iter().all(|&c| (1..=4).contains(&c)) {
+                1000.0
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    let volume = CpuVolume {
+        dims: [6; 3],
+        spacing: [1.0; 3],
+        origin: [0.0; 3],
+        direction: DMat3::IDENTITY,
+        values,
+    };
+    let tf = TransferFunction::ramp(100.0, 200.0, [1.0; 4]);
+    let full = classify(&volume, &tf, 0.0).unwrap();
+    let shell_at = |high| {
+        let options = ClassifyOptions {
+            min_opacity: 0.0,
+            shell: Some(high),
+            ..Default::default()
+        };
+        classify_with(&volume, &tf, &options).unwrap()
+    };
+    let shell = shell_at(0.5);
+    // The block, and around it the voxels whose cells reach into it.
+    assert!(full.grid.len() > 64, "{}", full.grid.len());
+    assert_eq!(
+        shell.grid.len(),
+        full.grid.len() - 8,
+        "the 2x2x2 core is left out"
+    );
+    let core = 2 + 6 * (2 + 6 * 2);
+    assert!(full.grid.contains(core) && !shell.grid.contains(core));
+    assert_eq!(shell.colors.len(), shell.grid.len());
+    // With `high` at full opacity every visible voxel is on the shell.
+    assert_eq!(shell_at(1.0).grid.len(), full.grid.len());
+}
+
+#[test]
+fn a_uniform_field_gives_its_own_opacity_and_clear_space_no_splat() {
+    let mut values = vec![110.0f32; 24];
+    values[..8].fill(-5.0);
+    let volume = CpuVolume {
+        dims: [2, 3, 4],
+        spacing: [1.0; 3],
+        origin: [0.0; 3],
+        direction: DMat3::IDENTITY,
+        values: values.into(),
+    };
+    let classified = classify(
+        &volume,
+        &TransferFunction::ramp(100.0, 200.0, [1.0; 4]),
+        0.0,
+    )
+    .unwrap();
+    // The last voxel's cell lies wholly in the value 110.
+    let c = classified.colors[classified.grid.rank(23).unwrap() as usize];
+    // Value 110 throughout the cell: opacity 0.1 per millimetre, white.
+    assert_eq!(c.rgb, [255; 3]);
+    assert!((c.density.to_f32() / Opacity::default().density(0.1) - 1.0).abs() < 1e-3);
+    let [r, _, _, a] = c.premultiplied(1.0);
+    assert!((r - a).abs() < 1e-6, "premultiplied");
+    let all_clear = CpuVolume {
+        values: vec![-5.0; 24].into(),
+        ..volume
+    };
+    let none = classify(
+        &all_clear,
+        &TransferFunction::ramp(100.0, 200.0, [1.0; 4]),
+        0.0,
+    )
+    .unwrap();
+    assert!(none.grid.is_empty());
+}

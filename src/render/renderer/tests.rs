@@ -1,0 +1,61 @@
+use super::*;
+
+#[test]
+fn refined_voxels_tile_the_coarse_box() {
+    // Fine voxel j of coarse voxel k sits at k - 1/2 + (j + 1/2) / f: the first fine
+    // centre half a fine voxel inside the coarse box, the last as far from its other end.
+    let m = refinement([2, 3, 1]);
+    let first = m.transform_point3(DVec3::ZERO);
+    assert!((first - DVec3::new(-0.25, -1.0 / 3.0, 0.0)).length() < 1e-12);
+    let last = m.transform_point3(DVec3::new(9.0, 5.0, 3.0));
+    assert!((last - DVec3::new(4.25, 1.0 + 1.0 / 3.0, 3.0)).length() < 1e-12);
+}
+
+#[test]
+fn refinement_brings_voxels_to_about_a_pixel_within_its_caps() {
+    // To at most 1.5 pixels: 1.4 pixels apart stays, 1.6 doubles, 3.5 triples, 3.0
+    // doubles.
+    assert_eq!(refine_factors([100; 3], [1.4, 1.5, 0.3]), None);
+    assert_eq!(refine_factors([100; 3], [1.6, 3.5, 3.0]), Some([2, 3, 2]));
+    // At most MAX_REFINE an axis, and 2048 voxels along it.
+    assert_eq!(refine_factors([10; 3], [50.0, 1.0, 1.0]), Some([8, 1, 1]));
+    assert_eq!(
+        refine_factors([1000, 4, 4], [5.0, 1.0, 1.0]),
+        Some([2, 1, 1])
+    );
+    // At most MAX_REFINED_VOXELS in all: the largest factor goes down first.
+    let f = refine_factors([512, 512, 512], [4.0, 4.0, 2.0]).unwrap();
+    let count: u64 = (0..3).map(|a| 512 * u64::from(f[a])).product();
+    assert!(count <= MAX_REFINED_VOXELS, "{f:?}");
+    assert!(f.iter().all(|&f| f >= 1) && f != [1; 3], "{f:?}");
+    // Not a number: no refinement.
+    assert_eq!(refine_factors([10; 3], [f64::NAN; 3]), None);
+}
+
+#[test]
+fn the_detail_follows_the_pixels_a_voxel_spans() {
+    // A 100 mm cube of 50 voxels (2 mm) seen from 400 mm at 35 degrees.
+    let geometry = |spacing: f64| {
+        VolumeGeometry::new([50; 3], glam::DAffine3::from_scale(DVec3::splat(spacing))).unwrap()
+    };
+    let camera = SceneCamera::look_at(DVec3::new(50.0, 50.0, -400.0), DVec3::splat(50.0));
+    let view = |pixels: u32| ViewSetup::new(&camera, (pixels, pixels), None).unwrap();
+    let apart = |g: &VolumeGeometry, v: &ViewSetup| pixels_apart(g, v).unwrap()[0];
+    // About 2 pixels apart at 256: refined 2 x 2 x 2.
+    let g = geometry(2.0);
+    let a = apart(&g, &view(256));
+    assert!((1.9..2.1).contains(&a), "{a}");
+    assert_eq!(detail_for(&g, &view(256)), Detail::Refined([2; 3]));
+    // Under half a pixel apart at 48: a level coarser, whose voxels are under a pixel
+    // apart; the next would be more.
+    let a = apart(&g, &view(48));
+    assert!((0.25..0.5).contains(&a), "{a}");
+    assert_eq!(detail_for(&g, &view(48)), Detail::Level(1));
+    // About a pixel apart: the own grid.
+    assert_eq!(detail_for(&g, &view(160)), Detail::Level(0));
+    assert_eq!(detail_for(&g, &view(64)), Detail::Level(0));
+    // The eye inside the box: the own grid.
+    let inside = SceneCamera::look_at(DVec3::splat(50.0), DVec3::new(50.0, 50.0, 400.0));
+    let v = ViewSetup::new(&inside, (256, 256), None).unwrap();
+    assert_eq!(detail_for(&g, &v), Detail::Level(0));
+}
