@@ -28,15 +28,15 @@ enum Command {
     /// Compare every ordering's run time and image error along a camera path.
     Orderings(cli::orderings::OrderingsArgs),
     /// Render a scene file (the built-in shoulder scene without one) to a PNG.
-    Render(cli::scenes::RenderArgs),
+    Render(cli::render::RenderArgs),
     /// Pick what lies under a pixel: prints the hit as JSON (or that nothing was hit).
-    Pick(cli::scenes::PickArgs),
+    Pick(cli::pick::PickArgs),
     /// Measure a distance or an angle between picked pixels or given points, as JSON.
-    Measure(cli::scenes::MeasureArgs),
+    Measure(cli::measure::MeasureArgs),
     /// Open a viewer window: orbit, pick, select and move meshes, measure, undo, save the plan,
     /// switch orderings and transfer functions.
     #[command(after_help = splatscene::viewer::keys_help())]
-    View(cli::scenes::ViewerArgs),
+    View(cli::view::ViewerArgs),
     /// Render the pictures a manifest lists, many cases and views in one process (volumes
     /// classified once per job), resumable, and sharded over a Slurm array with --shard.
     Batch(cli::batch::BatchArgs),
@@ -53,10 +53,10 @@ fn main() -> Result<()> {
     match cli.command {
         Command::Order(args) => cli::order::run_order(args),
         Command::Orderings(args) => cli::orderings::run_orderings(args),
-        Command::Render(args) => cli::scenes::run_render(args),
-        Command::Pick(args) => cli::scenes::run_pick(args),
-        Command::Measure(args) => cli::scenes::run_measure(args),
-        Command::View(args) => cli::scenes::run_viewer(args),
+        Command::Render(args) => cli::render::run_render(args),
+        Command::Pick(args) => cli::pick::run_pick(args),
+        Command::Measure(args) => cli::measure::run_measure(args),
+        Command::View(args) => cli::view::run_viewer(args),
         Command::Info(args) => cli::info::run_info(args),
         Command::Batch(args) => cli::batch::run_batch(args),
     }

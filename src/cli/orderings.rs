@@ -96,7 +96,7 @@ pub(crate) fn run_orderings(args: OrderingsArgs) -> Result<()> {
     std::fs::create_dir_all(&args.out_dir)
         .with_context(|| format!("creating {}", args.out_dir.display()))?;
     let (name, volume, tf, classified) = load_for_report(&args)?;
-    super::scenes::refuse_inputs(
+    super::render::refuse_inputs(
         ["png", "svg"].map(|e| args.out_dir.join(format!("error-vs-time.{e}"))),
     )?;
     let geometry = volume.geometry()?;

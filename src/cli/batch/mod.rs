@@ -19,7 +19,7 @@ use splatscene::scene::{NodeContent, NodeId, Scene};
 
 use splatscene::pick::measure::draw_scene_measurements;
 
-use super::scenes::{depth_files, figure_image};
+use super::render::{depth_files, figure_image};
 use index::{CameraRecord, FileHash, Index, InputRecord, JobRecord, OutputRecord, Status, Timings};
 use manifest::{Content, PlannedJob, ViewKind};
 

@@ -273,7 +273,7 @@ impl PlannedJob {
             files.push(item.image.clone());
             if let Some(d) = &item.depth {
                 files.push(d.clone());
-                files.push(super::super::scenes::sidecar_of(d));
+                files.push(super::super::render::sidecar_of(d));
             }
         }
         files
@@ -751,7 +751,7 @@ fn plan_job(position: usize, spec: JobSpec, base: &Path) -> Result<PlannedJob, V
     }
     // A depth image's calibration is written beside it with `.json`.
     if let Some(depth) = &spec.depth
-        && super::super::scenes::sidecar_of(Path::new(depth))
+        && super::super::render::sidecar_of(Path::new(depth))
             .file_name()
             .is_some_and(|n| is_index_name(&n.to_string_lossy()))
     {
@@ -1014,7 +1014,7 @@ fn check_outputs(jobs: &[PlannedJob], problems: &mut Vec<Problem>) {
             let mut files = vec![("out", normal(&item.image))];
             if let Some(d) = &item.depth {
                 files.push(("depth", normal(d)));
-                files.push(("depth", normal(&super::super::scenes::sidecar_of(d))));
+                files.push(("depth", normal(&super::super::render::sidecar_of(d))));
             }
             for (key, file) in files {
                 let what = format!(

@@ -1,24 +1,23 @@
-//! The commands that look at a scene: `render`, `pick` and `measure`.
+//! `splatscene render`: figures of a scene, with annotations and calibrated depth, and what
+//! every command that writes images shares (output names, depth files, refusing to write
+//! over an input).
 
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context, Result, bail};
-use glam::DVec3;
-use serde_json::{Value, json};
+use anyhow::{Result, bail};
+use serde_json::Value;
 
 use splatscene::annotate::{Annotations, Label, annotate_image};
 use splatscene::order::Ordering;
-use splatscene::pick::measure::{
-    MarkerStyle, MeasureKind, Measurement, annotate, draw_scene_measurements, label_text,
-};
-use splatscene::pick::{PickOptions, Picker, surface_distances};
+use splatscene::pick::measure::draw_scene_measurements;
+use splatscene::pick::surface_distances;
 use splatscene::render::{
     Compositor, DepthImage, DepthMode, FrameOptions, FrameReport, GpuContext, RenderError,
-    Renderer, ViewSetup, encode_png, frame_to_rgba8,
+    Renderer, encode_png, frame_to_rgba8,
 };
 use splatscene::scene::{Scene, SceneCamera};
 
-use super::args::{parse_f64x3, parse_opacity, parse_u32x2};
+use super::args::parse_opacity;
 use super::files::write_replacing;
 use super::input::{View, ViewArgs};
 
@@ -82,7 +81,7 @@ pub struct AnnotateArgs {
 
 impl AnnotateArgs {
     /// The annotations asked for, or `None` for a plain image.
-    fn parts(&self) -> Result<Option<Annotations>> {
+    pub(crate) fn parts(&self) -> Result<Option<Annotations>> {
         let mut parts = match &self.annotate {
             Some(list) => {
                 Annotations::parse_parts(list).map_err(|e| anyhow::anyhow!("--annotate: {e}"))?
@@ -105,7 +104,7 @@ impl AnnotateArgs {
 }
 
 /// The image of a screenshot, annotated when asked, with what was drawn said on stderr.
-fn figure(
+pub(crate) fn figure(
     shot: &splatscene::render::Screenshot,
     scene: &Scene,
     camera: &SceneCamera,
@@ -153,46 +152,6 @@ pub(crate) fn figure_image(
         None => None,
     };
     Ok((image, drawn))
-}
-
-/// `splatscene pick`.
-#[derive(clap::Args)]
-pub struct PickArgs {
-    #[command(flatten)]
-    view: ViewArgs,
-    /// The pixel X,Y (0,0 is the top-left pixel).
-    #[arg(long, value_parser = parse_u32x2)]
-    pixel: [u32; 2],
-    /// Opacity a voxel must exceed to be hit (0 to 1).
-    #[arg(long, default_value_t = 0.1, value_parser = parse_opacity)]
-    opacity: f32,
-    /// Pick meshes only.
-    #[arg(long)]
-    meshes_only: bool,
-}
-
-/// `splatscene measure`.
-#[derive(clap::Args)]
-pub struct MeasureArgs {
-    #[command(flatten)]
-    view: ViewArgs,
-    /// Pixels X,Y to pick, in order: two for a distance, three for the angle at the second,
-    /// four for the angle between the directed lines from the first to the second and from
-    /// the third to the fourth (0 to 180 degrees).
-    #[arg(long = "pixel", value_parser = parse_u32x2, required = true)]
-    pixels: Vec<[u32; 2]>,
-    /// World points X,Y,Z to measure instead of picking pixels.
-    #[arg(long = "point", value_parser = parse_f64x3, allow_hyphen_values = true, conflicts_with = "pixels")]
-    points: Vec<[f64; 3]>,
-    /// Opacity a voxel must exceed to be hit (0 to 1).
-    #[arg(long, default_value_t = 0.1, value_parser = parse_opacity)]
-    opacity: f32,
-    /// Also render the scene with the measurement drawn in and its value written beside it,
-    /// to this PNG.
-    #[arg(long)]
-    out: Option<PathBuf>,
-    #[command(flatten)]
-    annotate: AnnotateArgs,
 }
 
 pub fn run_render(args: RenderArgs) -> Result<()> {
@@ -488,114 +447,6 @@ fn context_for(compositor: Compositor, scene: &Scene) -> Result<Option<GpuContex
     }
 }
 
-fn check_pixel(pixel: [u32; 2], size: (u32, u32)) -> Result<()> {
-    if pixel[0] >= size.0 || pixel[1] >= size.1 {
-        bail!(
-            "pixel {},{} is outside the {}x{} image",
-            pixel[0],
-            pixel[1],
-            size.0,
-            size.1
-        );
-    }
-    Ok(())
-}
-
-pub fn run_pick(args: PickArgs) -> Result<()> {
-    let view = args.view.load()?;
-    let camera = view.single_camera()?;
-    let View { loaded, size, .. } = view;
-    check_pixel(args.pixel, size)?;
-    let scene = &loaded.scene;
-    let view = ViewSetup::new(&camera, size, scene.bounds())?;
-    let options = PickOptions {
-        opacity_threshold: args.opacity,
-        volumes: !args.meshes_only,
-    };
-    let hit = Picker::new(scene).pick_pixel(scene, &view, args.pixel[0], args.pixel[1], &options);
-    let hit = hit.map(|h| h.to_json(scene));
-    let out = json!({ "pixel": args.pixel, "size": [size.0, size.1], "hit": hit });
-    println!("{}", serde_json::to_string_pretty(&out)?);
-    Ok(())
-}
-
-pub fn run_measure(args: MeasureArgs) -> Result<()> {
-    let view = args.view.load()?;
-    let camera = view.single_camera()?;
-    let View {
-        mut loaded, size, ..
-    } = view;
-    let scene = &loaded.scene;
-    let view = ViewSetup::new(&camera, size, scene.bounds())?;
-    let options = PickOptions {
-        opacity_threshold: args.opacity,
-        volumes: true,
-    };
-    let mut points = Vec::new();
-    let mut hits = Vec::new();
-    if args.points.is_empty() {
-        let picker = Picker::new(scene);
-        for &pixel in &args.pixels {
-            check_pixel(pixel, size)?;
-            let hit = picker
-                .pick_pixel(scene, &view, pixel[0], pixel[1], &options)
-                .with_context(|| {
-                    format!("nothing to measure at pixel {},{}", pixel[0], pixel[1])
-                })?;
-            points.push(hit.point());
-            hits.push(hit.to_json(scene));
-        }
-    } else {
-        points.extend(args.points.iter().map(|p| DVec3::from(*p)));
-    }
-    let kind = match points.len() {
-        2 => MeasureKind::Distance,
-        3 => MeasureKind::Angle,
-        4 => MeasureKind::LineAngle,
-        n => bail!("give two, three or four points (got {n})"),
-    };
-    // Checked as every measurement is: finite, within reach, and making an angle.
-    let measurement = Measurement::new(kind, &points).map_err(anyhow::Error::msg)?;
-    let mut out = serde_json::to_value(&measurement)?;
-    if let Some(object) = out.as_object_mut() {
-        object.insert("frame".into(), "RAS".into());
-        object.insert("hits".into(), Value::Array(hits));
-    }
-    println!("{}", serde_json::to_string_pretty(&out)?);
-    if let Some(path) = &args.out {
-        refuse_inputs([path.clone()])?;
-        let style = MarkerStyle::for_scene(&loaded.scene);
-        let mut labels = draw_scene_measurements(&mut loaded.scene).map_err(anyhow::Error::msg)?;
-        annotate(&mut loaded.scene, &measurement, &style)?;
-        let options = FrameOptions {
-            background: loaded.background,
-            ..FrameOptions::default()
-        };
-        let ctx = GpuContext::headless()?;
-        let shot = Renderer::new().screenshot(&ctx, &loaded.scene, &camera, size, &options)?;
-        // The value is always written beside the measurement; the other parts as asked.
-        let mut parts = args
-            .annotate
-            .parts()?
-            .unwrap_or_else(|| Annotations::parse_parts("measurements").unwrap_or_default());
-        parts.measurements = true;
-        labels.push(measurement_label(&measurement));
-        let image = figure(&shot, &loaded.scene, &camera, Some(&parts), &labels)?;
-        write_replacing(path, &encode_png(&image)?)?;
-        eprintln!("wrote {}", path.display());
-    }
-    Ok(())
-}
-
-/// The text of a measurement and where it goes: the middle of a distance, the vertex of an
-/// angle, the middle of the first line of a line angle.
-fn measurement_label(m: &Measurement) -> Label {
-    Label {
-        at: m.label_anchor(),
-        text: label_text(m, None),
-    }
-}
-
 /// Whether two output paths name one file, also when reached two ways (`./`, `..`, links,
 /// and links whose target does not exist yet, which writing would create).
 fn same_file(a: &Path, b: &Path) -> bool {
@@ -612,67 +463,4 @@ fn same_file(a: &Path, b: &Path) -> bool {
         })
     };
     a == b || matches!((resolve(a), resolve(b)), (Some(x), Some(y)) if x == y)
-}
-
-/// `splatscene view`.
-#[derive(clap::Args)]
-pub struct ViewerArgs {
-    #[command(flatten)]
-    view: ViewArgs,
-    /// Folder for screenshots taken with the S key.
-    #[arg(long, default_value = ".")]
-    screenshots: PathBuf,
-    /// Draw every frame in full, also while the camera moves (by default, where a full frame
-    /// takes over 50 ms, a drag or a zoom draws the volumes at half resolution, about an eighth
-    /// of the splats).
-    #[arg(long)]
-    no_preview: bool,
-    /// The annotations drawn over the picture: marker, letters, scale, or all (the default);
-    /// the A key turns them off and on.
-    #[arg(long, default_value = "all", value_name = "PARTS")]
-    annotate: String,
-    /// No annotations until the A key is pressed.
-    #[arg(long, conflicts_with = "annotate")]
-    no_annotate: bool,
-    /// Who composites the splats: auto (the CPU tile compositor where the GPU adapter is
-    /// itself a CPU), gpu or cpu.
-    #[arg(long, default_value = "auto")]
-    compositor: Compositor,
-}
-
-pub fn run_viewer(args: ViewerArgs) -> Result<()> {
-    let annotations = if args.no_annotate {
-        None
-    } else {
-        Some(
-            Annotations::parse_parts(&args.annotate)
-                .map_err(|e| anyhow::anyhow!("--annotate: {e}"))?,
-        )
-    };
-    let scene_path = args.view.input.scene_path();
-    let view = args.view.load()?;
-    let camera = view.single_camera()?;
-    let View {
-        mut loaded,
-        size,
-        file,
-        ..
-    } = view;
-    loaded.scene.camera = Some(camera);
-    let options = splatscene::viewer::ViewerOptions {
-        size,
-        screenshot_dir: args.screenshots,
-        background: loaded.background.unwrap_or([0.06, 0.07, 0.09]),
-        preview_while_moving: !args.no_preview,
-        scene_file: Some(file),
-        ordering: loaded.ordering,
-        annotations,
-        compositor: args.compositor,
-        scene_path,
-    };
-    eprintln!(
-        "drag to orbit, right drag to pan, wheel to zoom, click to pick and select a mesh; H in the window (or view --help) lists every key"
-    );
-    splatscene::viewer::run(loaded.scene, options)?;
-    Ok(())
 }

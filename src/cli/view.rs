@@ -1,0 +1,72 @@
+//! `splatscene view`: the viewer window.
+
+use std::path::PathBuf;
+
+use anyhow::Result;
+
+use splatscene::annotate::Annotations;
+use splatscene::render::Compositor;
+
+use super::input::{View, ViewArgs};
+
+/// `splatscene view`.
+#[derive(clap::Args)]
+pub struct ViewerArgs {
+    #[command(flatten)]
+    view: ViewArgs,
+    /// Folder for screenshots taken with the S key.
+    #[arg(long, default_value = ".")]
+    screenshots: PathBuf,
+    /// Draw every frame in full, also while the camera moves (by default, where a full frame
+    /// takes over 50 ms, a drag or a zoom draws the volumes at half resolution, about an eighth
+    /// of the splats).
+    #[arg(long)]
+    no_preview: bool,
+    /// The annotations drawn over the picture: marker, letters, scale, or all (the default);
+    /// the A key turns them off and on.
+    #[arg(long, default_value = "all", value_name = "PARTS")]
+    annotate: String,
+    /// No annotations until the A key is pressed.
+    #[arg(long, conflicts_with = "annotate")]
+    no_annotate: bool,
+    /// Who composites the splats: auto (the CPU tile compositor where the GPU adapter is
+    /// itself a CPU), gpu or cpu.
+    #[arg(long, default_value = "auto")]
+    compositor: Compositor,
+}
+pub fn run_viewer(args: ViewerArgs) -> Result<()> {
+    let annotations = if args.no_annotate {
+        None
+    } else {
+        Some(
+            Annotations::parse_parts(&args.annotate)
+                .map_err(|e| anyhow::anyhow!("--annotate: {e}"))?,
+        )
+    };
+    let scene_path = args.view.input.scene_path();
+    let view = args.view.load()?;
+    let camera = view.single_camera()?;
+    let View {
+        mut loaded,
+        size,
+        file,
+        ..
+    } = view;
+    loaded.scene.camera = Some(camera);
+    let options = splatscene::viewer::ViewerOptions {
+        size,
+        screenshot_dir: args.screenshots,
+        background: loaded.background.unwrap_or([0.06, 0.07, 0.09]),
+        preview_while_moving: !args.no_preview,
+        scene_file: Some(file),
+        ordering: loaded.ordering,
+        annotations,
+        compositor: args.compositor,
+        scene_path,
+    };
+    eprintln!(
+        "drag to orbit, right drag to pan, wheel to zoom, click to pick and select a mesh; H in the window (or view --help) lists every key"
+    );
+    splatscene::viewer::run(loaded.scene, options)?;
+    Ok(())
+}
