@@ -427,7 +427,10 @@ fn meshes_from_the_command_line_take_units_and_frames_and_a_wrong_scale_is_named
         "--out",
         s(&out),
     ]);
-    assert!(message.contains("RAS or LPS"), "{message}");
+    assert!(
+        message.contains("--mesh-frame") && message.contains("neither RAS nor LPS"),
+        "{message}"
+    );
     let message = fails(&["render", s(&nifti), "--mesh-units", "m", "--out", s(&out)]);
     assert!(message.contains("--mesh"), "{message}");
 }

@@ -11,12 +11,14 @@ use serde::Deserialize;
 
 use splatscene::camera::Camera;
 use splatscene::scene::file::{
-    CameraSpec, LoadedScene, MeshSpec, SceneFile, TransformSpec, VolumeSpec, named_view_camera,
+    CameraSpec, LoadedScene, MeshSpec, SceneFile, TransformSpec, Units, VolumeSpec,
+    named_view_camera,
 };
 use splatscene::scene::patient::NamedView;
+use splatscene::scene::patient::OrientationCode;
 use splatscene::scene::{Projection, SceneCamera};
-use splatscene::volume::VolumeError;
-use splatscene::volume::detect::detect_format;
+use splatscene::volume::detect::{CoordinateFrame, NiftiTransform, detect_format};
+use splatscene::volume::{ScalarFormat, VolumeError};
 
 use super::args::{
     parse_f32x2, parse_f64x2, parse_f64x3, parse_finite_f32, parse_size, parse_u32x3,
@@ -41,24 +43,17 @@ pub struct VolumeChoices {
     /// NIfTI: the transform that places the grid when both are set: sform (default, as
     /// nibabel), qform, or itk (ITK's and 3D Slicer's rule: the sform only when its code is
     /// 1, scanner, else the qform).
-    #[arg(long, value_parser = ["sform", "qform", "itk"])]
-    pub nifti_transform: Option<String>,
+    #[arg(long)]
+    pub nifti_transform: Option<NiftiTransform>,
     /// VTK, .dat, or NRRD without an anatomical space: the patient frame of the file's
     /// coordinates, RAS (default) or LPS (as ITK-based tools write them).
-    #[arg(long, value_parser = ["RAS", "LPS"])]
-    pub coordinate_frame: Option<String>,
+    #[arg(long)]
+    pub coordinate_frame: Option<CoordinateFrame>,
 }
 
 impl VolumeChoices {
     /// The loading options these flags make.
     pub fn options(&self) -> Result<splatscene::volume::detect::LoadOptions> {
-        fn parse<T: std::str::FromStr<Err = String>>(value: &Option<String>) -> Result<Option<T>> {
-            value
-                .as_deref()
-                .map(str::parse)
-                .transpose()
-                .map_err(anyhow::Error::msg)
-        }
         Ok(splatscene::volume::detect::LoadOptions {
             series: self
                 .series
@@ -66,8 +61,8 @@ impl VolumeChoices {
                 .map(splatscene::volume::detect::SeriesChoice),
             skip_unreadable: self.skip_unreadable,
             frame: self.frame,
-            nifti_transform: parse(&self.nifti_transform)?,
-            coordinate_frame: parse(&self.coordinate_frame)?,
+            nifti_transform: self.nifti_transform,
+            coordinate_frame: self.coordinate_frame,
         })
     }
 }
@@ -89,11 +84,11 @@ pub struct InputArgs {
     mesh_transforms: Vec<String>,
     /// Length unit of the mesh files: mm (default), cm or m; once, or once per --mesh.
     #[arg(long = "mesh-units")]
-    mesh_units: Vec<String>,
+    mesh_units: Vec<Units>,
     /// Patient frame of the mesh files: RAS (default) or LPS (3D Slicer's export); once, or
     /// once per --mesh.
     #[arg(long = "mesh-frame")]
-    mesh_frames: Vec<String>,
+    mesh_frames: Vec<CoordinateFrame>,
     /// Transfer function preset for every volume: ct-bone, ct-soft-tissue, ct-metal,
     /// mr-default (default: chosen from the data, and said on stderr).
     #[arg(long)]
@@ -112,7 +107,7 @@ pub struct InputArgs {
     dims: Option<[u32; 3]>,
     /// Raw volume: scalar type (u8, i16le, u16be, f32...).
     #[arg(long)]
-    scalar: Option<String>,
+    scalar: Option<ScalarFormat>,
     /// Raw volume: bytes to skip at the start of the file.
     #[arg(long)]
     header_bytes: Option<u64>,
@@ -125,7 +120,7 @@ pub struct InputArgs {
     /// Raw volume: where its index axes run in the patient, one letter per axis naming the side
     /// it increases toward: RAS (default), LPS, LPI...
     #[arg(long)]
-    orientation: Option<String>,
+    orientation: Option<OrientationCode>,
 }
 
 /// What the input turned out to be.
@@ -225,16 +220,16 @@ impl InputArgs {
             name: path.file_name().map(|n| n.to_string_lossy().into_owned()),
             path: absolute.to_string_lossy().into_owned(),
             dims: self.dims,
-            scalar: self.scalar.clone(),
+            scalar: self.scalar,
             header_bytes: self.header_bytes,
             spacing: self.spacing,
             origin: self.origin,
-            orientation: self.orientation.clone(),
+            orientation: self.orientation,
             series: self.choices.series.clone(),
             skip_unreadable: self.choices.skip_unreadable.then_some(true),
             frame: self.choices.frame,
-            nifti_transform: self.choices.nifti_transform.clone(),
-            coordinate_frame: self.choices.coordinate_frame.clone(),
+            nifti_transform: self.choices.nifti_transform,
+            coordinate_frame: self.choices.coordinate_frame,
             ..VolumeSpec::default()
         };
         Ok(SceneFile {
@@ -249,7 +244,7 @@ impl InputArgs {
 
     fn mesh_specs(&self) -> Result<Vec<MeshSpec>> {
         let n = self.meshes.len();
-        let per_mesh = |flag: &str, values: &[String]| -> Result<Vec<Option<String>>> {
+        fn per_mesh<T: Clone>(flag: &str, values: &[T], n: usize) -> Result<Vec<Option<T>>> {
             match values.len() {
                 0 => Ok(vec![None; n]),
                 _ if n == 0 => bail!("{flag} needs --mesh"),
@@ -259,10 +254,10 @@ impl InputArgs {
                     "{flag} is given {k} times for {n} meshes: give it once, or once per --mesh"
                 ),
             }
-        };
-        let transforms = per_mesh("--mesh-transform", &self.mesh_transforms)?;
-        let units = per_mesh("--mesh-units", &self.mesh_units)?;
-        let frames = per_mesh("--mesh-frame", &self.mesh_frames)?;
+        }
+        let transforms = per_mesh("--mesh-transform", &self.mesh_transforms, n)?;
+        let units = per_mesh("--mesh-units", &self.mesh_units, n)?;
+        let frames = per_mesh("--mesh-frame", &self.mesh_frames, n)?;
         let mut specs = Vec::with_capacity(n);
         for (i, path) in self.meshes.iter().enumerate() {
             let transform = match &transforms[i] {
@@ -274,8 +269,8 @@ impl InputArgs {
             specs.push(MeshSpec {
                 name: path.file_name().map(|n| n.to_string_lossy().into_owned()),
                 path: absolute.to_string_lossy().into_owned(),
-                units: units[i].clone(),
-                frame: frames[i].clone(),
+                units: units[i],
+                frame: frames[i],
                 transform,
                 ..MeshSpec::default()
             });

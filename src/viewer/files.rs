@@ -187,7 +187,7 @@ impl App {
             self.edit.scene.up_axis(),
         ));
         file.output.size = Some([size.0, size.1]);
-        file.output.ordering = Some(self.ordering.to_string());
+        file.output.ordering = Some(self.ordering);
         for volume in &mut file.volumes {
             if let Some(p) = self.preset {
                 volume.transfer = Some(p.to_owned());

@@ -189,6 +189,15 @@ impl std::str::FromStr for CoordinateFrame {
     }
 }
 
+impl std::fmt::Display for CoordinateFrame {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Self::Ras => "RAS",
+            Self::Lps => "LPS",
+        })
+    }
+}
+
 /// Which of a NIfTI file's two transforms places the grid.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum NiftiTransform {
@@ -214,6 +223,16 @@ impl std::str::FromStr for NiftiTransform {
                 "NIfTI transform {s:?} is none of sform, qform, itk"
             )),
         }
+    }
+}
+
+impl std::fmt::Display for NiftiTransform {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Self::Sform => "sform",
+            Self::Qform => "qform",
+            Self::Itk => "itk",
+        })
     }
 }
 

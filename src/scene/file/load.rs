@@ -12,10 +12,10 @@ use super::{
     SceneFileError, TransformSpec, VolumeSpec, data_dir, describe_data_dir, mm, named_apart,
     shortened, validate,
 };
+use super::{Seat, Units};
 use crate::classify::{TransferFunction, auto_transfer};
 use crate::mesh::load_mesh;
 use crate::mesh::prosthesis::seat_in_phantom;
-use crate::order::Ordering;
 use crate::scene::patient::OrientationCode;
 use crate::scene::shoulder::{
     add_model, cut_away_anterior_humerus, prosthesis_model, resect_humeral_head,
@@ -24,10 +24,11 @@ use crate::scene::{
     ClipPlane, Clipping, Light, Lights, MAX_CLIP_PLANES, NodeContent, NodeId, Scene,
     SceneMeasurement, SplatSettings, VolumeNode,
 };
+use crate::volume::detect::CoordinateFrame;
 use crate::volume::detect::{LoadOptions, SeriesChoice};
 use crate::volume::phantom::{DEFAULT_DIMS, DEFAULT_SPACING};
 use crate::volume::{
-    CpuVolume, RawSpec, ScalarFormat, VolumeError, load_raw, load_raw_slices, shoulder_landmarks,
+    CpuVolume, RawSpec, VolumeError, load_raw, load_raw_slices, shoulder_landmarks,
     shoulder_phantom_default, slice_stack,
 };
 
@@ -41,13 +42,7 @@ impl SceneFile {
         // The cheap checks come first, so that a typo is reported before volumes are read.
         validate::check(self).map_err(&invalid)?;
         let size = self.output.size.map(|[w, h]| (w, h));
-        let ordering = match &self.output.ordering {
-            Some(name) => Some(
-                name.parse::<Ordering>()
-                    .map_err(|e| invalid(format!("output.ordering: {e}")))?,
-            ),
-            None => None,
-        };
+        let ordering = self.output.ordering;
         let data = DataRoot::from_env();
         let mut scene = Scene::new();
         for (i, spec) in self.volumes.iter().enumerate() {
@@ -348,19 +343,6 @@ pub(super) fn load_volume(
     })
 }
 
-/// The value of a volume key that names a choice, parsed.
-pub(super) fn parse_key<T: std::str::FromStr<Err = String>>(
-    path: &Path,
-    key: &str,
-    value: &Option<String>,
-) -> Result<Option<T>, String> {
-    value
-        .as_deref()
-        .map(str::parse)
-        .transpose()
-        .map_err(|e| format!("volume {}: {key}: {e}", path.display()))
-}
-
 pub(super) fn load_raw_volume(
     spec: &VolumeSpec,
     path: &Path,
@@ -400,10 +382,8 @@ pub(super) fn load_raw_volume(
             series: spec.series.clone().map(SeriesChoice),
             skip_unreadable: spec.skip_unreadable.unwrap_or(false),
             frame: spec.frame,
-            coordinate_frame: parse_key(path, "coordinate_frame", &spec.coordinate_frame)
-                .map_err(invalid)?,
-            nifti_transform: parse_key(path, "nifti_transform", &spec.nifti_transform)
-                .map_err(invalid)?,
+            coordinate_frame: spec.coordinate_frame,
+            nifti_transform: spec.nifti_transform,
         };
         let loaded = match crate::volume::detect::load_volume_with(path, &options) {
             Err(VolumeError::NoHeader { .. }) if looks_like_scene_file(path) => {
@@ -436,15 +416,8 @@ pub(super) fn load_raw_volume(
             path.display()
         )));
     };
-    let format: ScalarFormat = scalar
-        .parse()
-        .map_err(|e| invalid(format!("volume {}: {e}", path.display())))?;
-    let orientation = match &spec.orientation {
-        Some(code) => code
-            .parse::<OrientationCode>()
-            .map_err(|e| invalid(format!("volume {}: {e}", path.display())))?,
-        None => OrientationCode::RAS,
-    };
+    let format = *scalar;
+    let orientation = spec.orientation.unwrap_or(OrientationCode::RAS);
     let raw = RawSpec {
         header_bytes: spec.header_bytes.unwrap_or(0),
         spacing: spec.spacing.unwrap_or([1.0; 3]),
@@ -560,12 +533,11 @@ pub(super) fn load_mesh_spec(
             part.material.metallic = m.clamp(0.0, 1.0);
         }
     }
-    let seat = match spec.seat.as_deref() {
+    let seat = match spec.seat {
         None => DMat4::IDENTITY,
-        Some("phantom") => seat_in_phantom(&shoulder_landmarks(DEFAULT_DIMS, DEFAULT_SPACING)),
-        Some(other) => return Err(invalid(format!("unknown seat {other:?} (phantom)"))),
+        Some(Seat::Phantom) => seat_in_phantom(&shoulder_landmarks(DEFAULT_DIMS, DEFAULT_SPACING)),
     };
-    let local = seat * transform(&spec.transform).map_err(invalid)? * file_frame(spec, invalid)?;
+    let local = seat * transform(&spec.transform).map_err(invalid)? * file_frame(spec);
     let name = spec
         .name
         .clone()
@@ -748,39 +720,14 @@ pub(super) fn looks_like_scene_file(path: &Path) -> bool {
 
 /// The mesh file's coordinates to scene millimetres in RAS: its `units` scaled, its `frame`
 /// turned.
-pub(super) fn file_frame(
-    spec: &MeshSpec,
-    invalid: &dyn Fn(String) -> SceneFileError,
-) -> Result<DMat4, SceneFileError> {
-    let scale = match spec.units.as_deref() {
-        None | Some("mm") => 1.0,
-        Some("cm") => 10.0,
-        Some("m") => 1000.0,
-        Some(other) => {
-            return Err(invalid(format!(
-                "mesh {}: units {other:?} is not mm, cm or m",
-                spec.path
-            )));
-        }
-    };
-    let turn = match spec
-        .frame
-        .as_deref()
-        .map(str::to_ascii_uppercase)
-        .as_deref()
-    {
-        None | Some("RAS") => DVec3::ONE,
+pub(super) fn file_frame(spec: &MeshSpec) -> DMat4 {
+    let scale = spec.units.map_or(1.0, Units::millimetres);
+    let turn = match spec.frame.unwrap_or_default() {
+        CoordinateFrame::Ras => DVec3::ONE,
         // LPS to RAS: x and y change sign.
-        Some("LPS") => DVec3::new(-1.0, -1.0, 1.0),
-        Some(_) => {
-            return Err(invalid(format!(
-                "mesh {}: frame {:?} is not RAS or LPS",
-                spec.path,
-                spec.frame.as_deref().unwrap_or_default()
-            )));
-        }
+        CoordinateFrame::Lps => DVec3::new(-1.0, -1.0, 1.0),
     };
-    Ok(DMat4::from_scale(turn * scale))
+    DMat4::from_scale(turn * scale)
 }
 
 pub(super) fn transform(spec: &TransformSpec) -> Result<DMat4, String> {

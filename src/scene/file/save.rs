@@ -1,6 +1,6 @@
 //! Saving: a scene file with the plan a scene holds now, paths made absolute, as TOML.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use glam::{DMat4, DVec3};
 
@@ -9,10 +9,9 @@ use crate::scene::{NodeId, Projection, Scene, SceneCamera};
 use crate::volume::phantom::{DEFAULT_DIMS, DEFAULT_SPACING};
 use crate::volume::shoulder_landmarks;
 
+use super::Seat;
 use super::load::file_frame;
-use super::{
-    BoxSpec, CameraSpec, ClipSpec, MeasurementSpec, SceneFile, SceneFileError, TransformSpec,
-};
+use super::{BoxSpec, CameraSpec, ClipSpec, MeasurementSpec, SceneFile, TransformSpec};
 
 impl SceneFile {
     /// The same file with every relative volume and mesh path made absolute against `base`
@@ -55,22 +54,18 @@ impl SceneFile {
             .map(NodeId)
             .filter(|id| scene.nodes()[id.0].parent().is_none())
             .collect();
-        let invalid = |message: String| SceneFileError::Invalid {
-            path: PathBuf::new(),
-            message,
-        };
         for (i, spec) in file.meshes.iter_mut().enumerate() {
             let id = *roots
                 .get(self.volumes.len() + i)
                 .ok_or_else(|| format!("mesh {}: no node in the scene", i + 1))?;
             let local = scene.node(id).map_err(|e| e.to_string())?.local();
-            let seat = match spec.seat.as_deref() {
-                Some("phantom") => {
+            let seat = match spec.seat {
+                Some(Seat::Phantom) => {
                     seat_in_phantom(&shoulder_landmarks(DEFAULT_DIMS, DEFAULT_SPACING))
                 }
-                _ => DMat4::IDENTITY,
+                None => DMat4::IDENTITY,
             };
-            let frame = file_frame(spec, &invalid).map_err(|e| e.to_string())?;
+            let frame = file_frame(spec);
             let (ds, df) = (seat.determinant(), frame.determinant());
             if !(ds.is_normal() && df.is_normal()) {
                 return Err(format!("mesh {}: its seat or frame is singular", i + 1));

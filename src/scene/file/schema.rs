@@ -9,6 +9,107 @@ use super::{SceneFileError, validate};
 use crate::measure::MeasureKind;
 use crate::order::Ordering;
 use crate::scene::Scene;
+use crate::scene::patient::OrientationCode;
+use crate::volume::ScalarFormat;
+use crate::volume::detect::{CoordinateFrame, NiftiTransform};
+
+/// Serde for a key whose value is one of a closed set, written by name: read through the type's
+/// `FromStr` (so that a wrong name is an error at its line in the file, listing the names
+/// accepted) and written with its `Display`.
+mod by_name {
+    use std::fmt::Display;
+    use std::str::FromStr;
+
+    use serde::{Deserialize, Deserializer, Serializer, de::Error};
+
+    pub fn serialize<T: Display, S: Serializer>(
+        value: &Option<T>,
+        s: S,
+    ) -> Result<S::Ok, S::Error> {
+        match value {
+            Some(v) => s.serialize_some(&v.to_string()),
+            None => s.serialize_none(),
+        }
+    }
+
+    pub fn deserialize<'de, T, D>(d: D) -> Result<Option<T>, D::Error>
+    where
+        T: FromStr,
+        T::Err: Display,
+        D: Deserializer<'de>,
+    {
+        Option::<String>::deserialize(d)?
+            .map(|name| name.parse().map_err(D::Error::custom))
+            .transpose()
+    }
+}
+
+/// Where a mesh is seated before its transform.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Seat {
+    /// In the built-in phantom's humerus (the built-in prosthesis's place).
+    Phantom,
+}
+
+impl std::str::FromStr for Seat {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "phantom" => Ok(Self::Phantom),
+            _ => Err(format!("unknown seat {s:?} (phantom)")),
+        }
+    }
+}
+
+impl std::fmt::Display for Seat {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("phantom")
+    }
+}
+
+/// The length unit of a mesh file's coordinates.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Units {
+    /// Millimetres, the scene's unit.
+    Mm,
+    /// Centimetres.
+    Cm,
+    /// Metres (OpenSim, many STL exports).
+    M,
+}
+
+impl Units {
+    /// Millimetres in one unit.
+    pub fn millimetres(self) -> f64 {
+        match self {
+            Self::Mm => 1.0,
+            Self::Cm => 10.0,
+            Self::M => 1000.0,
+        }
+    }
+}
+
+impl std::str::FromStr for Units {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "mm" => Ok(Self::Mm),
+            "cm" => Ok(Self::Cm),
+            "m" => Ok(Self::M),
+            _ => Err(format!("units {s:?} is not mm, cm or m")),
+        }
+    }
+}
+
+impl std::fmt::Display for Units {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Self::Mm => "mm",
+            Self::Cm => "cm",
+            Self::M => "m",
+        })
+    }
+}
 
 /// Output settings.
 #[derive(Debug, Clone, Default, Deserialize, Serialize)]
@@ -22,7 +123,8 @@ pub struct OutputSpec {
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub transparent: bool,
     /// Ordering for every volume (btf, wbtf, pbtf, ip-pbtf, exact, bucketed...).
-    pub ordering: Option<String>,
+    #[serde(default, with = "by_name")]
+    pub ordering: Option<Ordering>,
 }
 
 /// The camera; without `eye` the scene is fitted, seen along `view_from`.
@@ -97,7 +199,8 @@ pub struct VolumeSpec {
     /// Raw: grid size.
     pub dims: Option<[u32; 3]>,
     /// Raw: scalar type and byte order, such as `u8`, `i16le`, `u16be`, `f32`.
-    pub scalar: Option<String>,
+    #[serde(default, with = "by_name")]
+    pub scalar: Option<ScalarFormat>,
     /// Raw: bytes to skip at the start of each file.
     pub header_bytes: Option<u64>,
     /// Raw: voxel spacing in millimetres.
@@ -115,15 +218,18 @@ pub struct VolumeSpec {
     /// NIfTI: which transform places the grid when both are set, `sform` (the default, as
     /// nibabel), `qform`, or `itk` (ITK's and 3D Slicer's rule: the sform only when its code
     /// is 1, scanner, else the qform).
-    pub nifti_transform: Option<String>,
+    #[serde(default, with = "by_name")]
+    pub nifti_transform: Option<NiftiTransform>,
     /// A file whose format states no patient frame (VTK `.vtk`/`.vti`, `.dat`, NRRD without
     /// an anatomical `space`): the frame its coordinates are in, `RAS` (the default) or `LPS`
     /// (what ITK-based tools write). Refused for a file that states its own.
-    pub coordinate_frame: Option<String>,
+    #[serde(default, with = "by_name")]
+    pub coordinate_frame: Option<CoordinateFrame>,
     /// Raw: where the index axes run in the patient frame, one letter per axis naming the
     /// side it increases toward (`RAS`, the default, puts the grid along world +x, +y, +z;
     /// `LPS`, `LPI`...; see [`super::patient`]).
-    pub orientation: Option<String>,
+    #[serde(default, with = "by_name")]
+    pub orientation: Option<OrientationCode>,
     /// Transfer function: a preset (`ct-bone`, the default, `ct-soft-tissue`, `ct-metal`,
     /// `mr-default`) or `ramp` (with `window` and `color`).
     pub transfer: Option<String>,
@@ -203,13 +309,16 @@ pub struct MeshSpec {
     /// Metalness replacing the file's.
     pub metallic: Option<f32>,
     /// `phantom`: seat the prosthesis in the built-in phantom's humerus (before `transform`).
-    pub seat: Option<String>,
+    #[serde(default, with = "by_name")]
+    pub seat: Option<Seat>,
     /// Length unit of the file's coordinates: `mm` (the default), `cm` or `m` (OpenSim and
     /// many STL exports are in metres); scaled to millimetres before `transform`.
-    pub units: Option<String>,
+    #[serde(default, with = "by_name")]
+    pub units: Option<Units>,
     /// Patient frame of the file's coordinates: `RAS` (the default, the scene's) or `LPS`
     /// (DICOM's, and 3D Slicer's model export); turned to RAS before `transform`.
-    pub frame: Option<String>,
+    #[serde(default, with = "by_name")]
+    pub frame: Option<CoordinateFrame>,
     /// Node transform.
     #[serde(default)]
     pub transform: TransformSpec,

@@ -6,6 +6,7 @@ use glam::{DMat4, DVec3};
 
 use crate::classify::TransferFunction;
 use crate::measure::MeasureKind;
+use crate::order::Ordering;
 use crate::scene::{NodeContent, SceneMeasurement};
 
 use super::load::*;
@@ -322,14 +323,67 @@ fn a_missing_mesh_file_is_a_typed_error_naming_the_path() {
 
 #[test]
 fn a_bad_ordering_is_named() {
-    let err = SceneFile::parse("[output]\nordering = \"zigzag\"\n", Path::new("o.toml"))
-        .unwrap()
-        .load(Path::new("o.toml"), Path::new("."))
-        .unwrap_err();
-    assert!(matches!(err, SceneFileError::Invalid { .. }), "{err:?}");
+    // Refused as the file is read, at its line, with the names accepted.
+    let err =
+        SceneFile::parse("[output]\nordering = \"zigzag\"\n", Path::new("o.toml")).unwrap_err();
+    assert!(matches!(err, SceneFileError::Parse { .. }), "{err:?}");
     let message = err.to_string();
-    assert!(message.contains("zigzag"), "{message}");
-    assert!(message.contains("o.toml"), "{message}");
+    for said in ["zigzag", "o.toml", "line 2", "ordering = ", "ip-pbtf"] {
+        assert!(message.contains(said), "{said}: {message}");
+    }
+}
+
+/// Every key whose value is one of a closed set is read into its type, refused by name when
+/// it is none of them, and written back as the same name.
+#[test]
+fn closed_sets_are_read_by_name_and_written_back() {
+    let text = "[output]\nordering = \"pbtf\"\n\n\
+        [[volume]]\npath = \"v.raw\"\ndims = [2, 2, 2]\nscalar = \"u16be\"\norientation = \"LPI\"\n\n\
+        [[volume]]\npath = \"v.nii\"\nnifti_transform = \"itk\"\n\n\
+        [[volume]]\npath = \"v.vtk\"\ncoordinate_frame = \"LPS\"\n\n\
+        [[mesh]]\npath = \"m.stl\"\nunits = \"m\"\nframe = \"LPS\"\nseat = \"phantom\"\n";
+    let file = SceneFile::parse(text, Path::new("s.toml")).unwrap();
+    assert_eq!(file.output.ordering, Some(Ordering::Pbtf));
+    assert_eq!(file.meshes[0].units, Some(Units::M));
+    assert_eq!(file.meshes[0].seat, Some(Seat::Phantom));
+    let again = SceneFile::parse(&file.to_toml().unwrap(), Path::new("again.toml")).unwrap();
+    assert_eq!(again.to_toml().unwrap(), file.to_toml().unwrap());
+    for (volume, key) in [
+        (0, "scalar = \"u16be\""),
+        (0, "orientation = \"LPI\""),
+        (1, "nifti_transform = \"itk\""),
+        (2, "coordinate_frame = \"LPS\""),
+    ] {
+        let _ = volume;
+        assert!(file.to_toml().unwrap().contains(key), "{key}");
+    }
+    for (bad, said) in [
+        (
+            "[[mesh]]\npath = \"m.stl\"\nunits = \"inch\"\n",
+            "is not mm, cm or m",
+        ),
+        (
+            "[[mesh]]\npath = \"m.stl\"\nframe = \"XYZ\"\n",
+            "neither RAS nor LPS",
+        ),
+        (
+            "[[mesh]]\npath = \"m.stl\"\nseat = \"scapula\"\n",
+            "unknown seat",
+        ),
+        ("[[volume]]\npath = \"v.raw\"\nscalar = \"u12\"\n", "u12"),
+        (
+            "[[volume]]\npath = \"v.nii\"\nnifti_transform = \"best\"\n",
+            "none of sform, qform, itk",
+        ),
+    ] {
+        let err = SceneFile::parse(bad, Path::new("bad.toml"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains(said) && err.contains("bad.toml"),
+            "{bad}: {err}"
+        );
+    }
 }
 
 #[test]

@@ -183,6 +183,17 @@ impl FromStr for ScalarType {
     }
 }
 
+/// The name [`ScalarFormat`]'s `FromStr` reads back: the type alone when little-endian (the
+/// default), else with `be`.
+impl fmt::Display for ScalarFormat {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self.order {
+            ByteOrder::Little => write!(f, "{}", self.scalar),
+            ByteOrder::Big => write!(f, "{}be", self.scalar),
+        }
+    }
+}
+
 impl FromStr for ScalarFormat {
     type Err = ParseScalarError;
 

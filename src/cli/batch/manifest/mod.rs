@@ -638,8 +638,9 @@ fn plan_job(position: usize, spec: JobSpec, base: &Path) -> Result<PlannedJob, V
         vec![
             file.output
                 .ordering
-                .clone()
-                .unwrap_or_else(|| Ordering::IpPbtfImplicit.name().into()),
+                .unwrap_or(Ordering::IpPbtfImplicit)
+                .name()
+                .into(),
         ]
     });
     if names.is_empty() {
