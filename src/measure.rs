@@ -4,6 +4,7 @@
 
 use glam::DVec3;
 use serde::{Deserialize, Serialize};
+use thiserror::Error;
 
 /// The farthest a measured point may lie from the origin, in millimetres (a thousand
 /// kilometres).
@@ -60,47 +61,78 @@ pub struct Measurement {
     pub unit: &'static str,
 }
 
+/// Why points make no measurement.
+#[derive(Debug, Clone, PartialEq, Error)]
+pub enum MeasureError {
+    /// Not the number of points the kind takes.
+    #[error("{} takes {} point{}, not {got}", kind_with_article(*.kind), .kind.point_count(), if .kind.point_count() == 1 { "" } else { "s" })]
+    PointCount {
+        /// The kind.
+        kind: MeasureKind,
+        /// The points given.
+        got: usize,
+    },
+    /// A point with a NaN or infinite coordinate.
+    #[error("point {0} is not finite")]
+    NotFinite(DVec3),
+    /// A point so far from the origin that differences of points lose every millimetre.
+    #[error("point {0} lies more than {MAX_POINT_MM:e} mm from the origin")]
+    TooFar(DVec3),
+    /// An angle whose first or last point is on its vertex.
+    #[error("an angle needs its first and last points apart from its vertex")]
+    AngleAtVertex,
+    /// A line of a line angle whose two points coincide.
+    #[error("each line of a line angle needs two distinct points")]
+    LineOfOnePoint,
+}
+
+/// "a distance", "an angle"...
+fn kind_with_article(kind: MeasureKind) -> String {
+    let article = if kind == MeasureKind::Angle {
+        "an"
+    } else {
+        "a"
+    };
+    format!("{article} {}", kind.name())
+}
+
 impl Measurement {
     /// The measurement of `kind` over `points`.
     ///
     /// # Errors
     ///
-    /// A message when the number of points is not the kind's, a point is not finite, or the
-    /// points make no angle (a point on its vertex, a line of one point).
-    pub fn new(kind: MeasureKind, points: &[DVec3]) -> Result<Self, String> {
+    /// When the number of points is not the kind's, a point is not finite or lies past
+    /// [`MAX_POINT_MM`], or the points make no angle (a point on its vertex, a line of one
+    /// point).
+    pub fn new(kind: MeasureKind, points: &[DVec3]) -> Result<Self, MeasureError> {
         if points.len() != kind.point_count() {
-            let article = if kind == MeasureKind::Angle {
-                "an"
-            } else {
-                "a"
-            };
-            return Err(format!(
-                "{article} {} takes {} point{}, not {}",
-                kind.name(),
-                kind.point_count(),
-                if kind.point_count() == 1 { "" } else { "s" },
-                points.len()
-            ));
+            return Err(MeasureError::PointCount {
+                kind,
+                got: points.len(),
+            });
         }
         if let Some(bad) = points.iter().find(|p| !p.is_finite()) {
-            return Err(format!("point {bad} is not finite"));
+            return Err(MeasureError::NotFinite(*bad));
         }
         // Past this the differences of two points overflow or lose every millimetre; no
         // scene is that large.
         if let Some(bad) = points.iter().find(|p| p.abs().max_element() > MAX_POINT_MM) {
-            return Err(format!(
-                "point {bad} lies more than {MAX_POINT_MM:e} mm from the origin"
-            ));
+            return Err(MeasureError::TooFar(*bad));
         }
         match (kind, points) {
             (MeasureKind::Distance, [a, b]) => Ok(Self::distance(*a, *b)),
-            (MeasureKind::Angle, [a, v, b]) => Self::angle(*a, *v, *b).ok_or_else(|| {
-                "an angle needs its first and last points apart from its vertex".into()
-            }),
-            (MeasureKind::LineAngle, [a0, a1, b0, b1]) => Self::line_angle(*a0, *a1, *b0, *b1)
-                .ok_or_else(|| "each line of a line angle needs two distinct points".into()),
+            (MeasureKind::Angle, [a, v, b]) => {
+                Self::angle(*a, *v, *b).ok_or(MeasureError::AngleAtVertex)
+            }
+            (MeasureKind::LineAngle, [a0, a1, b0, b1]) => {
+                Self::line_angle(*a0, *a1, *b0, *b1).ok_or(MeasureError::LineOfOnePoint)
+            }
             (MeasureKind::Point, [p]) => Ok(Self::point(*p)),
-            _ => Err(format!("a {} cannot be made of these points", kind.name())),
+            // The count was checked against the kind's above.
+            _ => Err(MeasureError::PointCount {
+                kind,
+                got: points.len(),
+            }),
         }
     }
 

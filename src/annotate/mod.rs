@@ -42,10 +42,15 @@ impl Default for Annotations {
     }
 }
 
+/// A name that is no part of the annotations.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("{0:?} is not an annotation: marker, letters, scale, measurements, all or none")]
+pub struct UnknownAnnotation(pub String);
+
 impl Annotations {
     /// The parts named in a comma-separated list (`marker`, `letters`, `scale`,
     /// `measurements`; `all` or `none`); an unknown name is an error listing the names.
-    pub fn parse_parts(list: &str) -> Result<Self, String> {
+    pub fn parse_parts(list: &str) -> Result<Self, UnknownAnnotation> {
         let mut parts = Self {
             orientation_marker: false,
             edge_letters: false,
@@ -61,11 +66,7 @@ impl Annotations {
                 "letters" => parts.edge_letters = true,
                 "scale" => parts.scale_bar = true,
                 "measurements" => parts.measurements = true,
-                other => {
-                    return Err(format!(
-                        "{other:?} is not an annotation: marker, letters, scale, measurements, all or none"
-                    ));
-                }
+                other => return Err(UnknownAnnotation(other.to_owned())),
             }
         }
         Ok(parts)
@@ -381,6 +382,7 @@ mod tests {
         assert!(
             Annotations::parse_parts("triad")
                 .unwrap_err()
+                .to_string()
                 .contains("marker")
         );
     }

@@ -55,22 +55,43 @@ impl MarkerStyle {
 ///
 /// # Errors
 ///
-/// A message naming the measurement whose points no longer make one (a node moved onto
-/// another point).
-pub fn draw_scene_measurements(scene: &mut Scene) -> Result<Vec<crate::annotate::Label>, String> {
+/// The measurement whose points no longer make one (a node moved onto another point), or the
+/// scene refusing a marker.
+pub fn draw_scene_measurements(
+    scene: &mut Scene,
+) -> Result<Vec<crate::annotate::Label>, DrawMeasurementError> {
     let style = MarkerStyle::for_scene(scene);
     let mut labels = Vec::new();
     for (i, m) in scene.measurements.clone().iter().enumerate() {
         let value = scene
             .measure(m)
-            .map_err(|e| format!("measurement {}: {e}", i + 1))?;
-        annotate(scene, &value, &style).map_err(|e| e.to_string())?;
+            .map_err(|source| DrawMeasurementError::Measure {
+                number: i + 1,
+                source,
+            })?;
+        annotate(scene, &value, &style)?;
         labels.push(crate::annotate::Label {
             at: value.label_anchor(),
             text: label_text(&value, m.label.as_deref()),
         });
     }
     Ok(labels)
+}
+
+/// Why a scene's measurements could not be drawn.
+#[derive(Debug, thiserror::Error)]
+pub enum DrawMeasurementError {
+    /// A measurement's points make no measurement (now that its node moved).
+    #[error("measurement {number}: {source}")]
+    Measure {
+        /// Its number in the scene, from 1.
+        number: usize,
+        /// Why.
+        source: crate::measure::MeasureError,
+    },
+    /// The scene refused a marker node.
+    #[error(transparent)]
+    Scene(#[from] SceneError),
 }
 
 /// Adds `measurement` to the scene as a group of marker spheres and line cylinders, drawn as
@@ -211,7 +232,7 @@ mod tests {
         ] {
             let n = kind.point_count();
             assert!(Measurement::new(kind, &p[..n]).is_ok(), "{kind:?}");
-            let e = Measurement::new(kind, &p[..n - 1]).unwrap_err();
+            let e = Measurement::new(kind, &p[..n - 1]).unwrap_err().to_string();
             assert!(e.contains(&format!("takes {n} point")), "{e}");
         }
         let nan = DVec3::new(f64::NAN, 0.0, 0.0);

@@ -9,7 +9,7 @@ use thiserror::Error;
 
 use crate::classify::TransferFunction;
 use crate::geometry::{GeometryError, VolumeGeometry};
-use crate::measure::{MeasureKind, Measurement};
+use crate::measure::{MeasureError, MeasureKind, Measurement};
 use crate::mesh::{CpuMesh, Material};
 use crate::order::Ordering;
 use crate::splat::reference::SplatStyle;
@@ -264,8 +264,8 @@ impl Scene {
     ///
     /// # Errors
     ///
-    /// A message when the points make no measurement of its kind (see [`Measurement::new`]).
-    pub fn measure(&self, m: &SceneMeasurement) -> Result<Measurement, String> {
+    /// When the points make no measurement of its kind (see [`Measurement::new`]).
+    pub fn measure(&self, m: &SceneMeasurement) -> Result<Measurement, MeasureError> {
         let to_world = m.node.map_or(DMat4::IDENTITY, |id| self.world(id));
         let points: Vec<DVec3> = m
             .points

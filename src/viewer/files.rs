@@ -181,7 +181,9 @@ impl App {
             .scene_file
             .as_ref()
             .ok_or("the scene has no scene file")?;
-        let mut file = file.with_plan(&self.edit.scene)?;
+        let mut file = file
+            .with_plan(&self.edit.scene)
+            .map_err(|e| e.to_string())?;
         file.camera = Some(CameraSpec::from_camera(
             &self.camera,
             self.edit.scene.up_axis(),
@@ -203,7 +205,7 @@ impl App {
                 volume.shift = None;
             }
         }
-        let text = file.to_toml()?;
+        let text = file.to_toml().map_err(|e| e.to_string())?;
         Ok(format!(
             "# Saved by splatscene's viewer: `splatscene render THIS.toml --out view.png` draws\n# the same picture, and `splatscene view THIS.toml` opens the plan again.\n\n{text}"
         ))

@@ -3,7 +3,7 @@
 
 use glam::{DMat4, DQuat, DVec3};
 
-use crate::measure::{MeasureKind, Measurement};
+use crate::measure::{MeasureError, MeasureKind, Measurement};
 use crate::scene::{NodeId, Projection, Scene, SceneCamera, SceneError, SceneMeasurement};
 
 /// One edit of the plan, with what undoes it.
@@ -282,14 +282,14 @@ impl Pending {
     ///
     /// # Errors
     ///
-    /// A message when the points make no measurement (an angle's point on its vertex); the
-    /// points are then cleared.
+    /// When the points make no measurement (an angle's point on its vertex); the points are
+    /// then cleared.
     pub fn add(
         &mut self,
         scene: &Scene,
         point: DVec3,
         on: Option<NodeId>,
-    ) -> Result<Option<SceneMeasurement>, String> {
+    ) -> Result<Option<SceneMeasurement>, MeasureError> {
         self.points.push((point, on));
         if self.points.len() < self.kind.point_count() {
             return Ok(None);

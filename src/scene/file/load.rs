@@ -93,7 +93,8 @@ impl SceneFile {
         scene.lights = lights(&self.lights);
         scene.up = self.camera.as_ref().and_then(|c| c.up).map(DVec3::from);
         let aspect = size.map_or(4.0 / 3.0, |(w, h)| f64::from(w) / f64::from(h));
-        scene.camera = Some(camera(self.camera.as_ref(), &scene, aspect).map_err(&invalid)?);
+        scene.camera =
+            Some(camera(self.camera.as_ref(), &scene, aspect).map_err(|e| invalid(e.to_string()))?);
         let background = if self.output.transparent {
             None
         } else {
@@ -175,14 +176,25 @@ impl SceneFile {
     }
 }
 
+/// Why a `data:` path of a scene file names no file in the data folder.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum DataPathError {
+    /// It climbs out of the data folder, or is absolute.
+    #[error("{0:?}: a data: path must stay inside the data folder (relative, no ..)")]
+    Outside(String),
+    /// Nothing follows `data:`.
+    #[error("{0:?}: a data: path needs a file name after data:")]
+    NoName(String),
+}
+
 /// Where a volume or mesh `path` of a scene file points (see the module documentation): a
 /// `data:` path inside `data_dir`, a relative path inside `base` (the scene file's folder), an
 /// absolute path as it is. Built-in names are not paths and must be handled before.
 ///
 /// # Errors
 ///
-/// A message when a `data:` path is empty, absolute, or climbs out of the data folder.
-pub fn resolve_path(path: &str, base: &Path, data_dir: &Path) -> Result<PathBuf, String> {
+/// When a `data:` path is empty, absolute, or climbs out of the data folder.
+pub fn resolve_path(path: &str, base: &Path, data_dir: &Path) -> Result<PathBuf, DataPathError> {
     let Some(rest) = path.strip_prefix("data:") else {
         let p = Path::new(path);
         return Ok(if p.is_absolute() {
@@ -200,16 +212,12 @@ pub fn resolve_path(path: &str, base: &Path, data_dir: &Path) -> Result<PathBuf,
             // A data: path that leaves the data folder would make scene files depend on what
             // lies around it, which is what the prefix exists to avoid.
             Component::ParentDir | Component::RootDir | Component::Prefix(_) => {
-                return Err(format!(
-                    "{path:?}: a data: path must stay inside the data folder (relative, no ..)"
-                ));
+                return Err(DataPathError::Outside(path.to_owned()));
             }
         }
     }
     if names == 0 {
-        return Err(format!(
-            "{path:?}: a data: path needs a file name after data:"
-        ));
+        return Err(DataPathError::NoName(path.to_owned()));
     }
     Ok(data_dir.join(rel))
 }
@@ -223,7 +231,7 @@ pub(super) fn resolve_spec_path(
     data: &DataRoot,
     invalid: &dyn Fn(String) -> SceneFileError,
 ) -> Result<PathBuf, SceneFileError> {
-    let resolved = resolve_path(path, base, &data.dir).map_err(invalid)?;
+    let resolved = resolve_path(path, base, &data.dir).map_err(|e| invalid(e.to_string()))?;
     if path.starts_with("data:") && !resolved.exists() {
         return Err(SceneFileError::DataNotFound {
             path: scene_file.into(),

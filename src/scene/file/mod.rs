@@ -48,8 +48,9 @@ mod schema;
 mod tests;
 mod validate;
 
-pub use camera::{camera, named_view_camera, upright};
-pub use load::{load_scene_file, resolve_path, scale_warnings};
+pub use camera::{CameraSpecError, camera, named_view_camera, upright};
+pub use load::{DataPathError, load_scene_file, resolve_path, scale_warnings};
+pub use save::PlanError;
 pub use schema::*;
 pub use validate::extra_elements;
 

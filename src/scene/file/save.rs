@@ -13,6 +13,29 @@ use super::Seat;
 use super::load::file_frame;
 use super::{BoxSpec, CameraSpec, ClipSpec, MeasurementSpec, SceneFile, TransformSpec};
 
+/// Why a scene's plan could not be written as its scene file.
+#[derive(Debug, thiserror::Error)]
+pub enum PlanError {
+    /// The scene has fewer top nodes than the file has volumes and meshes.
+    #[error("mesh {mesh}: no node in the scene")]
+    NoNode {
+        /// The mesh's number in the file, from 1.
+        mesh: usize,
+    },
+    /// A mesh's seat or frame has no inverse, so its transform cannot be written.
+    #[error("mesh {mesh}: its seat or frame is singular")]
+    Singular {
+        /// The mesh's number in the file, from 1.
+        mesh: usize,
+    },
+    /// The scene has a crop box but the file no volume to hold it.
+    #[error("a crop box needs a volume to keep it in the scene file")]
+    CropWithoutVolume,
+    /// The scene refused a node.
+    #[error(transparent)]
+    Scene(#[from] crate::scene::SceneError),
+}
+
 impl SceneFile {
     /// The same file with every relative volume and mesh path made absolute against `base`
     /// (the scene file's folder), so that it can be saved anywhere; `builtin:` and `data:`
@@ -46,9 +69,9 @@ impl SceneFile {
     ///
     /// # Errors
     ///
-    /// A message when a mesh's placement cannot be expressed (a singular seat or frame) or a
-    /// mesh node is missing.
-    pub fn with_plan(&self, scene: &Scene) -> Result<Self, String> {
+    /// When a mesh node is missing, a mesh's placement cannot be expressed (a singular seat or
+    /// frame), or a crop box has no volume to keep it.
+    pub fn with_plan(&self, scene: &Scene) -> Result<Self, PlanError> {
         let mut file = self.clone();
         let roots: Vec<NodeId> = (0..scene.nodes().len())
             .map(NodeId)
@@ -57,8 +80,8 @@ impl SceneFile {
         for (i, spec) in file.meshes.iter_mut().enumerate() {
             let id = *roots
                 .get(self.volumes.len() + i)
-                .ok_or_else(|| format!("mesh {}: no node in the scene", i + 1))?;
-            let local = scene.node(id).map_err(|e| e.to_string())?.local();
+                .ok_or(PlanError::NoNode { mesh: i + 1 })?;
+            let local = scene.node(id)?.local();
             let seat = match spec.seat {
                 Some(Seat::Phantom) => {
                     seat_in_phantom(&shoulder_landmarks(DEFAULT_DIMS, DEFAULT_SPACING))
@@ -68,7 +91,7 @@ impl SceneFile {
             let frame = file_frame(spec);
             let (ds, df) = (seat.determinant(), frame.determinant());
             if !(ds.is_normal() && df.is_normal()) {
-                return Err(format!("mesh {}: its seat or frame is singular", i + 1));
+                return Err(PlanError::Singular { mesh: i + 1 });
             }
             // Round-off of turns by whole angles (1e-17 for 0) is written as 0.
             let matrix = (seat.inverse() * local * frame.inverse())
@@ -97,7 +120,7 @@ impl SceneFile {
             let v = file
                 .volumes
                 .first_mut()
-                .ok_or("a crop box needs a volume to keep it in the scene file")?;
+                .ok_or(PlanError::CropWithoutVolume)?;
             v.crop_box = Some(BoxSpec {
                 min: lo.to_array(),
                 max: hi.to_array(),
@@ -121,8 +144,12 @@ impl SceneFile {
     }
 
     /// The file as TOML text, as [`SceneFile::parse`] reads it back.
-    pub fn to_toml(&self) -> Result<String, String> {
-        toml::to_string(self).map_err(|e| e.to_string())
+    ///
+    /// # Errors
+    ///
+    /// When serde cannot write a value as TOML (none of the file's values is such a value).
+    pub fn to_toml(&self) -> Result<String, toml::ser::Error> {
+        toml::to_string(self)
     }
 }
 

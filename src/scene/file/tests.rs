@@ -73,7 +73,7 @@ fn data_paths_resolve_inside_the_data_folder() {
         "data:a/../../b",
         "data:/etc/passwd",
     ] {
-        let message = resolve_path(bad, base, data).unwrap_err();
+        let message = resolve_path(bad, base, data).unwrap_err().to_string();
         assert!(message.contains(bad), "{bad}: {message}");
     }
 }

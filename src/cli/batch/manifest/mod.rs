@@ -694,7 +694,7 @@ fn plan_job(position: usize, spec: JobSpec, base: &Path) -> Result<PlannedJob, V
         Some(AnnotateValue::Parts(p)) => match splatscene::annotate::Annotations::parse_parts(p) {
             Ok(_) => Some(p.clone()),
             Err(e) => {
-                problem("annotate", e);
+                problem("annotate", e.to_string());
                 None
             }
         },
