@@ -439,6 +439,10 @@ fn label(position: usize, name: Option<&str>) -> String {
     }
 }
 
+/// Checks one job's keys and expands it into its pictures. Every problem is collected, not the
+/// first alone, so that a manifest is fixed in one pass: this is why the closed sets of a job
+/// (orderings, contents, depth modes, annotation parts) are read here from their names rather
+/// than by serde, which stops at the first bad value. Each group of keys has its helper below.
 fn plan_job(position: usize, spec: JobSpec, base: &Path) -> Result<PlannedJob, Vec<Problem>> {
     let mut problems = Vec::new();
     let job = label(position, spec.name.as_deref());
@@ -568,165 +572,13 @@ fn plan_job(position: usize, spec: JobSpec, base: &Path) -> Result<PlannedJob, V
         );
     }
 
-    // Views.
-    let mut views = Vec::new();
-    let entries = spec
-        .views
-        .clone()
-        .unwrap_or_else(|| vec![ViewEntry::Named("scene".into())]);
-    if entries.is_empty() {
-        problem("views", "is empty: give at least one view".into());
-    }
-    for entry in &entries {
-        match entry {
-            ViewEntry::Named(n) if n == "scene" => views.push(PlannedView {
-                name: n.clone(),
-                kind: ViewKind::Scene,
-            }),
-            ViewEntry::Named(n) => match NamedView::parse(n) {
-                Ok(v) => views.push(PlannedView {
-                    name: v.name.clone(),
-                    kind: ViewKind::Named(v),
-                }),
-                Err(e) => problem(
-                    "views",
-                    format!("{e} (or \"scene\" for the scene's camera)"),
-                ),
-            },
-            ViewEntry::Camera(c) => match camera_spec(c) {
-                Ok(spec) => views.push(PlannedView {
-                    name: c.name.clone(),
-                    kind: ViewKind::Camera(spec),
-                }),
-                Err(e) => problem("views", format!("camera {:?}: {e}", c.name)),
-            },
-        }
-    }
-    for (i, v) in views.iter().enumerate() {
-        if views[..i].iter().any(|w| w.name == v.name) {
-            problem("views", format!("{:?} is given twice", v.name));
-        }
-    }
-
-    // Sizes.
-    let sizes = match &spec.sizes {
-        Some(list) => list.iter().map(|&[w, h]| (w, h)).collect(),
-        None => vec![file.output.size.map_or((800, 600), |[w, h]| (w, h))],
-    };
-    if sizes.is_empty() {
-        problem(
-            "sizes",
-            "is empty: give at least one [width, height]".into(),
-        );
-    }
-    for &(w, h) in &sizes {
-        if w == 0 || h == 0 || w > MAX_SIDE || h > MAX_SIDE {
-            problem(
-                "sizes",
-                format!("[{w}, {h}]: each side must be between 1 and {MAX_SIDE} pixels"),
-            );
-        } else if u64::from(w) * u64::from(h) > MAX_PIXELS {
-            problem(
-                "sizes",
-                format!("[{w}, {h}]: more than {MAX_PIXELS} pixels in one image"),
-            );
-        }
-    }
-
-    // Orderings.
-    let names = spec.orderings.clone().unwrap_or_else(|| {
-        vec![
-            file.output
-                .ordering
-                .unwrap_or(Ordering::IpPbtfImplicit)
-                .name()
-                .into(),
-        ]
-    });
-    if names.is_empty() {
-        problem("orderings", "is empty: give at least one ordering".into());
-    }
-    let mut orderings = Vec::new();
-    for n in &names {
-        match n.parse::<Ordering>() {
-            Ok(o) => orderings.push(o),
-            Err(e) => problem("orderings", e.to_string()),
-        }
-    }
-
-    // Contents, those with volumes first.
-    let mut contents = Vec::new();
+    let views = plan_views(&spec, &mut problem);
+    let sizes = plan_sizes(&spec, &file, &mut problem);
+    let orderings = plan_orderings(&spec, &file, &mut problem);
     let has_meshes = !file.meshes.is_empty();
-    let has_volumes = !file.volumes.is_empty();
-    for n in spec.contents.clone().unwrap_or_else(|| vec!["all".into()]) {
-        let content = match n.as_str() {
-            "all" => Content::All,
-            "meshes" => Content::Meshes,
-            "volumes" => Content::Volumes,
-            other => {
-                problem(
-                    "contents",
-                    format!("unknown content {other:?}: all, meshes or volumes"),
-                );
-                continue;
-            }
-        };
-        if content == Content::Meshes && !has_meshes {
-            problem("contents", "\"meshes\": the job has no meshes".into());
-        }
-        if content == Content::Volumes && !has_volumes {
-            problem("contents", "\"volumes\": the job has no volumes".into());
-        }
-        if contents.contains(&content) {
-            problem("contents", format!("{n:?} is given twice"));
-        }
-        contents.push(content);
-    }
-    if contents.is_empty() && spec.contents.is_some() {
-        problem("contents", "is empty: give all, meshes or volumes".into());
-    }
-    contents.sort_by_key(|c| *c == Content::Meshes);
+    let contents = plan_contents(&spec, &file, &mut problem);
 
-    // Annotations, depth.
-    let annotate = match &spec.annotate {
-        None | Some(AnnotateValue::All(false)) => None,
-        Some(AnnotateValue::All(true)) => Some("all".to_owned()),
-        Some(AnnotateValue::Parts(p)) => match splatscene::annotate::Annotations::parse_parts(p) {
-            Ok(_) => Some(p.clone()),
-            Err(e) => {
-                problem("annotate", e.to_string());
-                None
-            }
-        },
-    };
-    if spec.caption.as_deref().is_some_and(|c| c.trim().is_empty()) {
-        problem("caption", "is empty".into());
-    }
-    match spec.depth_mode.as_deref() {
-        None | Some("mesh" | "surface") => {}
-        Some(other) => problem("depth_mode", format!("{other:?}: mesh or surface")),
-    }
-    if spec.depth.is_none() {
-        if spec.depth_mode.is_some() {
-            problem("depth_mode", "has no effect without `depth`".into());
-        }
-        if spec.surface_opacity.is_some() {
-            problem("surface_opacity", "has no effect without `depth`".into());
-        }
-    }
-    if spec.depth_mode.as_deref() == Some("mesh") && !has_meshes && spec.depth.is_some() {
-        problem(
-            "depth_mode",
-            "\"mesh\": the job has no meshes, so the depth image would be empty".into(),
-        );
-    }
-    let surface_opacity = spec.surface_opacity.unwrap_or(0.3);
-    if !(surface_opacity > 0.0 && surface_opacity <= 1.0) {
-        problem(
-            "surface_opacity",
-            format!("{surface_opacity}: must lie in (0, 1]"),
-        );
-    }
+    let (annotate, surface_opacity) = plan_annotations_and_depth(&spec, has_meshes, &mut problem);
 
     // Output names.
     let vary = |n: usize| n > 1;
@@ -832,6 +684,200 @@ fn plan_job(position: usize, spec: JobSpec, base: &Path) -> Result<PlannedJob, V
         surface_opacity,
         spec,
     })
+}
+
+/// The job's views (`views`, the scene's camera by default): named views, cameras, or
+/// `scene`; none given twice.
+fn plan_views(spec: &JobSpec, problem: &mut impl FnMut(&str, String)) -> Vec<PlannedView> {
+    let mut views = Vec::new();
+    let entries = spec
+        .views
+        .clone()
+        .unwrap_or_else(|| vec![ViewEntry::Named("scene".into())]);
+    if entries.is_empty() {
+        problem("views", "is empty: give at least one view".into());
+    }
+    for entry in &entries {
+        match entry {
+            ViewEntry::Named(n) if n == "scene" => views.push(PlannedView {
+                name: n.clone(),
+                kind: ViewKind::Scene,
+            }),
+            ViewEntry::Named(n) => match NamedView::parse(n) {
+                Ok(v) => views.push(PlannedView {
+                    name: v.name.clone(),
+                    kind: ViewKind::Named(v),
+                }),
+                Err(e) => problem(
+                    "views",
+                    format!("{e} (or \"scene\" for the scene's camera)"),
+                ),
+            },
+            ViewEntry::Camera(c) => match camera_spec(c) {
+                Ok(spec) => views.push(PlannedView {
+                    name: c.name.clone(),
+                    kind: ViewKind::Camera(spec),
+                }),
+                Err(e) => problem("views", format!("camera {:?}: {e}", c.name)),
+            },
+        }
+    }
+    for (i, v) in views.iter().enumerate() {
+        if views[..i].iter().any(|w| w.name == v.name) {
+            problem("views", format!("{:?} is given twice", v.name));
+        }
+    }
+    views
+}
+
+/// The job's image sizes (`sizes`, the scene file's by default), each within the limits.
+fn plan_sizes(
+    spec: &JobSpec,
+    file: &SceneFile,
+    problem: &mut impl FnMut(&str, String),
+) -> Vec<(u32, u32)> {
+    let sizes = match &spec.sizes {
+        Some(list) => list.iter().map(|&[w, h]| (w, h)).collect(),
+        None => vec![file.output.size.map_or((800, 600), |[w, h]| (w, h))],
+    };
+    if sizes.is_empty() {
+        problem(
+            "sizes",
+            "is empty: give at least one [width, height]".into(),
+        );
+    }
+    for &(w, h) in &sizes {
+        if w == 0 || h == 0 || w > MAX_SIDE || h > MAX_SIDE {
+            problem(
+                "sizes",
+                format!("[{w}, {h}]: each side must be between 1 and {MAX_SIDE} pixels"),
+            );
+        } else if u64::from(w) * u64::from(h) > MAX_PIXELS {
+            problem(
+                "sizes",
+                format!("[{w}, {h}]: more than {MAX_PIXELS} pixels in one image"),
+            );
+        }
+    }
+    sizes
+}
+
+/// The job's orderings (`orderings`, the scene file's by default), by name.
+fn plan_orderings(
+    spec: &JobSpec,
+    file: &SceneFile,
+    problem: &mut impl FnMut(&str, String),
+) -> Vec<Ordering> {
+    let names = spec.orderings.clone().unwrap_or_else(|| {
+        vec![
+            file.output
+                .ordering
+                .unwrap_or(Ordering::IpPbtfImplicit)
+                .name()
+                .into(),
+        ]
+    });
+    if names.is_empty() {
+        problem("orderings", "is empty: give at least one ordering".into());
+    }
+    let mut orderings = Vec::new();
+    for n in &names {
+        match n.parse::<Ordering>() {
+            Ok(o) => orderings.push(o),
+            Err(e) => problem("orderings", e.to_string()),
+        }
+    }
+    orderings
+}
+
+/// What the job's pictures draw (`contents`, `all` by default), those with volumes first; a
+/// content the scene cannot show is a problem.
+fn plan_contents(
+    spec: &JobSpec,
+    file: &SceneFile,
+    problem: &mut impl FnMut(&str, String),
+) -> Vec<Content> {
+    let mut contents = Vec::new();
+    let has_meshes = !file.meshes.is_empty();
+    let has_volumes = !file.volumes.is_empty();
+    for n in spec.contents.clone().unwrap_or_else(|| vec!["all".into()]) {
+        let content = match n.as_str() {
+            "all" => Content::All,
+            "meshes" => Content::Meshes,
+            "volumes" => Content::Volumes,
+            other => {
+                problem(
+                    "contents",
+                    format!("unknown content {other:?}: all, meshes or volumes"),
+                );
+                continue;
+            }
+        };
+        if content == Content::Meshes && !has_meshes {
+            problem("contents", "\"meshes\": the job has no meshes".into());
+        }
+        if content == Content::Volumes && !has_volumes {
+            problem("contents", "\"volumes\": the job has no volumes".into());
+        }
+        if contents.contains(&content) {
+            problem("contents", format!("{n:?} is given twice"));
+        }
+        contents.push(content);
+    }
+    if contents.is_empty() && spec.contents.is_some() {
+        problem("contents", "is empty: give all, meshes or volumes".into());
+    }
+    contents.sort_by_key(|c| *c == Content::Meshes);
+    contents
+}
+
+/// The job's annotations (`annotate`, `caption`) and depth image settings (`depth_mode`,
+/// `surface_opacity`): the annotation parts to draw, and the surface opacity.
+fn plan_annotations_and_depth(
+    spec: &JobSpec,
+    has_meshes: bool,
+    problem: &mut impl FnMut(&str, String),
+) -> (Option<String>, f32) {
+    let annotate = match &spec.annotate {
+        None | Some(AnnotateValue::All(false)) => None,
+        Some(AnnotateValue::All(true)) => Some("all".to_owned()),
+        Some(AnnotateValue::Parts(p)) => match splatscene::annotate::Annotations::parse_parts(p) {
+            Ok(_) => Some(p.clone()),
+            Err(e) => {
+                problem("annotate", e.to_string());
+                None
+            }
+        },
+    };
+    if spec.caption.as_deref().is_some_and(|c| c.trim().is_empty()) {
+        problem("caption", "is empty".into());
+    }
+    match spec.depth_mode.as_deref() {
+        None | Some("mesh" | "surface") => {}
+        Some(other) => problem("depth_mode", format!("{other:?}: mesh or surface")),
+    }
+    if spec.depth.is_none() {
+        if spec.depth_mode.is_some() {
+            problem("depth_mode", "has no effect without `depth`".into());
+        }
+        if spec.surface_opacity.is_some() {
+            problem("surface_opacity", "has no effect without `depth`".into());
+        }
+    }
+    if spec.depth_mode.as_deref() == Some("mesh") && !has_meshes && spec.depth.is_some() {
+        problem(
+            "depth_mode",
+            "\"mesh\": the job has no meshes, so the depth image would be empty".into(),
+        );
+    }
+    let surface_opacity = spec.surface_opacity.unwrap_or(0.3);
+    if !(surface_opacity > 0.0 && surface_opacity <= 1.0) {
+        problem(
+            "surface_opacity",
+            format!("{surface_opacity}: must lie in (0, 1]"),
+        );
+    }
+    (annotate, surface_opacity)
 }
 
 /// A job or view name goes into file names: letters, digits, `.`, `_` and `-`.
