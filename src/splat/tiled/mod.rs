@@ -220,7 +220,8 @@ impl TiledCompositor {
                                 culled += ids.len();
                                 continue;
                             }
-                            let (hidden, placed) = group.project(ids, &mut out[kept..]);
+                            let (hidden, placed) =
+                                simd::project_group(&group, ids, &mut out[kept..]);
                             culled += hidden;
                             kept += placed;
                         }
@@ -255,7 +256,7 @@ impl TiledCompositor {
                 };
                 self.tiles.par_iter_mut().enumerate().for_each(|(t, tile)| {
                     let origin = ((t % tx) * TILE, (t / tx) * TILE);
-                    tile.composite(t, origin, batch);
+                    simd::composite_tile(tile, t, origin, batch);
                 });
                 for (t, tile) in self.tiles.iter().enumerate() {
                     self.mask

@@ -6,11 +6,7 @@ use strength_reduce::StrengthReducedU32;
 
 use super::Screen;
 use super::mask::OpaqueMask;
-#[cfg(target_arch = "x86_64")]
-use super::simd::{avx2, has_avx2};
 use super::texels::SplatTexels;
-#[cfg(target_arch = "x86_64")]
-use super::tile::LANES;
 use crate::splat::footprint::{Footprint, Lens, footprint};
 
 /// One volume's splats for a frame, in the splat pass's terms (see `SplatUniforms` in
@@ -148,29 +144,7 @@ pub(super) struct Group<'a> {
 }
 
 impl Group<'_> {
-    /// Projects the splats `ids`, writing those that land on the image, in order, to the
-    /// front of `out` (at least as long as `ids`): neither the splats left out nor their
-    /// places are written, read or binned. Returns how many were left out as hidden behind
-    /// opaque pixels, and how many were written. Eight at a time in AVX2 vectors where the
-    /// processor has them.
-    pub(super) fn project(&self, ids: &[u32], out: &mut [Projected]) -> (usize, usize) {
-        #[cfg(target_arch = "x86_64")]
-        if has_avx2() {
-            let (mut culled, mut kept) = (0, 0);
-            for ids in ids.chunks(LANES) {
-                #[allow(unsafe_code)]
-                // SAFETY: the processor has the features the function is built for, checked
-                // above.
-                let (hidden, placed) = unsafe { avx2::project(self, ids, &mut out[kept..]) };
-                culled += hidden;
-                kept += placed;
-            }
-            return (culled, kept);
-        }
-        self.project_each(ids, out)
-    }
-
-    /// [`Group::project`] a splat at a time.
+    /// [`super::simd::project_group`] a splat at a time, in plain code.
     pub(super) fn project_each(&self, ids: &[u32], out: &mut [Projected]) -> (usize, usize) {
         let (w, h) = (self.screen.w as i32, self.screen.h as i32);
         let (mut culled, mut kept) = (0, 0);

@@ -1,5 +1,54 @@
-//! The AVX2 and FMA code of the tile compositor, chosen at run time where the processor has
-//! it, and the switch that keeps the portable loops on ([`SIMD_VAR`]).
+//! The choice between the tile compositor's portable loops and its AVX2 and FMA code, made at
+//! run time from the processor (and [`SIMD_VAR`]), and that AVX2 code: projection eight splats
+//! a vector, and the pixel loop eight pixels a vector.
+
+use super::project::{Group, Projected};
+#[cfg(target_arch = "x86_64")]
+use super::tile::LANES;
+use super::tile::{Batch, TilePixels, composite_splat_lanes, composite_tile_lanes};
+
+/// Projects the splats `ids` of a group, writing those that land on the image, in order, to
+/// the front of `out` (at least as long as `ids`): neither the splats left out nor their
+/// places are written, read or binned. Returns how many were left out as hidden behind opaque
+/// pixels, and how many were written. Eight at a time in AVX2 vectors where the processor has
+/// them, else [`Group::project_each`].
+pub(super) fn project_group(
+    group: &Group<'_>,
+    ids: &[u32],
+    out: &mut [Projected],
+) -> (usize, usize) {
+    #[cfg(target_arch = "x86_64")]
+    if has_avx2() {
+        let (mut culled, mut kept) = (0, 0);
+        for ids in ids.chunks(LANES) {
+            #[allow(unsafe_code)]
+            // SAFETY: the processor has the features the function is built for, checked above.
+            let (hidden, placed) = unsafe { avx2::project(group, ids, &mut out[kept..]) };
+            culled += hidden;
+            kept += placed;
+        }
+        return (culled, kept);
+    }
+    group.project_each(ids, out)
+}
+
+/// Composites a batch's splats touching tile `t` (its top-left pixel at `origin`), nearest
+/// first, under what the tile holds: 8 lanes wide where the processor has AVX2 and FMA, else
+/// the portable loop.
+pub(super) fn composite_tile(
+    tile: &mut TilePixels,
+    t: usize,
+    origin: (usize, usize),
+    batch: Batch<'_>,
+) {
+    #[cfg(target_arch = "x86_64")]
+    if has_avx2() {
+        #[allow(unsafe_code)]
+        // SAFETY: the processor has the features the function is built for, checked above.
+        return unsafe { avx2::composite_tile(tile, t, origin, batch) };
+    }
+    composite_tile_lanes(tile, t, origin, batch, composite_splat_lanes);
+}
 
 /// The environment variable that, set to `off`, keeps the tile compositor on its portable
 /// loops on any processor, so that they are tested where AVX2 is there too (CI runs the image

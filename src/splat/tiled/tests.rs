@@ -100,7 +100,7 @@ fn the_lanes_composite_as_a_pixel_by_pixel_loop_does() {
     let mut reference = vec![[0.0f32; 4]; PIXELS];
     let splats = splats();
     let bins = [one_list(splats.len())];
-    tile.composite(0, (16, 32), batch(&splats, &bins));
+    composite_tile(&mut tile, 0, (16, 32), batch(&splats, &bins));
     for &p in &splats {
         // The old scalar loop, pixel by pixel over the quad's rectangle, with libm's exp.
         for y in p.y0.max(32)..=p.y1.min(32 + 15).min(39) {

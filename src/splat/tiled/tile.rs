@@ -6,8 +6,6 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use super::TILE;
 use super::bin::ChunkBins;
 use super::project::Projected;
-#[cfg(target_arch = "x86_64")]
-use super::simd::{avx2, has_avx2};
 
 /// Pixels in a tile.
 pub(super) const PIXELS: usize = TILE * TILE;
@@ -84,19 +82,6 @@ impl TilePixels {
             a: self.a.get_mut(at..end)?.try_into().ok()?,
             depth: self.depth.get(at..end)?.try_into().ok()?,
         })
-    }
-
-    /// Composites this batch's splats touching tile `t` (its top-left pixel at `origin`),
-    /// nearest first, under what the tile holds: 8 lanes wide where the processor has AVX2
-    /// and FMA.
-    pub(super) fn composite(&mut self, t: usize, origin: (usize, usize), batch: Batch<'_>) {
-        #[cfg(target_arch = "x86_64")]
-        if has_avx2() {
-            #[allow(unsafe_code)]
-            // SAFETY: the processor has the features the function is built for, checked above.
-            return unsafe { avx2::composite_tile(self, t, origin, batch) };
-        }
-        composite_tile_lanes(self, t, origin, batch, composite_splat_lanes);
     }
 }
 
