@@ -5,7 +5,7 @@
 //! - [`footprint`]: a splat's ellipse on the screen (EWA projection with the pixel variance
 //!   added, and the share of opacity that keeps its integral), generic over the float type and
 //!   mirrored by `shaders/footprint.wgsl`.
-//! - [`reference`]: the reference compositor, in f64, a plain loop over every splat and pixel,
+//! - [`reference`](mod@reference): the reference compositor, in f64, a plain loop over every splat and pixel,
 //!   "over" in draw order. It is slow on purpose: it is the oracle the tests and the orderings'
 //!   error measure compare against, and it keeps the fragment order it saw.
 //! - [`tiled`]: the tile compositor, the fast one on the CPU: project, bin into 16x16-pixel

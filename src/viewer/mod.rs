@@ -51,7 +51,7 @@ pub struct ViewerOptions {
     /// Background colour.
     pub background: [f32; 3],
     /// While the camera is dragged or zoomed and a full frame takes longer than 50 ms (20
-    /// frames a second), draw the volumes at half resolution ([`FrameOptions::preview`]); the
+    /// frames a second), draw the volumes at half resolution ([`crate::render::FrameOptions::preview`]); the
     /// full frame follows when the button is released, or a quarter second after the last
     /// wheel step.
     pub preview_while_moving: bool,

@@ -139,7 +139,7 @@ pub struct CameraSpec {
     /// axis by default (anterior for a view along it).
     pub up: Option<[f64; 3]>,
     /// A named view of the patient (`anterior`, `superior`, `anterolateral-right`...; see
-    /// [`super::patient::NamedView`]), fitted to the scene; instead of `eye` and `view_from`.
+    /// [`crate::scene::patient::NamedView`]), fitted to the scene; instead of `eye` and `view_from`.
     pub view: Option<String>,
     /// Viewing direction used to fit the scene when no eye is given.
     pub view_from: Option<[f64; 3]>,
@@ -227,7 +227,7 @@ pub struct VolumeSpec {
     pub coordinate_frame: Option<CoordinateFrame>,
     /// Raw: where the index axes run in the patient frame, one letter per axis naming the
     /// side it increases toward (`RAS`, the default, puts the grid along world +x, +y, +z;
-    /// `LPS`, `LPI`...; see [`super::patient`]).
+    /// `LPS`, `LPI`...; see [`crate::scene::patient`]).
     #[serde(default, with = "by_name")]
     pub orientation: Option<OrientationCode>,
     /// Transfer function: a preset (`ct-bone`, the default, `ct-soft-tissue`, `ct-metal`,
