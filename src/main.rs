@@ -33,6 +33,9 @@ enum Command {
     Pick(cli::pick::PickArgs),
     /// Measure a distance or an angle between picked pixels or given points, as JSON.
     Measure(cli::measure::MeasureArgs),
+    /// What a mesh's surface touches in the volume, as JSON: its area by value class (for CT:
+    /// soft tissue or air, cancellous and cortical bone) and the value under it.
+    Contact(cli::contact::ContactArgs),
     /// Open a viewer window: orbit, pick, select and move meshes, measure, undo, save the plan,
     /// switch orderings and transfer functions.
     #[command(after_help = splatscene::viewer::keys_help())]
@@ -56,6 +59,7 @@ fn main() -> Result<()> {
         Command::Render(args) => cli::render::run_render(args),
         Command::Pick(args) => cli::pick::run_pick(args),
         Command::Measure(args) => cli::measure::run_measure(args),
+        Command::Contact(args) => cli::contact::run_contact(args),
         Command::View(args) => cli::view::run_viewer(args),
         Command::Info(args) => cli::info::run_info(args),
         Command::Batch(args) => cli::batch::run_batch(args),

@@ -507,40 +507,9 @@ pub fn refined_gradient_snorm8(
         let (mut lo, mut hi) = (centre, centre);
         lo[a] -= 1.0 / f[a];
         hi[a] += 1.0 / f[a];
-        (trilinear(volume, hi) - trilinear(volume, lo)) / 2.0
+        (volume.trilinear(hi) - volume.trilinear(lo)) / 2.0
     });
     snorm8(-glam::Vec3::from(g))
-}
-
-/// The trilinear interpolation of `volume`'s values at index coordinates `p`, the grid's
-/// faces extended outward.
-fn trilinear(volume: &CpuVolume, p: [f64; 3]) -> f32 {
-    let dims = volume.dims.map(|n| n.max(1) as usize);
-    let mut lower = [0usize; 3];
-    let mut upper = [0usize; 3];
-    let mut t = [0.0f32; 3];
-    for a in 0..3 {
-        let c = p[a].clamp(0.0, (dims[a] - 1) as f64);
-        lower[a] = (c.floor() as usize).min(dims[a] - 1);
-        upper[a] = (lower[a] + 1).min(dims[a] - 1);
-        t[a] = (c - lower[a] as f64) as f32;
-    }
-    let value = |x: usize, y: usize, z: usize| {
-        volume
-            .values
-            .get(x + dims[0] * (y + dims[1] * z))
-            .unwrap_or(0.0)
-    };
-    let line = |y: usize, z: usize| {
-        let a = value(lower[0], y, z);
-        a + t[0] * (value(upper[0], y, z) - a)
-    };
-    let plane = |z: usize| {
-        let a = line(lower[1], z);
-        a + t[1] * (line(upper[1], z) - a)
-    };
-    let a = plane(lower[2]);
-    a + t[2] * (plane(upper[2]) - a)
 }
 
 /// A direction as snorm8 once made unit length; `None` for a zero or non-finite one.

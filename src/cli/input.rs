@@ -76,7 +76,7 @@ pub struct InputArgs {
     pub input: Option<PathBuf>,
     /// A mesh to add (glTF, GLB, OBJ or STL); repeat for several.
     #[arg(long = "mesh")]
-    meshes: Vec<PathBuf>,
+    pub(crate) meshes: Vec<PathBuf>,
     /// The transform of the meshes, in the syntax of scene files, for example
     /// '{ rotate_degrees = [0, -28, 180], translate = [26.7, 163.4, 16.7] }': given once it
     /// applies to every --mesh, else once per --mesh in their order.

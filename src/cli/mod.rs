@@ -2,6 +2,7 @@
 
 pub mod args;
 pub mod batch;
+pub mod contact;
 pub mod files;
 pub mod info;
 pub mod input;

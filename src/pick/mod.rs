@@ -18,6 +18,7 @@ use serde::Serialize;
 use crate::render::ViewSetup;
 use crate::scene::{ClipPlane, Clipping, NodeId, Scene, placed_geometry};
 
+pub mod contact;
 mod march;
 pub mod measure;
 

@@ -55,6 +55,38 @@ impl CpuVolume {
         )
     }
 
+    /// The trilinear interpolation of the values at index coordinates `p` (voxel centres at
+    /// whole numbers), the grid's faces extended outward: a point outside takes the value of
+    /// the nearest face. (Written here: the loop is three lerps over the held type, which no
+    /// interpolation crate reads.)
+    pub fn trilinear(&self, p: [f64; 3]) -> f32 {
+        let dims = self.dims.map(|n| n.max(1) as usize);
+        let mut lower = [0usize; 3];
+        let mut upper = [0usize; 3];
+        let mut t = [0.0f32; 3];
+        for a in 0..3 {
+            let c = p[a].clamp(0.0, (dims[a] - 1) as f64);
+            lower[a] = (c.floor() as usize).min(dims[a] - 1);
+            upper[a] = (lower[a] + 1).min(dims[a] - 1);
+            t[a] = (c - lower[a] as f64) as f32;
+        }
+        let value = |x: usize, y: usize, z: usize| {
+            self.values
+                .get(x + dims[0] * (y + dims[1] * z))
+                .unwrap_or(0.0)
+        };
+        let line = |y: usize, z: usize| {
+            let a = value(lower[0], y, z);
+            a + t[0] * (value(upper[0], y, z) - a)
+        };
+        let plane = |z: usize| {
+            let a = line(lower[1], z);
+            a + t[1] * (line(upper[1], z) - a)
+        };
+        let a = plane(lower[2]);
+        a + t[2] * (plane(upper[2]) - a)
+    }
+
     /// The volume at half the resolution along every axis of more than one voxel: each value
     /// the mean of a 2x2x2 block (fewer at an odd end), each voxel at the centre of its whole
     /// block, the spacing doubled. A volume drawn from this has about an eighth of the splats,

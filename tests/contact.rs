@@ -1,0 +1,388 @@
+//! The bone-contact map against answers known in closed form: a value field linear in world z
+//! (which trilinear interpolation reproduces exactly), an axis-aligned box (its area below a
+//! height by hand), an oblique box (each face clipped by the plane, an exact polygon area) and
+//! a sphere (Archimedes: a zone's area is proportional to its height), within 2%; a mesh partly
+//! and wholly outside the volume; and the errors a user meets.
+
+use std::sync::Arc;
+
+use glam::{DMat3, DMat4, DQuat, DVec3};
+use splatscene::classify::TransferFunction;
+use splatscene::mesh::{CpuMesh, Material};
+use splatscene::pick::contact::{Classes, ContactError, contact};
+use splatscene::scene::{MeshNode, NodeContent, Scene, SplatSettings, VolumeNode};
+use splatscene::volume::CpuVolume;
+
+mod common;
+use common::{ok, scratch, stderr};
+
+/// Value per millimetre of world z.
+const SLOPE: f64 = 10.0;
+
+/// A 128^3 volume of 0.5 mm voxels centred on the origin, its value `SLOPE * z` (world z).
+fn ramp_volume() -> CpuVolume {
+    let n = 128u32;
+    let spacing = 0.5;
+    let origin = -0.5 * spacing * f64::from(n - 1);
+    let values = (0..n * n * n)
+        .map(|id| {
+            let z = origin + spacing * f64::from(id / (n * n));
+            (SLOPE * z) as f32
+        })
+        .collect();
+    CpuVolume {
+        dims: [n; 3],
+        spacing: [spacing; 3],
+        origin: [origin; 3],
+        direction: DMat3::IDENTITY,
+        values,
+    }
+}
+
+fn scene_with(mesh: CpuMesh, placed: DMat4) -> Scene {
+    let mut scene = Scene::new();
+    let volume = VolumeNode {
+        volume: Arc::new(ramp_volume()),
+        transfer: Arc::new(TransferFunction::ct_bone()),
+        splats: SplatSettings::default(),
+    };
+    scene
+        .add("ct", DMat4::IDENTITY, None, NodeContent::Volume(volume))
+        .unwrap();
+    let node = MeshNode {
+        mesh: Arc::new(mesh),
+        material: Material::default(),
+    };
+    scene
+        .add("stem", placed, None, NodeContent::Mesh(node))
+        .unwrap();
+    scene
+}
+
+/// A cube of side `side` centred on the origin, two triangles a face.
+fn cube(side: f32) -> CpuMesh {
+    let h = side / 2.0;
+    let mut positions = Vec::new();
+    let mut indices = Vec::new();
+    for axis in 0..3 {
+        for sign in [-1.0f32, 1.0] {
+            let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
+            let base = positions.len() as u32;
+            for (a, b) in [(-h, -h), (h, -h), (h, h), (-h, h)] {
+                let mut p = [0.0; 3];
+                p[axis] = sign * h;
+                p[u] = a;
+                p[v] = b;
+                positions.push(p);
+            }
+            indices.extend([base, base + 1, base + 2, base, base + 2, base + 3]);
+        }
+    }
+    let mut mesh = CpuMesh {
+        positions,
+        normals: Vec::new(),
+        indices,
+    };
+    mesh.compute_normals();
+    mesh
+}
+
+/// A UV sphere of radius `r`.
+fn sphere(r: f32, rings: u32, segments: u32) -> CpuMesh {
+    let mut positions = Vec::new();
+    for i in 0..=rings {
+        let theta = std::f32::consts::PI * i as f32 / rings as f32;
+        for j in 0..segments {
+            let phi = std::f32::consts::TAU * j as f32 / segments as f32;
+            positions.push([
+                r * theta.sin() * phi.cos(),
+                r * theta.sin() * phi.sin(),
+                r * theta.cos(),
+            ]);
+        }
+    }
+    let mut indices = Vec::new();
+    for i in 0..rings {
+        for j in 0..segments {
+            let a = i * segments + j;
+            let b = i * segments + (j + 1) % segments;
+            let (c, d) = (a + segments, b + segments);
+            indices.extend([a, c, b, b, c, d]);
+        }
+    }
+    let mut mesh = CpuMesh {
+        positions,
+        normals: Vec::new(),
+        indices,
+    };
+    mesh.compute_normals();
+    mesh
+}
+
+/// The area of the part of convex polygon `poly` (world points) where z < `h`: the polygon
+/// clipped by the plane (Sutherland-Hodgman), its area by the cross products of a fan.
+fn area_below(poly: &[DVec3], h: f64) -> f64 {
+    let mut kept = Vec::new();
+    for (i, &a) in poly.iter().enumerate() {
+        let b = poly[(i + 1) % poly.len()];
+        if a.z < h {
+            kept.push(a);
+        }
+        if (a.z < h) != (b.z < h) {
+            kept.push(a + (b - a) * ((h - a.z) / (b.z - a.z)));
+        }
+    }
+    (1..kept.len().saturating_sub(1))
+        .map(|i| 0.5 * (kept[i] - kept[0]).cross(kept[i + 1] - kept[0]).length())
+        .sum()
+}
+
+/// The six faces of the cube of side `side` placed by `m`, as world quads.
+fn cube_faces(side: f64, m: DMat4) -> Vec<Vec<DVec3>> {
+    let h = side / 2.0;
+    let mut faces = Vec::new();
+    for axis in 0..3 {
+        for sign in [-1.0, 1.0] {
+            let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
+            let face = [(-h, -h), (h, -h), (h, h), (-h, h)]
+                .map(|(a, b)| {
+                    let mut p = DVec3::ZERO;
+                    p[axis] = sign * h;
+                    p[u] = a;
+                    p[v] = b;
+                    m.transform_point3(p)
+                })
+                .to_vec();
+            faces.push(face);
+        }
+    }
+    faces
+}
+
+/// Checks the contact of a 20 mm cube placed by `m` against the clipped faces.
+fn check_cube(m: DMat4) {
+    let side = 20.0;
+    let scene = scene_with(cube(side as f32), m);
+    let edges = [SLOPE * -4.0, SLOPE * 3.0];
+    let report = contact(&scene, Some("stem"), &Classes::from_edges(&edges).unwrap()).unwrap();
+    let faces = cube_faces(side, m);
+    let total = 6.0 * side * side;
+    assert!((report.area_mm2 - total).abs() < 1e-6 * total, "{report:?}");
+    assert_eq!(report.outside_mm2, 0.0);
+    let below = |e: f64| faces.iter().map(|f| area_below(f, e / SLOPE)).sum::<f64>();
+    let expected = [
+        below(edges[0]),
+        below(edges[1]) - below(edges[0]),
+        total - below(edges[1]),
+    ];
+    for (class, want) in report.classes.iter().zip(expected) {
+        assert!(
+            (class.fraction - want / total).abs() < 0.02,
+            "{}: {} against {} ({report:?})",
+            class.name,
+            class.fraction,
+            want / total
+        );
+    }
+    let sum: f64 = report.classes.iter().map(|c| c.fraction).sum();
+    assert!((sum - 1.0).abs() < 1e-9, "{sum}");
+    // The mean of a linear field over a centred symmetric surface is its value at the centre.
+    let value = report.value.unwrap();
+    let centre = SLOPE * m.w_axis.z;
+    assert!(
+        (value.mean - centre).abs() < 0.01 * SLOPE * side,
+        "{value:?}"
+    );
+    let lowest = faces
+        .iter()
+        .flatten()
+        .map(|p| p.z)
+        .fold(f64::INFINITY, f64::min);
+    let highest = faces
+        .iter()
+        .flatten()
+        .map(|p| p.z)
+        .fold(f64::NEG_INFINITY, f64::max);
+    assert!(value.min >= SLOPE * lowest - 1e-3 && value.min < SLOPE * (lowest + 1.0));
+    assert!(value.max <= SLOPE * highest + 1e-3 && value.max > SLOPE * (highest - 1.0));
+}
+
+#[test]
+fn an_axis_aligned_box_splits_by_height_as_its_faces_do() {
+    check_cube(DMat4::from_translation(DVec3::new(2.0, -3.0, 1.5)));
+}
+
+#[test]
+fn an_oblique_box_splits_as_its_faces_clipped_by_the_planes_do() {
+    let turn = DQuat::from_rotation_x(0.5) * DQuat::from_rotation_y(-0.8);
+    check_cube(DMat4::from_rotation_translation(
+        turn,
+        DVec3::new(-1.0, 2.0, -2.5),
+    ));
+}
+
+#[test]
+fn a_sphere_splits_by_height_as_archimedes_says() {
+    let r = 15.0;
+    let centre = DVec3::new(1.0, 0.5, -2.0);
+    let scene = scene_with(sphere(r as f32, 90, 180), DMat4::from_translation(centre));
+    // Zones of the sphere between heights: area 2 pi r dh.
+    let cuts = [-9.0, -2.0, 6.5];
+    let edges = cuts.map(|c| SLOPE * (centre.z + c));
+    let report = contact(&scene, None, &Classes::from_edges(&edges).unwrap()).unwrap();
+    assert_eq!(report.mesh, "stem");
+    let bounds = [-r, cuts[0], cuts[1], cuts[2], r];
+    for (i, class) in report.classes.iter().enumerate() {
+        let want = (bounds[i + 1] - bounds[i]) / (2.0 * r);
+        assert!(
+            (class.fraction - want).abs() < 0.02,
+            "{}: {} against {want}",
+            class.name,
+            class.fraction
+        );
+    }
+    let area = 4.0 * std::f64::consts::PI * r * r;
+    assert!(
+        (report.area_mm2 - area).abs() < 0.02 * area,
+        "{}",
+        report.area_mm2
+    );
+    assert!((report.value.unwrap().mean - SLOPE * centre.z).abs() < 0.01 * SLOPE * r);
+}
+
+#[test]
+fn a_mesh_outside_the_volume_is_reported_outside_never_as_a_value() {
+    // The volume spans -31.75..31.75 mm; a 20 mm box centred at x = 30 is half outside.
+    let scene = scene_with(
+        cube(20.0),
+        DMat4::from_translation(DVec3::new(31.75, 0.0, 0.0)),
+    );
+    let report = contact(&scene, None, &Classes::ct()).unwrap();
+    let total = 2400.0;
+    // Outside: the x = +10 face (400) and half of the four faces around x (4 x 200).
+    assert!(
+        (report.outside_mm2 - 1200.0).abs() < 0.02 * total,
+        "{report:?}"
+    );
+    let sum: f64 = report.classes.iter().map(|c| c.fraction).sum::<f64>() + report.outside_fraction;
+    assert!((sum - 1.0).abs() < 1e-9);
+    let far = scene_with(
+        cube(20.0),
+        DMat4::from_translation(DVec3::new(500.0, 0.0, 0.0)),
+    );
+    let report = contact(&far, None, &Classes::ct()).unwrap();
+    assert_eq!(report.outside_fraction, 1.0);
+    assert_eq!(report.value, None);
+    assert!(
+        report
+            .classes
+            .iter()
+            .all(|c| c.area_mm2 == 0.0 && c.fraction == 0.0)
+    );
+    let json = serde_json::to_string(&report).unwrap();
+    assert!(
+        !json.contains("NaN") && json.contains("\"value\":null"),
+        "{json}"
+    );
+}
+
+#[test]
+fn a_missing_mesh_or_volume_and_bad_edges_are_named() {
+    let scene = scene_with(cube(10.0), DMat4::IDENTITY);
+    let err = contact(&scene, Some("glenoid"), &Classes::ct()).unwrap_err();
+    assert!(
+        matches!(err, ContactError::NoMesh { .. })
+            && err.to_string().contains("glenoid")
+            && err.to_string().contains("\"stem\""),
+        "{err}"
+    );
+    let mut meshes_only = Scene::new();
+    meshes_only
+        .add(
+            "stem",
+            DMat4::IDENTITY,
+            None,
+            NodeContent::Mesh(MeshNode {
+                mesh: Arc::new(cube(10.0)),
+                material: Material::default(),
+            }),
+        )
+        .unwrap();
+    assert!(matches!(
+        contact(&meshes_only, None, &Classes::ct()),
+        Err(ContactError::NoVolume)
+    ));
+    assert!(matches!(
+        Classes::from_edges(&[700.0, 200.0]),
+        Err(ContactError::BadEdges(_))
+    ));
+}
+
+#[test]
+fn the_command_line_prints_the_contact_of_a_mesh_given_beside_a_volume() {
+    let dir = scratch("contact");
+    let raw = dir.join("ramp.raw");
+    let volume = ramp_volume();
+    let bytes: Vec<u8> = volume.values.iter().flat_map(f32::to_le_bytes).collect();
+    std::fs::write(&raw, bytes).unwrap();
+    let stl = dir.join("box.obj");
+    let mesh = cube(20.0);
+    let mut obj = String::new();
+    for p in &mesh.positions {
+        obj.push_str(&format!("v {} {} {}\n", p[0], p[1], p[2]));
+    }
+    for t in mesh.indices.chunks(3) {
+        obj.push_str(&format!("f {} {} {}\n", t[0] + 1, t[1] + 1, t[2] + 1));
+    }
+    std::fs::write(&stl, obj).unwrap();
+    let s = |p: &std::path::Path| p.to_str().unwrap().to_owned();
+    let origin = format!("{0},{0},{0}", -0.5 * 0.5 * 127.0);
+    let base = [
+        "contact".to_owned(),
+        s(&raw),
+        "--dims".into(),
+        "128,128,128".into(),
+        "--scalar".into(),
+        "f32".into(),
+        "--spacing".into(),
+        "0.5,0.5,0.5".into(),
+        "--origin".into(),
+        origin,
+        "--mesh".into(),
+        s(&stl),
+    ];
+    let run = |extra: &[&str]| {
+        let mut args: Vec<&str> = base.iter().map(String::as_str).collect();
+        args.extend_from_slice(extra);
+        ok(&args)
+    };
+    let out = run(&["--classes", "-40,30"]);
+    let report: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(report["mesh"], "box.obj");
+    assert!((report["area_mm2"].as_f64().unwrap() - 2400.0).abs() < 1e-3);
+    let names: Vec<&str> = report["classes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|c| c["name"].as_str().unwrap())
+        .collect();
+    assert_eq!(names, ["below -40", "-40 to 30", "30 and above"]);
+    assert!(report["classes"][0]["min"].is_null() && report["classes"][2]["max"].is_null());
+    // The box spans z -10..10 mm: values -100..100; below -40: the bottom face and 6 mm of
+    // each side, (400 + 4 x 120) / 2400.
+    let below = report["classes"][0]["fraction"].as_f64().unwrap();
+    assert!((below - 880.0 / 2400.0).abs() < 0.02, "{below}");
+    // A name that is no file and no mesh of the scene, and edges that do not increase.
+    let mut args: Vec<&str> = base.iter().map(String::as_str).collect();
+    args.extend_from_slice(&["--mesh", "glenoid"]);
+    let said = common::fails(&args);
+    assert!(
+        said.contains("glenoid") && said.contains("box.obj"),
+        "{said}"
+    );
+    let mut args: Vec<&str> = base.iter().map(String::as_str).collect();
+    args.extend_from_slice(&["--classes", "700,200"]);
+    let said = common::fails(&args);
+    assert!(said.contains("increasing"), "{said}");
+    let _ = stderr;
+}
