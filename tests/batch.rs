@@ -623,3 +623,82 @@ measurements = "values/{job}.json"
         "batch and render draw a plan's measurements alike"
     );
 }
+
+#[test]
+fn a_job_asking_for_contact_writes_it_and_the_index_holds_it() {
+    let dir = scratch("contact");
+    std::fs::write(
+        dir.join("plan.toml"),
+        r#"
+[[volume]]
+path = "builtin:shoulder-phantom"
+
+[[mesh]]
+name = "prosthesis"
+path = "builtin:prosthesis"
+seat = "phantom"
+"#,
+    )
+    .unwrap();
+    let manifest = dir.join("manifest.toml");
+    std::fs::write(
+        &manifest,
+        r#"
+[defaults]
+views = ["anterior"]
+sizes = [[64, 48]]
+
+[[job]]
+name = "fit"
+scene = "plan.toml"
+contact = true
+contents = ["volumes"]
+"#,
+    )
+    .unwrap();
+    let out = dir.join("out");
+    let (m, o) = (manifest.to_str().unwrap(), out.to_str().unwrap());
+    ok(&["batch", m, "--out", o]);
+    let first = index(&out.join("index.json"));
+    let job = &first["jobs"][0];
+    let written: Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("fit-contact.json")).unwrap())
+            .unwrap();
+    assert_eq!(job["contact"], written);
+    assert_eq!(written["mesh"], "prosthesis");
+    // The phantom is CT: the three CT classes, their shares adding up with what is outside.
+    let classes = written["classes"].as_array().unwrap();
+    assert_eq!(classes.len(), 3);
+    let shares: f64 = classes
+        .iter()
+        .map(|c| c["fraction"].as_f64().unwrap())
+        .sum::<f64>()
+        + written["outside_fraction"].as_f64().unwrap();
+    assert!((shares - 1.0).abs() < 1e-9, "{written}");
+    assert!(
+        job["outputs"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|o| o["kind"] == "contact" && o["file"] == "fit-contact.json")
+    );
+    // Run again: up to date, the contact kept in the index.
+    ok(&["batch", m, "--out", o]);
+    let again = index(&out.join("index.json"));
+    assert_eq!(
+        statuses(&again),
+        [("fit".to_owned(), "up-to-date".to_owned())]
+    );
+    assert_eq!(again["jobs"][0]["contact"], written);
+    // A job without a mesh cannot ask for it.
+    std::fs::write(
+        &manifest,
+        "[[job]]\nname = \"bare\"\nvolume = \"builtin:shoulder-phantom\"\ncontact = true\n",
+    )
+    .unwrap();
+    let said = fails(&["batch", m, "--out", o, "--check"]);
+    assert!(
+        said.contains("contact") && said.contains("needs a mesh"),
+        "{said}"
+    );
+}

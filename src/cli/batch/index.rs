@@ -151,6 +151,10 @@ pub struct JobRecord {
     /// Why it failed.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub error: Option<String>,
+    /// The contact of its first mesh with its volume, where the job asked for it (as
+    /// `splatscene contact` prints it).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub contact: Option<serde_json::Value>,
 }
 
 /// How many jobs ended each way.

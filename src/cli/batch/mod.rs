@@ -17,6 +17,8 @@ use splatscene::render::{
 use splatscene::scene::file::{LoadedScene, camera as scene_camera, named_view_camera};
 use splatscene::scene::{NodeContent, NodeId, Scene};
 
+use splatscene::classify::is_hounsfield;
+use splatscene::pick::contact::{Classes, contact};
 use splatscene::pick::measure::draw_scene_measurements;
 
 use super::render::{depth_files, figure_image};
@@ -184,6 +186,7 @@ pub fn run_batch(args: BatchArgs) -> Result<()> {
                 outputs: Vec::new(),
                 timings_ms: None,
                 error: None,
+                contact: None,
             })
             .collect(),
         summary: Default::default(),
@@ -478,6 +481,7 @@ fn failed(job: &PlannedJob, partial: Option<JobRecord>, error: String) -> JobRec
         outputs: Vec::new(),
         timings_ms: None,
         error: None,
+        contact: None,
     });
     record.status = Status::Failed;
     record.error = Some(error);
@@ -506,6 +510,7 @@ fn run_job(
         outputs: Vec::new(),
         timings_ms: None,
         error: None,
+        contact: None,
     };
     let mut timings = Timings::default();
     let loaded = match job.file.load(&job.source, Path::new(".")) {
@@ -588,6 +593,26 @@ fn render_job(
             size: None,
             camera: None,
         });
+    }
+    if let Some(file) = &job.contact {
+        let classes = match full.volumes().next() {
+            Some((_, v, _)) if is_hounsfield(&v.volume.values) => Classes::ct(),
+            _ => Classes::none(),
+        };
+        let report = serde_json::to_value(contact(full, None, &classes)?)?;
+        let json = serde_json::to_string_pretty(&report)?;
+        write_output(settings.out, file, json.as_bytes())?;
+        record.outputs.push(OutputRecord {
+            file: slashed(file),
+            kind: "contact".into(),
+            blake3: blake3::hash(json.as_bytes()).to_hex().to_string(),
+            view: None,
+            content: None,
+            ordering: None,
+            size: None,
+            camera: None,
+        });
+        record.contact = Some(report);
     }
     for item in &job.items {
         let scene = match scenes.iter().find(|(c, _)| *c == item.content) {

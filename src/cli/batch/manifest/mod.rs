@@ -137,6 +137,11 @@ pub struct JobSpec {
     /// Where the scene's measurements go as JSON, when it has any (`{job}-measurements.json`
     /// by default); `{job}` is replaced.
     pub measurements: Option<String>,
+    /// With `true`, the contact of the job's first mesh with its volume (as `splatscene
+    /// contact` gives it) is written to `{job}-contact.json` and into the index. Left out of
+    /// the job's hash while unset, so that manifests without it keep their hashes.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub contact: Option<bool>,
 }
 
 impl JobSpec {
@@ -166,7 +171,8 @@ impl JobSpec {
             depth,
             depth_mode,
             surface_opacity,
-            measurements
+            measurements,
+            contact
         )
     }
 }
@@ -260,6 +266,8 @@ pub struct PlannedJob {
     pub surface_opacity: f32,
     /// The measurements' JSON file, when the scene has measurements.
     pub measurements: Option<PathBuf>,
+    /// The contact report's JSON file, when the job asks for it.
+    pub contact: Option<PathBuf>,
     /// The merged spec, hashed with the inputs so that a changed key renders the job again.
     pub spec: JobSpec,
 }
@@ -632,6 +640,13 @@ fn plan_job(position: usize, spec: JobSpec, base: &Path) -> Result<PlannedJob, V
             ),
         );
     }
+    if spec.contact == Some(true) && (file.meshes.is_empty() || file.volumes.is_empty()) {
+        problem(
+            "contact",
+            "needs a mesh and a volume: the contact is the mesh's surface sampled in the volume"
+                .into(),
+        );
+    }
     if spec.measurements.is_some() && file.measurements.is_empty() {
         problem(
             "measurements",
@@ -669,9 +684,12 @@ fn plan_job(position: usize, spec: JobSpec, base: &Path) -> Result<PlannedJob, V
     }
     let measurements = (!file.measurements.is_empty())
         .then(|| PathBuf::from(measurements_out.replace("{job}", &name)));
+    let contact =
+        (spec.contact == Some(true)).then(|| PathBuf::from(format!("{name}-contact.json")));
     Ok(PlannedJob {
         position,
         measurements,
+        contact,
         name,
         file,
         source,
