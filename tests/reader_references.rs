@@ -488,20 +488,7 @@ fn dicom_multiframe_objects_are_volumes() {
 /// The shared data's reader test files, or `None` (with a note) when the data are not there;
 /// under CI they must be.
 fn shared_reader_tests() -> Option<PathBuf> {
-    let dir = std::env::var_os("SPLATSCENE_DATA")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data"))
-        .join("reader_tests");
-    if dir.is_dir() {
-        return Some(dir);
-    }
-    assert!(
-        std::env::var_os("CI").is_none(),
-        "{} is missing under CI: set SPLATSCENE_DATA",
-        dir.display()
-    );
-    println!("note: {} not found; skipping", dir.display());
-    None
+    Some(common::data_dir()?.join("reader_tests"))
 }
 
 /// What the loader must do with each shared test file: load it as the reference says, or

@@ -2,7 +2,6 @@
 
 use anyhow::{Result, bail};
 
-use splatscene::classify::is_hounsfield;
 use splatscene::pick::contact::{Classes, contact};
 
 use super::input::InputArgs;
@@ -61,16 +60,18 @@ pub fn run_contact(mut args: ContactArgs) -> Result<()> {
         .or(added);
     let classes = match &args.classes {
         Some(Edges(edges)) => Classes::from_edges(edges)?,
-        None => match scene.volumes().next() {
-            Some((_, v, _)) if is_hounsfield(&v.volume.values) => Classes::ct(),
-            Some(_) => {
+        None => {
+            let classes = scene
+                .volumes()
+                .next()
+                .map_or_else(Classes::none, |(_, v, _)| Classes::for_volume(&v.volume));
+            if classes.is_empty() && scene.volumes().next().is_some() {
                 eprintln!(
                     "note: the volume is not CT (no values at air's -1000 HU): no classes without --classes"
                 );
-                Classes::none()
             }
-            None => Classes::none(),
-        },
+            classes
+        }
     };
     let report = contact(scene, chosen.as_deref(), &classes)?;
     println!("{}", serde_json::to_string_pretty(&report)?);

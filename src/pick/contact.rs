@@ -65,6 +65,21 @@ impl Classes {
         })
     }
 
+    /// The classes a volume gets by default: [`Classes::ct`] for CT (values in Hounsfield
+    /// units, air at -1000), none for other data (whose values mean nothing fixed).
+    pub fn for_volume(volume: &CpuVolume) -> Self {
+        if crate::classify::is_hounsfield(&volume.values) {
+            Self::ct()
+        } else {
+            Self::none()
+        }
+    }
+
+    /// Whether there are no classes.
+    pub fn is_empty(&self) -> bool {
+        self.names.is_empty()
+    }
+
     /// No classes: the value under the surface alone.
     pub fn none() -> Self {
         Self {

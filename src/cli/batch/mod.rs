@@ -17,7 +17,6 @@ use splatscene::render::{
 use splatscene::scene::file::{LoadedScene, camera as scene_camera, named_view_camera};
 use splatscene::scene::{NodeContent, NodeId, Scene};
 
-use splatscene::classify::is_hounsfield;
 use splatscene::pick::contact::{Classes, contact};
 use splatscene::pick::measure::draw_scene_measurements;
 
@@ -580,40 +579,35 @@ fn render_job(
     let base = full.camera.context("the scene has no camera")?;
     let mut scenes: Vec<(Content, Scene)> = Vec::new();
     let mut labels = Vec::new();
+    // A JSON file the job writes beside its pictures, and its record.
+    let mut write_json = |file: &Path, kind: &str, json: String| -> Result<()> {
+        write_output(settings.out, file, json.as_bytes())?;
+        record.outputs.push(OutputRecord {
+            file: slashed(file),
+            kind: kind.into(),
+            blake3: blake3::hash(json.as_bytes()).to_hex().to_string(),
+            view: None,
+            content: None,
+            ordering: None,
+            size: None,
+            camera: None,
+        });
+        Ok(())
+    };
     if let Some(file) = &job.measurements {
-        let json = measurements_json(full)?;
-        write_output(settings.out, file, json.as_bytes())?;
-        record.outputs.push(OutputRecord {
-            file: slashed(file),
-            kind: "measurements".into(),
-            blake3: blake3::hash(json.as_bytes()).to_hex().to_string(),
-            view: None,
-            content: None,
-            ordering: None,
-            size: None,
-            camera: None,
-        });
+        write_json(file, "measurements", measurements_json(full)?)?;
     }
+    let mut contact_report = None;
     if let Some(file) = &job.contact {
-        let classes = match full.volumes().next() {
-            Some((_, v, _)) if is_hounsfield(&v.volume.values) => Classes::ct(),
-            _ => Classes::none(),
-        };
+        let classes = full
+            .volumes()
+            .next()
+            .map_or_else(Classes::none, |(_, v, _)| Classes::for_volume(&v.volume));
         let report = serde_json::to_value(contact(full, None, &classes)?)?;
-        let json = serde_json::to_string_pretty(&report)?;
-        write_output(settings.out, file, json.as_bytes())?;
-        record.outputs.push(OutputRecord {
-            file: slashed(file),
-            kind: "contact".into(),
-            blake3: blake3::hash(json.as_bytes()).to_hex().to_string(),
-            view: None,
-            content: None,
-            ordering: None,
-            size: None,
-            camera: None,
-        });
-        record.contact = Some(report);
+        write_json(file, "contact", serde_json::to_string_pretty(&report)?)?;
+        contact_report = Some(report);
     }
+    record.contact = contact_report;
     for item in &job.items {
         let scene = match scenes.iter().find(|(c, _)| *c == item.content) {
             Some((_, s)) => s,
