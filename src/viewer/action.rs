@@ -59,6 +59,10 @@ pub const KEYS: &[(&str, &str)] = &[
         "crop box around the selected mesh on and off, shrink, grow by 5 mm",
     ),
     ("R", "reset the camera"),
+    (
+        "K",
+        "contact: what the selected mesh's surface touches in the volume",
+    ),
     ("H", "this help"),
     ("Escape", "cancel, deselect; with nothing to cancel, quit"),
     ("Q", "quit"),
@@ -142,6 +146,9 @@ pub enum Action {
     NextMeasureKind,
     /// Snap mode: a point of the selected mesh, then where it goes.
     Snap,
+    /// Report the selected mesh's contact with the volume (the first mesh's where none is
+    /// selected).
+    Contact,
     /// Forget the points clicked so far.
     ClearPoints,
     /// Start typing the selected measurement's label.
@@ -243,6 +250,7 @@ fn character_action(c: &str, ctrl: bool, shift: bool, step: f64) -> Option<Actio
         "m" => Action::NextMeasureKind,
         "n" => Action::Snap,
         "x" => Action::ClearPoints,
+        "k" => Action::Contact,
         "l" => Action::Label,
         "a" => Action::ToggleAnnotations,
         "r" => Action::ResetCamera,

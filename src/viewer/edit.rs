@@ -8,6 +8,7 @@ use glam::{DMat4, DVec3};
 use super::action::{Action, ScreenAxis};
 use super::plan::{self, Edit, History, Pending};
 use crate::measure::MeasureKind;
+use crate::pick::contact::{Classes, contact};
 use crate::scene::{NodeId, Scene, SceneCamera};
 
 /// What an edit tells the user.
@@ -143,6 +144,7 @@ impl Editor {
             } else {
                 Notice::Say("snap: select a mesh first (click it)".into())
             }),
+            Action::Contact => Some(self.contact()),
             Action::ClearPoints => {
                 if let Some(m) = &mut self.measuring {
                     m.points.clear();
@@ -162,6 +164,45 @@ impl Editor {
             }
             _ => None,
         }
+    }
+
+    /// The contact of the selected mesh (else the first) with the first volume, in a line:
+    /// each class's share of the surface, and the share outside the volume.
+    fn contact(&self) -> Notice {
+        let name = self
+            .selected
+            .and_then(|id| self.scene.node(id).ok())
+            .map(|n| n.name.clone());
+        let classes = self
+            .scene
+            .volumes()
+            .next()
+            .map_or_else(Classes::none, |(_, v, _)| Classes::for_volume(&v.volume));
+        Notice::Say(match contact(&self.scene, name.as_deref(), &classes) {
+            Err(e) => format!("contact: {e}"),
+            Ok(c) => {
+                let mut parts: Vec<String> = c
+                    .classes
+                    .iter()
+                    .map(|k| format!("{:.0}% {}", 100.0 * k.fraction, k.name))
+                    .collect();
+                if let Some(v) = c.value {
+                    parts.push(format!("mean value {:.0}", v.mean));
+                }
+                if c.outside_mm2 > 0.0 {
+                    parts.push(format!(
+                        "{:.0}% outside the volume",
+                        100.0 * c.outside_fraction
+                    ));
+                }
+                format!(
+                    "contact {} ({:.1} mm2): {}",
+                    c.mesh,
+                    c.area_mm2,
+                    parts.join(", ")
+                )
+            }
+        })
     }
 
     /// Deletes the selected measurement, or the last one when none is selected.
@@ -495,6 +536,53 @@ mod tests {
             Cancelled::Done(Some(Notice::Print("selected nothing".into())))
         );
         assert_eq!(editor.cancel(), Cancelled::Nothing);
+    }
+
+    #[test]
+    fn k_reports_the_selected_meshs_contact_with_the_volume() {
+        let (mut editor, id, camera) = editor();
+        // No volume yet: said so.
+        assert_eq!(
+            editor.act(Action::Contact, &camera),
+            Some(Notice::Say(
+                "contact: the scene has no volume to sample under the mesh".into()
+            ))
+        );
+        // A CT-like volume: air (-1000) below z = 0, cortical bone (1500) above, in 1 mm
+        // voxels from -5 to 5 mm; the triangle, moved 1 mm toward the eye, lies in z = 1, in bone.
+        let values = (0..11 * 11 * 11)
+            .map(|i| if i / 121 >= 6 { 1500.0 } else { -1000.0 })
+            .collect();
+        let volume = crate::volume::CpuVolume {
+            dims: [11; 3],
+            spacing: [1.0; 3],
+            origin: [-5.0; 3],
+            direction: glam::DMat3::IDENTITY,
+            values,
+        };
+        let node = crate::scene::VolumeNode {
+            volume: Arc::new(volume),
+            transfer: Arc::new(crate::classify::TransferFunction::ct_bone()),
+            splats: crate::scene::SplatSettings::default(),
+        };
+        editor
+            .scene
+            .add("ct", DMat4::IDENTITY, None, NodeContent::Volume(node))
+            .unwrap();
+        editor.click(Some(DVec3::ZERO), Some(id));
+        editor.act(
+            Action::Nudge {
+                along: ScreenAxis::Forward,
+                mm: -1.0,
+            },
+            &camera,
+        );
+        assert_eq!(
+            editor.act(Action::Contact, &camera),
+            Some(Notice::Say(
+                "contact implant (0.5 mm2): 0% soft tissue or air, 0% cancellous bone, 100% cortical bone, mean value 1500".into()
+            ))
+        );
     }
 
     #[test]
