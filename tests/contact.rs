@@ -14,7 +14,7 @@ use splatscene::scene::{MeshNode, NodeContent, Scene, SplatSettings, VolumeNode}
 use splatscene::volume::CpuVolume;
 
 mod common;
-use common::{ok, scratch, stderr};
+use common::{fails, ok, scratch};
 
 /// Value per millimetre of world z.
 const SLOPE: f64 = 10.0;
@@ -375,14 +375,13 @@ fn the_command_line_prints_the_contact_of_a_mesh_given_beside_a_volume() {
     // A name that is no file and no mesh of the scene, and edges that do not increase.
     let mut args: Vec<&str> = base.iter().map(String::as_str).collect();
     args.extend_from_slice(&["--mesh", "glenoid"]);
-    let said = common::fails(&args);
+    let said = fails(&args);
     assert!(
         said.contains("glenoid") && said.contains("box.obj"),
         "{said}"
     );
     let mut args: Vec<&str> = base.iter().map(String::as_str).collect();
     args.extend_from_slice(&["--classes", "700,200"]);
-    let said = common::fails(&args);
+    let said = fails(&args);
     assert!(said.contains("increasing"), "{said}");
-    let _ = stderr;
 }

@@ -61,11 +61,10 @@ pub fn run_contact(mut args: ContactArgs) -> Result<()> {
     let classes = match &args.classes {
         Some(Edges(edges)) => Classes::from_edges(edges)?,
         None => {
-            let classes = scene
-                .volumes()
-                .next()
-                .map_or_else(Classes::none, |(_, v, _)| Classes::for_volume(&v.volume));
-            if classes.is_empty() && scene.volumes().next().is_some() {
+            let volume = scene.volumes().next();
+            let classes =
+                volume.map_or_else(Classes::none, |(_, v, _)| Classes::for_volume(&v.volume));
+            if classes.is_empty() && volume.is_some() {
                 eprintln!(
                     "note: the volume is not CT (no values at air's -1000 HU): no classes without --classes"
                 );
