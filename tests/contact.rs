@@ -10,7 +10,7 @@ use glam::{DMat3, DMat4, DQuat, DVec3};
 use splatscene::classify::TransferFunction;
 use splatscene::mesh::{CpuMesh, Material};
 use splatscene::pick::contact::{Classes, ContactError, contact};
-use splatscene::scene::{MeshNode, NodeContent, Scene, SplatSettings, VolumeNode};
+use splatscene::scene::{MeshNode, NodeContent, ObjectError, Scene, SplatSettings, VolumeNode};
 use splatscene::volume::CpuVolume;
 
 mod common;
@@ -291,7 +291,7 @@ fn a_missing_mesh_or_volume_and_bad_edges_are_named() {
     let scene = scene_with(cube(10.0), DMat4::IDENTITY);
     let err = contact(&scene, Some("glenoid"), &Classes::ct()).unwrap_err();
     assert!(
-        matches!(err, ContactError::NoMesh { .. })
+        matches!(err, ContactError::Mesh(ObjectError::NoMesh { .. }))
             && err.to_string().contains("glenoid")
             && err.to_string().contains("\"stem\""),
         "{err}"

@@ -9,12 +9,12 @@
 //! [`MAX_SAMPLES`] samples), and each small triangle weighs its area at its centroid's value.
 //! Samples outside the volume's grid are counted apart (`outside_mm2`), never as a value.
 
-use glam::{DMat4, DVec3};
+use glam::DVec3;
 use serde::Serialize;
 use thiserror::Error;
 
 use crate::geometry::{GeometryError, VolumeGeometry};
-use crate::scene::{NodeId, Scene, placed_geometry};
+use crate::scene::{ObjectError, Scene, placed_geometry};
 use crate::volume::CpuVolume;
 
 /// The most samples one surface takes: 4M trilinear reads, a fraction of a second here.
@@ -97,17 +97,9 @@ impl Classes {
 /// Why a contact could not be measured.
 #[derive(Debug, Error)]
 pub enum ContactError {
-    /// No node of that name holds a mesh.
-    #[error("no mesh named {name:?} in the scene (its meshes: {known})")]
-    NoMesh {
-        /// The name asked for.
-        name: String,
-        /// The meshes there are, comma-separated.
-        known: String,
-    },
-    /// The scene has no mesh at all.
-    #[error("the scene has no mesh to measure the contact of")]
-    NoMeshes,
+    /// The mesh asked for is not in the scene, or there is none.
+    #[error(transparent)]
+    Mesh(#[from] ObjectError),
     /// The scene has no volume to sample.
     #[error("the scene has no volume to sample under the mesh")]
     NoVolume,
@@ -179,14 +171,10 @@ pub fn contact(
     mesh: Option<&str>,
     classes: &Classes,
 ) -> Result<Contact, ContactError> {
-    let (top, mesh_name) = chosen_mesh(scene, mesh)?;
+    let (top, mesh_name) = scene.mesh_object(mesh)?;
     let (volume_id, node, world) = scene.volumes().next().ok_or(ContactError::NoVolume)?;
     let geometry = placed_geometry(&node.volume, world)?;
-    let triangles: Vec<[DVec3; 3]> = scene
-        .meshes()
-        .filter(|(id, _, _)| is_under(scene, *id, top))
-        .flat_map(|(_, m, to_world)| world_triangles(&m.mesh.positions, &m.mesh.indices, to_world))
-        .collect();
+    let triangles = scene.object_triangles(top);
     let min_spacing = node
         .volume
         .spacing
@@ -239,62 +227,6 @@ pub fn contact(
         value,
         samples: sums.samples,
         sample_mm: step,
-    })
-}
-
-/// The node whose meshes are measured, and its name.
-fn chosen_mesh(scene: &Scene, name: Option<&str>) -> Result<(NodeId, String), ContactError> {
-    let holds_mesh = |top: NodeId| scene.meshes().any(|(id, _, _)| is_under(scene, id, top));
-    let tops: Vec<NodeId> = (0..scene.nodes().len())
-        .map(NodeId)
-        .filter(|&id| scene.nodes()[id.0].parent().is_none() && holds_mesh(id))
-        .collect();
-    let Some(name) = name else {
-        let top = *tops.first().ok_or(ContactError::NoMeshes)?;
-        return Ok((top, scene.nodes()[top.0].name.clone()));
-    };
-    let found = (0..scene.nodes().len())
-        .map(NodeId)
-        .find(|&id| scene.nodes()[id.0].name == name && holds_mesh(id));
-    match found {
-        Some(id) => Ok((id, name.to_owned())),
-        None if tops.is_empty() => Err(ContactError::NoMeshes),
-        None => Err(ContactError::NoMesh {
-            name: name.to_owned(),
-            known: tops
-                .iter()
-                .map(|t| format!("{:?}", scene.nodes()[t.0].name))
-                .collect::<Vec<_>>()
-                .join(", "),
-        }),
-    }
-}
-
-/// Whether `node` is `top` or lies below it.
-fn is_under(scene: &Scene, node: NodeId, top: NodeId) -> bool {
-    let mut at = Some(node);
-    while let Some(id) = at {
-        if id == top {
-            return true;
-        }
-        at = scene.nodes().get(id.0).and_then(|n| n.parent());
-    }
-    false
-}
-
-/// A mesh's triangles in world coordinates (those whose indices are out of range left out).
-fn world_triangles<'a>(
-    positions: &'a [[f32; 3]],
-    indices: &'a [u32],
-    to_world: DMat4,
-) -> impl Iterator<Item = [DVec3; 3]> + 'a {
-    indices.chunks_exact(3).filter_map(move |t| {
-        let p = |i: u32| {
-            positions
-                .get(i as usize)
-                .map(|p| to_world.transform_point3(DVec3::from(p.map(f64::from))))
-        };
-        Some([p(t[0])?, p(t[1])?, p(t[2])?])
     })
 }
 

@@ -17,11 +17,13 @@ use crate::volume::CpuVolume;
 
 mod clip;
 pub mod file;
+mod objects;
 pub mod patient;
 pub mod shoulder;
 mod view;
 
 pub use clip::{ClipPlane, Clipping, MAX_CLIP_PLANES};
+pub use objects::{ObjectError, world_triangles};
 pub use view::{Light, Lights, Projection, SceneCamera};
 
 /// Index of a node in its [`Scene`].

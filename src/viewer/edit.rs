@@ -223,7 +223,7 @@ impl Editor {
     pub fn move_selected(&mut self, after: impl Fn(DMat4, DVec3) -> DMat4) -> Option<Notice> {
         let top = self.selected?;
         let before = self.scene.node(top).ok()?.local();
-        let (pivot, _) = plan::pivot(&self.scene, top);
+        let (pivot, _) = self.scene.pivot(top);
         let edit = Edit::Move {
             node: top,
             before,
@@ -462,7 +462,7 @@ mod tests {
     fn a_turn_keeps_the_pivot_where_it_is() {
         let (mut editor, id, camera) = editor();
         editor.click(Some(DVec3::ZERO), Some(id));
-        let (pivot, _) = plan::pivot(&editor.scene, id);
+        let (pivot, _) = editor.scene.pivot(id);
         editor.act(
             Action::Turn {
                 about: ScreenAxis::Up,

@@ -352,7 +352,7 @@ impl App {
             None => "nothing".into(),
         });
         let on_mesh = match &hit {
-            Some(Hit::Mesh(m)) => Some(plan::top_node(&self.edit.scene, m.node)),
+            Some(Hit::Mesh(m)) => Some(self.edit.scene.top_node(m.node)),
             _ => None,
         };
         let notice = self.edit.click(hit.map(|h| h.point()), on_mesh);
@@ -378,7 +378,7 @@ impl App {
             .picker
             .pick_pixel(&self.edit.scene, &view, px, py, &options)
         {
-            Some(Hit::Mesh(m)) => plan::top_node(&self.edit.scene, m.node) == top,
+            Some(Hit::Mesh(m)) => self.edit.scene.top_node(m.node) == top,
             _ => false,
         }
     }
@@ -481,7 +481,7 @@ impl App {
             // Shift drags the selected mesh in the view plane, its pivot following the cursor;
             // Ctrl turns it about its pivot, half a degree a pixel.
             let local = node.local();
-            let (pivot, _) = plan::pivot(&self.edit.scene, top);
+            let (pivot, _) = self.edit.scene.pivot(top);
             let (right, up, _) = plan::screen_axes(&self.camera);
             let height = self
                 .gpu

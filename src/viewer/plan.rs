@@ -195,33 +195,6 @@ impl History {
     }
 }
 
-/// The top node above `node` (the node of a whole mesh file, which moves as one).
-pub fn top_node(scene: &Scene, mut node: NodeId) -> NodeId {
-    while let Some(parent) = scene.node(node).ok().and_then(|n| n.parent()) {
-        node = parent;
-    }
-    node
-}
-
-/// Where a node turns about: its first point measurement (a landmark such as the head centre
-/// of a prosthesis, named by its label), else its origin; in world coordinates.
-pub fn pivot(scene: &Scene, node: NodeId) -> (DVec3, String) {
-    let landmark = scene
-        .measurements
-        .iter()
-        .find(|m| m.kind == MeasureKind::Point && m.node == Some(node));
-    if let Some(m) = landmark
-        && let Ok(value) = scene.measure(m)
-    {
-        let at = DVec3::from(value.points[0]);
-        return (at, m.label.clone().unwrap_or_else(|| "landmark".into()));
-    }
-    (
-        scene.world(node).transform_point3(DVec3::ZERO),
-        "origin".into(),
-    )
-}
-
 /// `local` (of a top node, so its world transform) moved by `delta` in the world.
 pub fn translated(local: DMat4, delta: DVec3) -> DMat4 {
     DMat4::from_translation(delta) * local
@@ -353,7 +326,7 @@ mod tests {
     #[test]
     fn moves_undo_and_redo() {
         let (mut scene, top, part) = scene_with_group();
-        assert_eq!(top_node(&scene, part), top);
+        assert_eq!(scene.top_node(part), top);
         let mut history = History::new();
         assert!(!history.unsaved());
         let before = scene.node(top).unwrap().local();
@@ -398,7 +371,7 @@ mod tests {
     #[test]
     fn turns_keep_the_pivot_and_measurements_follow_their_node() {
         let (mut scene, top, _) = scene_with_group();
-        let (origin, name) = pivot(&scene, top);
+        let (origin, name) = scene.pivot(top);
         assert_eq!(
             (origin, name.as_str()),
             (DVec3::new(10.0, 0.0, 0.0), "origin")
@@ -409,7 +382,7 @@ mod tests {
             node: Some(top),
             label: Some("head centre".into()),
         });
-        let (p, name) = pivot(&scene, top);
+        let (p, name) = scene.pivot(top);
         assert_eq!(
             (p, name.as_str()),
             (DVec3::new(10.0, 0.0, 7.0), "head centre")
@@ -417,7 +390,7 @@ mod tests {
         let local = scene.node(top).unwrap().local();
         let turned = rotated(local, p, DVec3::Y, 90.0);
         scene.set_local(top, turned).unwrap();
-        let (after, _) = pivot(&scene, top);
+        let (after, _) = scene.pivot(top);
         assert!(after.distance(p) < 1e-9, "the pivot stays put: {after}");
         // The origin swings about it: 7 mm below the pivot turns to 7 mm along -x... about y.
         let origin = scene.world(top).transform_point3(DVec3::ZERO);

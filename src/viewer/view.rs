@@ -7,7 +7,6 @@ use std::time::{Duration, Instant};
 use glam::DVec3;
 
 use super::action::{KEYS, STEP};
-use super::plan;
 use super::{App, PREVIEW_ABOVE, SETTLE, ViewerError};
 use crate::annotate::{Anchor, Label, Painter, annotate_image};
 use crate::pick::measure::{MarkerStyle, Measurement, annotate, draw_scene_measurements};
@@ -197,7 +196,7 @@ impl App {
         {
             let (_, turn, at) = node.local().to_scale_rotation_translation();
             let (_, angle) = turn.to_axis_angle();
-            let (_, pivot) = plan::pivot(&self.edit.scene, top);
+            let (_, pivot) = self.edit.scene.pivot(top);
             lines.push(format!(
                 "selected {}: at ({:.1}, {:.1}, {:.1}) mm, turned {:.1}\u{b0}; pivot {pivot}; steps {STEP} mm, {STEP}\u{b0} (Shift x10)",
                 node.name,
