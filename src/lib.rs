@@ -12,7 +12,8 @@
 //! - [`mesh`]: triangle meshes with glTF, OBJ and STL loaders, and the prosthesis generator;
 //! - [`scene`]: the scene graph, camera, lights, scene files and the built-in shoulder scene.
 //!
-//! On top, [`render`]: a wgpu renderer (headless by default) that draws the meshes with a depth
+//! [`slice`] reformats the volume on a plane with the meshes' cross-sections, for judging an
+//! implant's fit. On top, [`render`]: a wgpu renderer (headless by default) that draws the meshes with a depth
 //! buffer, then the splats in visibility order, depth-tested against them.
 //!
 //! ```
@@ -46,6 +47,7 @@ pub mod render;
 #[cfg(feature = "report")]
 pub mod report;
 pub mod scene;
+pub mod slice;
 pub mod splat;
 #[cfg(feature = "viewer")]
 pub mod viewer;

@@ -198,7 +198,8 @@ pub fn is_hounsfield(values: &Voxels) -> bool {
     lo <= HU_AIR && hi > 0.0
 }
 
-fn finite_range(values: &Voxels) -> (f32, f32) {
+/// The least and greatest finite values (infinite, reversed, where there are none).
+pub fn finite_range(values: &Voxels) -> (f32, f32) {
     values
         .par_chunks(1 << 16, |chunk| {
             chunk

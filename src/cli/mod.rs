@@ -11,4 +11,5 @@ pub mod order;
 pub mod orderings;
 pub mod pick;
 pub mod render;
+pub mod slice;
 pub mod view;

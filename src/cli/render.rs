@@ -20,6 +20,9 @@ use splatscene::scene::{Scene, SceneCamera};
 use super::args::parse_opacity;
 use super::files::write_replacing;
 use super::input::{View, ViewArgs};
+use super::slice::{
+    Layout, SliceArgs, compose_quad, quad_slices, run_slices, sidecar, window, write_figure,
+};
 
 /// `splatscene render`.
 #[derive(clap::Args)]
@@ -63,6 +66,8 @@ pub struct RenderArgs {
     transparent: bool,
     #[command(flatten)]
     annotate: AnnotateArgs,
+    #[command(flatten)]
+    slices: SliceArgs,
 }
 
 /// Annotations drawn onto the image for report figures.
@@ -159,8 +164,44 @@ pub fn run_render(args: RenderArgs) -> Result<()> {
         loaded,
         cameras,
         size,
-        ..
+        file,
     } = args.view.load()?;
+    let layout = args.slices.layout(&file)?;
+    if let Layout::Slices(wanted) = &layout {
+        if args.depth.is_some() || args.transparent {
+            bail!("--depth and --transparent are for the 3D view; slices have neither");
+        }
+        let [(_, camera)] = cameras.as_slice() else {
+            bail!("slices go through one camera's target: give one --view with --slice");
+        };
+        let parts = args.annotate.parts()?;
+        return run_slices(
+            &loaded.scene,
+            &file,
+            camera.target,
+            wanted,
+            &args.out,
+            parts.as_ref(),
+        );
+    }
+    let quad = match layout {
+        Layout::Quad(at) => {
+            if args.depth.is_some() {
+                bail!("--depth is for the 3D view alone; --layout quad writes a calibration of its slices instead");
+            }
+            if size.0 < 64 || size.1 < 64 {
+                bail!("--layout quad needs at least 64x64 pixels for its four panes");
+            }
+            Some(at)
+        }
+        _ => None,
+    };
+    // The quad's 3D pane takes a quarter of the figure.
+    let render_size = if quad.is_some() {
+        (size.0 / 2, size.1 / 2)
+    } else {
+        size
+    };
     let outputs = output_names(&args.out, &cameras)?;
     let depths = match &args.depth {
         Some(depth) => output_names(depth, &cameras)?
@@ -170,12 +211,20 @@ pub fn run_render(args: RenderArgs) -> Result<()> {
         None => vec![None; cameras.len()],
     };
     check_distinct(&outputs, &depths)?;
+    let quad_sidecars = match quad {
+        Some(_) => outputs
+            .iter()
+            .map(|o| sidecar(o))
+            .collect::<Result<Vec<_>>>()?,
+        None => Vec::new(),
+    };
     refuse_inputs(
         outputs
             .iter()
             .chain(depths.iter().flatten())
             .cloned()
-            .chain(depths.iter().flatten().map(|d| sidecar_of(d))),
+            .chain(depths.iter().flatten().map(|d| sidecar_of(d)))
+            .chain(quad_sidecars.iter().cloned()),
     )?;
     let options = FrameOptions {
         ordering: args.ordering.or(loaded.ordering),
@@ -222,11 +271,22 @@ pub fn run_render(args: RenderArgs) -> Result<()> {
         .map_or("no GPU adapter".into(), GpuContext::describe);
     for ((name, camera), (out, depth)) in cameras.iter().zip(outputs.iter().zip(&depths)) {
         let shot = match &ctx {
-            Some(ctx) => renderer.screenshot(ctx, &drawn, camera, size, &options)?,
-            None => renderer.screenshot_without_gpu(&drawn, camera, size, &options)?,
+            Some(ctx) => renderer.screenshot(ctx, &drawn, camera, render_size, &options)?,
+            None => renderer.screenshot_without_gpu(&drawn, camera, render_size, &options)?,
         };
         let image = figure(&shot, &loaded.scene, camera, label_parts.as_ref(), &labels)?;
-        write_replacing(out, &encode_png(&image)?)?;
+        match quad {
+            Some(at) => {
+                let point = quad_point(&loaded.scene, camera.target, at);
+                let window = window(&loaded.scene, &file);
+                let slices =
+                    quad_slices(&loaded.scene, point, render_size, window, parts.as_ref())?;
+                let (image, calibration) =
+                    compose_quad(size, &image, &slices, point, &loaded.scene);
+                write_figure(out, &image, &calibration)?;
+            }
+            None => write_replacing(out, &encode_png(&image)?)?,
+        }
         if let Some(path) = depth {
             write_depth(path, &shot, &loaded.scene, depth_mode, args.surface_opacity)?;
         }
@@ -242,6 +302,20 @@ pub fn run_render(args: RenderArgs) -> Result<()> {
         eprintln!("wrote {}", out.display());
     }
     Ok(())
+}
+
+/// The quad layout's point: `target` moved onto the axial, coronal and sagittal planes given
+/// (`at`: their coordinates along S, A and R).
+fn quad_point(scene: &Scene, target: glam::DVec3, at: [Option<f64>; 3]) -> glam::DVec3 {
+    let patient = scene.patient_frame();
+    let normals = [glam::DVec3::Z, glam::DVec3::Y, glam::DVec3::X].map(|d| patient.world(d));
+    normals
+        .iter()
+        .zip(at)
+        .fold(target, |p, (n, mm)| match mm {
+            Some(mm) => p + *n * (mm - p.dot(*n)),
+            None => p,
+        })
 }
 
 /// Writes the depth image of `shot` and its calibration beside it.

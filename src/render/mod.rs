@@ -18,7 +18,7 @@ mod view;
 pub use blit::{Blit, OVERLAY_FORMAT, overlay_texture, write_overlay};
 pub use context::GpuContext;
 pub use depth_image::{DepthImage, DepthMode};
-pub use output::{encode_png, frame_to_rgba8};
+pub use output::{encode_png, encode_png_with_text, frame_to_rgba8};
 pub use renderer::{
     Compositor, Detail, FrameOptions, FrameReport, FrameTimings, MAX_LEVEL, MAX_REFINE,
     MAX_REFINED_VOXELS, REFINE_TO, Renderer, Screenshot, detail_for, pixels_apart,

@@ -32,3 +32,28 @@ where
     )?;
     Ok(bytes)
 }
+
+/// Encodes an 8-bit RGBA image as PNG bytes with text chunks (each value as its text, strings
+/// without quotes; keys prefixed `splatscene:`), as calibrated figures carry what their pixels
+/// mean.
+pub fn encode_png_with_text(
+    image: &RgbaImage,
+    chunks: &[(&str, &serde_json::Value)],
+) -> Result<Vec<u8>, png::EncodingError> {
+    let mut bytes = Vec::new();
+    {
+        let mut encoder = png::Encoder::new(&mut bytes, image.width(), image.height());
+        encoder.set_color(png::ColorType::Rgba);
+        encoder.set_depth(png::BitDepth::Eight);
+        for (key, value) in chunks {
+            let text = match value {
+                serde_json::Value::String(s) => s.clone(),
+                other => other.to_string(),
+            };
+            encoder.add_text_chunk(format!("splatscene:{key}"), text)?;
+        }
+        let mut writer = encoder.write_header()?;
+        writer.write_image_data(image.as_raw())?;
+    }
+    Ok(bytes)
+}

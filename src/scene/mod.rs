@@ -20,6 +20,7 @@ pub mod file;
 mod objects;
 pub mod patient;
 pub mod shoulder;
+pub mod slice_spec;
 mod view;
 
 pub use clip::{ClipPlane, Clipping, MAX_CLIP_PLANES};

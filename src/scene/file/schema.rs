@@ -10,6 +10,7 @@ use crate::measure::MeasureKind;
 use crate::order::Ordering;
 use crate::scene::Scene;
 use crate::scene::patient::OrientationCode;
+use crate::scene::slice_spec::SliceSpec;
 use crate::volume::ScalarFormat;
 use crate::volume::detect::{CoordinateFrame, NiftiTransform};
 
@@ -340,6 +341,42 @@ pub struct MeasurementSpec {
     pub node: Option<String>,
 }
 
+/// A slice `render` draws (`[[slice]]`): the CT reformatted on a plane, the meshes' outlines
+/// on it (see `crate::slice`).
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct SliceFileSpec {
+    /// `axial`, `coronal`, `sagittal`, `implant-long` or `implant-cross`, with `@MM` along
+    /// its normal where wanted (`axial@-62.5`).
+    #[serde(with = "by_name_required")]
+    pub plane: SliceSpec,
+    /// The mesh an implant plane follows (the first mesh by default); implant planes only.
+    pub mesh: Option<String>,
+    /// Square pixels of this many millimetres (the volume's finest spacing by default).
+    pub mm_per_pixel: Option<f64>,
+}
+
+/// [`by_name`] for a key that must be given.
+mod by_name_required {
+    use std::fmt::Display;
+    use std::str::FromStr;
+
+    use serde::{Deserialize, Deserializer, Serializer, de::Error};
+
+    pub fn serialize<T: Display, S: Serializer>(value: &T, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_str(&value.to_string())
+    }
+
+    pub fn deserialize<'de, T, D>(d: D) -> Result<T, D::Error>
+    where
+        T: FromStr,
+        T::Err: Display,
+        D: Deserializer<'de>,
+    {
+        String::deserialize(d)?.parse().map_err(D::Error::custom)
+    }
+}
+
 /// A whole scene file.
 #[derive(Debug, Clone, Default, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
@@ -364,6 +401,9 @@ pub struct SceneFile {
     /// Clip planes.
     #[serde(default, rename = "clip", skip_serializing_if = "Vec::is_empty")]
     pub clip: Vec<ClipSpec>,
+    /// Slices `render` draws when the command line names none.
+    #[serde(default, rename = "slice", skip_serializing_if = "Vec::is_empty")]
+    pub slices: Vec<SliceFileSpec>,
 }
 
 /// A loaded scene with the output settings of its file.

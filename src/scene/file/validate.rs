@@ -2,7 +2,10 @@
 //! range, every direction non-zero, every key one that has an effect where it stands. Each
 //! problem is a message naming the key (and the node) and saying what is wrong.
 
-use super::{CameraSpec, LightsSpec, MeshSpec, OutputSpec, SceneFile, TransformSpec, VolumeSpec};
+use super::{
+    CameraSpec, LightsSpec, MeshSpec, OutputSpec, SceneFile, SliceFileSpec, TransformSpec,
+    VolumeSpec,
+};
 
 /// Largest image side, as the renderer's textures allow.
 pub const MAX_SIDE: u32 = crate::budget::MAX_SIDE;
@@ -28,6 +31,22 @@ pub fn check(file: &SceneFile) -> Result<(), String> {
     for (i, m) in file.meshes.iter().enumerate() {
         let node = m.name.clone().unwrap_or_else(|| format!("mesh {}", i + 1));
         mesh(m).map_err(|e| format!("{node}: {e}"))?;
+    }
+    for (i, s) in file.slices.iter().enumerate() {
+        slice(s).map_err(|e| format!("slice {} ({}): {e}", i + 1, s.plane))?;
+    }
+    Ok(())
+}
+
+fn slice(s: &SliceFileSpec) -> Result<(), String> {
+    if let Some(mm) = s.mm_per_pixel {
+        positive("mm_per_pixel", mm)?;
+    }
+    if s.mesh.is_some() && !s.plane.kind.follows_implant() {
+        return Err(format!(
+            "mesh has no effect on a {} plane; only implant-long and implant-cross follow a mesh",
+            s.plane.kind.name()
+        ));
     }
     Ok(())
 }

@@ -1,0 +1,207 @@
+//! The exact cross-section of a mesh by a plane: every triangle that crosses it gives a
+//! segment, and segments that meet on a mesh edge are joined into polylines (closed loops for
+//! a closed mesh).
+//!
+//! A vertex on the plane counts as lying on its positive side, so that no vertex is ever "on"
+//! the plane: each crossing lies inside an edge whose ends lie on either side, and the two
+//! triangles sharing that edge find the same point. Edges are keyed by their ends' positions
+//! (exact bits), which joins meshes stored with a vertex per triangle corner (STL) as well as
+//! indexed ones.
+
+use std::collections::HashMap;
+
+use glam::{DMat4, DVec3};
+
+use super::Plane;
+use crate::scene::{NodeId, Scene};
+
+/// The cross-section of one object (a top node holding meshes) by a plane.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Outline {
+    /// The object's node.
+    pub node: NodeId,
+    /// Its name.
+    pub name: String,
+    /// The base colour of its first mesh (linear RGBA).
+    pub color: [f32; 4],
+    /// The polylines, in world coordinates, each with whether it closes on itself (its last
+    /// point joined to its first, which is not repeated).
+    pub polylines: Vec<(Vec<DVec3>, bool)>,
+    /// The outline's length in millimetres.
+    pub length_mm: f64,
+    /// The area it encloses in square millimetres: for a closed mesh whose triangles all wind
+    /// one way, the section's area, holes taken out.
+    pub area_mm2: f64,
+}
+
+/// The cross-sections by `plane` of the scene's objects that it cuts (overlays left out).
+pub fn outlines(scene: &Scene, plane: &Plane) -> Vec<Outline> {
+    let mut by_top: Vec<(NodeId, Vec<Segment>, [f32; 4])> = Vec::new();
+    for (id, mesh, world) in scene.meshes() {
+        let top = scene.top_node(id);
+        let segments = mesh_segments(&mesh.mesh.positions, &mesh.mesh.indices, world, plane, id);
+        match by_top.iter_mut().find(|(t, _, _)| *t == top) {
+            Some((_, all, _)) => all.extend(segments),
+            None => by_top.push((top, segments, mesh.material.base_color)),
+        }
+    }
+    by_top
+        .into_iter()
+        .filter(|(_, segments, _)| !segments.is_empty())
+        .map(|(node, segments, color)| {
+            let length_mm = segments.iter().map(|s| (s.b - s.a).length()).sum();
+            let twice_area: f64 = segments
+                .iter()
+                .map(|s| (s.a - plane.point).cross(s.b - plane.point).dot(plane.normal))
+                .sum();
+            Outline {
+                node,
+                name: scene
+                    .node(node)
+                    .map_or_else(|_| String::new(), |n| n.name.clone()),
+                color,
+                polylines: join(&segments),
+                length_mm,
+                area_mm2: 0.5 * twice_area.abs(),
+            }
+        })
+        .collect()
+}
+
+/// An edge of a mesh: its node and its ends' positions (exact bits), lesser end first.
+type EdgeKey = (usize, [u32; 3], [u32; 3]);
+
+/// A piece of the section: from `a` to `b`, which lie on the edges `ka` and `kb`, directed so
+/// that the solid lies on one side of every segment (from the triangle's winding).
+#[derive(Debug, Clone, Copy)]
+struct Segment {
+    a: DVec3,
+    b: DVec3,
+    ka: EdgeKey,
+    kb: EdgeKey,
+}
+
+fn mesh_segments(
+    positions: &[[f32; 3]],
+    indices: &[u32],
+    world: DMat4,
+    plane: &Plane,
+    node: NodeId,
+) -> Vec<Segment> {
+    let mut out = Vec::new();
+    for t in indices.chunks_exact(3) {
+        let Some(local) = t
+            .iter()
+            .map(|&i| positions.get(i as usize).copied())
+            .collect::<Option<Vec<[f32; 3]>>>()
+        else {
+            continue;
+        };
+        let p: Vec<DVec3> = local
+            .iter()
+            .map(|v| world.transform_point3(DVec3::from(v.map(f64::from))))
+            .collect();
+        let d: Vec<f64> = p.iter().map(|&q| plane.distance(q)).collect();
+        if d.iter().any(|v| !v.is_finite()) {
+            continue;
+        }
+        let side: Vec<bool> = d.iter().map(|&v| v >= 0.0).collect();
+        let mut cuts = Vec::with_capacity(2);
+        for (i, j) in [(0, 1), (1, 2), (2, 0)] {
+            if side[i] == side[j] {
+                continue;
+            }
+            let s = d[i] / (d[i] - d[j]);
+            let point = p[i] + (p[j] - p[i]) * s;
+            let (bi, bj) = (local[i].map(f32::to_bits), local[j].map(f32::to_bits));
+            let key = if bi <= bj {
+                (node.0, bi, bj)
+            } else {
+                (node.0, bj, bi)
+            };
+            cuts.push((point, key));
+        }
+        let [(a, ka), (b, kb)] = cuts[..] else {
+            continue;
+        };
+        // The segment runs along normal x face normal, so that the section's signed area
+        // counts every piece of a consistently wound mesh with one sign.
+        let face = (p[1] - p[0]).cross(p[2] - p[0]);
+        let along = plane.normal.cross(face);
+        let segment = if (b - a).dot(along) >= 0.0 {
+            Segment { a, b, ka, kb }
+        } else {
+            Segment {
+                a: b,
+                b: a,
+                ka: kb,
+                kb: ka,
+            }
+        };
+        out.push(segment);
+    }
+    out
+}
+
+/// Segments joined end to end where they share an edge, each chain followed both ways from
+/// where it starts.
+fn join(segments: &[Segment]) -> Vec<(Vec<DVec3>, bool)> {
+    let mut at: HashMap<EdgeKey, Vec<usize>> = HashMap::new();
+    for (i, s) in segments.iter().enumerate() {
+        at.entry(s.ka).or_default().push(i);
+        at.entry(s.kb).or_default().push(i);
+    }
+    let mut used = vec![false; segments.len()];
+    let mut out = Vec::new();
+    for start in 0..segments.len() {
+        if used[start] {
+            continue;
+        }
+        used[start] = true;
+        let s = segments[start];
+        // Forward from `b`, then backward from `a`.
+        let mut forward = vec![s.a, s.b];
+        let mut closed = false;
+        let mut key = s.kb;
+        while let Some(next) = take_next(&at, &mut used, key) {
+            let n = segments[next];
+            let (point, other) = if n.ka == key {
+                (n.b, n.kb)
+            } else {
+                (n.a, n.ka)
+            };
+            if other == s.ka {
+                closed = true;
+                break;
+            }
+            forward.push(point);
+            key = other;
+        }
+        if !closed {
+            let mut backward = Vec::new();
+            let mut key = s.ka;
+            while let Some(next) = take_next(&at, &mut used, key) {
+                let n = segments[next];
+                let (point, other) = if n.ka == key {
+                    (n.b, n.kb)
+                } else {
+                    (n.a, n.ka)
+                };
+                backward.push(point);
+                key = other;
+            }
+            backward.reverse();
+            backward.extend(forward);
+            forward = backward;
+        }
+        out.push((forward, closed));
+    }
+    out
+}
+
+/// An unused segment with an end on edge `key`, marked used.
+fn take_next(at: &HashMap<EdgeKey, Vec<usize>>, used: &mut [bool], key: EdgeKey) -> Option<usize> {
+    let next = *at.get(&key)?.iter().find(|&&i| !used[i])?;
+    used[next] = true;
+    Some(next)
+}
