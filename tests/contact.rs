@@ -14,6 +14,7 @@ use splatscene::scene::{MeshNode, NodeContent, ObjectError, Scene, SplatSettings
 use splatscene::volume::CpuVolume;
 
 mod common;
+use common::shapes::{cube, obj_text, sphere};
 use common::{fails, ok, scratch};
 
 /// Value per millimetre of world z.
@@ -57,66 +58,6 @@ fn scene_with(mesh: CpuMesh, placed: DMat4) -> Scene {
         .add("stem", placed, None, NodeContent::Mesh(node))
         .unwrap();
     scene
-}
-
-/// A cube of side `side` centred on the origin, two triangles a face.
-fn cube(side: f32) -> CpuMesh {
-    let h = side / 2.0;
-    let mut positions = Vec::new();
-    let mut indices = Vec::new();
-    for axis in 0..3 {
-        for sign in [-1.0f32, 1.0] {
-            let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
-            let base = positions.len() as u32;
-            for (a, b) in [(-h, -h), (h, -h), (h, h), (-h, h)] {
-                let mut p = [0.0; 3];
-                p[axis] = sign * h;
-                p[u] = a;
-                p[v] = b;
-                positions.push(p);
-            }
-            indices.extend([base, base + 1, base + 2, base, base + 2, base + 3]);
-        }
-    }
-    let mut mesh = CpuMesh {
-        positions,
-        normals: Vec::new(),
-        indices,
-    };
-    mesh.compute_normals();
-    mesh
-}
-
-/// A UV sphere of radius `r`.
-fn sphere(r: f32, rings: u32, segments: u32) -> CpuMesh {
-    let mut positions = Vec::new();
-    for i in 0..=rings {
-        let theta = std::f32::consts::PI * i as f32 / rings as f32;
-        for j in 0..segments {
-            let phi = std::f32::consts::TAU * j as f32 / segments as f32;
-            positions.push([
-                r * theta.sin() * phi.cos(),
-                r * theta.sin() * phi.sin(),
-                r * theta.cos(),
-            ]);
-        }
-    }
-    let mut indices = Vec::new();
-    for i in 0..rings {
-        for j in 0..segments {
-            let a = i * segments + j;
-            let b = i * segments + (j + 1) % segments;
-            let (c, d) = (a + segments, b + segments);
-            indices.extend([a, c, b, b, c, d]);
-        }
-    }
-    let mut mesh = CpuMesh {
-        positions,
-        normals: Vec::new(),
-        indices,
-    };
-    mesh.compute_normals();
-    mesh
 }
 
 /// The area of the part of convex polygon `poly` (world points) where z < `h`: the polygon
@@ -326,15 +267,7 @@ fn the_command_line_prints_the_contact_of_a_mesh_given_beside_a_volume() {
     let bytes: Vec<u8> = volume.values.iter().flat_map(f32::to_le_bytes).collect();
     std::fs::write(&raw, bytes).unwrap();
     let stl = dir.join("box.obj");
-    let mesh = cube(20.0);
-    let mut obj = String::new();
-    for p in &mesh.positions {
-        obj.push_str(&format!("v {} {} {}\n", p[0], p[1], p[2]));
-    }
-    for t in mesh.indices.chunks(3) {
-        obj.push_str(&format!("f {} {} {}\n", t[0] + 1, t[1] + 1, t[2] + 1));
-    }
-    std::fs::write(&stl, obj).unwrap();
+    std::fs::write(&stl, obj_text(&cube(20.0))).unwrap();
     let s = |p: &std::path::Path| p.to_str().unwrap().to_owned();
     let origin = format!("{0},{0},{0}", -0.5 * 0.5 * 127.0);
     let base = [

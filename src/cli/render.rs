@@ -187,7 +187,9 @@ pub fn run_render(args: RenderArgs) -> Result<()> {
     let quad = match layout {
         Layout::Quad(at) => {
             if args.depth.is_some() {
-                bail!("--depth is for the 3D view alone; --layout quad writes a calibration of its slices instead");
+                bail!(
+                    "--depth is for the 3D view alone; --layout quad writes a calibration of its slices instead"
+                );
             }
             if size.0 < 64 || size.1 < 64 {
                 bail!("--layout quad needs at least 64x64 pixels for its four panes");
@@ -309,13 +311,10 @@ pub fn run_render(args: RenderArgs) -> Result<()> {
 fn quad_point(scene: &Scene, target: glam::DVec3, at: [Option<f64>; 3]) -> glam::DVec3 {
     let patient = scene.patient_frame();
     let normals = [glam::DVec3::Z, glam::DVec3::Y, glam::DVec3::X].map(|d| patient.world(d));
-    normals
-        .iter()
-        .zip(at)
-        .fold(target, |p, (n, mm)| match mm {
-            Some(mm) => p + *n * (mm - p.dot(*n)),
-            None => p,
-        })
+    normals.iter().zip(at).fold(target, |p, (n, mm)| match mm {
+        Some(mm) => p + *n * (mm - p.dot(*n)),
+        None => p,
+    })
 }
 
 /// Writes the depth image of `shot` and its calibration beside it.

@@ -194,7 +194,10 @@ pub fn slice_outputs(pattern: &Path, wanted: &[Wanted]) -> Result<Vec<PathBuf>> 
         .collect();
     for (i, a) in outputs.iter().enumerate() {
         if outputs[i + 1..].contains(a) {
-            bail!("{}: two slices would write one file (is a plane named twice?)", a.display());
+            bail!(
+                "{}: two slices would write one file (is a plane named twice?)",
+                a.display()
+            );
         }
     }
     Ok(outputs)
@@ -321,7 +324,8 @@ pub fn run_slices(
 }
 
 /// 3D Slicer's colours of the planes: axial red, coronal green, sagittal yellow.
-pub const PLANE_COLOURS: [[u8; 4]; 3] = [[241, 89, 70, 255], [110, 176, 75, 255], [237, 214, 80, 255]];
+pub const PLANE_COLOURS: [[u8; 4]; 3] =
+    [[241, 89, 70, 255], [110, 176, 75, 255], [237, 214, 80, 255]];
 
 /// The three slice panes of a quad figure through `point`, each `pane` pixels at one shared
 /// pixel size (the largest that fits every section into its pane), with the lines where the
@@ -336,14 +340,7 @@ pub fn quad_slices(
     let kinds = [PlaneKind::Axial, PlaneKind::Coronal, PlaneKind::Sagittal];
     let planes = kinds
         .iter()
-        .map(|&kind| {
-            Plane::of(
-                scene,
-                SliceSpec { kind, at_mm: None },
-                point,
-                None,
-            )
-        })
+        .map(|&kind| Plane::of(scene, SliceSpec { kind, at_mm: None }, point, None))
         .collect::<Result<Vec<_>, _>>()?;
     let extents = planes
         .iter()
@@ -424,7 +421,8 @@ pub fn compose_quad(
                 a.get(i).and_then(Value::as_f64).unwrap_or(0.0)
             }))
         };
-        let origin = vector("origin_mm") - vector("pixel_right_mm") * f64::from(x)
+        let origin = vector("origin_mm")
+            - vector("pixel_right_mm") * f64::from(x)
             - vector("pixel_down_mm") * f64::from(y);
         c["origin_mm"] = json!(origin.to_array());
         c["rect"] = json!([x, y, pane.width(), pane.height()]);
@@ -436,7 +434,9 @@ pub fn compose_quad(
         }
         panes.push(c);
     }
-    let window = slices.first().map_or(Value::Null, |(_, _, c)| c["window"].clone());
+    let window = slices
+        .first()
+        .map_or(Value::Null, |(_, _, c)| c["window"].clone());
     let p = scene.patient_frame().patient(point);
     let calibration = json!({
         "layout": "quad",

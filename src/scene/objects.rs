@@ -103,7 +103,9 @@ impl Scene {
     pub fn object_triangles(&self, top: NodeId) -> Vec<[DVec3; 3]> {
         self.meshes()
             .filter(|(id, _, _)| self.is_under(*id, top))
-            .flat_map(|(_, m, to_world)| world_triangles(&m.mesh.positions, &m.mesh.indices, to_world))
+            .flat_map(|(_, m, to_world)| {
+                world_triangles(&m.mesh.positions, &m.mesh.indices, to_world)
+            })
             .collect()
     }
 }

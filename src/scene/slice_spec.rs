@@ -121,5 +121,4 @@ mod tests {
             assert!(bad.parse::<SliceSpec>().is_err(), "{bad}");
         }
     }
-
 }

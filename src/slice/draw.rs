@@ -100,8 +100,10 @@ pub fn crosshair(
     across: [u8; 4],
     along: [u8; 4],
 ) -> Result<(), NoFont> {
+    // Through the centre of the pixel the point falls in, so that the lines stay one crisp
+    // pixel wide (they lie within half a pixel of the point).
     let [x, y] = frame.pixel(point);
-    let (x, y) = ((x + 0.5) as f32, (y + 0.5) as f32);
+    let (x, y) = (x.round() as f32 + 0.5, y.round() as f32 + 0.5);
     let (w, h) = (image.width() as f32, image.height() as f32);
     let mut painter = Painter::new(image)?;
     painter.line([0.0, y], [w, y], 1.0, across);

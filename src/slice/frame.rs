@@ -64,7 +64,10 @@ impl Extent {
         if polygon.len() < 3 {
             return Err(misses(scene, plane, &geometry));
         }
-        let (mut u, mut v) = ([f64::INFINITY, f64::NEG_INFINITY], [f64::INFINITY, f64::NEG_INFINITY]);
+        let (mut u, mut v) = (
+            [f64::INFINITY, f64::NEG_INFINITY],
+            [f64::INFINITY, f64::NEG_INFINITY],
+        );
         for p in &polygon {
             u = [u[0].min(p.x), u[1].max(p.x)];
             v = [v[0].min(p.y), v[1].max(p.y)];
@@ -174,7 +177,10 @@ impl SliceFrame {
         let (width, height) = match size {
             Some(size) => size,
             None => {
-                let (w, h) = (count(extent.u[1] - extent.u[0]), count(extent.v[1] - extent.v[0]));
+                let (w, h) = (
+                    count(extent.u[1] - extent.u[0]),
+                    count(extent.v[1] - extent.v[0]),
+                );
                 let too_large = SliceError::TooLarge {
                     plane: plane.spec.to_string(),
                     width: w,

@@ -49,8 +49,8 @@ impl Plane {
             PlaneKind::Sagittal => (through, r, -a, -s),
             PlaneKind::ImplantLong | PlaneKind::ImplantCross => {
                 let (top, name) = scene.mesh_object(mesh)?;
-                let axis = long_axis(&scene.object_triangles(top))
-                    .ok_or(SliceError::NoLongAxis(name))?;
+                let axis =
+                    long_axis(&scene.object_triangles(top)).ok_or(SliceError::NoLongAxis(name))?;
                 // The axis's superior end up.
                 let axis = if axis.dot(s) < 0.0 { -axis } else { axis };
                 let (pivot, _) = scene.pivot(top);
@@ -132,7 +132,7 @@ pub fn long_axis(triangles: &[[DVec3; 3]]) -> Option<DVec3> {
     let mut order = [0usize, 1, 2];
     order.sort_by(|&i, &j| values[j].total_cmp(&values[i]));
     let (l0, l1) = (values[order[0]], values[order[1]]);
-    if !(l0 > 0.0) || l1 > 0.99 * l0 {
+    if l0.is_nan() || l0 <= 0.0 || l1 > 0.99 * l0 {
         return None;
     }
     vectors[order[0]].try_normalize()
@@ -164,15 +164,15 @@ pub(crate) fn symmetric_eigen(m: DMat3) -> ([f64; 3], [DVec3; 3]) {
             let c = 1.0 / (t * t + 1.0).sqrt();
             let s = t * c;
             // a <- J^T a J, v <- v J, J the rotation in the (p, q) plane.
-            for k in 0..3 {
-                let (akp, akq) = (a[k][p], a[k][q]);
-                a[k][p] = c * akp - s * akq;
-                a[k][q] = s * akp + c * akq;
+            for row in &mut a {
+                let (akp, akq) = (row[p], row[q]);
+                row[p] = c * akp - s * akq;
+                row[q] = s * akp + c * akq;
             }
+            let (rp, rq) = (a[p], a[q]);
             for k in 0..3 {
-                let (apk, aqk) = (a[p][k], a[q][k]);
-                a[p][k] = c * apk - s * aqk;
-                a[q][k] = s * apk + c * aqk;
+                a[p][k] = c * rp[k] - s * rq[k];
+                a[q][k] = s * rp[k] + c * rq[k];
             }
             for row in &mut v {
                 let (vp, vq) = (row[p], row[q]);

@@ -47,9 +47,8 @@ pub fn resample(scene: &Scene, frame: &SliceFrame) -> Result<SliceValues, SliceE
                     continue;
                 }
                 let i = geometry.world_to_index(p);
-                let inside = (0..3).all(|a| {
-                    i[a] >= ranges[a].0 - tolerance && i[a] <= ranges[a].1 + tolerance
-                });
+                let inside = (0..3)
+                    .all(|a| i[a] >= ranges[a].0 - tolerance && i[a] <= ranges[a].1 + tolerance);
                 if inside {
                     *out = volume.trilinear(i.to_array());
                 }

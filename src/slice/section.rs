@@ -29,8 +29,9 @@ pub struct Outline {
     pub polylines: Vec<(Vec<DVec3>, bool)>,
     /// The outline's length in millimetres.
     pub length_mm: f64,
-    /// The area it encloses in square millimetres: for a closed mesh whose triangles all wind
-    /// one way, the section's area, holes taken out.
+    /// The area its closed polylines enclose in square millimetres, a loop inside another
+    /// taken out of it (even-odd: a tube's wall, not its bore), whatever way the mesh's
+    /// triangles wind.
     pub area_mm2: f64,
 }
 
@@ -50,29 +51,82 @@ pub fn outlines(scene: &Scene, plane: &Plane) -> Vec<Outline> {
         .filter(|(_, segments, _)| !segments.is_empty())
         .map(|(node, segments, color)| {
             let length_mm = segments.iter().map(|s| (s.b - s.a).length()).sum();
-            let twice_area: f64 = segments
-                .iter()
-                .map(|s| (s.a - plane.point).cross(s.b - plane.point).dot(plane.normal))
-                .sum();
+            let polylines = join(&segments);
+            let area_mm2 = enclosed_area(&polylines, plane);
             Outline {
                 node,
                 name: scene
                     .node(node)
                     .map_or_else(|_| String::new(), |n| n.name.clone()),
                 color,
-                polylines: join(&segments),
+                polylines,
                 length_mm,
-                area_mm2: 0.5 * twice_area.abs(),
+                area_mm2,
             }
         })
         .collect()
 }
 
+/// The area closed loops enclose by the even-odd rule: each loop's area, added where an even
+/// number of other loops holds it and taken away where an odd number does.
+fn enclosed_area(polylines: &[(Vec<DVec3>, bool)], plane: &Plane) -> f64 {
+    let flat: Vec<Vec<[f64; 2]>> = polylines
+        .iter()
+        .filter(|(points, closed)| *closed && points.len() > 2)
+        .map(|(points, _)| {
+            points
+                .iter()
+                .map(|p| {
+                    let d = *p - plane.point;
+                    [d.dot(plane.right), d.dot(plane.down)]
+                })
+                .collect()
+        })
+        .collect();
+    flat.iter()
+        .enumerate()
+        .map(|(i, ring)| {
+            let area = shoelace(ring).abs();
+            // A loop never crosses another (both are sections of one surface), so where its
+            // first point lies tells where all of it does.
+            let holders = flat
+                .iter()
+                .enumerate()
+                .filter(|(j, other)| *j != i && contains(other, ring[0]))
+                .count();
+            if holders % 2 == 0 { area } else { -area }
+        })
+        .sum()
+}
+
+/// The signed area of a ring of points.
+fn shoelace(ring: &[[f64; 2]]) -> f64 {
+    let twice: f64 = ring
+        .iter()
+        .zip(ring.iter().cycle().skip(1))
+        .map(|(a, b)| a[0] * b[1] - b[0] * a[1])
+        .sum();
+    0.5 * twice
+}
+
+/// Whether `p` lies inside the ring (crossings of a ray toward +x).
+fn contains(ring: &[[f64; 2]], p: [f64; 2]) -> bool {
+    let mut inside = false;
+    for (a, b) in ring.iter().zip(ring.iter().cycle().skip(1)) {
+        if (a[1] > p[1]) != (b[1] > p[1]) {
+            let x = a[0] + (p[1] - a[1]) / (b[1] - a[1]) * (b[0] - a[0]);
+            if x > p[0] {
+                inside = !inside;
+            }
+        }
+    }
+    inside
+}
+
 /// An edge of a mesh: its node and its ends' positions (exact bits), lesser end first.
 type EdgeKey = (usize, [u32; 3], [u32; 3]);
 
-/// A piece of the section: from `a` to `b`, which lie on the edges `ka` and `kb`, directed so
-/// that the solid lies on one side of every segment (from the triangle's winding).
+/// A piece of the section: from `a` to `b`, which lie on the edges `ka` and `kb`.
 #[derive(Debug, Clone, Copy)]
 struct Segment {
     a: DVec3,
@@ -124,21 +178,7 @@ fn mesh_segments(
         let [(a, ka), (b, kb)] = cuts[..] else {
             continue;
         };
-        // The segment runs along normal x face normal, so that the section's signed area
-        // counts every piece of a consistently wound mesh with one sign.
-        let face = (p[1] - p[0]).cross(p[2] - p[0]);
-        let along = plane.normal.cross(face);
-        let segment = if (b - a).dot(along) >= 0.0 {
-            Segment { a, b, ka, kb }
-        } else {
-            Segment {
-                a: b,
-                b: a,
-                ka: kb,
-                kb: ka,
-            }
-        };
-        out.push(segment);
+        out.push(Segment { a, b, ka, kb });
     }
     out
 }

@@ -7,6 +7,7 @@
 pub mod files;
 pub mod pictures;
 pub mod raymarch;
+pub mod shapes;
 
 #[allow(unused_imports)]
 pub use files::{
