@@ -702,3 +702,91 @@ contents = ["volumes"]
         "{said}"
     );
 }
+
+#[test]
+fn a_job_asking_for_slices_writes_them_as_render_does_with_their_calibration() {
+    let dir = scratch("batch-slices");
+    std::fs::write(
+        dir.join("plan.toml"),
+        r#"
+[[volume]]
+path = "builtin:shoulder-phantom"
+
+[[mesh]]
+name = "prosthesis"
+path = "builtin:prosthesis"
+seat = "phantom"
+"#,
+    )
+    .unwrap();
+    let manifest = dir.join("manifest.toml");
+    std::fs::write(
+        &manifest,
+        r#"
+[[job]]
+name = "fit"
+scene = "plan.toml"
+views = ["anterior"]
+sizes = [[64, 48]]
+contents = ["volumes"]
+slices = ["implant-long", "axial@40"]
+"#,
+    )
+    .unwrap();
+    let out = dir.join("out");
+    let (m, o) = (manifest.to_str().unwrap(), out.to_str().unwrap());
+    ok(&["batch", m, "--out", o]);
+    let job = &index(&out.join("index.json"))["jobs"][0];
+    let outputs = job["outputs"].as_array().unwrap();
+    for name in ["implant-long", "axial@40"] {
+        let figure = format!("fit-{name}.png");
+        let calibration = format!("fit-{name}.json");
+        assert!(
+            outputs
+                .iter()
+                .any(|o| o["kind"] == "slice" && o["file"] == figure && o["slice"] == name),
+            "{outputs:?}"
+        );
+        assert!(
+            outputs
+                .iter()
+                .any(|o| o["kind"] == "slice-calibration" && o["file"] == calibration)
+        );
+        let c: Value =
+            serde_json::from_str(&std::fs::read_to_string(out.join(&calibration)).unwrap())
+                .unwrap();
+        assert_eq!(c["plane"], name);
+        assert_eq!(c["frame"], "RAS");
+    }
+    let c: Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("fit-implant-long.json")).unwrap())
+            .unwrap();
+    assert_eq!(c["meshes"][0]["name"], "prosthesis");
+    // The same figure as `render --slice` draws.
+    let single = dir.join("single.png");
+    ok(&[
+        "render",
+        dir.join("plan.toml").to_str().unwrap(),
+        "--slice",
+        "implant-long",
+        "--out",
+        single.to_str().unwrap(),
+    ]);
+    assert_eq!(
+        image::open(&single).unwrap().as_bytes(),
+        image::open(out.join("fit-implant-long.png"))
+            .unwrap()
+            .as_bytes()
+    );
+    // Planes that are none, and implant planes without a mesh, are refused at --check.
+    std::fs::write(
+        &manifest,
+        "[[job]]\nname = \"bare\"\nvolume = \"builtin:shoulder-phantom\"\nslices = [\"oblique\", \"implant-cross\"]\n",
+    )
+    .unwrap();
+    let said = fails(&["batch", m, "--out", o, "--check"]);
+    assert!(
+        said.contains("oblique") && said.contains("follow a mesh"),
+        "{said}"
+    );
+}

@@ -705,3 +705,34 @@ plane = "coronal@-2"
     }
     let _ = base;
 }
+
+#[test]
+fn overlapping_parts_of_one_object_enclose_their_union() {
+    let mut scene = scene_with(field_volume(DMat3::IDENTITY, DVec3::ZERO), None);
+    let top = scene
+        .add("implant", DMat4::IDENTITY, None, NodeContent::Empty)
+        .unwrap();
+    for (name, x) in [("head", 0.0), ("neck", 5.0)] {
+        let part = MeshNode {
+            mesh: Arc::new(cube(10.0)),
+            material: Material::default(),
+        };
+        scene
+            .add(
+                name,
+                DMat4::from_translation(DVec3::new(x, 0.0, 0.0)),
+                Some(top),
+                NodeContent::Mesh(part),
+            )
+            .unwrap();
+    }
+    let plane = Plane::of(&scene, spec("axial@1"), DVec3::ZERO, None).unwrap();
+    let slice = Slice::new(&scene, plane, Pixels::Size(None)).unwrap();
+    assert_eq!(slice.outlines.len(), 1);
+    let o = &slice.outlines[0];
+    assert_eq!(o.name, "implant");
+    assert_eq!(o.polylines.len(), 2);
+    // 15 by 10 mm: the overlap counted once.
+    assert!((o.area_mm2 - 150.0).abs() < 1e-6, "{}", o.area_mm2);
+    assert!((o.length_mm - 80.0).abs() < 1e-6, "{}", o.length_mm);
+}

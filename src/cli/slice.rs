@@ -241,10 +241,10 @@ fn label_parts(parts: Option<&Annotations>, slice: &Slice) -> Option<Annotations
     }
 }
 
-/// Writes a figure, its calibration beside it and in its text chunks.
-pub fn write_figure(out: &Path, image: &RgbaImage, calibration: &Value) -> Result<()> {
-    let json_path = sidecar(out)?;
-    let chunks: Vec<(&str, &Value)> = calibration
+/// The calibration's keys that go into a PNG's text chunks: the pixels' placement, not the
+/// lists of meshes, measurements and panes (which the JSON beside it holds).
+pub fn calibration_chunks(calibration: &Value) -> Vec<(&str, &Value)> {
+    calibration
         .as_object()
         .map(|o| {
             o.iter()
@@ -252,7 +252,13 @@ pub fn write_figure(out: &Path, image: &RgbaImage, calibration: &Value) -> Resul
                 .map(|(k, v)| (k.as_str(), v))
                 .collect()
         })
-        .unwrap_or_default();
+        .unwrap_or_default()
+}
+
+/// Writes a figure, its calibration beside it and in its text chunks.
+pub fn write_figure(out: &Path, image: &RgbaImage, calibration: &Value) -> Result<()> {
+    let json_path = sidecar(out)?;
+    let chunks = calibration_chunks(calibration);
     write_replacing(out, &encode_png_with_text(image, &chunks)?)?;
     write_replacing(
         &json_path,

@@ -29,9 +29,9 @@ pub struct Outline {
     pub polylines: Vec<(Vec<DVec3>, bool)>,
     /// The outline's length in millimetres.
     pub length_mm: f64,
-    /// The area its closed polylines enclose in square millimetres, a loop inside another
-    /// taken out of it (even-odd: a tube's wall, not its bore), whatever way the mesh's
-    /// triangles wind.
+    /// The area its closed polylines enclose in square millimetres: within each mesh a loop
+    /// inside another taken out of it (even-odd: a tube's wall, not its bore), whatever way
+    /// the triangles wind; across the object's meshes their union.
     pub area_mm2: f64,
 }
 
@@ -51,8 +51,12 @@ pub fn outlines(scene: &Scene, plane: &Plane) -> Vec<Outline> {
         .filter(|(_, segments, _)| !segments.is_empty())
         .map(|(node, segments, color)| {
             let length_mm = segments.iter().map(|s| (s.b - s.a).length()).sum();
-            let polylines = join(&segments);
-            let area_mm2 = enclosed_area(&polylines, plane);
+            let joined = join(&segments);
+            let area_mm2 = enclosed_area(&joined, plane);
+            let polylines = joined
+                .into_iter()
+                .map(|(p, closed, _)| (p, closed))
+                .collect();
             Outline {
                 node,
                 name: scene
@@ -67,60 +71,82 @@ pub fn outlines(scene: &Scene, plane: &Plane) -> Vec<Outline> {
         .collect()
 }
 
-/// The area closed loops enclose by the even-odd rule: each loop's area, added where an even
-/// number of other loops holds it and taken away where an odd number does.
-fn enclosed_area(polylines: &[(Vec<DVec3>, bool)], plane: &Plane) -> f64 {
-    let flat: Vec<Vec<[f64; 2]>> = polylines
-        .iter()
-        .filter(|(points, closed)| *closed && points.len() > 2)
-        .map(|(points, _)| {
-            points
-                .iter()
-                .map(|p| {
-                    let d = *p - plane.point;
-                    [d.dot(plane.right), d.dot(plane.down)]
-                })
-                .collect()
-        })
-        .collect();
-    flat.iter()
-        .enumerate()
-        .map(|(i, ring)| {
-            let area = shoelace(ring).abs();
-            // A loop never crosses another (both are sections of one surface), so where its
-            // first point lies tells where all of it does.
-            let holders = flat
-                .iter()
-                .enumerate()
-                .filter(|(j, other)| *j != i && contains(other, ring[0]))
-                .count();
-            if holders % 2 == 0 { area } else { -area }
-        })
-        .sum()
-}
-
-/// The signed area of a ring of points.
-fn shoelace(ring: &[[f64; 2]]) -> f64 {
-    let twice: f64 = ring
-        .iter()
-        .zip(ring.iter().cycle().skip(1))
-        .map(|(a, b)| a[0] * b[1] - b[0] * a[1])
-        .sum();
-    0.5 * twice
-}
-
-/// Whether `p` lies inside the ring (crossings of a ray toward +x).
-fn contains(ring: &[[f64; 2]], p: [f64; 2]) -> bool {
-    let mut inside = false;
-    for (a, b) in ring.iter().zip(ring.iter().cycle().skip(1)) {
-        if (a[1] > p[1]) != (b[1] > p[1]) {
-            let x = a[0] + (p[1] - a[1]) / (b[1] - a[1]) * (b[0] - a[0]);
-            if x > p[0] {
-                inside = !inside;
+/// The area the closed loops enclose: within each mesh (part) of the object by the even-odd
+/// rule (a loop inside another is a hole), across its parts the union (a head that overlaps
+/// its neck counts once). Integrated exactly band by band between the loops' corners, where
+/// the covered length of a line across the section is linear, save in the few bands where two
+/// parts' edges cross.
+fn enclosed_area(polylines: &[(Vec<DVec3>, bool, usize)], plane: &Plane) -> f64 {
+    // Edges (in plane coordinates) with their part.
+    let mut edges: Vec<([f64; 2], [f64; 2], usize)> = Vec::new();
+    for (points, closed, part) in polylines {
+        if !*closed || points.len() < 3 {
+            continue;
+        }
+        let flat: Vec<[f64; 2]> = points
+            .iter()
+            .map(|p| {
+                let d = *p - plane.point;
+                [d.dot(plane.right), d.dot(plane.down)]
+            })
+            .collect();
+        for (a, b) in flat.iter().zip(flat.iter().cycle().skip(1)) {
+            if a[1] != b[1] {
+                edges.push(if a[1] < b[1] {
+                    (*a, *b, *part)
+                } else {
+                    (*b, *a, *part)
+                });
             }
         }
     }
-    inside
+    if edges.is_empty() {
+        return 0.0;
+    }
+    edges.sort_by(|e, f| e.0[1].total_cmp(&f.0[1]));
+    let mut ys: Vec<f64> = edges.iter().flat_map(|e| [e.0[1], e.1[1]]).collect();
+    ys.sort_by(f64::total_cmp);
+    ys.dedup();
+    let mut area = 0.0;
+    let mut next = 0;
+    let mut active: Vec<([f64; 2], [f64; 2], usize)> = Vec::new();
+    let mut crossings: Vec<(usize, f64)> = Vec::new();
+    let mut spans: Vec<(f64, f64)> = Vec::new();
+    for band in ys.windows(2) {
+        let y = 0.5 * (band[0] + band[1]);
+        while next < edges.len() && edges[next].0[1] < y {
+            active.push(edges[next]);
+            next += 1;
+        }
+        active.retain(|e| e.1[1] > y);
+        crossings.clear();
+        crossings.extend(
+            active
+                .iter()
+                .map(|(a, b, part)| (*part, a[0] + (y - a[1]) / (b[1] - a[1]) * (b[0] - a[0]))),
+        );
+        crossings.sort_by(|p, q| p.0.cmp(&q.0).then(p.1.total_cmp(&q.1)));
+        // Each part's inside, even-odd: its crossings paired in order.
+        spans.clear();
+        for pair in crossings.chunks_exact(2) {
+            if pair[0].0 == pair[1].0 {
+                spans.push((pair[0].1, pair[1].1));
+            }
+        }
+        // The union of the parts' spans.
+        spans.sort_by(|p, q| p.0.total_cmp(&q.0));
+        let mut covered = 0.0;
+        let mut reach = f64::NEG_INFINITY;
+        for &(lo, hi) in &spans {
+            let lo = lo.max(reach);
+            if hi > lo {
+                covered += hi - lo;
+                reach = hi;
+            }
+        }
+        area += covered * (band[1] - band[0]);
+    }
+    area
 }
 
 /// An edge of a mesh: its node and its ends' positions (exact bits), lesser end first.
@@ -184,8 +210,8 @@ fn mesh_segments(
 }
 
 /// Segments joined end to end where they share an edge, each chain followed both ways from
-/// where it starts.
-fn join(segments: &[Segment]) -> Vec<(Vec<DVec3>, bool)> {
+/// where it starts; with whether it closes and the node of its mesh.
+fn join(segments: &[Segment]) -> Vec<(Vec<DVec3>, bool, usize)> {
     let mut at: HashMap<EdgeKey, Vec<usize>> = HashMap::new();
     for (i, s) in segments.iter().enumerate() {
         at.entry(s.ka).or_default().push(i);
@@ -234,7 +260,7 @@ fn join(segments: &[Segment]) -> Vec<(Vec<DVec3>, bool)> {
             backward.extend(forward);
             forward = backward;
         }
-        out.push((forward, closed));
+        out.push((forward, closed, s.ka.0));
     }
     out
 }

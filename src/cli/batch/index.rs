@@ -75,7 +75,8 @@ impl CameraRecord {
 pub struct OutputRecord {
     /// The file, relative to the output folder, with `/` between folders.
     pub file: String,
-    /// `image`, `depth`, `depth-calibration` or `measurements`.
+    /// `image`, `depth`, `depth-calibration`, `measurements`, `contact`, `slice` or
+    /// `slice-calibration`.
     pub kind: String,
     /// BLAKE3 of the file's bytes.
     pub blake3: String,
@@ -94,6 +95,9 @@ pub struct OutputRecord {
     /// The camera (pictures).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub camera: Option<CameraRecord>,
+    /// The slice's plane (slices and their calibration).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub slice: Option<String>,
 }
 
 /// How a job ended.

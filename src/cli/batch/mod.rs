@@ -18,6 +18,9 @@ use splatscene::scene::file::{LoadedScene, camera as scene_camera, named_view_ca
 use splatscene::scene::{NodeContent, NodeId, Scene};
 
 use splatscene::pick::contact::{Classes, contact};
+use splatscene::render::encode_png_with_text;
+
+use super::slice::{Wanted, calibration_chunks, slice_figure, window as slice_window};
 use splatscene::pick::measure::draw_scene_measurements;
 
 use super::render::{depth_files, figure_image};
@@ -591,6 +594,7 @@ fn render_job(
             ordering: None,
             size: None,
             camera: None,
+            slice: None,
         });
         Ok(())
     };
@@ -608,6 +612,42 @@ fn render_job(
         contact_report = Some(report);
     }
     record.contact = contact_report;
+    if !job.slices.is_empty() {
+        let window = slice_window(full, &job.file);
+        for (spec, figure) in &job.slices {
+            let wanted = Wanted {
+                spec: *spec,
+                mesh: None,
+                mm_per_pixel: None,
+            };
+            let (image, calibration) =
+                slice_figure(full, &wanted, base.target, window, parts.as_ref())
+                    .with_context(|| format!("slice {spec}"))?;
+            let png = encode_png_with_text(&image, &calibration_chunks(&calibration))?;
+            let json = serde_json::to_string_pretty(&calibration)?;
+            for (file, kind, bytes) in [
+                (figure.clone(), "slice", png.as_slice()),
+                (
+                    figure.with_extension("json"),
+                    "slice-calibration",
+                    json.as_bytes(),
+                ),
+            ] {
+                write_output(settings.out, &file, bytes)?;
+                record.outputs.push(OutputRecord {
+                    file: slashed(&file),
+                    kind: kind.into(),
+                    blake3: blake3::hash(bytes).to_hex().to_string(),
+                    view: None,
+                    content: None,
+                    ordering: None,
+                    size: (kind == "slice").then_some([image.width(), image.height()]),
+                    camera: None,
+                    slice: Some(spec.to_string()),
+                });
+            }
+        }
+    }
     for item in &job.items {
         let scene = match scenes.iter().find(|(c, _)| *c == item.content) {
             Some((_, s)) => s,
@@ -677,6 +717,7 @@ fn render_job(
             ordering: Some(item.ordering.name().into()),
             size: Some([item.size.0, item.size.1]),
             camera: Some(CameraRecord::of(&camera)),
+            slice: None,
         };
         let png = encode_png(&image)?;
         write_output(settings.out, &item.image, &png)?;

@@ -27,6 +27,7 @@ use serde::{Deserialize, Serialize};
 use splatscene::order::Ordering;
 use splatscene::scene::file::{CameraSpec, MeshSpec, SceneFile, VolumeSpec};
 use splatscene::scene::patient::NamedView;
+use splatscene::scene::slice_spec::SliceSpec;
 
 use crate::cli::input::apply_transfer;
 
@@ -142,6 +143,12 @@ pub struct JobSpec {
     /// the job's hash while unset, so that manifests without it keep their hashes.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub contact: Option<bool>,
+    /// Slices through the scene's camera target or the first mesh's pivot, as `render
+    /// --slice` names them (`axial`, `implant-long`, `axial@-62.5`...), each written to
+    /// `{job}-{slice}.png` with its calibration beside it (`.json`). Left out of the job's
+    /// hash while unset.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub slices: Option<Vec<String>>,
 }
 
 impl JobSpec {
@@ -172,7 +179,8 @@ impl JobSpec {
             depth_mode,
             surface_opacity,
             measurements,
-            contact
+            contact,
+            slices
         )
     }
 }
@@ -268,6 +276,8 @@ pub struct PlannedJob {
     pub measurements: Option<PathBuf>,
     /// The contact report's JSON file, when the job asks for it.
     pub contact: Option<PathBuf>,
+    /// The slices, each with its figure (its calibration beside it, `.json`).
+    pub slices: Vec<(SliceSpec, PathBuf)>,
     /// The merged spec, hashed with the inputs so that a changed key renders the job again.
     pub spec: JobSpec,
 }
@@ -276,7 +286,16 @@ impl PlannedJob {
     /// Every file the job writes, relative to the output folder: the measurements, and per
     /// picture the image, the depth image and its calibration.
     pub fn outputs(&self) -> Vec<PathBuf> {
-        let mut files: Vec<PathBuf> = self.measurements.iter().cloned().collect();
+        let mut files: Vec<PathBuf> = self
+            .measurements
+            .iter()
+            .chain(&self.contact)
+            .cloned()
+            .collect();
+        for (_, figure) in &self.slices {
+            files.push(figure.clone());
+            files.push(figure.with_extension("json"));
+        }
         for item in &self.items {
             files.push(item.image.clone());
             if let Some(d) = &item.depth {
@@ -647,6 +666,28 @@ fn plan_job(position: usize, spec: JobSpec, base: &Path) -> Result<PlannedJob, V
                 .into(),
         );
     }
+    let mut slices = Vec::new();
+    for text in spec.slices.iter().flatten() {
+        match text.parse::<SliceSpec>() {
+            Ok(slice) if slices.iter().any(|(s, _)| *s == slice) => {
+                problem("slices", format!("{slice} is named twice"));
+            }
+            Ok(slice) => {
+                let figure = PathBuf::from(format!("{name}-{slice}.png"));
+                slices.push((slice, figure));
+            }
+            Err(e) => problem("slices", e.to_string()),
+        }
+    }
+    if !slices.is_empty() && file.volumes.is_empty() {
+        problem("slices", "needs a volume to slice".into());
+    }
+    if slices.iter().any(|(s, _)| s.kind.follows_implant()) && file.meshes.is_empty() {
+        problem(
+            "slices",
+            "implant-long and implant-cross follow a mesh, and the job has none".into(),
+        );
+    }
     if spec.measurements.is_some() && file.measurements.is_empty() {
         problem(
             "measurements",
@@ -690,6 +731,7 @@ fn plan_job(position: usize, spec: JobSpec, base: &Path) -> Result<PlannedJob, V
         position,
         measurements,
         contact,
+        slices,
         name,
         file,
         source,
