@@ -89,18 +89,28 @@ fn workspace(data: &Path) -> Scratch {
 }
 
 /// The files a command says it writes: its `--out` and `--depth`, with `{view}` replaced by
-/// each of its views.
+/// each of its views and `{slice}` by each of its slices (whose calibration lies beside).
 fn outputs(args: &[String]) -> Vec<String> {
-    let views: Vec<String> = args
-        .windows(2)
-        .find(|w| w[0] == "--view")
-        .map(|w| w[1].split(',').map(str::to_owned).collect())
-        .unwrap_or_default();
+    let list = |flag: &str| -> Vec<String> {
+        args.windows(2)
+            .find(|w| w[0] == flag)
+            .map(|w| w[1].split(',').map(str::to_owned).collect())
+            .unwrap_or_default()
+    };
+    let (views, slices) = (list("--view"), list("--slice"));
     args.windows(2)
         .filter(|w| w[0] == "--out" || w[0] == "--depth")
         .flat_map(|w| {
             if w[1].contains("{view}") {
                 views.iter().map(|v| w[1].replace("{view}", v)).collect()
+            } else if w[1].contains("{slice}") {
+                slices
+                    .iter()
+                    .flat_map(|s| {
+                        let png = w[1].replace("{slice}", s);
+                        [png.replace(".png", ".json"), png]
+                    })
+                    .collect()
             } else {
                 vec![w[1].clone()]
             }
