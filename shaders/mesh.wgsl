@@ -36,15 +36,22 @@ struct VsOut {
     @invariant @builtin(position) clip: vec4<f32>,
     @location(0) rel: vec3<f32>,
     @location(1) normal: vec3<f32>,
+    // The vertex's colour, multiplying the material's (white for a mesh without colours).
+    @location(2) color: vec4<f32>,
 }
 
 @vertex
-fn vs_main(@location(0) position: vec3<f32>, @location(1) normal: vec3<f32>) -> VsOut {
+fn vs_main(
+    @location(0) position: vec3<f32>,
+    @location(1) normal: vec3<f32>,
+    @location(2) color: vec4<f32>,
+) -> VsOut {
     let rel = object.model * vec4<f32>(position, 1.0);
     var out: VsOut;
     out.clip = frame.view_proj * rel;
     out.rel = rel.xyz;
     out.normal = (object.normal * vec4<f32>(normal, 0.0)).xyz;
+    out.color = color;
     return out;
 }
 
@@ -74,7 +81,7 @@ fn fs_main(in: VsOut, @builtin(front_facing) front: bool) -> @location(0) vec4<f
     if frame.params.z > 0.5 {
         v = -frame.forward.xyz;
     }
-    let base = object.base_color.rgb;
+    let base = object.base_color.rgb * in.color.rgb;
     // Metals have little diffuse light; a view-dependent sheen stands in for the reflected
     // surroundings so that they do not go dark.
     let metallic = clamp(object.material.y, 0.0, 1.0);

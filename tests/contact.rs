@@ -10,6 +10,7 @@ use glam::{DMat3, DMat4, DQuat, DVec3};
 use splatscene::classify::TransferFunction;
 use splatscene::mesh::{CpuMesh, Material};
 use splatscene::pick::contact::{Classes, ContactError, contact};
+use splatscene::pick::paint::paint;
 use splatscene::scene::{MeshNode, NodeContent, ObjectError, Scene, SplatSettings, VolumeNode};
 use splatscene::volume::CpuVolume;
 
@@ -317,4 +318,169 @@ fn the_command_line_prints_the_contact_of_a_mesh_given_beside_a_volume() {
     args.extend_from_slice(&["--classes", "700,200"]);
     let said = fails(&args);
     assert!(said.contains("increasing"), "{said}");
+}
+
+/// The area of a triangle list.
+fn area_of(mesh: &CpuMesh, placed: DMat4) -> f64 {
+    mesh.indices
+        .chunks_exact(3)
+        .map(|t| {
+            let p = |i: u32| {
+                placed.transform_point3(DVec3::from(mesh.positions[i as usize].map(f64::from)))
+            };
+            0.5 * (p(t[1]) - p(t[0])).cross(p(t[2]) - p(t[0])).length()
+        })
+        .sum()
+}
+
+#[test]
+fn a_painted_surface_keeps_its_area_and_each_vertex_has_the_colour_of_the_value_there() {
+    // A sphere whose top rises out of the volume (whose last voxel centres lie 31.75 mm above
+    // the origin; the contact counts half a voxel beyond them, to 32 mm).
+    let placed = DMat4::from_translation(DVec3::new(2.0, -3.0, 25.0));
+    let original = sphere(10.0, 24, 48);
+    let scene = scene_with(original.clone(), placed);
+    let range = [-100.0, 300.0];
+    let painted = paint(&scene, None, range).unwrap();
+    assert_eq!(painted.meshes.len(), 1);
+    let (_, node) = &painted.meshes[0];
+    let mesh = &node.mesh;
+    assert_eq!(node.material.base_color, [1.0, 1.0, 1.0, 1.0]);
+    assert_eq!(mesh.colors.len(), mesh.positions.len());
+    let (before, after) = (area_of(&original, placed), area_of(mesh, placed));
+    assert!((before - after).abs() < 1e-4 * before, "{before} {after}");
+    let (mut inside, mut outside) = (0, 0);
+    for t in mesh.indices.chunks_exact(3) {
+        let p = |i: u32| DVec3::from(mesh.positions[i as usize].map(f64::from));
+        for (a, b) in [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])] {
+            assert!((p(a) - p(b)).length() <= painted.step_mm + 1e-4);
+        }
+    }
+    for (p, c) in mesh.positions.iter().zip(&mesh.colors) {
+        let world = placed.transform_point3(DVec3::from(p.map(f64::from)));
+        if world.z > 32.0 + 1e-3 {
+            assert_eq!(*c, [0.45, 0.45, 0.45, 1.0], "outside the volume: grey");
+            outside += 1;
+        } else if world.z < 31.75 - 1e-3 {
+            // The ramp's value there, through viridis, computed here.
+            let t = ((SLOPE * world.z - range[0]) / (range[1] - range[0])).clamp(0.0, 1.0);
+            let v = colorous::VIRIDIS.eval_continuous(t);
+            let want = [v.r, v.g, v.b].map(|x| f32::from(x) / 255.0);
+            for k in 0..3 {
+                assert!(
+                    (c[k] - want[k]).abs() <= 1.5 / 255.0,
+                    "z {}: {c:?} {want:?}",
+                    world.z
+                );
+            }
+            inside += 1;
+        }
+    }
+    assert!(inside > 1000 && outside > 100, "{inside} {outside}");
+    // Colour ranges that mean nothing are refused.
+    for bad in [[1.0, 1.0], [2.0, 1.0], [f64::NAN, 1.0]] {
+        assert!(paint(&scene, None, bad).is_err());
+    }
+}
+
+#[test]
+fn render_paints_the_contact_map_with_its_colour_bar() {
+    let dir = scratch("contact-map");
+    let raw = dir.join("ramp.raw");
+    let volume = ramp_volume();
+    let bytes: Vec<u8> = volume.values.iter().flat_map(f32::to_le_bytes).collect();
+    std::fs::write(&raw, bytes).unwrap();
+    std::fs::write(dir.join("box.obj"), obj_text(&cube(20.0))).unwrap();
+    let origin = -0.5 * 0.5 * 127.0;
+    // The volume left out of the picture (every voxel at or below the least opacity), so that
+    // the painted box shows whole.
+    std::fs::write(
+        dir.join("plan.toml"),
+        format!(
+            r#"
+[[volume]]
+path = "ramp.raw"
+dims = [128, 128, 128]
+scalar = "f32"
+spacing = [0.5, 0.5, 0.5]
+origin = [{origin}, {origin}, {origin}]
+transfer = "ramp"
+window = [-100.0, 100.0]
+color = [1.0, 1.0, 1.0, 0.5]
+min_opacity = 0.9
+
+[[mesh]]
+name = "box"
+path = "box.obj"
+"#
+        ),
+    )
+    .unwrap();
+    let out = dir.join("map.png");
+    let said = ok(&[
+        "render",
+        dir.join("plan.toml").to_str().unwrap(),
+        "--contact",
+        "--view",
+        "anterior",
+        "--orthographic",
+        "40",
+        "--size",
+        "200x200",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(
+        common::stderr(&said).contains("contact map"),
+        "{}",
+        common::stderr(&said)
+    );
+    let image = image::open(&out).unwrap().to_rgba8();
+    // The box's front face spans z -10 to 10 mm, values -100 to 100: the window's whole map,
+    // dark purple at the bottom (blue over green), yellow at the top (green over blue).
+    // The box's rows: the column's coloured pixels (the text is white or grey).
+    let coloured = |p: [u8; 4]| p[..3].iter().max().unwrap() - p[..3].iter().min().unwrap() > 30;
+    let rows: Vec<u32> = (0..200)
+        .filter(|&y| coloured(image.get_pixel(100, y).0))
+        .collect();
+    let (top, bottom) = (rows[0], rows[rows.len() - 1]);
+    assert!(bottom - top > 20, "the box spans rows {top} to {bottom}");
+    let (low, high) = (
+        image.get_pixel(100, bottom - 2).0,
+        image.get_pixel(100, top + 2).0,
+    );
+    assert!(low[2] > low[1] + 20, "bottom of the box {low:?}");
+    assert!(
+        high[1] > high[2] + 60 && high[0] > high[2] + 60,
+        "top of the box {high:?}"
+    );
+    // The colour bar: filled straight, its top the map's yellow.
+    let bar = (150..200)
+        .rev()
+        .map(|x| image.get_pixel(x, 31).0)
+        .find(|p| p[2] < 80 && p[1] > 200);
+    assert!(bar.is_some(), "no yellow colour bar at the top right");
+    // Slices outline instead; a mesh that is not there is named.
+    let said = fails(&[
+        "render",
+        dir.join("plan.toml").to_str().unwrap(),
+        "--contact",
+        "--slice",
+        "axial",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(said.contains("--contact"), "{said}");
+    let said = fails(&[
+        "render",
+        dir.join("plan.toml").to_str().unwrap(),
+        "--contact",
+        "glenoid",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(
+        said.contains("glenoid") && said.contains("\"box\""),
+        "{said}"
+    );
 }

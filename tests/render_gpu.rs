@@ -137,6 +137,7 @@ fn orthographic_gpu_frame_matches_a_distant_cpu_pinhole() {
 /// A square in the plane y = `y`, spanning `lo..hi` in x and z, facing -y.
 fn wall(y: f32, lo: f32, hi: f32) -> CpuMesh {
     let mut mesh = CpuMesh {
+        colors: Vec::new(),
         positions: vec![[lo, y, lo], [hi, y, lo], [hi, y, hi], [lo, y, hi]],
         normals: Vec::new(),
         indices: vec![0, 1, 2, 0, 2, 3],
@@ -319,6 +320,7 @@ fn pipelines_are_built_only_for_content() {
 /// A flat quad over x in [-1000, 0], y in [-1000, 1000] at z = 0, facing +z.
 fn left_half_quad() -> Scene {
     let mut mesh = CpuMesh {
+        colors: Vec::new(),
         positions: vec![
             [-1000.0, -1000.0, 0.0],
             [0.0, -1000.0, 0.0],

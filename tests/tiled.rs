@@ -78,6 +78,7 @@ fn gpu_against_tiles_at(
 
 fn wall(y: f32, lo: f32, hi: f32) -> Arc<CpuMesh> {
     let mut mesh = CpuMesh {
+        colors: Vec::new(),
         positions: vec![[lo, y, lo], [hi, y, lo], [hi, y, hi], [lo, y, hi]],
         normals: Vec::new(),
         indices: vec![0, 1, 2, 0, 2, 3],

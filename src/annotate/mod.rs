@@ -272,6 +272,64 @@ fn orientation_marker(painter: &mut Painter<'_>, cam: &ImageCamera, patient: &Pa
     }
 }
 
+/// A colour bar legend in the upper right corner (clear of the edge letters): the colours `colour` gives over
+/// `range` (greatest at the top), `ticks` marked and labelled on its left, `title` above it.
+///
+/// # Errors
+///
+/// No font to draw with.
+pub fn colour_bar(
+    image: &mut RgbaImage,
+    colour: impl Fn(f64) -> [u8; 4],
+    range: [f64; 2],
+    ticks: &[(f64, String)],
+    title: &str,
+) -> Result<(), NoFont> {
+    let (w, h) = (image.width() as f32, image.height() as f32);
+    let text = Painter::new(image)?.text_px;
+    let top = 2.6 * text;
+    let height = (0.35 * h).min(0.5 * h - top - text).max(8.0);
+    let width = (0.9 * text).max(6.0);
+    let right = w - 1.2 * text;
+    let left = right - width;
+    let span = range[1] - range[0];
+    let y_of = |v: f64| top + height * (1.0 - ((v - range[0]) / span).clamp(0.0, 1.0) as f32);
+    // The bar filled a pixel at a time (a stroke's halo would darken the row above), in a
+    // dark frame.
+    let (x0, x1) = (left.round().max(0.0) as u32, right.round().max(0.0) as u32);
+    let (y0, y1) = (
+        top.round().max(0.0) as u32,
+        (top + height).round().max(0.0) as u32,
+    );
+    for y in y0.saturating_sub(1)..(y1 + 1).min(image.height()) {
+        for x in x0.saturating_sub(1)..(x1 + 1).min(image.width()) {
+            let inside = (x0..x1).contains(&x) && (y0..y1).contains(&y);
+            let c = if inside {
+                let t = ((y as f32 + 0.5 - top) / height).clamp(0.0, 1.0);
+                colour(range[1] - span * f64::from(t))
+            } else {
+                [20, 20, 20, 255]
+            };
+            image.put_pixel(x, y, image::Rgba(c));
+        }
+    }
+    let mut painter = Painter::new(image)?;
+    for (value, label) in ticks {
+        let y = y_of(*value);
+        painter.line([left - 0.5 * text, y], [left, y], 1.0, WHITE);
+        let (_, th) = painter.measure(label);
+        painter.text(
+            label,
+            left - 0.7 * text,
+            y - th / 2.0,
+            Anchor::TopRight,
+            WHITE,
+        );
+    }
+    painter.text(title, right, top - 0.6 * text, Anchor::BottomRight, WHITE);
+    Ok(())
+}
+
 /// A bar of a round length (1, 2 or 5 times a power of ten millimetres) near a fifth of the
 /// image width, in the lower left corner, labelled with its length; in a perspective view the
 /// length holds at the target's depth only, and the label says so.

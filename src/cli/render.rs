@@ -7,15 +7,19 @@ use std::path::{Path, PathBuf};
 use anyhow::{Result, bail};
 use serde_json::Value;
 
-use splatscene::annotate::{Annotations, Label, annotate_image};
+use splatscene::annotate::{Annotations, Label, annotate_image, colour_bar};
 use splatscene::order::Ordering;
+use splatscene::pick::contact::Classes;
 use splatscene::pick::measure::draw_scene_measurements;
+use splatscene::pick::paint::{paint, value_colour};
 use splatscene::pick::surface_distances;
 use splatscene::render::{
     Compositor, DepthImage, DepthMode, FrameOptions, FrameReport, GpuContext, RenderError,
     Renderer, encode_png, frame_to_rgba8,
 };
+use splatscene::scene::file::SceneFile;
 use splatscene::scene::{Scene, SceneCamera};
+use splatscene::slice::draw::colour8;
 
 use super::args::parse_opacity;
 use super::files::write_replacing;
@@ -64,6 +68,13 @@ pub struct RenderArgs {
     /// Transparent background (the PNG's alpha is the coverage).
     #[arg(long)]
     transparent: bool,
+    /// Paint a mesh (the one named, else the first) with the volume's value under its surface,
+    /// a colour bar beside: the contact map. The colours (viridis) span --window, else the
+    /// volume's window, else for CT -100 to 1000 HU (soft tissue dark, cancellous bone blue to
+    /// green, cortical bone yellow; the CT classes' edges 200 and 700 HU marked), else the
+    /// values' range; grey where the surface lies outside the volume.
+    #[arg(long, num_args = 0..=1, default_missing_value = "", value_name = "MESH")]
+    contact: Option<String>,
     #[command(flatten)]
     annotate: AnnotateArgs,
     #[command(flatten)]
@@ -168,8 +179,10 @@ pub fn run_render(args: RenderArgs) -> Result<()> {
     } = args.view.load()?;
     let layout = args.slices.layout(&file)?;
     if let Layout::Slices(wanted) = &layout {
-        if args.depth.is_some() || args.transparent {
-            bail!("--depth and --transparent are for the 3D view; slices have neither");
+        if args.depth.is_some() || args.transparent || args.contact.is_some() {
+            bail!(
+                "--depth, --transparent and --contact are for the 3D view; slices outline the meshes instead"
+            );
         }
         let [(_, camera)] = cameras.as_slice() else {
             bail!("slices go through one camera's target: give one --view with --slice");
@@ -254,6 +267,10 @@ pub fn run_render(args: RenderArgs) -> Result<()> {
     // The scene's measurements are drawn in, their values written beside them unless the
     // annotations asked for leave them out.
     let mut drawn = loaded.scene.clone();
+    let contact_map = match &args.contact {
+        Some(name) => Some(paint_contact(&mut drawn, &file, name)?),
+        None => None,
+    };
     let mut labels = draw_scene_measurements(&mut drawn).map_err(anyhow::Error::msg)?;
     if parts.as_ref().is_some_and(|p| !p.measurements) {
         labels.clear();
@@ -276,7 +293,10 @@ pub fn run_render(args: RenderArgs) -> Result<()> {
             Some(ctx) => renderer.screenshot(ctx, &drawn, camera, render_size, &options)?,
             None => renderer.screenshot_without_gpu(&drawn, camera, render_size, &options)?,
         };
-        let image = figure(&shot, &loaded.scene, camera, label_parts.as_ref(), &labels)?;
+        let mut image = figure(&shot, &loaded.scene, camera, label_parts.as_ref(), &labels)?;
+        if let Some(map) = &contact_map {
+            map.legend(&mut image)?;
+        }
         match quad {
             Some(at) => {
                 let point = quad_point(&loaded.scene, camera.target, at);
@@ -304,6 +324,90 @@ pub fn run_render(args: RenderArgs) -> Result<()> {
         eprintln!("wrote {}", out.display());
     }
     Ok(())
+}
+
+/// A contact map painted into a scene: what its colour bar says.
+struct ContactMap {
+    range: [f64; 2],
+    ticks: Vec<(f64, String)>,
+    title: String,
+}
+
+impl ContactMap {
+    /// Draws the colour bar onto a figure.
+    fn legend(&self, image: &mut image::RgbaImage) -> Result<()> {
+        let range = self.range;
+        colour_bar(
+            image,
+            |v| colour8(value_colour(v, range)),
+            range,
+            &self.ticks,
+            &self.title,
+        )?;
+        Ok(())
+    }
+}
+
+/// The values a contact map's colours span: the volume's window where it was given one, else
+/// for CT -100 to 1000 HU (soft tissue to cortical bone), else the values' range.
+fn contact_range(scene: &Scene, file: &SceneFile) -> [f64; 2] {
+    let given = file
+        .volumes
+        .first()
+        .is_some_and(|v| v.level_width.is_some() || v.window.is_some());
+    let ct = scene
+        .volumes()
+        .next()
+        .is_some_and(|(_, v, _)| splatscene::classify::is_hounsfield(&v.volume.values));
+    if ct && !given {
+        return [-100.0, 1000.0];
+    }
+    let w = window(scene, file);
+    [f64::from(w[0]), f64::from(w[1])]
+}
+
+/// Paints the mesh named `name` (the first where empty) in `scene` with the volume's value.
+fn paint_contact(scene: &mut Scene, file: &SceneFile, name: &str) -> Result<ContactMap> {
+    let range = contact_range(scene, file);
+    let painted = paint(scene, (!name.is_empty()).then_some(name), range)
+        .map_err(|e| anyhow::anyhow!("--contact: {e}"))?;
+    painted.apply(scene)?;
+    let hounsfield = scene
+        .volumes()
+        .next()
+        .is_some_and(|(_, v, _)| Classes::for_volume(&v.volume) == Classes::ct());
+    let fmt = |v: f64| format!("{v}");
+    let mut ticks = vec![(range[0], fmt(range[0])), (range[1], fmt(range[1]))];
+    if hounsfield {
+        ticks.extend(
+            [200.0, 700.0]
+                .into_iter()
+                .filter(|v| *v > range[0] && *v < range[1])
+                .map(|v| (v, fmt(v))),
+        );
+    }
+    let triangles: usize = painted
+        .meshes
+        .iter()
+        .map(|(_, m)| m.mesh.triangle_count())
+        .sum();
+    eprintln!(
+        "contact map: {triangles} triangles of at most {:.2} mm painted, {} to {}{}",
+        painted.step_mm,
+        range[0],
+        range[1],
+        if hounsfield { " HU" } else { "" }
+    );
+    Ok(ContactMap {
+        range,
+        ticks,
+        title: if hounsfield {
+            "HU at the surface"
+        } else {
+            "value at the surface"
+        }
+        .into(),
+    })
 }
 
 /// The quad layout's point: `target` moved onto the axial, coronal and sagittal planes given

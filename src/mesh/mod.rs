@@ -32,6 +32,9 @@ pub struct CpuMesh {
     pub normals: Vec<[f32; 3]>,
     /// Triangle list: three indices into `positions` per triangle.
     pub indices: Vec<u32>,
+    /// Linear RGBA per position, multiplying the material's colour (a map of values painted
+    /// on the surface); empty for none.
+    pub colors: Vec<[f32; 4]>,
 }
 
 impl CpuMesh {

@@ -117,6 +117,7 @@ fn to_cpu_mesh(
         return Err(origin.out_of_range(what, u64::from(bad), len));
     }
     let mut cpu = CpuMesh {
+        colors: Vec::new(),
         positions,
         normals: triples(&mesh.normals),
         indices: mesh.indices.clone(),

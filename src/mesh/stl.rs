@@ -115,6 +115,7 @@ fn to_cpu_mesh(indexed: &stl_io::IndexedMesh, origin: &Origin) -> Result<CpuMesh
         }
     }
     let mut mesh = CpuMesh {
+        colors: Vec::new(),
         positions,
         normals: Vec::new(),
         indices,

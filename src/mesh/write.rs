@@ -339,6 +339,7 @@ mod tests {
 
     fn tetrahedron() -> CpuMesh {
         let mut mesh = CpuMesh {
+            colors: Vec::new(),
             positions: vec![
                 [0.0, 0.0, 0.0],
                 [1.0, 0.0, 0.0],

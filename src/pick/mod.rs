@@ -21,6 +21,7 @@ use crate::scene::{ClipPlane, Clipping, NodeId, Scene, placed_geometry};
 pub mod contact;
 mod march;
 pub mod measure;
+pub mod paint;
 
 pub use march::{first_surface, march_volume};
 

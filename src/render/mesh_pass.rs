@@ -42,6 +42,8 @@ const _: () = assert!(size_of::<ObjectUniforms>() == 160);
 struct Vertex {
     position: [f32; 3],
     normal: [f32; 3],
+    /// Multiplies the material's colour (white where the mesh has no colours).
+    color: [f32; 4],
 }
 
 /// The mesh pipelines and their per-frame uniforms.
@@ -182,6 +184,12 @@ impl MeshPass {
     /// The vertex and index buffers of `mesh`.
     fn buffers(&self, ctx: &GpuContext, mesh: &CpuMesh) -> (wgpu::Buffer, wgpu::Buffer) {
         let device = &ctx.device;
+        // Colours that do not match the positions one for one are left out (white).
+        let colors: &[[f32; 4]] = if mesh.colors.len() == mesh.positions.len() {
+            &mesh.colors
+        } else {
+            &[]
+        };
         let vertices: Vec<Vertex> = mesh
             .positions
             .iter()
@@ -190,9 +198,11 @@ impl MeshPass {
                     .iter()
                     .chain(std::iter::repeat(&[0.0, 0.0, 1.0])),
             )
-            .map(|(p, n)| Vertex {
+            .zip(colors.iter().chain(std::iter::repeat(&[1.0; 4])))
+            .map(|((p, n), c)| Vertex {
                 position: *p,
                 normal: *n,
+                color: *c,
             })
             .collect();
         let vertices = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
@@ -379,7 +389,7 @@ fn mesh_pipeline(
     blend: Option<wgpu::BlendState>,
     write_mask: wgpu::ColorWrites,
 ) -> wgpu::RenderPipeline {
-    let attributes = wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x3];
+    let attributes = wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x3, 2 => Float32x4];
     device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
         label: Some(
             match (write_depth, blend.is_some(), write_mask.is_empty()) {

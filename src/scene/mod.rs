@@ -482,6 +482,7 @@ mod tests {
 
     fn cube() -> NodeContent {
         let mut mesh = CpuMesh {
+            colors: Vec::new(),
             positions: vec![[0.0; 3], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [1.0, 1.0, 1.0]],
             normals: Vec::new(),
             indices: vec![0, 1, 2, 1, 3, 2],

@@ -46,7 +46,7 @@ pub fn figure(
                     segments.push((pixels[pixels.len() - 1], pixels[0]));
                 }
             }
-            painter.lines(&segments, OUTLINE_PX, srgb8(outline.color));
+            painter.lines(&segments, OUTLINE_PX, colour8(outline.color));
         }
         for m in &slice.measurements {
             let mut segments: Vec<([f32; 2], [f32; 2])> = m
@@ -111,17 +111,10 @@ pub fn crosshair(
     Ok(())
 }
 
-/// A linear RGBA colour as 8-bit sRGB, opaque (an outline is drawn whole, whatever the
-/// mesh's opacity in 3D).
-pub fn srgb8(linear: [f32; 4]) -> [u8; 4] {
-    let encode = |c: f32| {
-        let c = c.clamp(0.0, 1.0);
-        let s = if c <= 0.003_130_8 {
-            12.92 * c
-        } else {
-            1.055 * c.powf(1.0 / 2.4) - 0.055
-        };
-        (s * 255.0).round() as u8
-    };
-    [encode(linear[0]), encode(linear[1]), encode(linear[2]), 255]
+/// A mesh's colour as 8-bit RGBA, as the 3D figures show it (their frames are written to the
+/// PNG as they are, without a transfer function), opaque: an outline is drawn whole, whatever
+/// the mesh's opacity in 3D.
+pub fn colour8(color: [f32; 4]) -> [u8; 4] {
+    let q = |c: f32| (c.clamp(0.0, 1.0) * 255.0).round() as u8;
+    [q(color[0]), q(color[1]), q(color[2]), 255]
 }

@@ -387,6 +387,7 @@ mod tests {
     fn editor() -> (Editor, NodeId, SceneCamera) {
         let mut scene = Scene::new();
         let mut mesh = CpuMesh {
+            colors: Vec::new(),
             positions: vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],
             normals: Vec::new(),
             indices: vec![0, 1, 2],

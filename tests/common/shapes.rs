@@ -24,6 +24,7 @@ pub fn cube(side: f32) -> CpuMesh {
         }
     }
     let mut mesh = CpuMesh {
+        colors: Vec::new(),
         positions,
         normals: Vec::new(),
         indices,
@@ -56,6 +57,7 @@ pub fn sphere(r: f32, rings: u32, segments: u32) -> CpuMesh {
         }
     }
     let mut mesh = CpuMesh {
+        colors: Vec::new(),
         positions,
         normals: Vec::new(),
         indices,
@@ -88,6 +90,7 @@ pub fn cylinder(r: f32, half_length: f32, segments: u32) -> CpuMesh {
         indices.extend([top, c, d]);
     }
     let mut mesh = CpuMesh {
+        colors: Vec::new(),
         positions,
         normals: Vec::new(),
         indices,
@@ -104,6 +107,7 @@ pub fn unindexed(mesh: &CpuMesh) -> CpuMesh {
         .map(|&i| mesh.positions[i as usize])
         .collect();
     let mut out = CpuMesh {
+        colors: Vec::new(),
         indices: (0..positions.len() as u32).collect(),
         positions,
         normals: Vec::new(),

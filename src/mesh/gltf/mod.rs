@@ -545,6 +545,7 @@ impl<'a> Loader<'a> {
         }
         let normals = Vec::new();
         let mut mesh = CpuMesh {
+            colors: Vec::new(),
             positions,
             normals,
             indices,
