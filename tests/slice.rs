@@ -669,7 +669,7 @@ plane = "coronal@-2"
     assert!((point.z - 1.0).abs() < 1e-9);
     let panes = c["panes"].as_array().unwrap();
     let names: Vec<&str> = panes.iter().map(|p| p["name"].as_str().unwrap()).collect();
-    assert_eq!(names, ["3d", "axial", "coronal", "sagittal"]);
+    assert_eq!(names, ["3d", "axial", "sagittal", "coronal"]);
     for pane in &panes[1..] {
         // The pane's calibration, in the figure's pixels, puts the point where its lines
         // cross: the line along the rows in one plane's colour, along the columns another's.

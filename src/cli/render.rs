@@ -24,9 +24,9 @@ use splatscene::slice::draw::colour8;
 use super::args::parse_opacity;
 use super::files::write_replacing;
 use super::input::{View, ViewArgs};
-use super::slice::{
-    Layout, SliceArgs, compose_quad, quad_slices, run_slices, sidecar, window, write_figure,
-};
+use super::slice::{Layout, SliceArgs, compose_quad, run_slices, sidecar, window, write_figure};
+use splatscene::slice::PlaneKind;
+use splatscene::slice::draw::quad_panes;
 
 /// `splatscene render`.
 #[derive(clap::Args)]
@@ -301,10 +301,17 @@ pub fn run_render(args: RenderArgs) -> Result<()> {
             Some(at) => {
                 let point = quad_point(&loaded.scene, camera.target, at);
                 let window = window(&loaded.scene, &file);
-                let slices =
-                    quad_slices(&loaded.scene, point, render_size, window, parts.as_ref())?;
+                let slices = quad_panes(
+                    &loaded.scene,
+                    point,
+                    render_size,
+                    window,
+                    parts.as_ref(),
+                    PlaneKind::Coronal,
+                    None,
+                )?;
                 let (image, calibration) =
-                    compose_quad(size, &image, &slices, point, &loaded.scene);
+                    compose_quad(size, &image, &slices, window, point, &loaded.scene);
                 write_figure(out, &image, &calibration)?;
             }
             None => write_replacing(out, &encode_png(&image)?)?,

@@ -13,8 +13,8 @@ use splatscene::annotate::Annotations;
 use splatscene::render::encode_png_with_text;
 use splatscene::scene::Scene;
 use splatscene::scene::file::SceneFile;
-use splatscene::slice::draw::{crosshair, figure};
-use splatscene::slice::{Extent, Pixels, Plane, PlaneKind, Slice, SliceSpec, default_window};
+use splatscene::slice::draw::{Pane, figure};
+use splatscene::slice::{Pixels, Plane, PlaneKind, Slice, SliceSpec, default_window};
 
 use super::files::write_replacing;
 use super::render::refuse_inputs;
@@ -329,79 +329,14 @@ pub fn run_slices(
     Ok(())
 }
 
-/// 3D Slicer's colours of the planes: axial red, coronal green, sagittal yellow.
-pub const PLANE_COLOURS: [[u8; 4]; 3] =
-    [[241, 89, 70, 255], [110, 176, 75, 255], [237, 214, 80, 255]];
-
-/// The three slice panes of a quad figure through `point`, each `pane` pixels at one shared
-/// pixel size (the largest that fits every section into its pane), with the lines where the
-/// other planes meet them: (kind, image, calibration) for axial, coronal, sagittal.
-pub fn quad_slices(
-    scene: &Scene,
-    point: DVec3,
-    pane: (u32, u32),
-    window: [f32; 2],
-    parts: Option<&Annotations>,
-) -> Result<Vec<(PlaneKind, RgbaImage, Value)>> {
-    let kinds = [PlaneKind::Axial, PlaneKind::Coronal, PlaneKind::Sagittal];
-    let planes = kinds
-        .iter()
-        .map(|&kind| Plane::of(scene, SliceSpec { kind, at_mm: None }, point, None))
-        .collect::<Result<Vec<_>, _>>()?;
-    let extents = planes
-        .iter()
-        .map(|p| Extent::of(scene, p))
-        .collect::<Result<Vec<_>, _>>()?;
-    let mm = extents
-        .iter()
-        .map(|e| e.fit_mm(pane.0, pane.1))
-        .fold(0.0, f64::max);
-    let mut out = Vec::new();
-    for (i, (kind, plane)) in kinds.iter().zip(planes).enumerate() {
-        let slice = Slice::new(
-            scene,
-            plane,
-            Pixels::Fixed {
-                size: pane,
-                mm_per_pixel: mm,
-            },
-        )?;
-        let parts = label_parts(parts, &slice);
-        let (mut image, _) = figure(&slice, scene, window, parts.as_ref())?;
-        // Rows of the axial image run along R (the coronal plane's trace), its columns along A
-        // (the sagittal plane's); the coronal and sagittal images' rows are the axial trace.
-        let (across, along) = match i {
-            0 => (PLANE_COLOURS[1], PLANE_COLOURS[2]),
-            1 => (PLANE_COLOURS[0], PLANE_COLOURS[2]),
-            _ => (PLANE_COLOURS[0], PLANE_COLOURS[1]),
-        };
-        crosshair(&mut image, &slice.frame, point, across, along)?;
-        frame_pane(&mut image, PLANE_COLOURS[i]);
-        out.push((*kind, image, slice.calibration(scene, window)));
-    }
-    Ok(out)
-}
-
-/// A one-pixel border in the pane's colour.
-fn frame_pane(image: &mut RgbaImage, colour: [u8; 4]) {
-    let (w, h) = (image.width(), image.height());
-    for x in 0..w {
-        image.put_pixel(x, 0, image::Rgba(colour));
-        image.put_pixel(x, h - 1, image::Rgba(colour));
-    }
-    for y in 0..h {
-        image.put_pixel(0, y, image::Rgba(colour));
-        image.put_pixel(w - 1, y, image::Rgba(colour));
-    }
-}
-
 /// The four panes put together (3D Slicer's four-up: axial top left, 3D top right, sagittal
 /// bottom left, coronal bottom right), with the calibration of the whole figure: each slice
 /// pane's rectangle and its pixels' world points in the figure's pixel coordinates.
 pub fn compose_quad(
     size: (u32, u32),
     view3d: &RgbaImage,
-    slices: &[(PlaneKind, RgbaImage, Value)],
+    slices: &[Pane],
+    window: [f32; 2],
     point: DVec3,
     scene: &Scene,
 ) -> (RgbaImage, Value) {
@@ -415,10 +350,11 @@ pub fn compose_quad(
     };
     image::imageops::overlay(&mut image, view3d, i64::from(pw), 0);
     let mut panes = vec![json!({"name": "3d", "rect": [pw, 0, view3d.width(), view3d.height()]})];
-    for (kind, pane, calibration) in slices {
-        let (x, y) = at(Some(*kind));
-        image::imageops::overlay(&mut image, pane, i64::from(x), i64::from(y));
-        let mut c = calibration.clone();
+    for pane in slices {
+        let kind = pane.slice.frame.plane.spec.kind;
+        let (x, y) = at(Some(kind));
+        image::imageops::overlay(&mut image, &pane.image, i64::from(x), i64::from(y));
+        let mut c = pane.slice.calibration(scene, window);
         // The origin moved to the figure's pixel (0, 0), so that every pixel of the pane maps
         // by the same vectors.
         let vector = |key: &str| -> DVec3 {
@@ -431,7 +367,7 @@ pub fn compose_quad(
             - vector("pixel_right_mm") * f64::from(x)
             - vector("pixel_down_mm") * f64::from(y);
         c["origin_mm"] = json!(origin.to_array());
-        c["rect"] = json!([x, y, pane.width(), pane.height()]);
+        c["rect"] = json!([x, y, pane.image.width(), pane.image.height()]);
         c["name"] = json!(kind.name());
         for key in ["frame", "unit", "window", "volume"] {
             if let Some(o) = c.as_object_mut() {
@@ -440,9 +376,6 @@ pub fn compose_quad(
         }
         panes.push(c);
     }
-    let window = slices
-        .first()
-        .map_or(Value::Null, |(_, _, c)| c["window"].clone());
     let p = scene.patient_frame().patient(point);
     let calibration = json!({
         "layout": "quad",

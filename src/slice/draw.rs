@@ -5,7 +5,9 @@
 use glam::DVec3;
 use image::RgbaImage;
 
-use super::{Slice, SliceFrame, grey};
+use super::{
+    Extent, Pixels, Plane, PlaneKind, Slice, SliceError, SliceFrame, SliceSpec, grey,
+};
 use crate::annotate::text::{NoFont, Painter};
 use crate::annotate::{Annotations, Drawn, Label, annotate_image};
 use crate::scene::Scene;
@@ -86,29 +88,148 @@ pub fn figure(
     Ok((image, drawn))
 }
 
-/// Draws the lines where two other planes through `point` meet the slice: along the image's
-/// rows in `across` and along its columns in `along`, as planning tools mark where the other
-/// panes cut.
+/// Draws the line where the plane through `point` with normal `other` meets the slice, in
+/// `colour`, one pixel wide, through the centre of the pixel the point falls in (so that a line
+/// along the rows or columns stays crisp); nothing where the planes are parallel.
 ///
 /// # Errors
 ///
 /// No font to draw with (the painter needs one).
-pub fn crosshair(
+pub fn trace(
     image: &mut RgbaImage,
     frame: &SliceFrame,
     point: DVec3,
-    across: [u8; 4],
-    along: [u8; 4],
+    other: DVec3,
+    colour: [u8; 4],
 ) -> Result<(), NoFont> {
-    // Through the centre of the pixel the point falls in, so that the lines stay one crisp
-    // pixel wide (they lie within half a pixel of the point).
+    let along = frame.plane.normal.cross(other);
+    let (dx, dy) = (along.dot(frame.plane.right), along.dot(frame.plane.down));
+    let length = dx.hypot(dy);
+    if length < 1e-9 {
+        return Ok(());
+    }
     let [x, y] = frame.pixel(point);
-    let (x, y) = (x.round() as f32 + 0.5, y.round() as f32 + 0.5);
-    let (w, h) = (image.width() as f32, image.height() as f32);
+    let (x, y) = (x.round() + 0.5, y.round() + 0.5);
+    let reach = f64::from(image.width() + image.height());
+    let (ux, uy) = (dx / length * reach, dy / length * reach);
     let mut painter = Painter::new(image)?;
-    painter.line([0.0, y], [w, y], 1.0, across);
-    painter.line([x, 0.0], [x, h], 1.0, along);
+    painter.line(
+        [(x - ux) as f32, (y - uy) as f32],
+        [(x + ux) as f32, (y + uy) as f32],
+        1.0,
+        colour,
+    );
     Ok(())
+}
+
+/// 3D Slicer's colours of the planes: axial red, coronal green, sagittal yellow; an implant
+/// plane orange.
+pub fn plane_colour(kind: PlaneKind) -> [u8; 4] {
+    match kind {
+        PlaneKind::Axial => [241, 89, 70, 255],
+        PlaneKind::Coronal => [110, 176, 75, 255],
+        PlaneKind::Sagittal => [237, 214, 80, 255],
+        PlaneKind::ImplantLong | PlaneKind::ImplantCross => [235, 140, 50, 255],
+    }
+}
+
+/// A slice pane of the four-pane layout: its slice and its figure.
+#[derive(Debug, Clone)]
+pub struct Pane {
+    /// The slice.
+    pub slice: Slice,
+    /// Its figure, with the other panes' planes traced and a border in its plane's colour.
+    pub image: RgbaImage,
+}
+
+/// Why the panes could not be drawn.
+#[derive(Debug, thiserror::Error)]
+pub enum PaneError {
+    /// A slice could not be made.
+    #[error(transparent)]
+    Slice(#[from] SliceError),
+    /// No font to draw with.
+    #[error(transparent)]
+    Font(#[from] NoFont),
+}
+
+/// The slice panes of the four-pane layout through `point`: axial, sagittal and `fourth`
+/// (coronal, or implant-long through the pivot of the mesh named `mesh`), each `pane` pixels at
+/// one shared pixel size (the largest that fits every section into its pane), with the traces
+/// of the other panes' planes through the point.
+///
+/// # Errors
+///
+/// A plane that misses the volume, an implant plane without its mesh, no font.
+pub fn quad_panes(
+    scene: &Scene,
+    point: DVec3,
+    pane: (u32, u32),
+    window: [f32; 2],
+    parts: Option<&Annotations>,
+    fourth: PlaneKind,
+    mesh: Option<&str>,
+) -> Result<Vec<Pane>, PaneError> {
+    let kinds = [PlaneKind::Axial, PlaneKind::Sagittal, fourth];
+    let planes = kinds
+        .iter()
+        .map(|&kind| Plane::of(scene, SliceSpec { kind, at_mm: None }, point, mesh))
+        .collect::<Result<Vec<_>, _>>()?;
+    let mm = planes
+        .iter()
+        .map(|p| Extent::of(scene, p).map(|e| e.fit_mm(pane.0, pane.1)))
+        .collect::<Result<Vec<_>, _>>()?
+        .into_iter()
+        .fold(0.0, f64::max);
+    let mut out = Vec::new();
+    for (i, plane) in planes.iter().enumerate() {
+        let slice = Slice::new(
+            scene,
+            *plane,
+            Pixels::Fixed {
+                size: pane,
+                mm_per_pixel: mm,
+            },
+        )?;
+        let labels = (parts.is_some() || !slice.measurements.is_empty())
+            .then(|| parts.cloned().unwrap_or_else(measurements_only));
+        let (mut image, _) = figure(&slice, scene, window, labels.as_ref())?;
+        for (j, other) in planes.iter().enumerate() {
+            if j != i {
+                trace(&mut image, &slice.frame, point, other.normal, plane_colour(kinds[j]))?;
+            }
+        }
+        border(&mut image, plane_colour(kinds[i]));
+        out.push(Pane { slice, image });
+    }
+    Ok(out)
+}
+
+/// Annotations of the measurements' values alone.
+fn measurements_only() -> Annotations {
+    Annotations {
+        orientation_marker: false,
+        edge_letters: false,
+        scale_bar: false,
+        measurements: true,
+        caption: None,
+    }
+}
+
+/// A one-pixel border in `colour`.
+pub fn border(image: &mut RgbaImage, colour: [u8; 4]) {
+    let (w, h) = (image.width(), image.height());
+    if w == 0 || h == 0 {
+        return;
+    }
+    for x in 0..w {
+        image.put_pixel(x, 0, image::Rgba(colour));
+        image.put_pixel(x, h - 1, image::Rgba(colour));
+    }
+    for y in 0..h {
+        image.put_pixel(0, y, image::Rgba(colour));
+        image.put_pixel(w - 1, y, image::Rgba(colour));
+    }
 }
 
 /// A mesh's colour as 8-bit RGBA, as the 3D figures show it (their frames are written to the
