@@ -1685,3 +1685,197 @@ fn a_plan_made_in_the_viewer_is_saved_undone_measured_and_reloaded_under_xvfb() 
     });
     assert!(status.success(), "{status:?}");
 }
+
+/// Whether `p` is `colour` within a few levels (the X server's screen holds what the viewer
+/// presented, 8 bits a channel).
+fn is_colour(p: [u8; 3], colour: [u8; 3]) -> bool {
+    p.iter().zip(colour).all(|(a, b)| a.abs_diff(b) <= 3)
+}
+
+#[test]
+fn four_panes_show_slices_that_follow_the_crosshair_and_move_the_implant_in_their_plane() {
+    use splatscene::slice::{Extent, Plane, PlaneKind, SliceFrame, SliceSpec};
+
+    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    if !x11_tools() {
+        return;
+    }
+    let (_xvfb, display) = start_xvfb();
+    let dir = scratch("panes");
+    eprintln!("screenshots in {}", dir.display());
+    let scene_path = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/scenes/shoulder.toml");
+    let (_viewer, lines, window) = open_viewer(
+        &display,
+        &["view", scene_path.to_str().unwrap(), "--size", "640x480"],
+    );
+    title(&display, &window, " splats");
+    xdo(&display, &["windowfocus", "--sync", &window]);
+    xdo(&display, &["key", "v"]).expect("v");
+    assert!(line(&lines, "four panes").starts_with(':'));
+    title(&display, &window, "(four panes)");
+    // 3D Slicer's four-up: the axial pane (red border) top left, sagittal (yellow) bottom
+    // left, coronal (green) bottom right, the 3D view top right.
+    let (red, green, yellow) = ([241, 89, 70], [110, 176, 75], [237, 214, 80]);
+    screen_until(&display, &window, &dir, "1-panes", |shot| {
+        ensure!(
+            is_colour(shot.at(0, 100), red),
+            "axial border {:?}",
+            shot.at(0, 100)
+        );
+        ensure!(
+            is_colour(shot.at(0, 400), yellow),
+            "sagittal border {:?}",
+            shot.at(0, 400)
+        );
+        ensure!(
+            is_colour(shot.at(639, 400), green),
+            "coronal border {:?}",
+            shot.at(639, 400)
+        );
+        Ok(())
+    });
+
+    // Where the panes lie, worked out as the figures' calibration gives it: the scene's
+    // camera target is the crosshair, the three sections fitted to 320x240 at one pixel size.
+    let loaded = splatscene::scene::file::load_scene_file(&scene_path).unwrap();
+    let scene = &loaded.scene;
+    let camera = scene.camera.unwrap();
+    let plane =
+        |kind| Plane::of(scene, SliceSpec { kind, at_mm: None }, camera.target, None).unwrap();
+    let planes = [PlaneKind::Axial, PlaneKind::Sagittal, PlaneKind::Coronal].map(plane);
+    let mm = planes
+        .iter()
+        .map(|p| Extent::of(scene, p).unwrap().fit_mm(320, 240))
+        .fold(0.0, f64::max);
+    let coronal = SliceFrame::new(
+        planes[2],
+        &Extent::of(scene, &planes[2]).unwrap(),
+        mm,
+        Some((320, 240)),
+    )
+    .unwrap();
+
+    // Select the prosthesis in the 3D pane: a click where its pivot shows.
+    let top = scene.find("prosthesis").unwrap();
+    let (pivot, _) = scene.pivot(top);
+    let [x, y] = splatscene::annotate::ImageCamera::new(&camera, 320, 240)
+        .unwrap()
+        .project(pivot)
+        .unwrap();
+    let (x, y) = ((320.0 + x).to_string(), y.to_string());
+    xdo(
+        &display,
+        &["mousemove", "--window", &window, &x, &y, "click", "1"],
+    )
+    .expect("click");
+    assert_eq!(line(&lines, "selected"), "prosthesis");
+
+    // Drag it 30 pixels right in the coronal pane, from where its pivot shows there: it
+    // moves 30 of that pane's pixels along the pane's right, in the coronal plane.
+    let before = scene.node(top).unwrap().local().w_axis.truncate();
+    let [px, py] = coronal.pixel(pivot);
+    let (cx, cy) = (320.0 + px + 0.5, 240.0 + py + 0.5);
+    let at = |dx: f64| [(cx + dx).round().to_string(), cy.round().to_string()];
+    let start = at(0.0);
+    xdo(
+        &display,
+        &[
+            "mousemove",
+            "--window",
+            &window,
+            &start[0],
+            &start[1],
+            "mousedown",
+            "1",
+        ],
+    )
+    .expect("press");
+    for dx in [10.0, 20.0, 30.0] {
+        let p = at(dx);
+        std::thread::sleep(Duration::from_millis(200));
+        xdo(&display, &["mousemove", "--window", &window, &p[0], &p[1]]).expect("drag");
+    }
+    std::thread::sleep(Duration::from_millis(200));
+    xdo(&display, &["mouseup", "1"]).expect("release");
+    let moved = line(&lines, "moved");
+    let matrix: serde_json::Value =
+        serde_json::from_str(moved.strip_prefix("prosthesis").unwrap().trim()).unwrap();
+    let m: Vec<f64> = matrix["matrix"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .collect();
+    let after = glam::DVec3::new(m[12], m[13], m[14]);
+    let expected = before + coronal.pixel_right() * 30.0;
+    assert!(
+        after.distance(expected) < 1e-6 && (after - before).dot(planes[2].normal).abs() < 1e-9,
+        "moved to {after}, expected {expected}"
+    );
+    screen(&display, &window, &dir, "2-moved");
+    xdo(&display, &["key", "ctrl+z"]).expect("ctrl+z");
+    assert_eq!(line(&lines, "undo"), "move prosthesis");
+
+    // A click in the axial pane puts the crosshair there: the coronal plane's trace (green)
+    // runs along that row, the sagittal plane's (yellow) down that column.
+    xdo(
+        &display,
+        &["mousemove", "--window", &window, "100", "60", "click", "1"],
+    )
+    .expect("click");
+    let crosshair: serde_json::Value = serde_json::from_str(&line(&lines, "crosshair")).unwrap();
+    assert_eq!(crosshair["pane"], "axial");
+    screen_until(&display, &window, &dir, "3-crosshair", |shot| {
+        ensure!(
+            is_colour(shot.at(20, 60), green),
+            "row 60 at x 20: {:?} (rows 56-64: {:?}; columns 96-104 at y 200: {:?})",
+            shot.at(20, 60),
+            (56..65).map(|y| shot.at(20, y)).collect::<Vec<_>>(),
+            (96..105).map(|x| shot.at(x, 200)).collect::<Vec<_>>()
+        );
+        ensure!(
+            is_colour(shot.at(100, 200), yellow),
+            "column 100 at y 200: {:?}",
+            shot.at(100, 200)
+        );
+        // The sagittal pane's axial trace (red) stays at the point's height.
+        Ok(())
+    });
+    // The wheel over the axial pane moves its plane a voxel (0.85 mm) up.
+    let z = crosshair["point_mm"][2].as_f64().unwrap();
+    xdo(
+        &display,
+        &["mousemove", "--window", &window, "100", "100", "click", "4"],
+    )
+    .expect("wheel");
+    let said = line(&lines, "axial at");
+    let now: f64 = said.trim_end_matches(" mm").parse().unwrap();
+    assert!(
+        (now - z).abs() > 0.8 && (now - z).abs() < 1.8,
+        "{z} then {now}"
+    );
+    // Alt+drag over a slice windows the slices.
+    xdo(&display, &["keydown", "alt"]).expect("alt");
+    xdo(
+        &display,
+        &[
+            "mousemove",
+            "--window",
+            &window,
+            "150",
+            "400",
+            "mousedown",
+            "1",
+        ],
+    )
+    .expect("press");
+    std::thread::sleep(Duration::from_millis(200));
+    xdo(&display, &["mousemove", "--window", &window, "190", "380"]).expect("drag");
+    std::thread::sleep(Duration::from_millis(200));
+    xdo(&display, &["mouseup", "1"]).expect("release");
+    xdo(&display, &["keyup", "alt"]).expect("alt");
+    let window_said = line(&lines, "slices window");
+    assert_ne!(window_said, "-500 to 1500", "the window did not change");
+    xdo(&display, &["key", "v"]).expect("v");
+    assert_eq!(line(&lines, "one 3D view"), "");
+}

@@ -5,9 +5,7 @@
 use glam::DVec3;
 use image::RgbaImage;
 
-use super::{
-    Extent, Pixels, Plane, PlaneKind, Slice, SliceError, SliceFrame, SliceSpec, grey,
-};
+use super::{Extent, Pixels, Plane, PlaneKind, Slice, SliceError, SliceFrame, SliceSpec, grey};
 use crate::annotate::text::{NoFont, Painter};
 use crate::annotate::{Annotations, Drawn, Label, annotate_image};
 use crate::scene::Scene;
@@ -196,7 +194,13 @@ pub fn quad_panes(
         let (mut image, _) = figure(&slice, scene, window, labels.as_ref())?;
         for (j, other) in planes.iter().enumerate() {
             if j != i {
-                trace(&mut image, &slice.frame, point, other.normal, plane_colour(kinds[j]))?;
+                trace(
+                    &mut image,
+                    &slice.frame,
+                    point,
+                    other.normal,
+                    plane_colour(kinds[j]),
+                )?;
             }
         }
         border(&mut image, plane_colour(kinds[i]));

@@ -63,6 +63,26 @@ pub const KEYS: &[(&str, &str)] = &[
         "K",
         "contact: what the selected mesh's surface touches in the volume",
     ),
+    (
+        "Shift+K",
+        "contact map: the selected mesh painted with the value under it",
+    ),
+    (
+        "V",
+        "four panes: 3D, axial, sagittal, coronal (click a slice: crosshair)",
+    ),
+    (
+        "wheel on a slice",
+        "move its plane; Alt+drag on it windows the slices",
+    ),
+    (
+        "drag on it in a slice",
+        "move the selected mesh in that slice's plane",
+    ),
+    (
+        "I",
+        "four panes: the implant's long axis for the coronal pane",
+    ),
     ("H", "this help"),
     ("Escape", "cancel, deselect; with nothing to cancel, quit"),
     ("Q", "quit"),
@@ -167,6 +187,12 @@ pub enum Action {
     GrowCrop(f64),
     /// Draw the volumes in this ordering.
     Ordering(Ordering),
+    /// One 3D view, or four panes (3D and three slices).
+    TogglePanes,
+    /// The fourth pane between coronal and the selected implant's long axis.
+    ImplantPane,
+    /// The contact map on the selected mesh on and off.
+    ToggleContactMap,
 }
 
 /// The action of `key` pressed with `modifiers` held; `None` for a key that does nothing.
@@ -250,7 +276,10 @@ fn character_action(c: &str, ctrl: bool, shift: bool, step: f64) -> Option<Actio
         "m" => Action::NextMeasureKind,
         "n" => Action::Snap,
         "x" => Action::ClearPoints,
+        "k" if shift => Action::ToggleContactMap,
         "k" => Action::Contact,
+        "v" => Action::TogglePanes,
+        "i" => Action::ImplantPane,
         "l" => Action::Label,
         "a" => Action::ToggleAnnotations,
         "r" => Action::ResetCamera,

@@ -158,3 +158,69 @@ impl App {
         }
     }
 }
+
+impl App {
+    /// Shift+K: the selected mesh (the first where none is) painted with the volume's value
+    /// under its surface, a colour bar beside the view; off again.
+    pub(super) fn toggle_contact_map(&mut self) {
+        self.contact_map = !self.contact_map;
+        if !self.contact_map {
+            self.painted = None;
+            self.say("contact map off".into());
+            return;
+        }
+        self.refresh_contact_map();
+        if let Some((_, _, painted)) = &self.painted {
+            let [lo, hi] = painted.range;
+            self.say(format!(
+                "contact map: the value under the surface, {lo} (dark) to {hi} (yellow); grey outside the volume"
+            ));
+        }
+    }
+
+    /// Paints the mesh again where the plan changed since it was painted (it follows the
+    /// implant while it moves).
+    pub(super) fn refresh_contact_map(&mut self) {
+        if !self.contact_map {
+            self.painted = None;
+            return;
+        }
+        let generation = self.edit.scene.generation();
+        let target = self.edit.selected;
+        if matches!(&self.painted, Some((g, t, _)) if *g == generation && *t == target) {
+            return;
+        }
+        let name = target
+            .and_then(|id| self.edit.scene.node(id).ok())
+            .map(|n| n.name.clone());
+        let range = match self.edit.scene.volumes().next() {
+            Some((_, v, _)) if crate::classify::is_hounsfield(&v.volume.values) => [-100.0, 1000.0],
+            Some((_, v, _)) => {
+                let [lo, hi] = crate::slice::default_window(&v.volume);
+                [f64::from(lo), f64::from(hi)]
+            }
+            None => [0.0, 1.0],
+        };
+        match crate::pick::paint::paint(&self.edit.scene, name.as_deref(), range) {
+            Ok(painted) => self.painted = Some((generation, target, painted)),
+            Err(e) => {
+                self.contact_map = false;
+                self.painted = None;
+                self.say(format!("contact map: {e}"));
+            }
+        }
+    }
+}
+
+/// The marks of a contact map's colour bar: its ends, and the CT classes' edges (200 and 700
+/// HU) where the range is CT's.
+pub(super) fn contact_ticks(range: [f64; 2]) -> Vec<(f64, String)> {
+    let mut ticks = vec![
+        (range[0], format!("{}", range[0])),
+        (range[1], format!("{}", range[1])),
+    ];
+    if range == [-100.0, 1000.0] {
+        ticks.extend([200.0, 700.0].map(|v| (v, format!("{v}"))));
+    }
+    ticks
+}

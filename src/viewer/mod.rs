@@ -31,11 +31,13 @@ pub mod action;
 pub mod edit;
 mod files;
 mod look;
+mod panes;
 pub mod plan;
 mod view;
 
 pub use action::{KEYS, keys_help};
 use files::modified;
+use panes::{Panes, Under};
 
 use action::{Action, STEP, key_action};
 use edit::{Cancelled, Editor, LabelKey, Notice};
@@ -154,6 +156,9 @@ pub fn run(scene: Scene, options: ViewerOptions) -> Result<(), ViewerError> {
         sharpen: None,
         sharp_at: None,
         annotations_on: true,
+        panes: None,
+        contact_map: false,
+        painted: None,
         error: None,
     };
     app.remember_transfers();
@@ -183,6 +188,8 @@ struct Drag {
     start: (f64, f64),
     last: (f64, f64),
     moved: bool,
+    /// The slice pane the drag began over (four panes).
+    slice: Option<usize>,
 }
 
 /// How often the scene file is looked at for changes.
@@ -234,6 +241,12 @@ struct App {
     sharp_at: Option<SceneCamera>,
     /// Whether the annotations show (the `A` key).
     annotations_on: bool,
+    /// The four panes (the `V` key), when on.
+    panes: Option<panes::Panes>,
+    /// Whether the contact map shows (Shift+K).
+    contact_map: bool,
+    /// The contact map painted at a generation of the scene, for the mesh selected then.
+    painted: Option<(u64, Option<NodeId>, crate::pick::paint::Painted)>,
     error: Option<ViewerError>,
 }
 
@@ -321,7 +334,23 @@ impl App {
         self.message = Some((text, Instant::now()));
     }
 
+    /// What lies under window pixel `(x, y)` with four panes; `None` with one view.
+    pub(super) fn under(&self, x: f64, y: f64) -> Option<Under> {
+        let gpu = self.gpu.as_ref()?;
+        self.panes.as_ref()?;
+        Some(Panes::under(gpu.target.size, x, y))
+    }
+
+    /// A click at window pixel `(x, y)`: a pick in the 3D view, the crosshair in a slice.
     pub(super) fn pick(&mut self, x: f64, y: f64) -> Result<(), ViewerError> {
+        let (x, y) = match self.under(x, y) {
+            Some(Under::Slice(pane, lx, ly)) => {
+                self.click_slice(pane, lx, ly);
+                return Ok(());
+            }
+            Some(Under::View(lx, ly)) => (lx, ly),
+            None => (x, y),
+        };
         let Some(view) = self.view().transpose()? else {
             return Ok(());
         };
@@ -362,6 +391,11 @@ impl App {
 
     /// Whether the window pixel `at` shows the selected mesh (meshes only, nearest hit).
     pub(super) fn on_selected(&mut self, at: (f64, f64)) -> bool {
+        let at = match self.under(at.0, at.1) {
+            Some(Under::Slice(pane, x, y)) => return self.on_selected_slice(pane, x, y),
+            Some(Under::View(x, y)) => (x, y),
+            None => at,
+        };
         let (Some(top), Some(Ok(view))) = (self.edit.selected, self.view()) else {
             return false;
         };
@@ -428,6 +462,9 @@ impl App {
                 );
             }
             Action::ResetCamera => self.camera = self.home,
+            Action::TogglePanes => self.toggle_panes(),
+            Action::ImplantPane => self.toggle_implant_pane(),
+            Action::ToggleContactMap => self.toggle_contact_map(),
             Action::ToggleClip => self.toggle_clip(),
             Action::MoveClip(mm) => self.move_clip(mm),
             Action::ToggleCrop => self.toggle_crop(),
@@ -463,6 +500,12 @@ impl App {
         if (self.cursor.0 - drag.start.0).abs() + (self.cursor.1 - drag.start.1).abs() > 3.0 {
             drag.moved = true;
         }
+        if self.panes.as_ref().is_some_and(|p| p.windowing.is_some()) {
+            let (tx, ty) = (self.cursor.0 - drag.start.0, self.cursor.1 - drag.start.1);
+            self.window_slices(tx, ty);
+            return;
+        }
+        let slice = drag.slice;
         if let Some((level0, width0)) = self.windowing {
             // Alt+drag: right raises the level, up narrows the window, both from where the
             // drag began.
@@ -483,11 +526,14 @@ impl App {
             let local = node.local();
             let (pivot, _) = self.edit.scene.pivot(top);
             let (right, up, _) = plan::screen_axes(&self.camera);
-            let height = self
-                .gpu
-                .as_ref()
-                .map_or(self.options.size.1, |g| g.target.size.1);
-            let after = if self.modifiers.control_key() {
+            let height = match self.view() {
+                Some(Ok(view)) => view.size.1,
+                _ => self.options.size.1,
+            };
+            let after = if let Some(pane) = slice {
+                // Over a slice: moved in that slice's plane, following the cursor.
+                self.moved_in_slice(pane, local, dx, dy)
+            } else if self.modifiers.control_key() {
                 let turned = plan::rotated(local, pivot, up, 0.5 * dx);
                 plan::rotated(turned, pivot, right, 0.5 * dy)
             } else {
@@ -497,6 +543,10 @@ impl App {
             if let Err(e) = self.edit.scene.set_local(top, after) {
                 eprintln!("move refused: {e}");
             }
+            return;
+        }
+        if slice.is_some() {
+            // Drags over a slice move nothing but the selected mesh.
             return;
         }
         match drag.button {
@@ -544,7 +594,19 @@ impl App {
             WindowEvent::CursorMoved { position, .. } => self.mouse_moved(position),
             WindowEvent::MouseInput { state, button, .. } => match state {
                 ElementState::Pressed => {
-                    self.windowing = (self.modifiers.alt_key() && button == MouseButton::Left)
+                    let slice = match self.under(self.cursor.0, self.cursor.1) {
+                        Some(Under::Slice(pane, _, _)) => Some(pane),
+                        _ => None,
+                    };
+                    let alt = self.modifiers.alt_key() && button == MouseButton::Left;
+                    if alt && slice.is_some() {
+                        // Alt+drag over a slice windows the slices, not the 3D view.
+                        let start = self.slice_window();
+                        if let Some(p) = &mut self.panes {
+                            p.windowing = Some(start);
+                        }
+                    }
+                    self.windowing = (alt && slice.is_none())
                         .then(|| self.window.or_else(|| self.current_window()))
                         .flatten();
                     // A drag that starts on the selected mesh moves it (Ctrl: turns it), as does
@@ -553,9 +615,7 @@ impl App {
                     let grabbed = self.edit.selected.is_some() && self.on_selected(self.cursor);
                     self.moving = match self.edit.selected {
                         Some(top)
-                            if (modified || grabbed)
-                                && button == MouseButton::Left
-                                && self.windowing.is_none() =>
+                            if (modified || grabbed) && button == MouseButton::Left && !alt =>
                         {
                             self.edit.scene.node(top).ok().map(|n| n.local())
                         }
@@ -566,10 +626,19 @@ impl App {
                         start: self.cursor,
                         last: self.cursor,
                         moved: false,
+                        slice,
                     });
                 }
                 ElementState::Released => {
                     let drag = self.drag.take();
+                    if let Some(p) = &mut self.panes
+                        && p.windowing.take().is_some()
+                    {
+                        let [lo, hi] = self.slice_window();
+                        self.say(format!("slices window {lo:.0} to {hi:.0}"));
+                        self.request_redraw();
+                        return Ok(());
+                    }
                     if self.windowing.take().is_some() {
                         if let Some((level, width)) = self.window {
                             self.say(format!(
@@ -606,7 +675,9 @@ impl App {
                     MouseScrollDelta::LineDelta(_, y) => f64::from(y),
                     MouseScrollDelta::PixelDelta(p) => p.y / 40.0,
                 };
-                if self.modifiers.shift_key() && self.edit.selected.is_some() {
+                if let Some(Under::Slice(pane, _, _)) = self.under(self.cursor.0, self.cursor.1) {
+                    self.scroll_slice(pane, steps);
+                } else if self.modifiers.shift_key() && self.edit.selected.is_some() {
                     // Away from the eye as the wheel turns down, toward it as it turns up.
                     let (_, _, forward) = plan::screen_axes(&self.camera);
                     let big = if self.modifiers.control_key() {

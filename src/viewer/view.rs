@@ -7,20 +7,25 @@ use std::time::{Duration, Instant};
 use glam::DVec3;
 
 use super::action::{KEYS, STEP};
+use super::look::contact_ticks;
 use super::{App, PREVIEW_ABOVE, SETTLE, ViewerError};
-use crate::annotate::{Anchor, Label, Painter, annotate_image};
+use crate::annotate::{Anchor, Label, Painter, annotate_image, colour_bar};
 use crate::pick::measure::{MarkerStyle, Measurement, annotate, draw_scene_measurements};
+use crate::pick::paint::value_colour;
 use crate::render::{FrameOptions, RenderError, ViewSetup, frame_to_rgba8, write_overlay};
 use crate::scene::{ClipPlane, NodeContent, NodeId, Scene};
+use crate::slice::draw::colour8;
 
 impl App {
+    /// The 3D view's setup: the window's size, or a pane's with four panes.
     pub(super) fn view(&self) -> Option<Result<ViewSetup, RenderError>> {
         let gpu = self.gpu.as_ref()?;
-        Some(ViewSetup::new(
-            &self.camera,
-            gpu.target.size,
-            self.edit.scene.bounds(),
-        ))
+        let size = if self.panes.is_some() {
+            super::panes::Panes::pane_size(gpu.target.size)
+        } else {
+            gpu.target.size
+        };
+        Some(ViewSetup::new(&self.camera, size, self.edit.scene.bounds()))
     }
     /// Whether moving the camera draws previews: asked for, and full frames are slow.
     pub(super) fn previews_when_moving(&self) -> bool {
@@ -44,26 +49,80 @@ impl App {
             preview,
         };
         let started = std::time::Instant::now();
+        self.refresh_contact_map();
         let (drawn, labels) = self.drawn_scene();
+        let window_size = match &self.gpu {
+            Some(gpu) => gpu.target.size,
+            None => return Ok(()),
+        };
+        let slices = if self.panes.is_some() {
+            self.draw_panes(window_size)
+        } else {
+            None
+        };
         let hud = self.hud_lines();
-        let preset = self.transfer_label();
         let Some(gpu) = &mut self.gpu else {
             return Ok(());
         };
-        let target = &gpu.target;
         // Volumes coarser than the pixels are drawn refined only once the camera rests: the
         // refinement's classification and its splats cost more than a frame.
         let sharp = !preview && self.sharp_at == Some(self.camera);
         gpu.renderer.set_refinement(sharp);
-        let on_cpu = gpu.renderer.composites_on_cpu(&gpu.ctx);
+        // Four panes are put together on the CPU: the 3D view drawn at a pane's size and read
+        // back, the slices beside it.
+        let on_cpu = gpu.renderer.composites_on_cpu(&gpu.ctx) || self.panes.is_some();
+        let annotate_3d = |image: &mut image::RgbaImage, annotations_on: &mut bool| {
+            if let (Some(parts), true) = (&self.options.annotations, *annotations_on)
+                && let Err(e) = annotate_image(
+                    image,
+                    &self.camera,
+                    &self.edit.scene.patient_frame(),
+                    &labels,
+                    parts,
+                )
+            {
+                eprintln!("annotations off: {e}");
+                *annotations_on = false;
+            }
+            if let Some(map) = &self.painted
+                && self.contact_map
+            {
+                let range = map.2.range;
+                if let Err(e) = colour_bar(
+                    image,
+                    |v| colour8(value_colour(v, range)),
+                    range,
+                    &contact_ticks(range),
+                    "at the surface",
+                ) {
+                    eprintln!("colour bar: {e}");
+                }
+            }
+        };
+        let mut overlay = image::RgbaImage::new(window_size.0, window_size.1);
         if on_cpu {
             // The tile compositor's frame, shown through the present pass like the GPU's.
             let shot =
                 gpu.renderer
-                    .screenshot(&gpu.ctx, &drawn, &self.camera, target.size, &options)?;
+                    .screenshot(&gpu.ctx, &drawn, &self.camera, view.size, &options)?;
             self.last = shot.report;
-            let image = frame_to_rgba8(&shot.frame);
-            let (w, h) = target.size;
+            let mut image = frame_to_rgba8(&shot.frame);
+            if self.panes.is_some() {
+                annotate_3d(&mut image, &mut self.annotations_on);
+                let background = self
+                    .options
+                    .background
+                    .map(|c| (c.clamp(0.0, 1.0) * 255.0) as u8);
+                image = App::compose_panes(
+                    window_size,
+                    &image,
+                    slices.as_deref().unwrap_or(&[]),
+                    [background[0], background[1], background[2], 255],
+                );
+            } else {
+                annotate_3d(&mut overlay, &mut self.annotations_on);
+            }
+            let (w, h) = window_size;
             write_overlay(&gpu.ctx, &gpu.cpu_frame.0, image.as_raw(), w, h);
             gpu.cpu_frame.1 = Some(image);
         } else {
@@ -71,11 +130,12 @@ impl App {
                 &gpu.ctx,
                 &drawn,
                 &view,
-                &target.color_view,
-                &target.depth_view,
+                &gpu.target.color_view,
+                &gpu.target.depth_view,
                 &options,
             )?;
             gpu.cpu_frame.1 = None;
+            annotate_3d(&mut overlay, &mut self.annotations_on);
         }
         let frame = match gpu.surface.get_current_texture() {
             wgpu::CurrentSurfaceTexture::Success(frame)
@@ -89,26 +149,12 @@ impl App {
             }
         };
         let surface_view = frame.texture.create_view(&Default::default());
-        let (w, h) = target.size;
-        let mut image = image::RgbaImage::new(w, h);
-        if let (Some(parts), true) = (&self.options.annotations, self.annotations_on)
-            && let Err(e) = annotate_image(
-                &mut image,
-                &self.camera,
-                &self.edit.scene.patient_frame(),
-                &labels,
-                parts,
-            )
-        {
-            eprintln!("annotations off: {e}");
-            self.annotations_on = false;
-        }
-        let help = self.help;
-        draw_hud(&mut image, &hud, help);
-        write_overlay(&gpu.ctx, &gpu.overlay, image.as_raw(), w, h);
+        let (w, h) = window_size;
+        draw_hud(&mut overlay, &hud, self.help);
+        write_overlay(&gpu.ctx, &gpu.overlay, overlay.as_raw(), w, h);
         let overlay = Some(gpu.overlay.create_view(&Default::default()));
         let cpu_view = on_cpu.then(|| gpu.cpu_frame.0.create_view(&Default::default()));
-        let source = cpu_view.as_ref().unwrap_or(&target.color_view);
+        let source = cpu_view.as_ref().unwrap_or(&gpu.target.color_view);
         gpu.blit
             .copy(&gpu.ctx, source, overlay.as_ref(), &surface_view);
         gpu.window.pre_present_notify();
@@ -118,10 +164,23 @@ impl App {
             self.full_frame = elapsed;
         }
         self.sharpen = (!preview && self.last.unrefined).then(|| Instant::now() + SETTLE);
+        let preset = self.transfer_label();
+        let Some(gpu) = &self.gpu else {
+            return Ok(());
+        };
         gpu.window.set_title(&format!(
-            "splatscene: {}{} | {preset} | frame {:.0} ms, order {:.1} ms | {} splats{}",
+            "splatscene: {}{}{} | {preset} | frame {:.0} ms, order {:.1} ms | {} splats{}",
             self.ordering,
-            if on_cpu { " (CPU tiles)" } else { "" },
+            if on_cpu && self.panes.is_none() {
+                " (CPU tiles)"
+            } else {
+                ""
+            },
+            if self.panes.is_some() {
+                " (four panes)"
+            } else {
+                ""
+            },
             elapsed.as_secs_f64() * 1e3,
             self.last.timings.order.as_secs_f64() * 1e3,
             self.last.splats,
@@ -139,6 +198,12 @@ impl App {
     /// to write them.
     pub(super) fn drawn_scene(&self) -> (Scene, Vec<Label>) {
         let mut scene = self.edit.scene.clone();
+        if let Some((_, _, painted)) = &self.painted
+            && self.contact_map
+            && let Err(e) = painted.apply(&mut scene)
+        {
+            eprintln!("contact map: {e}");
+        }
         let labels = match draw_scene_measurements(&mut scene) {
             Ok(labels) => labels,
             Err(e) => {
@@ -174,7 +239,10 @@ impl App {
         for (a, b) in outline {
             let _ = annotate(&mut scene, &Measurement::distance(a, b), &thin);
         }
-        if let Some(top) = self.edit.selected {
+        // The contact map shows its own colours, untinted.
+        if let Some(top) = self.edit.selected
+            && !self.contact_map
+        {
             tint(&mut scene, top);
         }
         (scene, labels)
@@ -204,6 +272,17 @@ impl App {
                 at.y,
                 at.z,
                 angle.to_degrees()
+            ));
+        }
+        if let Some(panes) = &self.panes {
+            let p = self.edit.scene.patient_frame().patient(panes.point);
+            let [lo, hi] = self.slice_window();
+            lines.push(format!(
+                "four panes: crosshair ({:.1}, {:.1}, {:.1}) mm RAS; slices window {lo:.0} to {hi:.0}; bottom right {}",
+                p.x,
+                p.y,
+                p.z,
+                panes.fourth.name()
             ));
         }
         match self.edit.snapping {
