@@ -1735,13 +1735,30 @@ fn four_panes_show_slices_that_follow_the_crosshair_and_move_the_implant_in_thei
         Ok(())
     });
 
-    // Where the panes lie, worked out as the figures' calibration gives it: the scene's
-    // camera target is the crosshair, the three sections fitted to 320x240 at one pixel size.
+    // Select the prosthesis in the 3D pane: a click where its pivot shows. The crosshair
+    // goes to the point picked.
     let loaded = splatscene::scene::file::load_scene_file(&scene_path).unwrap();
     let scene = &loaded.scene;
     let camera = scene.camera.unwrap();
-    let plane =
-        |kind| Plane::of(scene, SliceSpec { kind, at_mm: None }, camera.target, None).unwrap();
+    let top = scene.find("prosthesis").unwrap();
+    let (pivot, _) = scene.pivot(top);
+    let [x, y] = splatscene::annotate::ImageCamera::new(&camera, 320, 240)
+        .unwrap()
+        .project(pivot)
+        .unwrap();
+    let (x, y) = ((320.0 + x).to_string(), y.to_string());
+    xdo(
+        &display,
+        &["mousemove", "--window", &window, &x, &y, "click", "1"],
+    )
+    .expect("click");
+    let pick: serde_json::Value = serde_json::from_str(&line(&lines, "pick")).unwrap();
+    let point = hit_point(&pick).expect("the prosthesis is hit");
+    assert_eq!(line(&lines, "selected"), "prosthesis");
+
+    // Where the panes lie, worked out as the figures' calibration gives it: the three
+    // sections through the crosshair fitted to 320x240 at one pixel size.
+    let plane = |kind| Plane::of(scene, SliceSpec { kind, at_mm: None }, point, None).unwrap();
     let planes = [PlaneKind::Axial, PlaneKind::Sagittal, PlaneKind::Coronal].map(plane);
     let mm = planes
         .iter()
@@ -1755,25 +1772,10 @@ fn four_panes_show_slices_that_follow_the_crosshair_and_move_the_implant_in_thei
     )
     .unwrap();
 
-    // Select the prosthesis in the 3D pane: a click where its pivot shows.
-    let top = scene.find("prosthesis").unwrap();
-    let (pivot, _) = scene.pivot(top);
-    let [x, y] = splatscene::annotate::ImageCamera::new(&camera, 320, 240)
-        .unwrap()
-        .project(pivot)
-        .unwrap();
-    let (x, y) = ((320.0 + x).to_string(), y.to_string());
-    xdo(
-        &display,
-        &["mousemove", "--window", &window, &x, &y, "click", "1"],
-    )
-    .expect("click");
-    assert_eq!(line(&lines, "selected"), "prosthesis");
-
-    // Drag it 30 pixels right in the coronal pane, from where its pivot shows there: it
-    // moves 30 of that pane's pixels along the pane's right, in the coronal plane.
+    // Drag it 30 pixels right in the coronal pane, from the point picked (on its outline
+    // there): it moves 30 of that pane's pixels along the pane's right, in the coronal plane.
     let before = scene.node(top).unwrap().local().w_axis.truncate();
-    let [px, py] = coronal.pixel(pivot);
+    let [px, py] = coronal.pixel(point);
     let (cx, cy) = (320.0 + px + 0.5, 240.0 + py + 0.5);
     let at = |dx: f64| [(cx + dx).round().to_string(), cy.round().to_string()];
     let start = at(0.0);

@@ -69,7 +69,7 @@ pub const KEYS: &[(&str, &str)] = &[
     ),
     (
         "V",
-        "four panes: 3D, axial, sagittal, coronal (click a slice: crosshair)",
+        "four panes: 3D, axial, sagittal, coronal; a click sets their crosshair",
     ),
     (
         "wheel on a slice",

@@ -380,6 +380,10 @@ impl App {
             }
             None => "nothing".into(),
         });
+        // With four panes the slices go through what was clicked in 3D.
+        if let (Some(panes), Some(h)) = (&mut self.panes, &hit) {
+            panes.point = h.point();
+        }
         let on_mesh = match &hit {
             Some(Hit::Mesh(m)) => Some(self.edit.scene.top_node(m.node)),
             _ => None,

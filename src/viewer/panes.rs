@@ -1,7 +1,7 @@
 //! The four-pane layout (the `V` key): the 3D view top right, the axial slice top left, the
 //! sagittal bottom left and the coronal (or, with `I`, the selected implant's long-axis plane)
 //! bottom right, 3D Slicer's four-up. The panes share one crosshair point, set by a click in a
-//! slice pane; the wheel over a slice moves its plane through the point; Alt+drag over a slice
+//! slice pane or on what a click in the 3D view picks; the wheel over a slice moves its plane through the point; Alt+drag over a slice
 //! windows the slices; a drag on the selected implant in a slice moves it in that plane (one
 //! edit, undone with Ctrl+Z). The slices are drawn from the plan as it stands at every frame,
 //! so the outlines follow the implant while it moves.
