@@ -7,15 +7,14 @@
 use std::sync::Arc;
 
 use glam::{DMat3, DMat4, DQuat, DVec3};
-use splatscene::classify::TransferFunction;
 use splatscene::mesh::{CpuMesh, Material};
 use splatscene::pick::contact::{Classes, ContactError, contact};
 use splatscene::pick::paint::paint;
-use splatscene::scene::{MeshNode, NodeContent, ObjectError, Scene, SplatSettings, VolumeNode};
+use splatscene::scene::{MeshNode, NodeContent, ObjectError, Scene};
 use splatscene::volume::CpuVolume;
 
 mod common;
-use common::shapes::{cube, obj_text, sphere};
+use common::shapes::{cube, obj_text, scene_of, sphere, write_raw_f32};
 use common::{fails, ok, scratch};
 
 /// Value per millimetre of world z.
@@ -42,23 +41,7 @@ fn ramp_volume() -> CpuVolume {
 }
 
 fn scene_with(mesh: CpuMesh, placed: DMat4) -> Scene {
-    let mut scene = Scene::new();
-    let volume = VolumeNode {
-        volume: Arc::new(ramp_volume()),
-        transfer: Arc::new(TransferFunction::ct_bone()),
-        splats: SplatSettings::default(),
-    };
-    scene
-        .add("ct", DMat4::IDENTITY, None, NodeContent::Volume(volume))
-        .unwrap();
-    let node = MeshNode {
-        mesh: Arc::new(mesh),
-        material: Material::default(),
-    };
-    scene
-        .add("stem", placed, None, NodeContent::Mesh(node))
-        .unwrap();
-    scene
+    scene_of(ramp_volume(), Some((mesh, placed)))
 }
 
 /// The area of the part of convex polygon `poly` (world points) where z < `h`: the polygon
@@ -264,9 +247,7 @@ fn a_missing_mesh_or_volume_and_bad_edges_are_named() {
 fn the_command_line_prints_the_contact_of_a_mesh_given_beside_a_volume() {
     let dir = scratch("contact");
     let raw = dir.join("ramp.raw");
-    let volume = ramp_volume();
-    let bytes: Vec<u8> = volume.values.iter().flat_map(f32::to_le_bytes).collect();
-    std::fs::write(&raw, bytes).unwrap();
+    write_raw_f32(&raw, &ramp_volume());
     let stl = dir.join("box.obj");
     std::fs::write(&stl, obj_text(&cube(20.0))).unwrap();
     let s = |p: &std::path::Path| p.to_str().unwrap().to_owned();
@@ -387,9 +368,7 @@ fn a_painted_surface_keeps_its_area_and_each_vertex_has_the_colour_of_the_value_
 fn render_paints_the_contact_map_with_its_colour_bar() {
     let dir = scratch("contact-map");
     let raw = dir.join("ramp.raw");
-    let volume = ramp_volume();
-    let bytes: Vec<u8> = volume.values.iter().flat_map(f32::to_le_bytes).collect();
-    std::fs::write(&raw, bytes).unwrap();
+    write_raw_f32(&raw, &ramp_volume());
     std::fs::write(dir.join("box.obj"), obj_text(&cube(20.0))).unwrap();
     let origin = -0.5 * 0.5 * 127.0;
     // The volume left out of the picture (every voxel at or below the least opacity), so that

@@ -9,17 +9,14 @@ use std::sync::Arc;
 
 use glam::{DMat3, DMat4, DQuat, DVec3, EulerRot};
 use serde_json::Value;
-use splatscene::classify::TransferFunction;
 use splatscene::measure::MeasureKind;
 use splatscene::mesh::{CpuMesh, Material};
-use splatscene::scene::{
-    MeshNode, NodeContent, Scene, SceneMeasurement, SplatSettings, VolumeNode,
-};
+use splatscene::scene::{MeshNode, NodeContent, SceneMeasurement};
 use splatscene::slice::{Pixels, Plane, PlaneKind, Slice, SliceError, SliceSpec, long_axis};
 use splatscene::volume::CpuVolume;
 
 mod common;
-use common::shapes::{cube, cylinder, obj_text, unindexed};
+use common::shapes::{cube, cylinder, obj_text, scene_of, unindexed, write_raw_f32};
 use common::{fails, ok, scratch};
 
 /// The field sampled: linear in world millimetres.
@@ -51,28 +48,6 @@ fn field_volume(turn: DMat3, centre: DVec3) -> CpuVolume {
     }
 }
 
-fn scene_with(volume: CpuVolume, mesh: Option<(CpuMesh, DMat4)>) -> Scene {
-    let mut scene = Scene::new();
-    let node = VolumeNode {
-        volume: Arc::new(volume),
-        transfer: Arc::new(TransferFunction::ct_bone()),
-        splats: SplatSettings::default(),
-    };
-    scene
-        .add("ct", DMat4::IDENTITY, None, NodeContent::Volume(node))
-        .unwrap();
-    if let Some((mesh, placed)) = mesh {
-        let node = MeshNode {
-            mesh: Arc::new(mesh),
-            material: Material::default(),
-        };
-        scene
-            .add("stem", placed, None, NodeContent::Mesh(node))
-            .unwrap();
-    }
-    scene
-}
-
 fn spec(s: &str) -> SliceSpec {
     s.parse().unwrap()
 }
@@ -96,7 +71,7 @@ fn inside_grid(p: DVec3, turn: DMat3, centre: DVec3, m: f64) -> bool {
 fn every_pixel_holds_the_field_at_the_point_its_calibration_names() {
     let turn = DMat3::from_euler(EulerRot::XYZ, 0.2, -0.35, 0.5);
     let centre = DVec3::new(4.0, -3.0, 10.0);
-    let scene = scene_with(field_volume(turn, centre), None);
+    let scene = scene_of(field_volume(turn, centre), None);
     for (name, normal) in [
         ("axial@13.3", DVec3::Z),
         ("coronal@-7.1", DVec3::Y),
@@ -145,7 +120,7 @@ fn every_pixel_holds_the_field_at_the_point_its_calibration_names() {
 
 #[test]
 fn the_patient_planes_are_seen_as_radiologists_read_them() {
-    let scene = scene_with(field_volume(DMat3::IDENTITY, DVec3::ZERO), None);
+    let scene = scene_of(field_volume(DMat3::IDENTITY, DVec3::ZERO), None);
     let dirs = |name: &str| {
         let p = Plane::of(&scene, spec(name), DVec3::ZERO, None).unwrap();
         (p.right, p.down)
@@ -170,7 +145,7 @@ fn tilted_cylinder() -> (CpuMesh, DMat4, DVec3, DVec3) {
 #[test]
 fn a_cylinder_cut_across_along_and_obliquely_gives_its_closed_form_sections() {
     let (mesh, placed, axis, at) = tilted_cylinder();
-    let scene = scene_with(
+    let scene = scene_of(
         field_volume(DMat3::IDENTITY, DVec3::ZERO),
         Some((mesh, placed)),
     );
@@ -244,7 +219,7 @@ fn a_turned_cube_stored_a_vertex_a_corner_joins_into_one_square() {
     let placed =
         DMat4::from_rotation_translation(DQuat::from_rotation_z(0.5), DVec3::new(1.0, 2.0, 3.0));
     for mesh in [cube(12.0), unindexed(&cube(12.0))] {
-        let scene = scene_with(
+        let scene = scene_of(
             field_volume(DMat3::IDENTITY, DVec3::ZERO),
             Some((mesh, placed)),
         );
@@ -262,7 +237,7 @@ fn a_turned_cube_stored_a_vertex_a_corner_joins_into_one_square() {
 
 #[test]
 fn measurements_show_on_the_slice_they_lie_in_only() {
-    let mut scene = scene_with(field_volume(DMat3::IDENTITY, DVec3::ZERO), None);
+    let mut scene = scene_of(field_volume(DMat3::IDENTITY, DVec3::ZERO), None);
     scene.measurements.push(SceneMeasurement {
         kind: MeasureKind::Distance,
         points: vec![DVec3::new(-10.0, 0.0, 5.0), DVec3::new(10.0, 0.0, 5.2)],
@@ -287,7 +262,7 @@ fn measurements_show_on_the_slice_they_lie_in_only() {
 
 #[test]
 fn planes_that_miss_unknown_meshes_and_round_meshes_are_refused_by_name() {
-    let scene = scene_with(
+    let scene = scene_of(
         field_volume(DMat3::IDENTITY, DVec3::ZERO),
         Some((cube(10.0), DMat4::IDENTITY)),
     );
@@ -314,7 +289,7 @@ fn planes_that_miss_unknown_meshes_and_round_meshes_are_refused_by_name() {
         said.contains("no long axis") && said.contains("stem"),
         "{said}"
     );
-    let bare = scene_with(field_volume(DMat3::IDENTITY, DVec3::ZERO), None);
+    let bare = scene_of(field_volume(DMat3::IDENTITY, DVec3::ZERO), None);
     let said = Plane::of(&bare, spec("implant-long"), DVec3::ZERO, None)
         .unwrap_err()
         .to_string();
@@ -341,7 +316,7 @@ fn a_tube_encloses_its_wall_not_its_bore() {
     tube.positions.extend(&inner.positions);
     tube.indices.extend(inner.indices.iter().map(|i| i + base));
     tube.compute_normals();
-    let scene = scene_with(
+    let scene = scene_of(
         field_volume(DMat3::IDENTITY, DVec3::ZERO),
         Some((tube, DMat4::IDENTITY)),
     );
@@ -362,9 +337,7 @@ fn a_tube_encloses_its_wall_not_its_bore() {
 /// cylinder as OBJ; returns the arguments that load both.
 fn files_on_disk(dir: &std::path::Path) -> Vec<String> {
     let raw = dir.join("field.raw");
-    let volume = field_volume(DMat3::IDENTITY, DVec3::ZERO);
-    let bytes: Vec<u8> = volume.values.iter().flat_map(f32::to_le_bytes).collect();
-    std::fs::write(&raw, bytes).unwrap();
+    write_raw_f32(&raw, &field_volume(DMat3::IDENTITY, DVec3::ZERO));
     let (mesh, _, _, _) = tilted_cylinder();
     let obj = dir.join("stem.obj");
     std::fs::write(&obj, obj_text(&mesh)).unwrap();
@@ -708,7 +681,7 @@ plane = "coronal@-2"
 
 #[test]
 fn overlapping_parts_of_one_object_enclose_their_union() {
-    let mut scene = scene_with(field_volume(DMat3::IDENTITY, DVec3::ZERO), None);
+    let mut scene = scene_of(field_volume(DMat3::IDENTITY, DVec3::ZERO), None);
     let top = scene
         .add("implant", DMat4::IDENTITY, None, NodeContent::Empty)
         .unwrap();

@@ -175,12 +175,7 @@ pub fn contact(
     let (volume_id, node, world) = scene.volumes().next().ok_or(ContactError::NoVolume)?;
     let geometry = placed_geometry(&node.volume, world)?;
     let triangles = scene.object_triangles(top);
-    let min_spacing = node
-        .volume
-        .spacing
-        .iter()
-        .copied()
-        .fold(f64::INFINITY, f64::min);
+    let min_spacing = node.volume.finest_spacing();
     let mut step = 0.5 * min_spacing;
     let count = |step: f64| -> u64 { triangles.iter().map(|t| subdivisions(t, step).pow(2)).sum() };
     let wanted = count(step);

@@ -83,12 +83,7 @@ pub fn paint(scene: &Scene, mesh: Option<&str>, range: [f64; 2]) -> Result<Paint
         .meshes()
         .filter(|(id, _, _)| scene.is_under(*id, top))
         .collect();
-    let finest = volume_node
-        .volume
-        .spacing
-        .iter()
-        .copied()
-        .fold(f64::INFINITY, f64::min);
+    let finest = volume_node.volume.finest_spacing();
     let mut step = finest;
     let count = |step: f64| -> u64 {
         parts

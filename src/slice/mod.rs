@@ -137,12 +137,7 @@ impl Slice {
         let (volume_id, node, _) = scene.volumes().next().ok_or(SliceError::NoVolume)?;
         let frame = match pixels {
             Pixels::Size(mm) => {
-                let finest = node
-                    .volume
-                    .spacing
-                    .iter()
-                    .copied()
-                    .fold(f64::INFINITY, f64::min);
+                let finest = node.volume.finest_spacing();
                 SliceFrame::new(plane, &extent, mm.unwrap_or(finest), None)?
             }
             Pixels::Fixed { size, mm_per_pixel } => {

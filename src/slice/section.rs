@@ -225,37 +225,12 @@ fn join(segments: &[Segment]) -> Vec<(Vec<DVec3>, bool, usize)> {
         }
         used[start] = true;
         let s = segments[start];
-        // Forward from `b`, then backward from `a`.
+        // Forward from `b` until the chain ends or comes back to `a`, then backward from `a`.
         let mut forward = vec![s.a, s.b];
-        let mut closed = false;
-        let mut key = s.kb;
-        while let Some(next) = take_next(&at, &mut used, key) {
-            let n = segments[next];
-            let (point, other) = if n.ka == key {
-                (n.b, n.kb)
-            } else {
-                (n.a, n.ka)
-            };
-            if other == s.ka {
-                closed = true;
-                break;
-            }
-            forward.push(point);
-            key = other;
-        }
+        let closed = walk(segments, &at, &mut used, s.kb, Some(s.ka), &mut forward);
         if !closed {
             let mut backward = Vec::new();
-            let mut key = s.ka;
-            while let Some(next) = take_next(&at, &mut used, key) {
-                let n = segments[next];
-                let (point, other) = if n.ka == key {
-                    (n.b, n.kb)
-                } else {
-                    (n.a, n.ka)
-                };
-                backward.push(point);
-                key = other;
-            }
+            walk(segments, &at, &mut used, s.ka, None, &mut backward);
             backward.reverse();
             backward.extend(forward);
             forward = backward;
@@ -263,6 +238,32 @@ fn join(segments: &[Segment]) -> Vec<(Vec<DVec3>, bool, usize)> {
         out.push((forward, closed, s.ka.0));
     }
     out
+}
+
+/// Follows the chain of unused segments from edge `key`, pushing each next point, until it
+/// ends or reaches edge `home` (then `true`: the chain closed).
+fn walk(
+    segments: &[Segment],
+    at: &HashMap<EdgeKey, Vec<usize>>,
+    used: &mut [bool],
+    mut key: EdgeKey,
+    home: Option<EdgeKey>,
+    points: &mut Vec<DVec3>,
+) -> bool {
+    while let Some(next) = take_next(at, used, key) {
+        let n = segments[next];
+        let (point, other) = if n.ka == key {
+            (n.b, n.kb)
+        } else {
+            (n.a, n.ka)
+        };
+        if Some(other) == home {
+            return true;
+        }
+        points.push(point);
+        key = other;
+    }
+    false
 }
 
 /// An unused segment with an end on edge `key`, marked used.

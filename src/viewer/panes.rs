@@ -180,13 +180,14 @@ impl App {
         image
     }
 
+    /// Where slice pane `pane` lay when last drawn.
+    fn pane_frame(&self, pane: usize) -> Option<SliceFrame> {
+        self.panes.as_ref()?.frames.get(pane).copied()
+    }
+
     /// A click on slice pane `pane` at its pixel `(x, y)`: the crosshair goes there.
     pub(super) fn click_slice(&mut self, pane: usize, x: f64, y: f64) {
-        let Some(frame) = self
-            .panes
-            .as_ref()
-            .and_then(|p| p.frames.get(pane).copied())
-        else {
+        let Some(frame) = self.pane_frame(pane) else {
             return;
         };
         // The centre of the pixel clicked (integers at pixel centres).
@@ -204,20 +205,15 @@ impl App {
     /// The wheel over slice pane `pane`: its plane moves through the point along its normal,
     /// a voxel a step.
     pub(super) fn scroll_slice(&mut self, pane: usize, steps: f64) {
-        let Some(frame) = self
-            .panes
-            .as_ref()
-            .and_then(|p| p.frames.get(pane).copied())
-        else {
+        let Some(frame) = self.pane_frame(pane) else {
             return;
         };
-        let step = self.edit.scene.volumes().next().map_or(1.0, |(_, v, _)| {
-            v.volume
-                .spacing
-                .iter()
-                .copied()
-                .fold(f64::INFINITY, f64::min)
-        });
+        let step = self
+            .edit
+            .scene
+            .volumes()
+            .next()
+            .map_or(1.0, |(_, v, _)| v.volume.finest_spacing());
         let normal = frame.plane.normal;
         if let Some(panes) = &mut self.panes {
             panes.point += normal * step * steps;
@@ -230,12 +226,7 @@ impl App {
     /// Whether pixel `(x, y)` of slice pane `pane` lies on the selected mesh's section (inside
     /// its outline or within a few pixels of it).
     pub(super) fn on_selected_slice(&self, pane: usize, x: f64, y: f64) -> bool {
-        let (Some(top), Some(frame)) = (
-            self.edit.selected,
-            self.panes
-                .as_ref()
-                .and_then(|p| p.frames.get(pane).copied()),
-        ) else {
+        let (Some(top), Some(frame)) = (self.edit.selected, self.pane_frame(pane)) else {
             return false;
         };
         let outlines = crate::slice::outlines(&self.edit.scene, &frame.plane);
@@ -269,7 +260,7 @@ impl App {
     /// The selected mesh's transform `before` moved by the pixels `(dx, dy)` of slice pane
     /// `pane`, in that pane's plane.
     pub(super) fn moved_in_slice(&self, pane: usize, before: DMat4, dx: f64, dy: f64) -> DMat4 {
-        match self.panes.as_ref().and_then(|p| p.frames.get(pane)) {
+        match self.pane_frame(pane) {
             Some(frame) => {
                 let delta = frame.pixel_right() * dx + frame.pixel_down() * dy;
                 super::plan::translated(before, delta)

@@ -55,6 +55,11 @@ impl CpuVolume {
         )
     }
 
+    /// The smallest of the voxel spacings, in millimetres.
+    pub fn finest_spacing(&self) -> f64 {
+        self.spacing.iter().copied().fold(f64::INFINITY, f64::min)
+    }
+
     /// The trilinear interpolation of the values at index coordinates `p` (voxel centres at
     /// whole numbers), the grid's faces extended outward: a point outside takes the value of
     /// the nearest face. (Written here: the loop is three lerps over the held type, which no

@@ -1,7 +1,42 @@
 //! Meshes whose sections and areas are known in closed form, for the tests that check
 //! geometry against them, and a writer of OBJ files for the command line.
 
-use splatscene::mesh::CpuMesh;
+use std::sync::Arc;
+
+use glam::DMat4;
+use splatscene::classify::TransferFunction;
+use splatscene::mesh::{CpuMesh, Material};
+use splatscene::scene::{MeshNode, NodeContent, Scene, SplatSettings, VolumeNode};
+use splatscene::volume::CpuVolume;
+
+/// A scene of `volume` (node "ct", ct-bone) and, where given, a mesh placed so (node "stem").
+pub fn scene_of(volume: CpuVolume, mesh: Option<(CpuMesh, DMat4)>) -> Scene {
+    let mut scene = Scene::new();
+    let node = VolumeNode {
+        volume: Arc::new(volume),
+        transfer: Arc::new(TransferFunction::ct_bone()),
+        splats: SplatSettings::default(),
+    };
+    scene
+        .add("ct", DMat4::IDENTITY, None, NodeContent::Volume(node))
+        .unwrap();
+    if let Some((mesh, placed)) = mesh {
+        let node = MeshNode {
+            mesh: Arc::new(mesh),
+            material: Material::default(),
+        };
+        scene
+            .add("stem", placed, None, NodeContent::Mesh(node))
+            .unwrap();
+    }
+    scene
+}
+
+/// Writes the values of `volume` as raw little-endian f32.
+pub fn write_raw_f32(path: &std::path::Path, volume: &CpuVolume) {
+    let bytes: Vec<u8> = volume.values.iter().flat_map(f32::to_le_bytes).collect();
+    std::fs::write(path, bytes).unwrap();
+}
 
 /// A cube of side `side` centred on the origin, two triangles a face; the faces at the
 /// negative end of each axis wound inward (as some files are).
