@@ -1881,3 +1881,93 @@ fn four_panes_show_slices_that_follow_the_crosshair_and_move_the_implant_in_thei
     xdo(&display, &["key", "v"]).expect("v");
     assert_eq!(line(&lines, "one 3D view"), "");
 }
+
+/// Waits for the viewer to exit by itself; its exit status.
+fn exits(viewer: &mut Guard) -> std::process::ExitStatus {
+    wait_for("the viewer to quit", 30, || {
+        viewer.0.try_wait().ok().flatten()
+    })
+}
+
+#[test]
+fn quitting_with_unsaved_edits_asks_and_a_killed_session_leaves_a_plan_to_restore() {
+    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    if !x11_tools() {
+        return;
+    }
+    let (_xvfb, display) = start_xvfb();
+    let dir = scratch("guard");
+    let original = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/scenes/shoulder.toml");
+    let scene_path = dir.join("shoulder.toml");
+    std::fs::copy(&original, &scene_path).unwrap();
+    let scene = scene_path.to_str().unwrap();
+    let autosave = dir.join("shoulder-autosave.toml");
+    let plan = dir.join("shoulder-plan.toml");
+    let start = || {
+        let (viewer, lines, window) = open_viewer(&display, &["view", scene, "--size", "640x480"]);
+        title(&display, &window, " splats");
+        xdo(&display, &["windowfocus", "--sync", &window]);
+        (viewer, lines, window)
+    };
+    let nudge = |lines: &Receiver<String>, window: &str| {
+        let (x, y) = (PICKED.0.to_string(), PICKED.1.to_string());
+        xdo(
+            &display,
+            &["mousemove", "--window", window, &x, &y, "click", "1"],
+        )
+        .expect("click");
+        assert_eq!(line(lines, "selected"), "prosthesis");
+        xdo(&display, &["key", "Right"]).expect("right");
+        line(lines, "moved prosthesis")
+    };
+
+    // Q with an unsaved edit asks; Escape goes back; the edit is autosaved beside the scene;
+    // Q then D quits, the autosave removed, nothing else written.
+    let (mut viewer, lines, window) = start();
+    nudge(&lines, &window);
+    xdo(&display, &["key", "q"]).expect("q");
+    assert!(line(&lines, "unsaved:").contains("D discards"));
+    xdo(&display, &["key", "Escape"]).expect("escape");
+    line(&lines, "quit cancelled");
+    assert_eq!(PathBuf::from(line(&lines, "autosaved")), autosave);
+    assert!(autosave.is_file());
+    xdo(&display, &["key", "q"]).expect("q");
+    line(&lines, "unsaved:");
+    xdo(&display, &["key", "d"]).expect("d");
+    line(&lines, "discarded");
+    assert!(exits(&mut viewer).success());
+    assert!(!autosave.exists() && !plan.exists(), "files left behind");
+
+    // A session killed after an edit leaves its autosave; the next start offers it, R
+    // restores the edit, and Q asks (a restored plan is not saved yet): S saves and quits.
+    let (mut viewer, lines, window) = start();
+    let moved = nudge(&lines, &window);
+    line(&lines, "autosaved");
+    viewer.0.kill().unwrap();
+    let _ = viewer.0.wait();
+    assert!(
+        autosave.is_file(),
+        "the autosave outlives the killed session"
+    );
+    let (mut viewer, lines, _window) = start();
+    assert_eq!(PathBuf::from(line(&lines, "autosave found")), autosave);
+    xdo(&display, &["key", "r"]).expect("r");
+    line(&lines, "restored");
+    xdo(&display, &["key", "q"]).expect("q");
+    line(&lines, "unsaved:");
+    xdo(&display, &["key", "s"]).expect("s");
+    assert_eq!(PathBuf::from(line(&lines, "saved plan")), plan);
+    assert!(exits(&mut viewer).success());
+    assert!(
+        !autosave.exists(),
+        "the autosave is gone once the plan is saved"
+    );
+    let matrix: serde_json::Value = serde_json::from_str(&moved).unwrap();
+    let m = matrix["matrix"].as_array().unwrap();
+    let nudged = glam::DVec3::new(
+        m[12].as_f64().unwrap(),
+        m[13].as_f64().unwrap(),
+        m[14].as_f64().unwrap(),
+    );
+    assert!(mesh_translation(&plan, "prosthesis").distance(nudged) < 1e-9);
+}

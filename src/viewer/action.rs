@@ -85,7 +85,10 @@ pub const KEYS: &[(&str, &str)] = &[
     ),
     ("H", "this help"),
     ("Escape", "cancel, deselect; with nothing to cancel, quit"),
-    ("Q", "quit"),
+    (
+        "Q",
+        "quit; with unsaved edits it asks (S save, D discard, Escape back)",
+    ),
 ];
 
 /// The keys as text, one per line (for `view --help`).

@@ -26,14 +26,7 @@ impl App {
                 return;
             }
         };
-        let (dir, stem) = match &self.options.scene_path {
-            Some(p) => (
-                p.parent().unwrap_or(Path::new(".")).to_path_buf(),
-                p.file_stem()
-                    .map_or("splatscene".into(), |s| s.to_string_lossy().into_owned()),
-            ),
-            None => (self.options.screenshot_dir.clone(), "splatscene".into()),
-        };
+        let (dir, stem) = self.plan_place();
         for n in 1..10_000 {
             let name = match n {
                 1 => format!("{stem}-plan.toml"),

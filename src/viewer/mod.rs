@@ -30,6 +30,7 @@ use crate::scene::{NodeId, Scene, SceneCamera};
 pub mod action;
 pub mod edit;
 mod files;
+mod guard;
 mod look;
 mod panes;
 pub mod plan;
@@ -159,9 +160,12 @@ pub fn run(scene: Scene, options: ViewerOptions) -> Result<(), ViewerError> {
         panes: None,
         contact_map: false,
         painted: None,
+        prompt: None,
+        autosave: None,
         error: None,
     };
     app.remember_transfers();
+    app.start_autosave();
     event_loop
         .run_app(&mut app)
         .map_err(|e| ViewerError::Window(e.to_string()))?;
@@ -247,6 +251,10 @@ struct App {
     contact_map: bool,
     /// The contact map painted at a generation of the scene, for the mesh selected then.
     painted: Option<(u64, Option<NodeId>, crate::pick::paint::Painted)>,
+    /// A question the window waits on (quit with unsaved edits, restore an autosave).
+    prompt: Option<guard::Prompt>,
+    /// Where the plan autosaves.
+    autosave: Option<guard::Autosave>,
     error: Option<ViewerError>,
 }
 
@@ -429,6 +437,9 @@ impl App {
         key: &Key,
         text: Option<&str>,
     ) -> Result<(), ViewerError> {
+        if self.answer(event_loop, key) {
+            return Ok(());
+        }
         if self.edit.labelling.is_some() {
             let key = match key {
                 Key::Named(NamedKey::Enter) => LabelKey::Enter,
@@ -446,9 +457,9 @@ impl App {
         match action {
             Action::Cancel => match self.edit.cancel() {
                 Cancelled::Done(notice) => self.tell(notice),
-                Cancelled::Nothing => event_loop.exit(),
+                Cancelled::Nothing => self.quit(event_loop),
             },
-            Action::Quit => event_loop.exit(),
+            Action::Quit => self.quit(event_loop),
             Action::Reload => self.reload(),
             Action::SavePlan => self.save_plan(),
             Action::Screenshot => self.screenshot()?,
@@ -585,7 +596,7 @@ impl App {
         event: WindowEvent,
     ) -> Result<(), ViewerError> {
         match event {
-            WindowEvent::CloseRequested => event_loop.exit(),
+            WindowEvent::CloseRequested => self.quit(event_loop),
             WindowEvent::Resized(size) => self.resize(size)?,
             WindowEvent::RedrawRequested => return self.redraw(),
             WindowEvent::KeyboardInput { event, .. } if event.state == ElementState::Pressed => {
@@ -725,6 +736,9 @@ impl ApplicationHandler for App {
 
     /// Draws the full frame once a zoom has settled.
     fn about_to_wait(&mut self, event_loop: &ActiveEventLoop) {
+        if self.autosave_due().is_some_and(|due| Instant::now() >= due) {
+            self.autosave_now();
+        }
         if self.watched.is_some() && Instant::now() >= self.next_check {
             self.next_check = Instant::now() + WATCH_EVERY;
             let before = self.edit.scene.generation();
@@ -741,7 +755,10 @@ impl ApplicationHandler for App {
             (Some(a), Some(b)) => Some(a.min(b)),
             (a, b) => a.or(b),
         };
-        let check = self.watched.as_ref().map(|_| self.next_check);
+        let check = wake(
+            self.watched.as_ref().map(|_| self.next_check),
+            self.autosave_due(),
+        );
         if let Some(due) = self.sharpen
             && self.settle.is_none()
             && self.drag.is_none()

@@ -140,6 +140,15 @@ impl History {
         }
     }
 
+    /// A history with nothing to undo, of a plan that was never saved as it stands (one
+    /// restored from an autosave).
+    pub fn restored() -> Self {
+        Self {
+            saved_at: None,
+            ..Self::default()
+        }
+    }
+
     /// Makes `edit` and keeps it for undo; redo is forgotten.
     pub fn apply(&mut self, scene: &mut Scene, edit: Edit) -> Result<(), SceneError> {
         edit.apply(scene)?;

@@ -331,6 +331,10 @@ impl App {
             lines.push(text.clone());
         }
         lines.push("H: keys".into());
+        // A question the window waits on comes first, whatever else is said.
+        if let Some(prompt) = &self.prompt {
+            lines.insert(0, prompt.text());
+        }
         lines
     }
     /// The name of the scene's own transfer function (of its first volume).
