@@ -840,3 +840,74 @@ fn a_depth_path_that_links_to_the_colour_output_is_refused_even_before_it_exists
     assert!(said.contains("the same file as --out"), "{said}");
     assert!(!out.exists(), "nothing is written");
 }
+
+#[test]
+fn captions_fill_their_placeholders_and_the_scene_camera_is_a_view() {
+    let dir = scratch("captions");
+    let out = |name: &str| dir.join(name).to_str().unwrap().to_owned();
+    let ok = |args: &[&str]| {
+        let o = splatscene(args);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    };
+    let pixels = |name: &str| image::open(dir.join(name)).unwrap().to_rgba8().into_raw();
+    // {view} in a caption is each view's name, as a caption written out is.
+    ok(&[
+        "render",
+        "--view",
+        "scene,anterior",
+        "--size",
+        "96x72",
+        "--caption",
+        "{view} view {size}",
+        "--out",
+        &out("c-{view}.png"),
+    ]);
+    ok(&[
+        "render",
+        "--view",
+        "anterior",
+        "--size",
+        "96x72",
+        "--caption",
+        "anterior view 96x72",
+        "--out",
+        &out("written.png"),
+    ]);
+    assert_eq!(pixels("c-anterior.png"), pixels("written.png"));
+    // `scene` is the scene's own camera, as without --view.
+    ok(&[
+        "render",
+        "--size",
+        "96x72",
+        "--caption",
+        "scene view 96x72",
+        "--out",
+        &out("own.png"),
+    ]);
+    assert_eq!(pixels("c-scene.png"), pixels("own.png"));
+}
+
+#[test]
+fn a_binary_file_without_dims_is_named_as_a_raw_volume_that_needs_them() {
+    let dir = scratch("raw-without-dims");
+    let raw = dir.join("ct.raw");
+    std::fs::write(
+        &raw,
+        (0..4096u32)
+            .map(|i| (i * 7919 % 251) as u8)
+            .collect::<Vec<_>>(),
+    )
+    .unwrap();
+    let o = splatscene(&[
+        "render",
+        raw.to_str().unwrap(),
+        "--out",
+        dir.join("x.png").to_str().unwrap(),
+    ]);
+    let said = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success());
+    assert!(
+        said.contains("ct.raw") && said.contains("--dims") && said.contains("not text"),
+        "{said}"
+    );
+}

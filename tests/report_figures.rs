@@ -375,7 +375,9 @@ fn meshes_from_the_command_line_take_units_and_frames_and_a_wrong_scale_is_named
     ]);
     let stderr = String::from_utf8_lossy(&result.stderr);
     assert!(
-        stderr.contains("humerus.stl") && stderr.contains("units = \"m\""),
+        stderr.contains("humerus.stl")
+            && stderr.contains("units = \"m\"")
+            && stderr.contains("--mesh-units m"),
         "{stderr}"
     );
     // With units = m the warning is gone and the bone is drawn at its size, turned from LPS.

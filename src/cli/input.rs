@@ -323,6 +323,15 @@ fn builtin_file() -> Result<SceneFile> {
 fn scene_or_volume(e: splatscene::scene::file::SceneFileError, path: &Path) -> anyhow::Error {
     use splatscene::scene::file::SceneFileError;
     match e {
+        // A file that is not text (binary voxels) is no scene file either.
+        SceneFileError::Io { ref source, .. }
+            if source.kind() == std::io::ErrorKind::InvalidData =>
+        {
+            anyhow::anyhow!(
+                "{} is neither a volume format splatscene recognises (NRRD, NIfTI, DICOM, MetaImage, VTK, Voreen .dat) nor a scene file (it is not text); a headerless raw volume needs --dims and --scalar (and --spacing, --origin, --orientation where they are not 1 mm, 0 and RAS)",
+                path.display()
+            )
+        }
         SceneFileError::Parse { .. } | SceneFileError::Invalid { .. } => anyhow::anyhow!(
             "{e}\n{} is neither a volume format splatscene recognises (NRRD, NIfTI, DICOM, MetaImage, VTK, Voreen .dat) nor a valid scene file; a headerless raw volume needs --dims and --scalar",
             path.display()
@@ -356,7 +365,8 @@ pub struct ViewArgs {
     #[arg(long, value_parser = parse_size)]
     size: Option<(u32, u32)>,
     /// Named views of the patient, comma-separated: anterior, posterior, left, right,
-    /// superior, inferior, or several joined by '-' (anterolateral-right); fitted to the scene.
+    /// superior, inferior, or several joined by '-' (anterolateral-right), fitted to the scene;
+    /// `scene` is the scene's own camera.
     #[arg(long, value_delimiter = ',')]
     view: Vec<String>,
     /// Eye position X,Y,Z in world millimetres.
@@ -392,10 +402,17 @@ pub struct View {
 impl ViewArgs {
     /// Loads the scene and makes its cameras.
     pub fn load(&self) -> Result<View> {
+        // `scene` is the scene's own camera (as in batch manifests), any other name a view of
+        // the patient.
         let views = self
             .view
             .iter()
-            .map(|name| NamedView::parse(name).map_err(|e| anyhow::anyhow!("--view: {e}")))
+            .map(|name| match name.trim() {
+                "scene" => Ok(None),
+                _ => NamedView::parse(name)
+                    .map(Some)
+                    .map_err(|e| anyhow::anyhow!("--view: {e}")),
+            })
             .collect::<Result<Vec<_>>>()?;
         if !views.is_empty() && self.eye.is_some() {
             bail!("--view and --eye both place the camera: give one");
@@ -433,6 +450,12 @@ impl ViewArgs {
             views
                 .iter()
                 .map(|v| {
+                    let Some(v) = v else {
+                        return (
+                            Some("scene".to_owned()),
+                            self.adjust(&loaded, base, projection),
+                        );
+                    };
                     let mut camera = named_view_camera(&loaded.scene, v, projection, aspect);
                     if let Some(target) = self.target {
                         camera.target = DVec3::from(target);

@@ -90,7 +90,8 @@ pub struct AnnotateArgs {
     #[arg(long, num_args = 0..=1, default_missing_value = "all", value_name = "PARTS")]
     annotate: Option<String>,
     /// A caption along the top of the image (implies --annotate for the caption alone when
-    /// --annotate is not given).
+    /// --annotate is not given); {view}, {size} and {ordering} are replaced (and {slice} in
+    /// slice figures).
     #[arg(long)]
     caption: Option<String>,
 }
@@ -293,7 +294,22 @@ pub fn run_render(args: RenderArgs) -> Result<()> {
             Some(ctx) => renderer.screenshot(ctx, &drawn, camera, render_size, &options)?,
             None => renderer.screenshot_without_gpu(&drawn, camera, render_size, &options)?,
         };
-        let mut image = figure(&shot, &loaded.scene, camera, label_parts.as_ref(), &labels)?;
+        // The caption's placeholders filled for this view.
+        let view_name = name.as_deref().unwrap_or("scene");
+        let parts_here = label_parts.clone().map(|mut p| {
+            p.caption = p.caption.map(|c| {
+                c.replace("{view}", view_name)
+                    .replace("{size}", &format!("{}x{}", size.0, size.1))
+                    .replace(
+                        "{ordering}",
+                        &options
+                            .ordering
+                            .map_or("the scene's".into(), |o| o.to_string()),
+                    )
+            });
+            p
+        });
+        let mut image = figure(&shot, &loaded.scene, camera, parts_here.as_ref(), &labels)?;
         if let Some(map) = &contact_map {
             map.legend(&mut image)?;
         }

@@ -226,7 +226,13 @@ pub fn slice_figure(
 ) -> Result<(RgbaImage, Value)> {
     let plane = Plane::of(scene, wanted.spec, through, wanted.mesh.as_deref())?;
     let slice = Slice::new(scene, plane, Pixels::Size(wanted.mm_per_pixel))?;
-    let parts = label_parts(parts, &slice);
+    let mut parts = label_parts(parts, &slice);
+    if let Some(p) = &mut parts {
+        p.caption = p
+            .caption
+            .take()
+            .map(|c| c.replace("{slice}", &wanted.spec.to_string()));
+    }
     let (image, _) = figure(&slice, scene, window, parts.as_ref())?;
     Ok((image, slice.calibration(scene, window)))
 }

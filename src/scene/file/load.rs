@@ -690,9 +690,9 @@ pub fn scale_warnings(scene: &Scene, meshes: &[(String, NodeId)]) -> Vec<String>
             let mesh = size(scene.subtree_bounds(*id)?);
             let ratio = mesh / volume;
             let hint = if ratio < 0.01 {
-                "units = \"m\" or \"cm\" if the file is in metres or centimetres"
+                "units = \"m\" or \"cm\" in the scene file (--mesh-units m or cm on the command line) if the file is in metres or centimetres"
             } else if ratio > 100.0 {
-                "units = \"mm\" with a scale, or check the file's units"
+                "units = \"mm\" with a scale in the scene file, or check the file's units (--mesh-units on the command line)"
             } else {
                 return None;
             };
