@@ -153,6 +153,7 @@ pub fn run(scene: Scene, options: ViewerOptions) -> Result<(), ViewerError> {
         drag: None,
         last: FrameReport::default(),
         full_frame: Duration::ZERO,
+        this_frame: Duration::ZERO,
         settle: None,
         sharpen: None,
         sharp_at: None,
@@ -234,8 +235,10 @@ struct App {
     cursor: (f64, f64),
     drag: Option<Drag>,
     last: FrameReport,
-    /// How long the last full frame took to draw and present.
+    /// How long the last full frame took to draw (whether moving the camera draws previews).
     full_frame: Duration,
+    /// How long the frame on screen took to draw (what the on-screen text and title say).
+    this_frame: Duration,
     /// When a zoom drawn as previews gets its full frame.
     settle: Option<Instant>,
     /// When a full frame drawn without refining a volume that wanted it gets its refined

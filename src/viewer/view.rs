@@ -60,7 +60,6 @@ impl App {
         } else {
             None
         };
-        let hud = self.hud_lines();
         let Some(gpu) = &mut self.gpu else {
             return Ok(());
         };
@@ -137,6 +136,16 @@ impl App {
             gpu.cpu_frame.1 = None;
             annotate_3d(&mut overlay, &mut self.annotations_on);
         }
+        // The on-screen text of this frame (its splats, its time to draw), not the last one's.
+        let drawn_in = started.elapsed();
+        if !preview && !sharp {
+            self.full_frame = drawn_in;
+        }
+        self.this_frame = drawn_in;
+        let hud = self.hud_lines();
+        let Some(gpu) = &mut self.gpu else {
+            return Ok(());
+        };
         let frame = match gpu.surface.get_current_texture() {
             wgpu::CurrentSurfaceTexture::Success(frame)
             | wgpu::CurrentSurfaceTexture::Suboptimal(frame) => frame,
@@ -159,10 +168,7 @@ impl App {
             .copy(&gpu.ctx, source, overlay.as_ref(), &surface_view);
         gpu.window.pre_present_notify();
         gpu.ctx.queue.present(frame);
-        let elapsed = started.elapsed();
-        if !preview && !sharp {
-            self.full_frame = elapsed;
-        }
+        let elapsed = drawn_in;
         self.sharpen = (!preview && self.last.unrefined).then(|| Instant::now() + SETTLE);
         let preset = self.transfer_label();
         let Some(gpu) = &self.gpu else {
@@ -254,7 +260,7 @@ impl App {
         let mut lines = vec![format!(
             "{} | {transfer} | frame {:.0} ms, order {:.1} ms, classify {:.0} ms | {} splats",
             self.ordering,
-            ms(self.full_frame),
+            ms(self.this_frame),
             ms(self.last.timings.order),
             ms(self.last.timings.classify),
             self.last.splats
