@@ -1891,6 +1891,9 @@ fn exits(viewer: &mut Guard) -> std::process::ExitStatus {
 
 #[test]
 fn quitting_with_unsaved_edits_asks_and_a_killed_session_leaves_a_plan_to_restore() {
+    use glam::DVec3;
+    use splatscene::viewer::typed::{Step, placed};
+
     let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     if !x11_tools() {
         return;
@@ -1924,7 +1927,27 @@ fn quitting_with_unsaved_edits_asks_and_a_killed_session_leaves_a_plan_to_restor
     // Q with an unsaved edit asks; Escape goes back; the edit is autosaved beside the scene;
     // Q then D quits, the autosave removed, nothing else written.
     let (mut viewer, lines, window) = start();
-    nudge(&lines, &window);
+    let nudged = matrix_of(&nudge(&lines, &window));
+    // A placement typed in: 2.5 mm along R, then 10 degrees back about S through the pivot,
+    // as the library places it; one edit, undone at once.
+    xdo(&display, &["key", "e"]).expect("e");
+    xdo(&display, &["type", "x 2.5 rz -10"]).expect("type");
+    xdo(&display, &["key", "Return"]).expect("enter");
+    let typed = matrix_of(&line(&lines, "moved prosthesis"));
+    let mut scene = splatscene::scene::file::load_scene_file(&scene_path)
+        .unwrap()
+        .scene;
+    let top = scene.find("prosthesis").unwrap();
+    scene.set_local(top, nudged).unwrap();
+    let (pivot, _) = scene.pivot(top);
+    let steps = [Step::Move(0, 2.5), Step::Turn(2, -10.0)];
+    let expected = placed(nudged, pivot, &steps, [DVec3::X, DVec3::Y, DVec3::Z]);
+    assert!(
+        typed.abs_diff_eq(expected, 1e-9),
+        "{typed} against {expected}"
+    );
+    xdo(&display, &["key", "ctrl+z"]).expect("ctrl+z");
+    assert_eq!(line(&lines, "undo"), "move prosthesis");
     xdo(&display, &["key", "q"]).expect("q");
     assert!(line(&lines, "unsaved:").contains("D discards"));
     xdo(&display, &["key", "Escape"]).expect("escape");
@@ -1962,12 +1985,18 @@ fn quitting_with_unsaved_edits_asks_and_a_killed_session_leaves_a_plan_to_restor
         !autosave.exists(),
         "the autosave is gone once the plan is saved"
     );
-    let matrix: serde_json::Value = serde_json::from_str(&moved).unwrap();
-    let m = matrix["matrix"].as_array().unwrap();
-    let nudged = glam::DVec3::new(
-        m[12].as_f64().unwrap(),
-        m[13].as_f64().unwrap(),
-        m[14].as_f64().unwrap(),
-    );
+    let nudged = matrix_of(&moved).w_axis.truncate();
     assert!(mesh_translation(&plan, "prosthesis").distance(nudged) < 1e-9);
+}
+
+/// The matrix of a "moved NAME {matrix}" line's JSON.
+fn matrix_of(json: &str) -> glam::DMat4 {
+    let value: serde_json::Value = serde_json::from_str(json).unwrap();
+    let m: Vec<f64> = value["matrix"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .collect();
+    glam::DMat4::from_cols_slice(&m)
 }

@@ -27,6 +27,10 @@ pub const KEYS: &[(&str, &str)] = &[
     ("arrows", "move the selected mesh by 1 mm (Shift: 10 mm)"),
     ("Ctrl+arrows", "turn it by 1 degree (Shift: 10)"),
     ("+ / -", "move it toward / away from the eye by 1 mm"),
+    (
+        "E",
+        "type a placement: x 2.5, rz -10, x=12.5 (pivot's x); Enter",
+    ),
     ("Ctrl+Z, Ctrl+Y", "undo, redo"),
     ("M", "measure: distance, angle, line angle, point, off"),
     (
@@ -192,6 +196,8 @@ pub enum Action {
     Ordering(Ordering),
     /// One 3D view, or four panes (3D and three slices).
     TogglePanes,
+    /// Type a placement of the selected mesh.
+    Place,
     /// The fourth pane between coronal and the selected implant's long axis.
     ImplantPane,
     /// The contact map on the selected mesh on and off.
@@ -282,6 +288,7 @@ fn character_action(c: &str, ctrl: bool, shift: bool, step: f64) -> Option<Actio
         "k" if shift => Action::ToggleContactMap,
         "k" => Action::Contact,
         "v" => Action::TogglePanes,
+        "e" => Action::Place,
         "i" => Action::ImplantPane,
         "l" => Action::Label,
         "a" => Action::ToggleAnnotations,

@@ -63,6 +63,8 @@ pub struct Editor {
     pub chosen: Option<usize>,
     /// The label being typed for the selected measurement.
     pub labelling: Option<String>,
+    /// The placement being typed for the selected mesh (see [`super::typed`]).
+    pub placing: Option<String>,
     /// The last picked point, marked on screen.
     pub marker: Option<DVec3>,
 }
@@ -78,6 +80,7 @@ impl Editor {
             snapping: None,
             chosen: None,
             labelling: None,
+            placing: None,
             marker: None,
         }
     }
@@ -145,6 +148,14 @@ impl Editor {
                 Notice::Say("snap: select a mesh first (click it)".into())
             }),
             Action::Contact => Some(self.contact()),
+            Action::Place => Some(if self.selected.is_some() {
+                self.placing = Some(String::new());
+                Notice::Say(
+                    "type a placement: x 2.5 (mm along R), rz -10 (degrees about S), x=12.5 (the pivot's x); Enter places, Escape cancels".into(),
+                )
+            } else {
+                Notice::Say("select a mesh to place first (click it)".into())
+            }),
             Action::ClearPoints => {
                 if let Some(m) = &mut self.measuring {
                     m.points.clear();

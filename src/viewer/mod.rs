@@ -34,6 +34,7 @@ mod guard;
 mod look;
 mod panes;
 pub mod plan;
+pub mod typed;
 mod view;
 
 pub use action::{KEYS, keys_help};
@@ -441,6 +442,17 @@ impl App {
         text: Option<&str>,
     ) -> Result<(), ViewerError> {
         if self.answer(event_loop, key) {
+            return Ok(());
+        }
+        if self.edit.placing.is_some() {
+            let key = match key {
+                Key::Named(NamedKey::Enter) => LabelKey::Enter,
+                Key::Named(NamedKey::Escape) => LabelKey::Escape,
+                Key::Named(NamedKey::Backspace) => LabelKey::Backspace,
+                _ => LabelKey::Text(text),
+            };
+            let notice = self.edit.place_key(key);
+            self.tell(notice);
             return Ok(());
         }
         if self.edit.labelling.is_some() {

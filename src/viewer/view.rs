@@ -13,6 +13,7 @@ use crate::annotate::{Anchor, Label, Painter, annotate_image, colour_bar};
 use crate::pick::measure::{MarkerStyle, Measurement, annotate, draw_scene_measurements};
 use crate::pick::paint::value_colour;
 use crate::render::{FrameOptions, RenderError, ViewSetup, frame_to_rgba8, write_overlay};
+use crate::scene::file::transform_spec;
 use crate::scene::{ClipPlane, NodeContent, NodeId, Scene};
 use crate::slice::draw::colour8;
 
@@ -268,16 +269,32 @@ impl App {
         if let Some(top) = self.edit.selected
             && let Ok(node) = self.edit.scene.node(top)
         {
-            let (_, turn, at) = node.local().to_scale_rotation_translation();
-            let (_, angle) = turn.to_axis_angle();
+            // The placement in the scene file's words, as the plan would save it.
+            let spec = self
+                .options
+                .scene_file
+                .as_ref()
+                .and_then(|f| f.with_plan(&self.edit.scene).ok())
+                .and_then(|f| {
+                    f.meshes
+                        .into_iter()
+                        .find(|m| m.name.as_deref() == Some(node.name.as_str()))
+                })
+                .map_or_else(|| transform_spec(node.local()), |m| m.transform);
             let (_, pivot) = self.edit.scene.pivot(top);
+            let placement = match (spec.matrix, spec.translate, spec.rotate_degrees) {
+                (Some(_), _, _) => "a sheared matrix".to_owned(),
+                (None, t, r) => {
+                    let [x, y, z] = t.unwrap_or([0.0; 3]);
+                    let [a, b, c] = r.unwrap_or([0.0; 3]);
+                    format!(
+                        "translate [{x:.1}, {y:.1}, {z:.1}] mm, rotate_degrees [{a:.1}, {b:.1}, {c:.1}]"
+                    )
+                }
+            };
             lines.push(format!(
-                "selected {}: at ({:.1}, {:.1}, {:.1}) mm, turned {:.1}\u{b0}; pivot {pivot}; steps {STEP} mm, {STEP}\u{b0} (Shift x10)",
+                "selected {}: {placement}; pivot {pivot}; steps {STEP} mm, {STEP}\u{b0} (Shift x10)",
                 node.name,
-                at.x,
-                at.y,
-                at.z,
-                angle.to_degrees()
             ));
         }
         if let Some(panes) = &self.panes {
@@ -306,6 +323,11 @@ impl App {
                 m.kind.name(),
                 m.points.len() + 1,
                 m.kind.point_count()
+            ));
+        }
+        if let Some(text) = &self.edit.placing {
+            lines.push(format!(
+                "place: {text}_ (x/y/z MM moves, rx/ry/rz DEG turns about the pivot, x=MM sets; Enter, Escape)"
             ));
         }
         if let Some(text) = &self.edit.labelling {

@@ -50,7 +50,7 @@ mod validate;
 
 pub use camera::{CameraSpecError, camera, named_view_camera, upright};
 pub use load::{DataPathError, load_scene_file, resolve_path, scale_warnings};
-pub use save::PlanError;
+pub use save::{PlanError, transform_spec};
 pub use schema::*;
 pub use validate::extra_elements;
 

@@ -2,7 +2,7 @@
 
 use std::path::Path;
 
-use glam::{DMat4, DVec3};
+use glam::{DMat4, DVec3, EulerRot};
 
 use crate::mesh::prosthesis::seat_in_phantom;
 use crate::scene::{NodeId, Projection, Scene, SceneCamera};
@@ -63,7 +63,8 @@ impl SceneFile {
     }
 
     /// The same file with the plan `scene` holds now: each mesh's transform as the node stands
-    /// (written as a matrix, so that the file loads to the same placement), and the scene's
+    /// (as `translate`, `rotate_degrees` and `scale` where those load back to it, else as a
+    /// matrix: the file loads to the same placement), and the scene's
     /// measurements (those attached to a node by the node's name). `scene` must have been
     /// loaded from this file: its mesh files are the top nodes after the volumes, in order.
     ///
@@ -93,14 +94,7 @@ impl SceneFile {
             if !(ds.is_normal() && df.is_normal()) {
                 return Err(PlanError::Singular { mesh: i + 1 });
             }
-            // Round-off of turns by whole angles (1e-17 for 0) is written as 0.
-            let matrix = (seat.inverse() * local * frame.inverse())
-                .to_cols_array()
-                .map(|x| if x.abs() < 1e-12 { 0.0 } else { x });
-            spec.transform = TransformSpec {
-                matrix: Some(matrix),
-                ..TransformSpec::default()
-            };
+            spec.transform = transform_spec(seat.inverse() * local * frame.inverse());
         }
         file.clip = scene
             .clipping
@@ -181,5 +175,43 @@ impl CameraSpec {
             orthographic_height,
             near: camera.near,
         }
+    }
+}
+
+/// A transform as people write it: `translate`, `rotate_degrees` (about x, then y, then z, as
+/// the loader turns) and `scale`, each left out where it does nothing, where those load back to
+/// `m` (to 1e-9 of its largest element); else, for a shear, the matrix. Round-off of turns by
+/// whole angles (1e-17 for 0) is written as 0.
+pub fn transform_spec(m: DMat4) -> TransformSpec {
+    let clean = |x: f64| if x.abs() < 1e-12 { 0.0 } else { x };
+    let matrix = TransformSpec {
+        matrix: Some(m.to_cols_array().map(clean)),
+        ..TransformSpec::default()
+    };
+    let (scale, rotation, translation) = m.to_scale_rotation_translation();
+    let (rz, ry, rx) = rotation.to_euler(EulerRot::ZYX);
+    let degrees = [rx, ry, rz].map(|a| {
+        let d = a.to_degrees();
+        // Whole degrees as they were typed, not 9.999999999999998.
+        if (d - d.round()).abs() < 1e-9 {
+            d.round() + 0.0
+        } else {
+            d
+        }
+    });
+    let scale = scale
+        .to_array()
+        .map(|s| if (s - 1.0).abs() < 1e-12 { 1.0 } else { s });
+    let translate = translation.to_array().map(clean);
+    let spec = TransformSpec {
+        translate: (translate != [0.0; 3]).then_some(translate),
+        rotate_degrees: (degrees != [0.0; 3]).then_some(degrees),
+        scale: (scale != [1.0; 3]).then_some(scale),
+        matrix: None,
+    };
+    let tolerance = 1e-9 * m.to_cols_array().iter().fold(1.0f64, |a, x| a.max(x.abs()));
+    match super::load::transform(&spec) {
+        Ok(back) if back.abs_diff_eq(m, tolerance) => spec,
+        _ => matrix,
     }
 }

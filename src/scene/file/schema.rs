@@ -176,7 +176,7 @@ pub struct LightsSpec {
 
 /// A node transform: scale, then rotation (degrees about x, y, z in that order), then
 /// translation; or a full column-major matrix.
-#[derive(Debug, Clone, Default, Deserialize, Serialize)]
+#[derive(Debug, Clone, Default, PartialEq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct TransformSpec {
     /// Translation.

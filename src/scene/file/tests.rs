@@ -719,3 +719,38 @@ fn a_mesh_file_named_by_several_nodes_is_read_once_and_shared() {
         meshes[30].material.base_color
     );
 }
+
+#[test]
+fn plans_write_transforms_as_people_do_where_they_load_back() {
+    use super::save::transform_spec;
+    let turned = |r: [f64; 3], t: [f64; 3], s: [f64; 3]| TransformSpec {
+        translate: Some(t),
+        rotate_degrees: Some(r),
+        scale: Some(s),
+        matrix: None,
+    };
+    for (r, t, s) in [
+        ([90.0, 0.0, 90.0], [26.7, 163.4, 16.7], [1.0; 3]),
+        ([180.0, 28.0, 0.0], [-26.69, 163.39, -16.66], [1.0; 3]),
+        ([-10.0, 35.5, 170.0], [0.0; 3], [2.0, 2.0, 2.0]),
+        ([0.0, 10.0, 0.0], [5.0, -3.0, 2.0], [1.0, -1.0, 1.0]),
+    ] {
+        let m = super::load::transform(&turned(r, t, s)).unwrap();
+        let written = transform_spec(m);
+        assert!(written.matrix.is_none(), "{r:?} {t:?} {s:?}: {written:?}");
+        let back = super::load::transform(&written).unwrap();
+        assert!(back.abs_diff_eq(m, 1e-9), "{written:?}");
+        if s == [1.0; 3] {
+            assert_eq!(written.rotate_degrees, Some(r), "the angles as typed");
+            assert_eq!(written.translate, Some(t));
+            assert_eq!(written.scale, None);
+        }
+    }
+    // A shear has no such keys: its matrix is written.
+    let shear = DMat4::from_cols_array(&[
+        1.0, 0.0, 0.0, 0.0, 0.5, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 1.0, 2.0, 3.0, 1.0,
+    ]);
+    let written = transform_spec(shear);
+    assert!(written.matrix.is_some() && written.translate.is_none());
+    assert_eq!(transform_spec(DMat4::IDENTITY), TransformSpec::default());
+}
