@@ -1703,7 +1703,8 @@ fn four_panes_show_slices_that_follow_the_crosshair_and_move_the_implant_in_thei
     let (_xvfb, display) = start_xvfb();
     let dir = scratch("panes");
     eprintln!("screenshots in {}", dir.display());
-    let scene_path = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/scenes/shoulder.toml");
+    // A copy, so that the plan's autosave lands in the scratch folder.
+    let scene_path = shoulder_copy(&dir);
     let (_viewer, lines, window) = open_viewer(
         &display,
         &["view", scene_path.to_str().unwrap(), "--size", "640x480"],
@@ -1999,4 +2000,75 @@ fn matrix_of(json: &str) -> glam::DMat4 {
         .map(|v| v.as_f64().unwrap())
         .collect();
     glam::DMat4::from_cols_slice(&m)
+}
+
+#[test]
+fn a_measurement_point_dragged_along_the_implant_changes_the_value_and_undoes() {
+    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    if !x11_tools() {
+        return;
+    }
+    let (_xvfb, display) = start_xvfb();
+    let dir = scratch("points");
+    let scene = shoulder_copy(&dir);
+    let (_viewer, lines, window) = open_viewer(
+        &display,
+        &["view", scene.to_str().unwrap(), "--size", "640x480"],
+    );
+    title(&display, &window, " splats");
+    xdo(&display, &["windowfocus", "--sync", &window]);
+    // A distance from the prosthesis head to its stem, both points on the implant.
+    xdo(&display, &["key", "m"]).expect("m");
+    let stem = ((STEM.x0 + STEM.x1) / 2, (STEM.y0 + STEM.y1) / 2);
+    for (x, y) in [PICKED, stem] {
+        let (x, y) = (x.to_string(), y.to_string());
+        xdo(
+            &display,
+            &["mousemove", "--window", &window, &x, &y, "click", "1"],
+        )
+        .expect("click");
+        line(&lines, "pick");
+    }
+    let added = line(&lines, "measurement 1 add distance");
+    let first: f64 = added.trim_end_matches(" mm").trim().parse().unwrap();
+    xdo(&display, &["key", "m"]).expect("m");
+    xdo(&display, &["key", "m"]).expect("m");
+    xdo(&display, &["key", "m"]).expect("m");
+    xdo(&display, &["key", "m"]).expect("measure off");
+    title(&display, &window, " splats");
+    // Its stem point dragged 40 pixels up the stem: the distance shrinks.
+    let (x, y) = (stem.0.to_string(), stem.1.to_string());
+    xdo(
+        &display,
+        &["mousemove", "--window", &window, &x, &y, "mousedown", "1"],
+    )
+    .expect("press");
+    for dy in [10, 20, 30, 40] {
+        std::thread::sleep(Duration::from_millis(200));
+        let y = (stem.1 - dy).to_string();
+        xdo(&display, &["mousemove", "--window", &window, &x, &y]).expect("drag");
+    }
+    std::thread::sleep(Duration::from_millis(200));
+    xdo(&display, &["mouseup", "1"]).expect("release");
+    let moved = line(&lines, "move a point of measurement 1");
+    let now: f64 = moved
+        .rsplit(':')
+        .next()
+        .unwrap()
+        .trim()
+        .trim_end_matches(" mm")
+        .parse()
+        .unwrap();
+    assert!(now < first - 3.0, "{first} mm, then {now} mm ({moved})");
+    xdo(&display, &["key", "ctrl+z"]).expect("ctrl+z");
+    assert!(line(&lines, "undo").starts_with("move a point of measurement 1"));
+}
+
+/// The shoulder scene copied into `dir` (the viewer autosaves edits beside the scene it
+/// opened: never into the repository).
+fn shoulder_copy(dir: &Path) -> PathBuf {
+    let original = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/scenes/shoulder.toml");
+    let copy = dir.join("shoulder.toml");
+    std::fs::copy(&original, &copy).unwrap();
+    copy
 }

@@ -7,7 +7,8 @@ use std::time::SystemTime;
 use super::plan::History;
 use super::{App, ViewerError};
 use crate::pick::Picker;
-use crate::render::{encode_png, frame_to_rgba8};
+use crate::pick::measure::draw_scene_measurements;
+use crate::render::{FrameOptions, encode_png, frame_to_rgba8};
 use crate::scene::file::{CameraSpec, SceneFile};
 
 impl App {
@@ -117,13 +118,29 @@ impl App {
         }
     }
     pub(super) fn screenshot(&mut self) -> Result<(), ViewerError> {
-        let Some(gpu) = &self.gpu else {
+        // The plan drawn afresh as `render` draws its scene file: the measurements, and none of
+        // the window's marks (the selection's tint, the picked points, the selected
+        // measurement's highlight, the crop box's edges, the four panes).
+        let mut scene = self.edit.scene.clone();
+        if let Err(e) = draw_scene_measurements(&mut scene) {
+            eprintln!("screenshot: measurements left out: {e}");
+            scene = self.edit.scene.clone();
+        }
+        let options = FrameOptions {
+            ordering: Some(self.ordering),
+            background: Some(self.options.background),
+            measure: false,
+            preview: false,
+        };
+        let Some(gpu) = &mut self.gpu else {
             return Ok(());
         };
-        let image = match &gpu.cpu_frame.1 {
-            Some(image) => image.clone(),
-            None => frame_to_rgba8(&gpu.target.read_color(&gpu.ctx)?),
-        };
+        let size = gpu.target.size;
+        gpu.renderer.set_refinement(true);
+        let shot = gpu
+            .renderer
+            .screenshot(&gpu.ctx, &scene, &self.camera, size, &options)?;
+        let image = frame_to_rgba8(&shot.frame);
         let size = image.dimensions();
         let png = encode_png(&image).map_err(|e| ViewerError::Window(e.to_string()))?;
         let dir = &self.options.screenshot_dir;

@@ -34,6 +34,7 @@ mod guard;
 mod look;
 mod panes;
 pub mod plan;
+mod points;
 pub mod typed;
 mod view;
 
@@ -136,6 +137,7 @@ pub fn run(scene: Scene, options: ViewerOptions) -> Result<(), ViewerError> {
         help: false,
         modifiers: ModifiersState::empty(),
         moving: None,
+        point_drag: None,
         last_pick: None,
         watched,
         next_check: Instant::now() + WATCH_EVERY,
@@ -212,6 +214,8 @@ struct App {
     modifiers: ModifiersState,
     /// The selected mesh's transform when the drag that moves it began.
     moving: Option<DMat4>,
+    /// The measurement point a drag takes (measurement, point) and the measurement before.
+    point_drag: Option<(usize, usize, crate::scene::SceneMeasurement)>,
     /// The last pick, as the screen says it.
     last_pick: Option<String>,
     /// The scene file and when it was last modified, to read it again when it changes.
@@ -536,6 +540,14 @@ impl App {
             return;
         }
         let slice = drag.slice;
+        let moved = drag.moved;
+        if let Some((i, j, _)) = &self.point_drag {
+            let (i, j) = (*i, *j);
+            if moved {
+                self.drag_point(i, j, self.cursor);
+            }
+            return;
+        }
         if let Some((level0, width0)) = self.windowing {
             // Alt+drag: right raises the level, up narrows the window, both from where the
             // drag began.
@@ -642,10 +654,24 @@ impl App {
                     // A drag that starts on the selected mesh moves it (Ctrl: turns it), as does
                     // a Shift or Ctrl drag anywhere; other drags move the camera.
                     let modified = self.modifiers.shift_key() || self.modifiers.control_key();
-                    let grabbed = self.edit.selected.is_some() && self.on_selected(self.cursor);
+                    // A plain left drag that starts on a measurement point's marker takes the
+                    // point.
+                    self.point_drag = (button == MouseButton::Left && !modified && !alt)
+                        .then(|| self.point_at(self.cursor))
+                        .flatten()
+                        .and_then(|(i, j)| {
+                            let before = self.edit.scene.measurements.get(i)?.clone();
+                            Some((i, j, before))
+                        });
+                    let grabbed = self.point_drag.is_none()
+                        && self.edit.selected.is_some()
+                        && self.on_selected(self.cursor);
                     self.moving = match self.edit.selected {
                         Some(top)
-                            if (modified || grabbed) && button == MouseButton::Left && !alt =>
+                            if (modified || grabbed)
+                                && self.point_drag.is_none()
+                                && button == MouseButton::Left
+                                && !alt =>
                         {
                             self.edit.scene.node(top).ok().map(|n| n.local())
                         }
@@ -680,7 +706,12 @@ impl App {
                         return Ok(());
                     }
                     let dragged = drag.as_ref().is_some_and(|d| d.moved);
-                    if let (Some(before), Some(top)) = (self.moving.take(), self.edit.selected)
+                    if let Some((i, _, before)) = self.point_drag.take()
+                        && dragged
+                    {
+                        self.dropped_point(i, before);
+                    } else if let (Some(before), Some(top)) =
+                        (self.moving.take(), self.edit.selected)
                         && let Ok(node) = self.edit.scene.node(top)
                         && dragged
                     {

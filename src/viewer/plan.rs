@@ -32,6 +32,15 @@ pub enum Edit {
         /// The measurement.
         measurement: SceneMeasurement,
     },
+    /// A measurement replaced by another (its points dragged).
+    Replace {
+        /// Which.
+        index: usize,
+        /// The measurement before.
+        before: SceneMeasurement,
+        /// The measurement after.
+        after: SceneMeasurement,
+    },
     /// A measurement's label changed.
     Relabel {
         /// Which.
@@ -57,6 +66,13 @@ impl Edit {
             Self::Remove { measurement, .. } => {
                 format!("delete {}", measurement_name(measurement))
             }
+            Self::Replace { index, after, .. } => {
+                format!(
+                    "move a point of measurement {} {}",
+                    index + 1,
+                    measurement_name(after)
+                )
+            }
             Self::Relabel { after, .. } => {
                 format!("label {:?}", after.as_deref().unwrap_or(""))
             }
@@ -77,6 +93,15 @@ impl Edit {
             },
             Self::Add { index, measurement } => Self::Remove { index, measurement },
             Self::Remove { index, measurement } => Self::Add { index, measurement },
+            Self::Replace {
+                index,
+                before,
+                after,
+            } => Self::Replace {
+                index,
+                before: after,
+                after: before,
+            },
             Self::Relabel {
                 index,
                 before,
@@ -101,6 +126,12 @@ impl Edit {
             Self::Remove { index, .. } => {
                 if *index < scene.measurements.len() {
                     scene.measurements.remove(*index);
+                }
+                Ok(())
+            }
+            Self::Replace { index, after, .. } => {
+                if let Some(m) = scene.measurements.get_mut(*index) {
+                    *m = after.clone();
                 }
                 Ok(())
             }
@@ -159,6 +190,11 @@ impl History {
     /// Keeps `edit`, already made (a drag moves the node as it goes), for undo.
     pub fn record(&mut self, edit: Edit) {
         if let Edit::Move { before, after, .. } = &edit
+            && before == after
+        {
+            return;
+        }
+        if let Edit::Replace { before, after, .. } = &edit
             && before == after
         {
             return;

@@ -219,6 +219,24 @@ impl App {
             }
         };
         let style = MarkerStyle::for_scene(&self.edit.scene);
+        // The selected measurement drawn over, thicker and in cyan, so that it shows in the
+        // picture and not only in the on-screen text.
+        if let Some(m) = self
+            .edit
+            .chosen
+            .and_then(|i| self.edit.scene.measurements.get(i))
+            .and_then(|m| self.edit.scene.measure(m).ok())
+        {
+            let chosen = MarkerStyle {
+                point_radius: 1.5 * style.point_radius,
+                line_radius: 1.8 * style.line_radius,
+                material: crate::mesh::Material {
+                    base_color: [0.2, 0.85, 1.0, 1.0],
+                    ..style.material
+                },
+            };
+            let _ = annotate(&mut scene, &m, &chosen);
+        }
         let pending = self
             .edit
             .measuring
