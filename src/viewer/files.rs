@@ -6,6 +6,7 @@ use std::time::SystemTime;
 
 use super::plan::History;
 use super::{App, ViewerError};
+use crate::annotate::{Annotations, annotate_image};
 use crate::pick::Picker;
 use crate::pick::measure::draw_scene_measurements;
 use crate::render::{FrameOptions, encode_png, frame_to_rgba8};
@@ -122,10 +123,21 @@ impl App {
         // the window's marks (the selection's tint, the picked points, the selected
         // measurement's highlight, the crop box's edges, the four panes).
         let mut scene = self.edit.scene.clone();
-        if let Err(e) = draw_scene_measurements(&mut scene) {
-            eprintln!("screenshot: measurements left out: {e}");
-            scene = self.edit.scene.clone();
-        }
+        let labels = match draw_scene_measurements(&mut scene) {
+            Ok(labels) => labels,
+            Err(e) => {
+                eprintln!("screenshot: measurements left out: {e}");
+                scene = self.edit.scene.clone();
+                Vec::new()
+            }
+        };
+        // Annotated as the window shows it (as `render --annotate PARTS` annotates), else
+        // with the measurements' values alone where there are any (as `render` writes them).
+        let parts = match (&self.options.annotations, self.annotations_on) {
+            (Some(parts), true) => Some(parts.clone()),
+            _ if !labels.is_empty() => Annotations::parse_parts("measurements").ok(),
+            _ => None,
+        };
         let options = FrameOptions {
             ordering: Some(self.ordering),
             background: Some(self.options.background),
@@ -140,7 +152,18 @@ impl App {
         let shot = gpu
             .renderer
             .screenshot(&gpu.ctx, &scene, &self.camera, size, &options)?;
-        let image = frame_to_rgba8(&shot.frame);
+        let mut image = frame_to_rgba8(&shot.frame);
+        if let Some(parts) = &parts
+            && let Err(e) = annotate_image(
+                &mut image,
+                &self.camera,
+                &self.edit.scene.patient_frame(),
+                &labels,
+                parts,
+            )
+        {
+            eprintln!("screenshot: not annotated: {e}");
+        }
         let size = image.dimensions();
         let png = encode_png(&image).map_err(|e| ViewerError::Window(e.to_string()))?;
         let dir = &self.options.screenshot_dir;
@@ -174,7 +197,17 @@ impl App {
             Ok(text) => {
                 let toml = path.with_extension("toml");
                 match crate::output::write_new(&toml, text.as_bytes()) {
-                    Ok(true) => println!("view {}", toml.display()),
+                    Ok(true) => {
+                        println!("view {}", toml.display());
+                        let annotate = match (&self.options.annotations, self.annotations_on) {
+                            (Some(p), true) => format!(" --annotate {}", parts_arg(p)),
+                            _ => String::new(),
+                        };
+                        println!(
+                            "the same picture: splatscene render {}{annotate} --out PNG",
+                            toml.display()
+                        );
+                    }
                     Ok(false) => eprintln!("view {}: taken meanwhile; not written", toml.display()),
                     Err(e) => eprintln!("view: {e}"),
                 }
@@ -225,4 +258,25 @@ impl App {
 /// When a file was last modified, if it can be told.
 pub(super) fn modified(path: &Path) -> Option<SystemTime> {
     std::fs::metadata(path).and_then(|m| m.modified()).ok()
+}
+
+/// The `--annotate` value that asks `render` for these annotations (the caption apart).
+fn parts_arg(parts: &Annotations) -> String {
+    let names: Vec<&str> = [
+        (parts.orientation_marker, "marker"),
+        (parts.edge_letters, "letters"),
+        (parts.scale_bar, "scale"),
+        (parts.measurements, "measurements"),
+    ]
+    .iter()
+    .filter(|(on, _)| *on)
+    .map(|(_, name)| *name)
+    .collect();
+    if names.len() == 4 {
+        "all".into()
+    } else if names.is_empty() {
+        "none".into()
+    } else {
+        names.join(",")
+    }
 }

@@ -62,16 +62,30 @@ impl App {
         match &self.options.scene_path {
             Some(p) => (
                 p.parent().unwrap_or(Path::new(".")).to_path_buf(),
-                p.file_stem()
-                    .map_or("splatscene".into(), |s| s.to_string_lossy().into_owned()),
+                p.file_stem().map_or("splatscene".into(), |s| {
+                    plan_stem(&s.to_string_lossy()).to_owned()
+                }),
             ),
             None => (self.options.screenshot_dir.clone(), "splatscene".into()),
         }
     }
 
+    /// The folder and name stem of this scene's autosaves: the scene file's own stem (a plan
+    /// opened again autosaves apart from the scene it came from).
+    fn autosave_place(&self) -> (PathBuf, String) {
+        let (dir, plan) = self.plan_place();
+        let stem = self
+            .options
+            .scene_path
+            .as_ref()
+            .and_then(|p| p.file_stem())
+            .map_or(plan, |s| s.to_string_lossy().into_owned());
+        (dir, stem)
+    }
+
     /// The first free other autosave name (`NAME-autosave-2.toml`...).
     fn free_autosave(&self) -> Option<PathBuf> {
-        let (dir, stem) = self.plan_place();
+        let (dir, stem) = self.autosave_place();
         (2..10_000)
             .map(|n| dir.join(format!("{stem}-autosave-{n}.toml")))
             .find(|p| std::fs::symlink_metadata(p).is_err())
@@ -80,7 +94,7 @@ impl App {
     /// At the start: an autosave left by an earlier session is offered; this session
     /// autosaves to that name, or to the first free other one while the old one is kept.
     pub(super) fn start_autosave(&mut self) {
-        let (dir, stem) = self.plan_place();
+        let (dir, stem) = self.autosave_place();
         let path = dir.join(format!("{stem}-autosave.toml"));
         if std::fs::symlink_metadata(&path).is_ok() {
             println!("autosave found {}", path.display());
@@ -293,11 +307,44 @@ impl App {
     }
 }
 
+/// The name a plan takes from its scene file's stem: a plan opened again saves as the next of
+/// its series (`shoulder-plan` and `shoulder-plan-3` give `shoulder`, so the next save is
+/// `shoulder-plan-N.toml`, not `shoulder-plan-plan.toml`), as does a restored autosave.
+pub(super) fn plan_stem(stem: &str) -> &str {
+    for suffix in ["-plan", "-autosave"] {
+        if let Some(at) = stem.rfind(suffix) {
+            let rest = &stem[at + suffix.len()..];
+            let numbered = rest
+                .strip_prefix('-')
+                .is_some_and(|n| !n.is_empty() && n.bytes().all(|b| b.is_ascii_digit()));
+            if (rest.is_empty() || numbered) && at > 0 {
+                return &stem[..at];
+            }
+        }
+    }
+    stem
+}
+
 /// Removes an autosave, saying so where it cannot.
 fn remove_autosave(path: &Path) {
     if let Err(e) = std::fs::remove_file(path)
         && e.kind() != std::io::ErrorKind::NotFound
     {
         eprintln!("autosave {} not removed: {e}", path.display());
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::plan_stem;
+
+    #[test]
+    fn plans_opened_again_save_in_their_series() {
+        assert_eq!(plan_stem("shoulder"), "shoulder");
+        assert_eq!(plan_stem("shoulder-plan"), "shoulder");
+        assert_eq!(plan_stem("shoulder-plan-12"), "shoulder");
+        assert_eq!(plan_stem("shoulder-autosave-2"), "shoulder");
+        assert_eq!(plan_stem("shoulder-planning"), "shoulder-planning");
+        assert_eq!(plan_stem("-plan"), "-plan");
     }
 }

@@ -139,9 +139,6 @@ impl App {
         }
         // The on-screen text of this frame (its splats, its time to draw), not the last one's.
         let drawn_in = started.elapsed();
-        if !preview && !sharp {
-            self.full_frame = drawn_in;
-        }
         self.this_frame = drawn_in;
         let hud = self.hud_lines();
         let Some(gpu) = &mut self.gpu else {
@@ -170,6 +167,10 @@ impl App {
         gpu.window.pre_present_notify();
         gpu.ctx.queue.present(frame);
         let elapsed = drawn_in;
+        // Whether moving draws previews goes by the whole frame, presenting included.
+        if !preview && !sharp {
+            self.full_frame = started.elapsed();
+        }
         self.sharpen = (!preview && self.last.unrefined).then(|| Instant::now() + SETTLE);
         let preset = self.transfer_label();
         let Some(gpu) = &self.gpu else {
