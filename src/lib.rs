@@ -12,7 +12,7 @@
 //! - [`mesh`]: triangle meshes with glTF, OBJ and STL loaders, and the prosthesis generator;
 //! - [`scene`]: the scene graph, camera, lights, scene files and the built-in shoulder scene.
 //!
-//! [`slice`] reformats the volume on a plane with the meshes' cross-sections, for judging an
+//! [`slice`](mod@slice) reformats the volume on a plane with the meshes' cross-sections, for judging an
 //! implant's fit. On top, [`render`]: a wgpu renderer (headless by default) that draws the meshes with a depth
 //! buffer, then the splats in visibility order, depth-tested against them.
 //!

@@ -503,7 +503,7 @@ fn the_command_line_refuses_slices_it_cannot_draw_and_names_why() {
     let base = files_on_disk(&dir);
     let out = dir.join("s.png");
     let out = out.to_str().unwrap();
-    let cases: [(&[&str], &[&str]); 8] = [
+    let cases: [(&[&str], &[&str]); 10] = [
         (
             &["--slice", "oblique"],
             &["oblique", "axial, coronal, sagittal"],
@@ -530,6 +530,14 @@ fn the_command_line_refuses_slices_it_cannot_draw_and_names_why() {
             &["positive"],
         ),
         (&["--slice", "axial", "--depth", "d.png"], &["--depth"]),
+        (
+            &["--slice", "axial", "--size", "300x200"],
+            &["--size", "no effect"],
+        ),
+        (
+            &["--slice", "axial", "--ordering", "btf"],
+            &["--ordering", "no effect"],
+        ),
     ];
     for (extra, words) in cases {
         let mut args = extra.to_vec();

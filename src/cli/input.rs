@@ -400,6 +400,11 @@ pub struct View {
 }
 
 impl ViewArgs {
+    /// Whether `--size` was given.
+    pub fn size_given(&self) -> bool {
+        self.size.is_some()
+    }
+
     /// Loads the scene and makes its cameras.
     pub fn load(&self) -> Result<View> {
         // `scene` is the scene's own camera (as in batch manifests), any other name a view of

@@ -180,10 +180,22 @@ pub fn run_render(args: RenderArgs) -> Result<()> {
     } = args.view.load()?;
     let layout = args.slices.layout(&file)?;
     if let Layout::Slices(wanted) = &layout {
-        if args.depth.is_some() || args.transparent || args.contact.is_some() {
+        if args.depth.is_some()
+            || args.depth_mode.is_some()
+            || args.transparent
+            || args.contact.is_some()
+        {
             bail!(
-                "--depth, --transparent and --contact are for the 3D view; slices outline the meshes instead"
+                "--depth, --depth-mode, --transparent and --contact are for the 3D view; slices outline the meshes instead"
             );
+        }
+        if args.view.size_given() {
+            bail!(
+                "--size has no effect on slices: their pixels are --slice-mm-per-pixel millimetres covering the section (with --layout quad, --size is the figure's)"
+            );
+        }
+        if args.ordering.is_some() {
+            bail!("--ordering has no effect on slices: they draw no splats");
         }
         let [(_, camera)] = cameras.as_slice() else {
             bail!("slices go through one camera's target: give one --view with --slice");

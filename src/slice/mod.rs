@@ -5,7 +5,7 @@
 //!
 //! - [`plane`]: which plane, and the directions its image's pixels step in;
 //! - [`frame`]: the section of the volume by the plane, covered by square pixels;
-//! - [`resample`]: the volume's values on the pixels (trilinear) and their grey image;
+//! - [`resample`](mod@resample): the volume's values on the pixels (trilinear) and their grey image;
 //! - [`section`]: the meshes' cross-sections, joined into polylines;
 //! - [`draw`] (with the `annotate` feature): the figure: grey, outlines, measurements and
 //!   annotations.
