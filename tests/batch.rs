@@ -627,19 +627,7 @@ measurements = "values/{job}.json"
 #[test]
 fn a_job_asking_for_contact_writes_it_and_the_index_holds_it() {
     let dir = scratch("contact");
-    std::fs::write(
-        dir.join("plan.toml"),
-        r#"
-[[volume]]
-path = "builtin:shoulder-phantom"
-
-[[mesh]]
-name = "prosthesis"
-path = "builtin:prosthesis"
-seat = "phantom"
-"#,
-    )
-    .unwrap();
+    phantom_plan(&dir);
     let manifest = dir.join("manifest.toml");
     std::fs::write(
         &manifest,
@@ -706,19 +694,7 @@ contents = ["volumes"]
 #[test]
 fn a_job_asking_for_slices_writes_them_as_render_does_with_their_calibration() {
     let dir = scratch("batch-slices");
-    std::fs::write(
-        dir.join("plan.toml"),
-        r#"
-[[volume]]
-path = "builtin:shoulder-phantom"
-
-[[mesh]]
-name = "prosthesis"
-path = "builtin:prosthesis"
-seat = "phantom"
-"#,
-    )
-    .unwrap();
+    phantom_plan(&dir);
     let manifest = dir.join("manifest.toml");
     std::fs::write(
         &manifest,
@@ -789,4 +765,21 @@ slices = ["implant-long", "axial@40"]
         said.contains("oblique") && said.contains("follow a mesh"),
         "{said}"
     );
+}
+
+/// A plan of the phantom with the prosthesis seated in it, as `dir/plan.toml`.
+fn phantom_plan(dir: &Path) {
+    std::fs::write(
+        dir.join("plan.toml"),
+        r#"
+[[volume]]
+path = "builtin:shoulder-phantom"
+
+[[mesh]]
+name = "prosthesis"
+path = "builtin:prosthesis"
+seat = "phantom"
+"#,
+    )
+    .unwrap();
 }

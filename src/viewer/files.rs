@@ -81,15 +81,8 @@ impl App {
         match loaded {
             Ok((file, loaded)) => {
                 // The file's clipping, measurements and placements replace the viewer's.
-                self.edit.scene = loaded.scene;
-                self.picker = Picker::new(&self.edit.scene);
                 self.options.scene_file = Some(file);
-                self.remember_transfers();
-                self.edit.history = History::new();
-                self.edit.selected = None;
-                self.edit.measuring = None;
-                self.edit.chosen = None;
-                self.edit.marker = None;
+                self.adopt(loaded.scene, History::new());
                 self.say(format!("reloaded {}", path.display()));
             }
             Err(e) => {
@@ -97,6 +90,18 @@ impl App {
                 eprintln!("not reloaded: {e}");
             }
         }
+    }
+    /// Puts `scene` in place of the plan, with `history`: nothing selected, measured or
+    /// marked, the transfer functions and the picker the new scene's.
+    pub(super) fn adopt(&mut self, scene: crate::scene::Scene, history: History) {
+        self.edit.scene = scene;
+        self.picker = Picker::new(&self.edit.scene);
+        self.remember_transfers();
+        self.edit.history = history;
+        self.edit.selected = None;
+        self.edit.measuring = None;
+        self.edit.chosen = None;
+        self.edit.marker = None;
     }
     /// Reloads the scene file when it changed on disk, unless that would drop unsaved edits.
     pub(super) fn watch(&mut self) {

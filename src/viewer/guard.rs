@@ -13,7 +13,6 @@ use winit::keyboard::{Key, NamedKey};
 
 use super::App;
 use super::plan::History;
-use crate::pick::Picker;
 use crate::scene::file::SceneFile;
 
 /// How long after an edit the plan is autosaved (edits in a burst are written once).
@@ -280,14 +279,7 @@ impl App {
         });
         match loaded {
             Ok(loaded) => {
-                self.edit.scene = loaded.scene;
-                self.picker = Picker::new(&self.edit.scene);
-                self.remember_transfers();
-                self.edit.history = History::restored();
-                self.edit.selected = None;
-                self.edit.measuring = None;
-                self.edit.chosen = None;
-                self.edit.marker = None;
+                self.adopt(loaded.scene, History::restored());
                 if let Some(auto) = &mut self.autosave {
                     // The restored plan is this session's to autosave, over the file it came
                     // from.

@@ -448,25 +448,20 @@ impl App {
         if self.answer(event_loop, key) {
             return Ok(());
         }
+        // A line being typed (a placement, a label) takes the keys first.
+        let typed = match key {
+            Key::Named(NamedKey::Enter) => LabelKey::Enter,
+            Key::Named(NamedKey::Escape) => LabelKey::Escape,
+            Key::Named(NamedKey::Backspace) => LabelKey::Backspace,
+            _ => LabelKey::Text(text),
+        };
         if self.edit.placing.is_some() {
-            let key = match key {
-                Key::Named(NamedKey::Enter) => LabelKey::Enter,
-                Key::Named(NamedKey::Escape) => LabelKey::Escape,
-                Key::Named(NamedKey::Backspace) => LabelKey::Backspace,
-                _ => LabelKey::Text(text),
-            };
-            let notice = self.edit.place_key(key);
+            let notice = self.edit.place_key(typed);
             self.tell(notice);
             return Ok(());
         }
         if self.edit.labelling.is_some() {
-            let key = match key {
-                Key::Named(NamedKey::Enter) => LabelKey::Enter,
-                Key::Named(NamedKey::Escape) => LabelKey::Escape,
-                Key::Named(NamedKey::Backspace) => LabelKey::Backspace,
-                _ => LabelKey::Text(text),
-            };
-            let notice = self.edit.label_key(key);
+            let notice = self.edit.label_key(typed);
             self.tell(notice);
             return Ok(());
         }
