@@ -2001,6 +2001,18 @@ fn quitting_with_unsaved_edits_asks_and_a_killed_session_leaves_a_plan_to_restor
     );
     let nudged = matrix_of(&moved).w_axis.truncate();
     assert!(mesh_translation(&plan, "prosthesis").distance(nudged) < 1e-9);
+    // Written over the scene file's text: its comments and spellings kept (a comment on a key
+    // the plan no longer has, as the camera's view_from, goes with it).
+    let text = std::fs::read_to_string(&plan).unwrap();
+    let scene_text = std::fs::read_to_string(&scene_path).unwrap();
+    for kept in [
+        "# The built-in shoulder scene (`splatscene render` without a scene file)",
+        "fov = 35.0",
+        "name = \"shoulder CT\"",
+        "cut_away_anterior_humerus = 30.0",
+    ] {
+        assert!(scene_text.contains(kept) && text.contains(kept), "{kept}");
+    }
 }
 
 /// The matrix of a "moved NAME {matrix}" line's JSON.
@@ -2084,4 +2096,64 @@ fn shoulder_copy(dir: &Path) -> PathBuf {
     let copy = dir.join("shoulder.toml");
     std::fs::copy(&original, &copy).unwrap();
     copy
+}
+
+#[test]
+fn a_plan_of_a_volume_without_a_scene_file_is_saved_beside_it_with_relative_paths() {
+    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    if !x11_tools() {
+        return;
+    }
+    let (_xvfb, display) = start_xvfb();
+    let dir = scratch("plan-of-volume");
+    for sub in ["ct", "meshes", "shots"] {
+        std::fs::create_dir_all(dir.join(sub)).unwrap();
+    }
+    // A block of bone-bright voxels, and a cube in front of it.
+    let ct = dir.join("ct/block.raw");
+    std::fs::write(&ct, vec![200u8; 32 * 32 * 32]).unwrap();
+    let mesh = dir.join("meshes/cube.obj");
+    std::fs::write(&mesh, common::shapes::obj_text(&common::shapes::cube(8.0))).unwrap();
+    let shots = dir.join("shots");
+    let (_viewer, lines, window) = open_viewer(
+        &display,
+        &[
+            "view",
+            ct.to_str().unwrap(),
+            "--dims",
+            "32,32,32",
+            "--scalar",
+            "u8",
+            "--mesh",
+            mesh.to_str().unwrap(),
+            "--size",
+            "640x480",
+            "--screenshots",
+            shots.to_str().unwrap(),
+        ],
+    );
+    title(&display, &window, " splats");
+    xdo(&display, &["windowfocus", "--sync", &window]);
+    xdo(&display, &["key", "m"]).expect("m");
+    for (x, y) in [("300", "240"), ("340", "250")] {
+        xdo(
+            &display,
+            &["mousemove", "--window", &window, x, y, "click", "1"],
+        )
+        .expect("click");
+        line(&lines, "pick");
+    }
+    line(&lines, "measurement 1 add distance");
+    xdo(&display, &["key", "ctrl+s"]).expect("ctrl+s");
+    // Beside the volume, named after it; its paths relative to where it lies.
+    let saved = PathBuf::from(line(&lines, "saved plan"));
+    assert_eq!(saved, dir.join("ct/block-plan.toml"));
+    let text = std::fs::read_to_string(&saved).unwrap();
+    assert!(text.contains("path = \"block.raw\""), "{text}");
+    assert!(text.contains("path = \"../meshes/cube.obj\""), "{text}");
+    let plan = splatscene::scene::file::load_scene_file(&saved).unwrap();
+    assert_eq!(plan.scene.measurements.len(), 1);
+    // Nothing written among the screenshots, nor over the inputs.
+    assert_eq!(std::fs::read_dir(&shots).unwrap().count(), 0);
+    assert_eq!(std::fs::read(&ct).unwrap().len(), 32 * 32 * 32);
 }

@@ -156,6 +156,27 @@ impl InputArgs {
         }
     }
 
+    /// Where a plan of a scene that has no scene file is saved, and under what name: beside
+    /// the volume given (a DICOM folder's parent), named after it (`ct.nii.gz` gives `ct`),
+    /// else beside the first mesh; `None` for a scene file or the built-in scene.
+    pub fn plan_place(&self) -> Option<(PathBuf, String)> {
+        let path = match self.input() {
+            Ok(Input::Volume(path)) => path,
+            Ok(Input::Builtin) => self.meshes.first()?,
+            _ => return None,
+        };
+        let name = path.file_name()?.to_string_lossy().into_owned();
+        let stem = match name.trim_start_matches('.').split('.').next() {
+            Some(s) if !s.is_empty() => s.to_owned(),
+            _ => "splatscene".to_owned(),
+        };
+        let dir = match path.parent() {
+            Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+            _ => PathBuf::from("."),
+        };
+        Some((dir, stem))
+    }
+
     /// Loads the scene the arguments describe, with the scene file that describes it (relative
     /// paths made absolute, so that it can be saved anywhere: the viewer's screenshots do).
     pub fn load(&self) -> Result<(LoadedScene, SceneFile)> {

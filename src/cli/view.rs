@@ -6,6 +6,7 @@ use anyhow::Result;
 
 use splatscene::annotate::Annotations;
 use splatscene::render::Compositor;
+use splatscene::scene::file::SceneFile;
 
 use super::input::{View, ViewArgs};
 
@@ -17,6 +18,10 @@ pub struct ViewerArgs {
     /// Folder for screenshots taken with the S key.
     #[arg(long, default_value = ".")]
     screenshots: PathBuf,
+    /// Folder for plans (Ctrl+S) and their autosaves (default: beside the scene file, else
+    /// beside the volume or mesh given, else the screenshot folder).
+    #[arg(long, value_name = "DIR")]
+    plans: Option<PathBuf>,
     /// Draw every frame in full, also while the camera moves (by default, where a full frame
     /// takes over 50 ms, a drag or a zoom draws the volumes at half resolution, about an eighth
     /// of the splats).
@@ -44,8 +49,23 @@ pub fn run_viewer(args: ViewerArgs) -> Result<()> {
         )
     };
     let scene_path = args.view.input.scene_path();
+    let (plan_dir, plan_name) = match (&args.plans, args.view.input.plan_place()) {
+        (Some(dir), place) => (Some(dir.clone()), place.map(|(_, name)| name)),
+        (None, Some((dir, name))) => (Some(dir), Some(name)),
+        (None, None) => (None, None),
+    };
+    if let Some(dir) = &args.plans
+        && !dir.is_dir()
+    {
+        anyhow::bail!("--plans {}: no such folder", dir.display());
+    }
     let view = args.view.load()?;
     let camera = view.single_camera()?;
+    // The text of the scene file, for plans written over it with its comments kept.
+    let scene_text = match &scene_path {
+        Some(p) => Some(SceneFile::read_with_text(p)?.1),
+        None => None,
+    };
     let View {
         mut loaded,
         size,
@@ -63,6 +83,9 @@ pub fn run_viewer(args: ViewerArgs) -> Result<()> {
         annotations,
         compositor: args.compositor,
         scene_path,
+        scene_text,
+        plan_dir,
+        plan_name,
     };
     eprintln!(
         "drag to orbit, right drag to pan, wheel to zoom, click to pick and select a mesh; H in the window (or view --help) lists every key"

@@ -1,7 +1,7 @@
 //! The plan's files: saving it as a new scene file (never over one), screenshots with their
 //! scene file, and reading the scene file again when it changes on disk.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::time::SystemTime;
 
 use super::plan::History;
@@ -20,15 +20,42 @@ impl App {
             .gpu
             .as_ref()
             .map_or(self.options.size, |g| g.target.size);
-        let text = match self.plan_file(size) {
-            Ok(text) => text,
-            Err(e) => {
-                self.say(format!("the plan was not saved: {e}"));
-                eprintln!("the plan was not saved: {e}");
-                return;
-            }
-        };
         let (dir, stem) = self.plan_place();
+        let mut tried = vec![dir];
+        // A folder that cannot be written (a read-only data folder) is said, and the
+        // screenshot folder tried next: the plan is never lost for want of a place.
+        if !tried.contains(&self.options.screenshot_dir) {
+            tried.push(self.options.screenshot_dir.clone());
+        }
+        let mut refused = Vec::new();
+        for dir in tried {
+            match self.save_plan_in(&dir, &stem, size) {
+                Ok(path) => {
+                    self.edit.history.mark_saved();
+                    let mut text = format!("saved plan {}", path.display());
+                    if let Some(first) = refused.first() {
+                        text = format!("{text} ({first})");
+                    }
+                    self.say(text);
+                    return;
+                }
+                Err(e) => {
+                    eprintln!("the plan was not saved: {e}");
+                    refused.push(e);
+                }
+            }
+        }
+        // Nothing is lost: the plan stays in the viewer, to be saved elsewhere.
+        self.say(format!(
+            "the plan was not saved: {} (it is kept here)",
+            refused.join("; ")
+        ));
+    }
+
+    /// Writes the plan into `dir` as the first free `STEM-plan.toml`, `STEM-plan-2.toml`...,
+    /// created exclusively: its path, or why not.
+    fn save_plan_in(&self, dir: &Path, stem: &str, size: (u32, u32)) -> Result<PathBuf, String> {
+        let text = self.plan_file(size, dir)?;
         for n in 1..10_000 {
             let name = match n {
                 1 => format!("{stem}-plan.toml"),
@@ -42,46 +69,38 @@ impl App {
             match file {
                 Ok(mut f) => {
                     use std::io::Write;
-                    if let Err(e) = f.write_all(text.as_bytes()) {
-                        let _ = std::fs::remove_file(&path);
-                        self.say(format!("the plan was not saved: {}: {e}", path.display()));
-                        eprintln!("the plan was not saved: {}: {e}", path.display());
-                        return;
-                    }
-                    self.edit.history.mark_saved();
-                    self.say(format!("saved plan {}", path.display()));
-                    return;
+                    return match f.write_all(text.as_bytes()) {
+                        Ok(()) => Ok(path),
+                        Err(e) => {
+                            let _ = std::fs::remove_file(&path);
+                            Err(format!("{}: {e}", path.display()))
+                        }
+                    };
                 }
                 Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {}
-                Err(e) => {
-                    // Nothing is lost: the plan stays in the viewer, to be saved elsewhere.
-                    self.say(format!(
-                        "the plan was not saved: {}: {e} (it is kept here)",
-                        path.display()
-                    ));
-                    eprintln!("the plan was not saved: {}: {e}", path.display());
-                    return;
-                }
+                Err(e) => return Err(format!("{}: {e}", path.display())),
             }
         }
-        self.say("the plan was not saved: no free name".into());
+        Err(format!("{}: no free name", dir.display()))
     }
+
     /// Reads the scene file again, keeping the camera; the viewer's edits are dropped.
     pub(super) fn reload(&mut self) {
         let Some((path, _)) = self.watched.clone() else {
             self.say("no scene file to reload".into());
             return;
         };
-        let loaded = SceneFile::read(&path).and_then(|file| {
+        let loaded = SceneFile::read_with_text(&path).and_then(|(file, text)| {
             let base = path.parent().unwrap_or(Path::new("."));
             let loaded = file.load(&path, base)?;
-            Ok((file.with_paths_from(base), loaded))
+            Ok((file.with_paths_from(base), loaded, text))
         });
         self.watched = Some((path.clone(), modified(&path)));
         match loaded {
-            Ok((file, loaded)) => {
+            Ok((file, loaded, text)) => {
                 // The file's clipping, measurements and placements replace the viewer's.
                 self.options.scene_file = Some(file);
+                self.options.scene_text = Some(text);
                 self.adopt(loaded.scene, History::new());
                 self.say(format!("reloaded {}", path.display()));
             }
@@ -197,7 +216,7 @@ impl App {
             return Ok(());
         };
         println!("screenshot {}", path.display());
-        match self.plan_file(size) {
+        match self.plan_file(size, dir) {
             Err(e) => eprintln!("view: no scene file: {e}"),
             Ok(text) => {
                 let toml = path.with_extension("toml");
@@ -222,8 +241,9 @@ impl App {
     }
     /// The scene file of what the window shows: the scene's own file with the plan (mesh
     /// transforms, measurements), the camera, the ordering, the image size and the transfer
-    /// function chosen with `T`.
-    pub(super) fn plan_file(&self, size: (u32, u32)) -> Result<String, String> {
+    /// function chosen with `T`; paths relative to `dir`, where it is to be written, and
+    /// written over the scene file's own text where there is one (its comments kept).
+    pub(super) fn plan_file(&self, size: (u32, u32), dir: &Path) -> Result<String, String> {
         let file = self
             .options
             .scene_file
@@ -253,12 +273,20 @@ impl App {
                 volume.shift = None;
             }
         }
-        let text = file.to_toml().map_err(|e| e.to_string())?;
-        Ok(format!(
-            "# Saved by splatscene's viewer: `splatscene render THIS.toml --out view.png` draws\n# the same picture, and `splatscene view THIS.toml` opens the plan again.\n\n{text}"
-        ))
+        let file = file.with_paths_relative_to(dir);
+        let text = match &self.options.scene_text {
+            Some(original) => file.to_toml_over(original).map_err(|e| e.to_string())?,
+            None => file.to_toml().map_err(|e| e.to_string())?,
+        };
+        if text.starts_with(SAVED_BY) {
+            return Ok(text);
+        }
+        Ok(format!("{SAVED_BY}\n\n{text}"))
     }
 }
+
+/// The first lines of a file the viewer saves.
+const SAVED_BY: &str = "# Saved by splatscene's viewer: `splatscene render THIS.toml --out view.png` draws\n# the same picture, and `splatscene view THIS.toml` opens the plan again.";
 
 /// When a file was last modified, if it can be told.
 pub(super) fn modified(path: &Path) -> Option<SystemTime> {

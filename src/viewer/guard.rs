@@ -55,18 +55,23 @@ pub(super) struct Autosave {
 }
 
 impl App {
-    /// The folder and the name stem plans are saved with: beside the scene file
-    /// (`NAME-plan.toml`), else in the screenshot folder (`splatscene-plan.toml`).
+    /// The folder and the name stem plans are saved with: `--plans`, else beside the scene
+    /// file, else the screenshot folder; the scene file's stem (`NAME-plan.toml`), else the
+    /// input's name, else `splatscene`.
     pub(super) fn plan_place(&self) -> (PathBuf, String) {
-        match &self.options.scene_path {
-            Some(p) => (
-                p.parent().unwrap_or(Path::new(".")).to_path_buf(),
-                p.file_stem().map_or("splatscene".into(), |s| {
-                    plan_stem(&s.to_string_lossy()).to_owned()
-                }),
-            ),
-            None => (self.options.screenshot_dir.clone(), "splatscene".into()),
-        }
+        let scene = self.options.scene_path.as_ref();
+        let dir = self
+            .options
+            .plan_dir
+            .clone()
+            .or_else(|| scene.map(|p| p.parent().unwrap_or(Path::new(".")).to_path_buf()))
+            .unwrap_or_else(|| self.options.screenshot_dir.clone());
+        let stem = scene
+            .and_then(|p| p.file_stem())
+            .map(|s| plan_stem(&s.to_string_lossy()).to_owned())
+            .or_else(|| self.options.plan_name.clone())
+            .unwrap_or_else(|| "splatscene".into());
+        (dir, stem)
     }
 
     /// The folder and name stem of this scene's autosaves: the scene file's own stem (a plan
@@ -159,7 +164,7 @@ impl App {
             .as_ref()
             .map_or(self.options.size, |g| g.target.size);
         let written = self
-            .plan_file(size)
+            .plan_file(size, path.parent().unwrap_or(Path::new(".")))
             .map_err(std::io::Error::other)
             .and_then(|text| crate::output::write_atomic(&path, text.as_bytes()).map(|_| ()));
         match written {

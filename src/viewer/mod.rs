@@ -73,8 +73,17 @@ pub struct ViewerOptions {
     /// the adapter is itself a CPU (lavapipe).
     pub compositor: Compositor,
     /// The scene file on disk: plans are saved beside it, and it is read again when it
-    /// changes. `None` saves plans into the screenshot folder and watches nothing.
+    /// changes. `None` watches nothing.
     pub scene_path: Option<PathBuf>,
+    /// The text the scene file was read from: plans are written over it, keeping its comments
+    /// and layout where they still hold. `None` writes plans afresh.
+    pub scene_text: Option<String>,
+    /// The folder plans and autosaves go to; `None` puts them beside the scene file, else in
+    /// the screenshot folder.
+    pub plan_dir: Option<PathBuf>,
+    /// The name plans are saved under (`NAME-plan.toml`) when there is no scene file: the
+    /// volume's, say; `None` is `splatscene`.
+    pub plan_name: Option<String>,
 }
 
 impl Default for ViewerOptions {
@@ -89,6 +98,9 @@ impl Default for ViewerOptions {
             annotations: Some(Annotations::default()),
             compositor: Compositor::Auto,
             scene_path: None,
+            scene_text: None,
+            plan_dir: None,
+            plan_name: None,
         }
     }
 }

@@ -41,6 +41,7 @@
 //! `examples/scenes/` holds complete scene files.
 
 mod camera;
+mod edit;
 mod load;
 mod save;
 mod schema;
@@ -49,6 +50,7 @@ mod tests;
 mod validate;
 
 pub use camera::{CameraSpecError, camera, named_view_camera, upright};
+pub use edit::EditError;
 pub use load::{DataPathError, load_scene_file, resolve_path, scale_warnings};
 pub use save::{PlanError, transform_spec};
 pub use schema::*;

@@ -1,4 +1,5 @@
-//! Saving: a scene file with the plan a scene holds now, paths made absolute, as TOML.
+//! Saving: a scene file with the plan a scene holds now, its paths made absolute or relative to
+//! where it is saved, as TOML.
 
 use std::path::Path;
 
@@ -50,6 +51,33 @@ impl SceneFile {
                     .unwrap_or_else(|_| base.join(p))
                     .to_string_lossy()
                     .into_owned()
+            }
+        };
+        let mut file = self.clone();
+        for v in &mut file.volumes {
+            v.path = fix(&v.path);
+        }
+        for m in &mut file.meshes {
+            m.path = fix(&m.path);
+        }
+        file
+    }
+
+    /// The same file with every absolute volume and mesh path written relative to `dir`, the
+    /// folder the file is to be saved in (`../ct/shoulder.nrrd`), so that the plan and its data
+    /// move together; `builtin:` and `data:` paths, and paths with no relative form (another
+    /// drive), are kept as they are.
+    pub fn with_paths_relative_to(&self, dir: &Path) -> Self {
+        let dir = std::path::absolute(dir).unwrap_or_else(|_| dir.to_path_buf());
+        let fix = |path: &str| {
+            let p = Path::new(path);
+            if path.starts_with("builtin:") || path.starts_with("data:") || !p.is_absolute() {
+                return path.to_owned();
+            }
+            match pathdiff::diff_paths(p, &dir) {
+                Some(rel) if rel.as_os_str().is_empty() => path.to_owned(),
+                Some(rel) => rel.to_string_lossy().into_owned(),
+                None => path.to_owned(),
             }
         };
         let mut file = self.clone();

@@ -426,6 +426,12 @@ pub const MAX_SCENE_BYTES: u64 = 16 << 20;
 impl SceneFile {
     /// Reads and parses a scene file (at most [`MAX_SCENE_BYTES`]).
     pub fn read(path: &Path) -> Result<Self, SceneFileError> {
+        Self::read_with_text(path).map(|(file, _)| file)
+    }
+
+    /// Reads and parses a scene file (at most [`MAX_SCENE_BYTES`]), with the text it was read
+    /// from: [`SceneFile::to_toml_over`] writes an edited file over that text.
+    pub fn read_with_text(path: &Path) -> Result<(Self, String), SceneFileError> {
         let io = |source| SceneFileError::Io {
             path: path.into(),
             source,
@@ -440,7 +446,7 @@ impl SceneFile {
             });
         }
         let text = crate::input::read_regular_text(path, MAX_SCENE_BYTES).map_err(io)?;
-        Self::parse(&text, path)
+        Self::parse(&text, path).map(|file| (file, text))
     }
 
     /// Parses scene TOML; `path` names it in errors.
