@@ -131,16 +131,40 @@ fn a_batch_renders_every_picture_with_an_index_and_leaves_finished_jobs_alone() 
         out.join("ball-superior-superior-ip-pbtf-implicit.png")
             .exists()
     );
-    // The picture without the volume is seen from where the one with it is.
-    let cameras: Vec<&Value> = jobs[0]["outputs"]
-        .as_array()
+    // The picture without the volume fits the meshes it draws: it looks at the centre of
+    // their vertices' box, from nearer than the picture with the volume.
+    let camera = |content: &str| {
+        let c = jobs[0]["outputs"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|o| o["view"] == "right" && o["kind"] == "image" && o["content"] == content)
+            .map(|o| &o["camera"])
+            .unwrap();
+        let v = |key: &str| {
+            let a: Vec<f64> = serde_json::from_value(c[key].clone()).unwrap();
+            glam::DVec3::new(a[0], a[1], a[2])
+        };
+        (v("eye"), v("target"))
+    };
+    let (all_eye, all_target) = camera("all");
+    let (mesh_eye, mesh_target) = camera("meshes");
+    let scene = splatscene::scene::file::load_scene_file(&repo("examples/scenes/shoulder.toml"))
         .unwrap()
-        .iter()
-        .filter(|o| o["view"] == "right" && o["kind"] == "image")
-        .map(|o| &o["camera"])
-        .collect();
-    assert_eq!(cameras.len(), 2);
-    assert_eq!(cameras[0], cameras[1]);
+        .scene;
+    let (mut lo, mut hi) = (glam::DVec3::splat(f64::MAX), glam::DVec3::splat(f64::MIN));
+    for (_, mesh, world) in scene.meshes() {
+        for p in &mesh.mesh.positions {
+            let p = world.transform_point3(glam::DVec3::from(p.map(f64::from)));
+            (lo, hi) = (lo.min(p), hi.max(p));
+        }
+    }
+    assert!(
+        mesh_target.distance(0.5 * (lo + hi)) < 0.01,
+        "{mesh_target} against {}",
+        0.5 * (lo + hi)
+    );
+    assert!(mesh_eye.distance(mesh_target) < all_eye.distance(all_target));
     // Without the volume the picture differs.
     let all = image::open(out.join("shoulder-right-all.png")).unwrap();
     let meshes = image::open(out.join("shoulder-right-meshes.png")).unwrap();

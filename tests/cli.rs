@@ -911,3 +911,68 @@ fn a_binary_file_without_dims_is_named_as_a_raw_volume_that_needs_them() {
         "{said}"
     );
 }
+
+#[test]
+fn named_views_fit_what_the_crop_box_leaves() {
+    let dir = scratch("fit-crop");
+    std::fs::write(dir.join("block.raw"), vec![200u8; 32 * 32 * 32]).unwrap();
+    let volume = r#"path = "block.raw"
+dims = [32, 32, 32]
+scalar = "u8"
+transfer = "ramp"
+window = [0, 255]"#;
+    std::fs::write(dir.join("whole.toml"), format!("[[volume]]\n{volume}\n")).unwrap();
+    // A crop box in one corner of the block, a quarter of its side, in world coordinates.
+    let whole = splatscene::scene::file::load_scene_file(&dir.join("whole.toml")).unwrap();
+    let (lo, hi) = whole.scene.volume_bounds().unwrap();
+    let (a, b) = (lo + 0.6 * (hi - lo), lo + 0.85 * (hi - lo));
+    let cropped = format!(
+        "[[volume]]\n{volume}\ncrop_box = {{ min = [{}, {}, {}], max = [{}, {}, {}] }}\n",
+        a.x, a.y, a.z, b.x, b.y, b.z
+    );
+    std::fs::write(dir.join("cropped.toml"), cropped).unwrap();
+    for view in ["anterior", "superior", "anterolateral-right"] {
+        let out = dir.join(format!("{view}.png"));
+        let o = splatscene(&[
+            "render",
+            dir.join("cropped.toml").to_str().unwrap(),
+            "--view",
+            view,
+            "--size",
+            "120x120",
+            "--transparent",
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        // What is drawn: the pixels with any cover, measured on the picture alone.
+        let image = image::open(&out).unwrap().to_rgba8();
+        let drawn: Vec<(u32, u32)> = image
+            .enumerate_pixels()
+            .filter(|(_, _, p)| p[3] > 0)
+            .map(|(x, y, _)| (x, y))
+            .collect();
+        assert!(!drawn.is_empty(), "{view}: nothing drawn");
+        let (x0, x1) = (
+            drawn.iter().map(|p| p.0).min().unwrap(),
+            drawn.iter().map(|p| p.0).max().unwrap(),
+        );
+        let (y0, y1) = (
+            drawn.iter().map(|p| p.1).min().unwrap(),
+            drawn.iter().map(|p| p.1).max().unwrap(),
+        );
+        // Centred, and filling a good part of the picture (the whole block would show the
+        // cropped corner at a sixth of it, off to one side).
+        let centre = (f64::from(x0 + x1) / 2.0, f64::from(y0 + y1) / 2.0);
+        assert!(
+            (centre.0 - 59.5).abs() < 8.0 && (centre.1 - 59.5).abs() < 8.0,
+            "{view}: drawn about {centre:?}"
+        );
+        assert!(
+            (x1 - x0).max(y1 - y0) > 55,
+            "{view}: drawn over {}x{} px",
+            x1 - x0,
+            y1 - y0
+        );
+    }
+}

@@ -1615,13 +1615,20 @@ fn a_plan_made_in_the_viewer_is_saved_undone_measured_and_reloaded_under_xvfb() 
     xdo(&display, &["key", "b"]).expect("b");
     assert_eq!(line(&lines, "crop box"), "off");
 
-    // A plan that cannot be written is said so, and kept: its folder gone, then back.
+    // A plan that cannot be written beside its scene (the folder gone) is said so, and
+    // saved in the screenshot folder instead.
     xdo(&display, &["key", "Delete"]).expect("delete");
     assert!(line(&lines, "measurement 1").starts_with("delete"));
     let moved_away = dir.join("case-moved");
     std::fs::rename(&case, &moved_away).unwrap();
     xdo(&display, &["key", "ctrl+s"]).expect("ctrl+s");
-    assert!(line(&lines, "the plan was not saved").contains("kept here"));
+    assert!(line(&lines, "plan not saved in its folder").contains("case"));
+    let elsewhere = PathBuf::from(line(&lines, "saved plan"));
+    assert_eq!(elsewhere, dir.join("shoulder-plan.toml"));
+    let plan = splatscene::scene::file::load_scene_file(&elsewhere)
+        .unwrap()
+        .scene;
+    assert!(plan.measurements.is_empty(), "the deletion is saved");
     std::fs::rename(&moved_away, &case).unwrap();
     xdo(&display, &["key", "ctrl+z"]).expect("ctrl+z");
     assert!(line(&lines, "undo").starts_with("delete"));

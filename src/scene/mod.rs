@@ -368,6 +368,45 @@ impl Scene {
         self.bounds
     }
 
+    /// World-space bounds `(min, max)` of what is drawn: each volume and mesh as the clip
+    /// planes and the crop box cut it (meshes by those that cut meshes), or `None` where
+    /// nothing is left. Views are fitted to these, so that a cropped shoulder fills the
+    /// picture.
+    pub fn drawn_bounds(&self) -> Option<(DVec3, DVec3)> {
+        self.nodes
+            .iter()
+            .zip(&self.local_bounds)
+            .zip(&self.world)
+            .filter_map(|((node, b), world)| {
+                let (lo, hi) = (*b)?;
+                // A mesh by its vertices (its box turned with it would hold more than it
+                // does); a volume by its box's corners, which bound it exactly.
+                let (wlo, whi) = match &node.content {
+                    NodeContent::Mesh(m) | NodeContent::Overlay(m) => m
+                        .mesh
+                        .positions
+                        .iter()
+                        .map(|p| world.transform_point3(DVec3::from(p.map(f64::from))))
+                        .fold(None, grow)?,
+                    _ => box_corners(lo, hi)
+                        .map(|c| world.transform_point3(c))
+                        .into_iter()
+                        .fold(None, grow)?,
+                };
+                let mesh = !matches!(node.content, NodeContent::Volume(_));
+                self.clipping.cut_box(wlo, whi, mesh)
+            })
+            .fold(None, |acc, (lo, hi)| grow(grow(acc, lo), hi))
+    }
+
+    /// What views are fitted to: [`Scene::drawn_bounds`], else (everything clipped away)
+    /// [`Scene::bounds`], else a unit box about the origin.
+    pub fn fit_bounds(&self) -> (DVec3, DVec3) {
+        self.drawn_bounds()
+            .or(self.bounds)
+            .unwrap_or((DVec3::splat(-1.0), DVec3::ONE))
+    }
+
     /// World-space bounds `(min, max)` of the volumes alone, or `None` for a scene without
     /// volumes.
     pub fn volume_bounds(&self) -> Option<(DVec3, DVec3)> {

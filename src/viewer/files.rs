@@ -32,11 +32,10 @@ impl App {
             match self.save_plan_in(&dir, &stem, size) {
                 Ok(path) => {
                     self.edit.history.mark_saved();
-                    let mut text = format!("saved plan {}", path.display());
                     if let Some(first) = refused.first() {
-                        text = format!("{text} ({first})");
+                        self.say(format!("plan not saved in its folder: {first}"));
                     }
-                    self.say(text);
+                    self.say(format!("saved plan {}", path.display()));
                     return;
                 }
                 Err(e) => {

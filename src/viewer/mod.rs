@@ -129,7 +129,7 @@ const SETTLE: Duration = Duration::from_millis(250);
 pub fn run(scene: Scene, options: ViewerOptions) -> Result<(), ViewerError> {
     let event_loop = EventLoop::new().map_err(|e| ViewerError::Window(e.to_string()))?;
     let home = scene.camera.unwrap_or_else(|| {
-        let bounds = scene.bounds().unwrap_or((DVec3::splat(-1.0), DVec3::ONE));
+        let bounds = scene.fit_bounds();
         SceneCamera::fit(
             bounds,
             DVec3::new(-0.3, -1.0, -0.35),

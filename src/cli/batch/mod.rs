@@ -660,17 +660,18 @@ fn render_job(
         };
         let view = &job.views[item.view];
         let aspect = f64::from(item.size.0) / f64::from(item.size.1);
-        // Cameras come from the whole scene, so that a picture without the volumes is seen
-        // from where the one with them is.
+        // Named and fitted views fit what this picture draws (a picture of the meshes alone
+        // fits the meshes, not the volume left out); the scene's own camera is the same for
+        // every content.
         let camera = match &view.kind {
             ViewKind::Scene => base,
             ViewKind::Named(v) => {
-                let mut c = named_view_camera(full, v, base.projection, aspect);
+                let mut c = named_view_camera(scene, v, base.projection, aspect);
                 c.near = base.near;
                 c
             }
             ViewKind::Camera(spec) => {
-                scene_camera(Some(spec), full, aspect).map_err(anyhow::Error::msg)?
+                scene_camera(Some(spec), scene, aspect).map_err(anyhow::Error::msg)?
             }
         };
         let options = FrameOptions {

@@ -54,7 +54,7 @@ pub fn camera(
 ) -> Result<SceneCamera, CameraSpecError> {
     let default = CameraSpec::default();
     let spec = spec.unwrap_or(&default);
-    let bounds = scene.bounds().unwrap_or((DVec3::splat(-1.0), DVec3::ONE));
+    let bounds = scene.fit_bounds();
     let projection = match (spec.orthographic_height, spec.fov) {
         (Some(height), _) if height.is_finite() && height > 0.0 => {
             Projection::Orthographic { height }
@@ -133,14 +133,15 @@ pub fn upright(forward: DVec3, scene: &Scene) -> DVec3 {
     }
 }
 
-/// A camera for a named view of the scene's patient, fitted to the scene.
+/// A camera for a named view of the scene's patient, fitted to what is drawn of the scene
+/// ([`Scene::fit_bounds`]: the crop box and clip planes cut it).
 pub fn named_view_camera(
     scene: &Scene,
     view: &NamedView,
     projection: Projection,
     aspect: f64,
 ) -> SceneCamera {
-    let bounds = scene.bounds().unwrap_or((DVec3::splat(-1.0), DVec3::ONE));
+    let bounds = scene.fit_bounds();
     let frame = scene.patient_frame();
     let mut camera = SceneCamera::fit(bounds, -frame.world(view.from), projection, aspect);
     camera.up = frame.world(view.up);
