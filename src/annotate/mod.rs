@@ -11,8 +11,10 @@ use crate::camera::CameraFrame;
 use crate::scene::patient::PatientFrame;
 use crate::scene::{Projection, SceneCamera};
 
+pub mod layout;
 pub mod text;
 
+pub use layout::{Layout, Rect};
 pub use text::{Anchor, NoFont, Painter, font_bytes};
 
 /// Which annotations to draw; all on by default, no caption.
@@ -134,10 +136,18 @@ impl ImageCamera {
 pub struct Drawn {
     /// The letters at the left, right, top and bottom edges (empty when not drawn).
     pub edge_letters: [String; 4],
-    /// The scale bar's label (`50 mm at the target`), when drawn.
+    /// The scale bar's label (`50 mm at the target`), when drawn (a picture too small for it
+    /// leaves it out).
     pub scale: Option<String>,
-    /// Whether the orientation marker was drawn.
+    /// Whether the orientation marker was drawn (a picture with no free corner for it leaves
+    /// it out).
     pub marker: bool,
+    /// The measurement labels (and a caption) left out for want of room: each free spot
+    /// near its point was taken or outside the picture.
+    pub dropped: Vec<String>,
+    /// Every piece of text drawn, with the rectangle it covers: edge letters, the marker's
+    /// letters, the scale bar's label, the caption and the measurement labels.
+    pub texts: Vec<(String, Rect)>,
 }
 
 /// Draws the annotations onto `image`, rendered with `camera`, for a scene whose patient lies
@@ -150,46 +160,137 @@ pub fn annotate_image(
     labels: &[Label],
     parts: &Annotations,
 ) -> Result<Drawn, NoFont> {
+    annotate_image_clear_of(image, camera, patient, labels, parts, &[])
+}
+
+/// [`annotate_image`], keeping clear of the rectangles `clear` (a window's own text, a colour
+/// bar). Every mark takes its place in one layout: the edge letters, the marker and the scale
+/// bar where they belong; the caption along the top, below the top letter where it would
+/// touch it, shortened with `…` to the picture's width; each measurement label in the first
+/// free spot around its point, with a leader line when that spot is not beside it, or left
+/// out (and listed in [`Drawn::dropped`]) when there is none.
+pub fn annotate_image_clear_of(
+    image: &mut RgbaImage,
+    camera: &SceneCamera,
+    patient: &PatientFrame,
+    labels: &[Label],
+    parts: &Annotations,
+    clear: &[Rect],
+) -> Result<Drawn, NoFont> {
     let mut drawn = Drawn::default();
     let Some(cam) = ImageCamera::new(camera, image.width(), image.height()) else {
         return Ok(drawn);
     };
     let mut painter = Painter::new(image)?;
-    if parts.edge_letters {
-        drawn.edge_letters = edge_letters(&mut painter, &cam, patient);
+    let (w, h) = painter.size();
+    let mut layout = Layout::new(w, h);
+    for r in clear {
+        layout.take(*r);
     }
-    if parts.orientation_marker {
-        orientation_marker(&mut painter, &cam, patient);
+    let pad = 0.25 * painter.text_px;
+    let mut top_letter = None;
+    if parts.edge_letters {
+        let (letters, rects) = edge_letters(&mut painter, &cam, patient);
+        for (l, r) in letters.iter().zip(rects) {
+            layout.take(layout::grown(r, pad));
+            drawn.texts.push((l.clone(), r));
+        }
+        drawn.edge_letters = letters;
+        top_letter = Some(rects[2]);
+    }
+    if parts.orientation_marker
+        && let Some(r) = orientation_marker(&mut painter, &cam, patient, &layout, &mut drawn.texts)
+    {
+        layout.take(r);
         drawn.marker = true;
     }
-    if parts.scale_bar {
-        drawn.scale = scale_bar(&mut painter, &cam);
-    }
-    if parts.measurements {
-        for label in labels {
-            if let Some([x, y]) = cam.project(label.at) {
-                let off = 0.6 * painter.text_px;
-                painter.text(&label.text, x + off, y - off, Anchor::BottomLeft, LABEL);
-            }
-        }
+    if parts.scale_bar
+        && let Some((text, rect, label)) = scale_bar(&mut painter, &cam, &layout)
+    {
+        drawn.texts.push((text.clone(), label));
+        drawn.scale = Some(text);
+        layout.take(layout::grown(rect, pad));
     }
     if let Some(caption) = &parts.caption {
         let margin = 0.6 * painter.text_px;
-        painter.text(caption, margin, margin, Anchor::TopLeft, WHITE);
+        let text = shortened(&painter, caption, w - 2.0 * margin);
+        let (tw, th) = painter.measure(&text);
+        let mut top = margin;
+        if let Some(letter) = top_letter
+            && layout::overlaps(
+                layout::grown(letter, pad),
+                [margin, top, margin + tw, top + th],
+            )
+        {
+            top = letter[3] + pad;
+        }
+        let rect = [margin, top, margin + tw, top + th];
+        if layout.fits(rect) {
+            let rect = painter.text(&text, margin, top, Anchor::TopLeft, WHITE);
+            layout.take(layout::grown(rect, pad));
+            drawn.texts.push((text, rect));
+        } else {
+            drawn.dropped.push(caption.clone());
+        }
+    }
+    if parts.measurements {
+        let gap = 0.6 * painter.text_px;
+        for label in labels {
+            let Some(at) = cam.project(label.at) else {
+                continue;
+            };
+            let size = painter.measure(&label.text);
+            match layout.place_label(at, size, gap) {
+                Some(placed) => {
+                    if placed.leader {
+                        let end = layout::nearest_on(placed.rect, at);
+                        painter.line(at, end, 1.0, LABEL);
+                    }
+                    let rect = painter.text(
+                        &label.text,
+                        placed.rect[0],
+                        placed.rect[1],
+                        Anchor::TopLeft,
+                        LABEL,
+                    );
+                    layout.take(layout::grown(rect, pad));
+                    drawn.texts.push((label.text.clone(), rect));
+                }
+                None => drawn.dropped.push(label.text.clone()),
+            }
+        }
     }
     Ok(drawn)
+}
+
+/// `text` cut to at most `width` pixels, ending in `…` where it was cut.
+pub fn shortened(painter: &Painter<'_>, text: &str, width: f32) -> String {
+    if painter.measure(text).0 <= width {
+        return text.to_owned();
+    }
+    let chars: Vec<char> = text.chars().collect();
+    let mut n = chars.len();
+    while n > 0 {
+        n -= 1;
+        let cut: String = chars[..n].iter().collect::<String>().trim_end().to_owned() + "…";
+        if painter.measure(&cut).0 <= width {
+            return cut;
+        }
+    }
+    String::new()
 }
 
 const WHITE: [u8; 4] = [255, 255, 255, 255];
 /// Measurement labels, in the colour of the measurement markers.
 const LABEL: [u8; 4] = [255, 214, 64, 255];
 
-/// The patient direction toward each image edge, at its middle.
+/// The patient direction toward each image edge, at its middle: the letters, and where each
+/// was drawn (left, right, top, bottom).
 fn edge_letters(
     painter: &mut Painter<'_>,
     cam: &ImageCamera,
     patient: &PatientFrame,
-) -> [String; 4] {
+) -> ([String; 4], [Rect; 4]) {
     let (w, h) = painter.size();
     let m = 0.5 * painter.text_px;
     let f = cam.frame;
@@ -199,7 +300,9 @@ fn edge_letters(
         (f.up, w / 2.0, m, Anchor::TopCentre),
         (-f.up, w / 2.0, h - m, Anchor::BottomCentre),
     ];
-    edges.map(|(direction, x, y, anchor)| {
+    let mut rects = [[0.0; 4]; 4];
+    let letters = std::array::from_fn(|i| {
+        let (direction, x, y, anchor) = edges[i];
         let letters = patient.letters(direction);
         let (_, th) = painter.measure(&letters);
         // Side letters are centred on the edge's middle.
@@ -208,21 +311,32 @@ fn edge_letters(
         } else {
             y
         };
-        painter.text(&letters, x, y, anchor, WHITE);
+        rects[i] = painter.text(&letters, x, y, anchor, WHITE);
         letters
-    })
+    });
+    (letters, rects)
 }
 
 /// The patient axes as seen by the camera, drawn from a point in the lower right corner:
 /// R red, A green, S blue (3D Slicer's colours), the positive half bold with its letter, the
-/// negative half thin with its own.
-fn orientation_marker(painter: &mut Painter<'_>, cam: &ImageCamera, patient: &PatientFrame) {
+/// negative half thin with its own. Letters that would touch one another (two axes seen
+/// along nearly the same line) are pushed apart along their axes. Returns the rectangle the
+/// marker and its letters cover.
+fn orientation_marker(
+    painter: &mut Painter<'_>,
+    cam: &ImageCamera,
+    patient: &PatientFrame,
+    layout: &Layout,
+    texts: &mut Vec<(String, Rect)>,
+) -> Option<Rect> {
     let (w, h) = painter.size();
     let radius = 0.09 * w.min(h).max(120.0);
-    let centre = [
+    let home = [
         w - radius - 1.6 * painter.text_px,
         h - radius - 1.6 * painter.text_px,
     ];
+    // Laid out about the origin, then moved to its place.
+    let centre = [0.0f32, 0.0];
     let axes = [
         (DVec3::X, ['R', 'L'], [235, 80, 70, 255]),
         (DVec3::Y, ['A', 'P'], [90, 210, 90, 255]),
@@ -240,7 +354,86 @@ fn orientation_marker(painter: &mut Painter<'_>, cam: &ImageCamera, patient: &Pa
     // Far halves first, so that the ones pointing at the viewer are drawn over them.
     halves.sort_by(|a, b| b.0.total_cmp(&a.0));
     let stroke = (painter.text_px / 6.0).max(1.5);
-    for (depth, positive, letter, [sx, sy], color) in halves {
+    let mut covered = [
+        centre[0] - radius,
+        centre[1] - radius,
+        centre[0] + radius,
+        centre[1] + radius,
+    ];
+    // The letters' places, found first (nearest the viewer first, as they matter most), so
+    // that no two touch.
+    let mut letters: Vec<Option<[f32; 2]>> = vec![None; halves.len()];
+    let mut placed: Vec<Rect> = Vec::new();
+    let order: Vec<usize> = (0..halves.len()).rev().collect();
+    for i in order {
+        let (depth, _, letter, [sx, sy], _) = halves[i];
+        let length = (sx * sx + sy * sy).sqrt();
+        let (tw, th) = painter.measure(&letter.to_string());
+        let rect_at = |p: [f32; 2]| {
+            layout::grown(
+                [
+                    p[0] - tw / 2.0,
+                    p[1] - th / 2.0,
+                    p[0] + tw / 2.0,
+                    p[1] + th / 2.0,
+                ],
+                0.1 * painter.text_px,
+            )
+        };
+        // The letter beyond the tip; an axis seen end-on gets its letter beside the centre,
+        // for the end facing the viewer only.
+        let (start, step) = if length > 0.25 {
+            let reach = radius + 0.7 * painter.text_px;
+            let (ux, uy) = (sx / length, sy / length);
+            (
+                [centre[0] + reach * ux, centre[1] + reach * uy],
+                [0.5 * painter.text_px * ux, 0.5 * painter.text_px * uy],
+            )
+        } else if depth < 0.0 {
+            (
+                [
+                    centre[0] + 0.8 * painter.text_px,
+                    centre[1] - 0.8 * painter.text_px,
+                ],
+                [0.5 * painter.text_px, -0.5 * painter.text_px],
+            )
+        } else {
+            continue;
+        };
+        let mut at = start;
+        for _ in 0..6 {
+            if !placed.iter().any(|r| layout::overlaps(*r, rect_at(at))) {
+                break;
+            }
+            at = [at[0] + step[0], at[1] + step[1]];
+        }
+        let r = rect_at(at);
+        placed.push(r);
+        covered = [
+            covered[0].min(r[0]),
+            covered[1].min(r[1]),
+            covered[2].max(r[2]),
+            covered[3].max(r[3]),
+        ];
+        letters[i] = Some(at);
+    }
+    // In the lower right corner, else as near it (up, then left) as leaves the other marks
+    // clear; nowhere, and it is left out.
+    let step = 0.5 * painter.text_px;
+    let at = |[x, y]: [f32; 2]| {
+        [
+            covered[0] + x,
+            covered[1] + y,
+            covered[2] + x,
+            covered[3] + y,
+        ]
+    };
+    let centre = (0..12)
+        .flat_map(|up| (0..8).map(move |left| (up, left)))
+        .map(|(up, left)| [home[0] - step * left as f32, home[1] - step * up as f32])
+        .find(|c| layout.fits(at(*c)))?;
+    let covered = at(centre);
+    for (i, (_, positive, letter, [sx, sy], color)) in halves.into_iter().enumerate() {
         let tip = [centre[0] + radius * sx, centre[1] + radius * sy];
         let width = if positive { stroke } else { 0.5 * stroke };
         let color = if positive {
@@ -252,24 +445,13 @@ fn orientation_marker(painter: &mut Painter<'_>, cam: &ImageCamera, patient: &Pa
         if length > 0.05 {
             painter.line(centre, tip, width, color);
         }
-        // The letter beyond the tip; an axis seen end-on gets its letter beside the centre,
-        // for the end facing the viewer only.
-        let reach = radius + 0.7 * painter.text_px;
-        let at = if length > 0.25 {
-            [
-                centre[0] + reach * sx / length,
-                centre[1] + reach * sy / length,
-            ]
-        } else if depth < 0.0 {
-            [
-                centre[0] + 0.8 * painter.text_px,
-                centre[1] - 0.8 * painter.text_px,
-            ]
-        } else {
-            continue;
-        };
-        painter.text(&letter.to_string(), at[0], at[1], Anchor::Centre, color);
+        if let Some([x, y]) = letters[i] {
+            let (x, y) = (x + centre[0], y + centre[1]);
+            let rect = painter.text(&letter.to_string(), x, y, Anchor::Centre, color);
+            texts.push((letter.to_string(), rect));
+        }
     }
+    Some(covered)
 }
 
 /// A colour bar legend in the upper right corner (clear of the edge letters): the colours `colour` gives over
@@ -332,8 +514,13 @@ pub fn colour_bar(
 
 /// A bar of a round length (1, 2 or 5 times a power of ten millimetres) near a fifth of the
 /// image width, in the lower left corner, labelled with its length; in a perspective view the
-/// length holds at the target's depth only, and the label says so.
-fn scale_bar(painter: &mut Painter<'_>, cam: &ImageCamera) -> Option<String> {
+/// length holds at the target's depth only, and the label says so. Returns the label, the rectangle
+/// the bar and label cover, and the label's own.
+fn scale_bar(
+    painter: &mut Painter<'_>,
+    cam: &ImageCamera,
+    layout: &Layout,
+) -> Option<(String, Rect, Rect)> {
     let (w, h) = painter.size();
     let per_mm = cam.pixels_per_mm();
     if !(per_mm.is_finite() && per_mm > 0.0) {
@@ -345,6 +532,18 @@ fn scale_bar(painter: &mut Painter<'_>, cam: &ImageCamera) -> Option<String> {
     let y = h - m;
     let tick = 0.4 * painter.text_px;
     let stroke = (painter.text_px / 7.0).max(1.5);
+    let text = if cam.orthographic {
+        format!("{} mm", format_length(mm))
+    } else {
+        format!("{} mm at the target", format_length(mm))
+    };
+    let (tw, th) = painter.measure(&text);
+    let base = y - tick - 0.2 * painter.text_px;
+    let rect = [m, base - th, (m + length).max(m + tw), y + tick + stroke];
+    // Left out where it would cover another mark or leave the picture.
+    if !layout.fits(rect) {
+        return None;
+    }
     painter.lines(
         &[
             ([m, y], [m + length, y]),
@@ -354,19 +553,8 @@ fn scale_bar(painter: &mut Painter<'_>, cam: &ImageCamera) -> Option<String> {
         stroke,
         WHITE,
     );
-    let text = if cam.orthographic {
-        format!("{} mm", format_length(mm))
-    } else {
-        format!("{} mm at the target", format_length(mm))
-    };
-    painter.text(
-        &text,
-        m,
-        y - tick - 0.2 * painter.text_px,
-        Anchor::BottomLeft,
-        WHITE,
-    );
-    Some(text)
+    let label = painter.text(&text, m, base, Anchor::BottomLeft, WHITE);
+    Some((text, rect, label))
 }
 
 /// The largest of 1, 2 or 5 times a power of ten that is at most `limit`.

@@ -168,7 +168,24 @@ pub(crate) fn figure_image(
         )?),
         None => None,
     };
+    say_dropped(drawn.as_ref(), parts);
     Ok((image, drawn))
+}
+
+/// A note on stderr for each label, and the marker, left out of a figure for want of room.
+pub(crate) fn say_dropped(
+    drawn: Option<&splatscene::annotate::Drawn>,
+    parts: Option<&Annotations>,
+) {
+    let Some(drawn) = drawn else {
+        return;
+    };
+    for text in &drawn.dropped {
+        eprintln!("note: the label {text:?} was left out: no free place near its point");
+    }
+    if parts.is_some_and(|p| p.orientation_marker) && !drawn.marker {
+        eprintln!("note: the orientation marker was left out: no free corner for it");
+    }
 }
 
 pub fn run_render(args: RenderArgs) -> Result<()> {

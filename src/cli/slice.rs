@@ -233,7 +233,8 @@ pub fn slice_figure(
             .take()
             .map(|c| c.replace("{slice}", &wanted.spec.to_string()));
     }
-    let (image, _) = figure(&slice, scene, window, parts.as_ref())?;
+    let (image, drawn) = figure(&slice, scene, window, parts.as_ref())?;
+    super::render::say_dropped(drawn.as_ref(), parts.as_ref());
     Ok((image, slice.calibration(scene, window)))
 }
 

@@ -368,7 +368,8 @@ impl Scene {
         self.bounds
     }
 
-    /// World-space bounds `(min, max)` of what is drawn: each volume and mesh as the clip
+    /// World-space bounds `(min, max)` of what is drawn: each volume and mesh (not the
+    /// measurement markers over them) as the clip
     /// planes and the crop box cut it (meshes by those that cut meshes), or `None` where
     /// nothing is left. Views are fitted to these, so that a cropped shoulder fills the
     /// picture.
@@ -382,7 +383,9 @@ impl Scene {
                 // A mesh by its vertices (its box turned with it would hold more than it
                 // does); a volume by its box's corners, which bound it exactly.
                 let (wlo, whi) = match &node.content {
-                    NodeContent::Mesh(m) | NodeContent::Overlay(m) => m
+                    // Measurement markers are drawn over the scene, not part of it.
+                    NodeContent::Overlay(_) => return None,
+                    NodeContent::Mesh(m) => m
                         .mesh
                         .positions
                         .iter()

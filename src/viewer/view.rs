@@ -9,7 +9,7 @@ use glam::DVec3;
 use super::action::{KEYS, STEP};
 use super::look::contact_ticks;
 use super::{App, PREVIEW_ABOVE, SETTLE, ViewerError};
-use crate::annotate::{Anchor, Label, Painter, annotate_image, colour_bar};
+use crate::annotate::{Anchor, Label, Painter, Rect, annotate_image_clear_of, colour_bar};
 use crate::pick::measure::{MarkerStyle, Measurement, annotate, draw_scene_measurements};
 use crate::pick::paint::value_colour;
 use crate::render::{FrameOptions, RenderError, ViewSetup, frame_to_rgba8, write_overlay};
@@ -61,6 +61,13 @@ impl App {
         } else {
             None
         };
+        // Labels keep clear of the on-screen text (as wrapped now; its numbers change, its
+        // lines seldom) in the window, not in the 3D pane of four.
+        let clear: Vec<Rect> = if self.panes.is_some() {
+            Vec::new()
+        } else {
+            vec![hud_block(&self.hud_lines(), window_size.0).1]
+        };
         let Some(gpu) = &mut self.gpu else {
             return Ok(());
         };
@@ -73,12 +80,13 @@ impl App {
         let on_cpu = gpu.renderer.composites_on_cpu(&gpu.ctx) || self.panes.is_some();
         let annotate_3d = |image: &mut image::RgbaImage, annotations_on: &mut bool| {
             if let (Some(parts), true) = (&self.options.annotations, *annotations_on)
-                && let Err(e) = annotate_image(
+                && let Err(e) = annotate_image_clear_of(
                     image,
                     &self.camera,
                     &self.edit.scene.patient_frame(),
                     &labels,
                     parts,
+                    &clear,
                 )
             {
                 eprintln!("annotations off: {e}");
@@ -448,30 +456,142 @@ pub(super) fn shade(image: &mut image::RgbaImage, x0: u32, y0: u32, x1: u32, y1:
     }
 }
 
-/// Writes the on-screen text into the top left of `image`, and the keys over it when `help`.
+/// Where the on-screen text starts: below the top edge's direction letter.
+const HUD_TOP: f32 = 28.0;
+/// The on-screen text's left margin, size and line step, in pixels.
+const HUD_LEFT: f32 = 10.0;
+const HUD_PX: f32 = 13.0;
+const HUD_STEP: f32 = 16.0;
+
+/// `text` broken at spaces into lines of at most `width` pixels as `painter` measures them (a
+/// word longer than that is a line of its own, shortened with `…`).
+fn wrapped(painter: &Painter<'_>, text: &str, width: f32) -> Vec<String> {
+    let mut lines: Vec<String> = Vec::new();
+    let mut current = String::new();
+    for word in text.split(' ') {
+        let tried = if current.is_empty() {
+            word.to_owned()
+        } else {
+            format!("{current} {word}")
+        };
+        if painter.measure(&tried).0 <= width || current.is_empty() {
+            current = tried;
+        } else {
+            lines.push(std::mem::take(&mut current));
+            current = word.to_owned();
+        }
+    }
+    lines.push(current);
+    lines
+        .into_iter()
+        .map(|l| crate::annotate::shortened(painter, &l, width))
+        .collect()
+}
+
+/// The on-screen text laid out for a window `width` pixels wide: its lines wrapped to fit,
+/// with the rectangle they cover.
+pub(super) fn hud_block(lines: &[String], width: u32) -> (Vec<String>, Rect) {
+    let mut scratch = image::RgbaImage::new(1, 1);
+    let Ok(mut painter) = Painter::new(&mut scratch) else {
+        return (lines.to_vec(), [0.0; 4]);
+    };
+    painter.text_px = HUD_PX;
+    let room = (width as f32 - 2.0 * HUD_LEFT).max(40.0);
+    let out: Vec<String> = lines
+        .iter()
+        .flat_map(|l| wrapped(&painter, l, room))
+        .collect();
+    let widest = out
+        .iter()
+        .map(|l| painter.measure(l).0)
+        .fold(0.0f32, f32::max);
+    let rect = [
+        HUD_LEFT - 2.0,
+        HUD_TOP - 2.0,
+        HUD_LEFT + widest + 2.0,
+        HUD_TOP + HUD_STEP * out.len() as f32 + 2.0,
+    ];
+    (out, rect)
+}
+
+/// Writes the on-screen text into the top left of `image`, wrapped to its width, and the keys
+/// under it on a dark panel sized to them when `help`: descriptions wrapped beside their
+/// keys, and where the window is too short for them all, the last line says where the rest
+/// are.
 pub(super) fn draw_hud(image: &mut image::RgbaImage, lines: &[String], help: bool) {
+    let (w, h) = image.dimensions();
+    let (lines, _) = hud_block(lines, w);
+    let mut rows: Vec<(String, String)> = Vec::new();
+    let mut panel = [0.0f32; 4];
     if help {
-        let top = 28 + 16 * (lines.len() as u32 + 1);
-        shade(image, 4, top - 4, 480, top + 16 * KEYS.len() as u32 + 4);
+        let mut scratch = image::RgbaImage::new(1, 1);
+        let Ok(mut measure) = Painter::new(&mut scratch) else {
+            return;
+        };
+        measure.text_px = HUD_PX;
+        let key_width = KEYS
+            .iter()
+            .map(|(k, _)| measure.measure(k).0)
+            .fold(0.0f32, f32::max)
+            + 12.0;
+        let room = (w as f32 - 2.0 * HUD_LEFT - key_width - 8.0).max(60.0);
+        for (keys, what) in KEYS {
+            for (i, part) in wrapped(&measure, what, room).into_iter().enumerate() {
+                let key = if i == 0 {
+                    (*keys).to_owned()
+                } else {
+                    String::new()
+                };
+                rows.push((key, part));
+            }
+        }
+        let top = HUD_TOP + HUD_STEP * (lines.len() as f32 + 1.0);
+        let fit = (((h as f32 - top - 8.0) / HUD_STEP).floor().max(1.0)) as usize;
+        if rows.len() > fit {
+            rows.truncate(fit.saturating_sub(1));
+            rows.push(("…".into(), "more keys: splatscene view --help".into()));
+        }
+        let widest = rows
+            .iter()
+            .map(|(_, what)| measure.measure(what).0)
+            .fold(0.0f32, f32::max);
+        panel = [
+            HUD_LEFT - 6.0,
+            top - 4.0,
+            (HUD_LEFT + key_width + widest + 6.0).min(w as f32),
+            (top + HUD_STEP * rows.len() as f32 + 4.0).min(h as f32),
+        ];
+        shade(
+            image,
+            panel[0] as u32,
+            panel[1] as u32,
+            panel[2] as u32,
+            panel[3] as u32,
+        );
+        panel[0] = key_width;
     }
     let Ok(mut painter) = Painter::new(image) else {
         return;
     };
-    painter.text_px = 13.0;
+    painter.text_px = HUD_PX;
     painter.halo_px = 1.5;
-    let step = 16.0;
-    // Below the top edge's direction letter and any caption.
-    let mut y = 28.0;
-    for line in lines {
-        painter.text(line, 10.0, y, Anchor::TopLeft, [235, 235, 235, 255]);
-        y += step;
+    let mut y = HUD_TOP;
+    for line in &lines {
+        painter.text(line, HUD_LEFT, y, Anchor::TopLeft, [235, 235, 235, 255]);
+        y += HUD_STEP;
     }
     if help {
-        y += step;
-        for (keys, what) in KEYS {
-            painter.text(keys, 10.0, y, Anchor::TopLeft, [255, 200, 90, 255]);
-            painter.text(what, 130.0, y, Anchor::TopLeft, [235, 235, 235, 255]);
-            y += step;
+        y += HUD_STEP;
+        for (keys, what) in &rows {
+            painter.text(keys, HUD_LEFT, y, Anchor::TopLeft, [255, 200, 90, 255]);
+            painter.text(
+                what,
+                HUD_LEFT + panel[0],
+                y,
+                Anchor::TopLeft,
+                [235, 235, 235, 255],
+            );
+            y += HUD_STEP;
         }
     }
 }
