@@ -976,3 +976,49 @@ window = [0, 255]"#;
         );
     }
 }
+
+#[test]
+fn a_ct_preset_on_values_that_are_no_hounsfield_units_is_warned_about() {
+    let dir = scratch("preset-mismatch");
+    let raw = dir.join("u8.raw");
+    std::fs::write(
+        &raw,
+        (0..16 * 16 * 16)
+            .map(|i| (i % 256) as u8)
+            .collect::<Vec<u8>>(),
+    )
+    .unwrap();
+    let run = |preset: &str| {
+        let o = splatscene(&[
+            "render",
+            raw.to_str().unwrap(),
+            "--dims",
+            "16,16,16",
+            "--scalar",
+            "u8",
+            "--preset",
+            preset,
+            "--size",
+            "32x24",
+            "--out",
+            dir.join(format!("{preset}.png")).to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        String::from_utf8_lossy(&o.stderr).into_owned()
+    };
+    let bone = run("ct-bone");
+    assert!(
+        bone.contains("ct-bone is made for Hounsfield units, but the values run from 0 to 255"),
+        "{bone}"
+    );
+    assert!(!run("mr-default").contains("Hounsfield"));
+    // The built-in CT phantom is in Hounsfield units: no warning.
+    let o = splatscene(&[
+        "render",
+        "--size",
+        "32x24",
+        "--out",
+        dir.join("builtin.png").to_str().unwrap(),
+    ]);
+    assert!(!String::from_utf8_lossy(&o.stderr).contains("made for Hounsfield"));
+}

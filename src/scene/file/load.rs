@@ -309,12 +309,16 @@ pub(super) fn load_volume(
                 eprintln!("{}: transfer function {}", spec.path, auto.reason);
                 auto.transfer
             } else {
-                TransferFunction::preset(other).ok_or_else(|| {
+                let preset = TransferFunction::preset(other).ok_or_else(|| {
                     invalid(format!(
                         "unknown transfer function {other:?} (auto, ramp, {})",
                         TransferFunction::PRESETS.join(", ")
                     ))
-                })?
+                })?;
+                if let Some(warning) = preset_mismatch(other, spec, &volume.values) {
+                    eprintln!("warning: {}: {warning}", spec.path);
+                }
+                preset
             }
         }
     };
@@ -671,6 +675,27 @@ pub(super) fn measurement(
         .measure(&m)
         .map_err(|e| format!("{name}: points: {e}"))?;
     Ok(m)
+}
+
+/// Why the CT preset `name` will draw these values badly, if it will: they are no Hounsfield
+/// units (LIDC-like 0..255 data), and neither `level_width` nor `shift` moves the preset onto
+/// them.
+fn preset_mismatch(
+    name: &str,
+    spec: &VolumeSpec,
+    values: &crate::volume::Voxels,
+) -> Option<String> {
+    if !name.starts_with("ct-")
+        || spec.level_width.is_some()
+        || spec.shift.is_some()
+        || crate::classify::is_hounsfield(values)
+    {
+        return None;
+    }
+    let (lo, hi) = crate::classify::finite_range(values);
+    Some(format!(
+        "{name} is made for Hounsfield units, but the values run from {lo} to {hi} (no air at -1000): the picture will be faint or empty; leave transfer out for a ramp over the data's percentiles, or move the preset with level_width or shift"
+    ))
 }
 
 /// Warnings for meshes whose size is under 1/100 or over 100 times the largest volume's: most
