@@ -2164,3 +2164,132 @@ fn a_plan_of_a_volume_without_a_scene_file_is_saved_beside_it_with_relative_path
     assert_eq!(std::fs::read_dir(&shots).unwrap().count(), 0);
     assert_eq!(std::fs::read(&ct).unwrap().len(), 32 * 32 * 32);
 }
+
+#[test]
+fn data_ramps_a_histogram_under_the_window_and_a_meshs_look_are_offered_and_saved() {
+    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    if !x11_tools() {
+        return;
+    }
+    let (_xvfb, display) = start_xvfb();
+    let dir = scratch("looks");
+    // Values 0..186 (no Hounsfield units) inside a large cube that hides them: the picture is
+    // the cube's, so that only the histogram panel changes it while the window is dragged.
+    let ct = dir.join("gradient.raw");
+    let values: Vec<u8> = (0..32 * 32 * 32)
+        .map(|i| (2 * (i % 32 + (i / 32) % 32 + i / 1024)) as u8)
+        .collect();
+    std::fs::write(&ct, values).unwrap();
+    let mesh = dir.join("box.obj");
+    std::fs::write(
+        &mesh,
+        common::shapes::obj_text(&common::shapes::cube(200.0)),
+    )
+    .unwrap();
+    let (_viewer, lines, window) = open_viewer(
+        &display,
+        &[
+            "view",
+            ct.to_str().unwrap(),
+            "--dims",
+            "32,32,32",
+            "--scalar",
+            "u8",
+            "--mesh",
+            mesh.to_str().unwrap(),
+            "--size",
+            "640x480",
+            "--plans",
+            dir.to_str().unwrap(),
+        ],
+    );
+    title(&display, &window, " splats");
+    xdo(&display, &["windowfocus", "--sync", &window]);
+    // T: ramps over the values' percentiles (the first is the automatic one, the scene's
+    // own, so it is skipped), then the MR preset; no CT preset.
+    let mut offered = Vec::new();
+    for _ in 0..3 {
+        xdo(&display, &["key", "t"]).expect("t");
+        offered.push(line(&lines, "transfer function"));
+    }
+    assert!(offered[0].starts_with("ramp p60-p95 ("), "{offered:?}");
+    assert!(offered[1].starts_with("ramp p25-p90 ("), "{offered:?}");
+    assert_eq!(offered[2], "mr-default");
+    xdo(&display, &["key", "t"]).expect("t");
+    assert_eq!(line(&lines, "transfer function"), "of the scene");
+    xdo(&display, &["key", "t"]).expect("t");
+    line(&lines, "transfer function ramp p60-p95");
+    title(&display, &window, " splats");
+    let before = screen(&display, &window, &dir, "1-before");
+    // While Alt+drag moves the window, a histogram panel shows along the bottom.
+    xdo(&display, &["keydown", "alt"]).expect("alt");
+    xdo(
+        &display,
+        &[
+            "mousemove",
+            "--window",
+            &window,
+            "300",
+            "300",
+            "mousedown",
+            "1",
+        ],
+    )
+    .expect("press");
+    std::thread::sleep(Duration::from_millis(150));
+    xdo(&display, &["mousemove", "--window", &window, "330", "300"]).expect("drag");
+    title(&display, &window, "window level");
+    std::thread::sleep(Duration::from_millis(600));
+    let during = screen(&display, &window, &dir, "2-windowing");
+    xdo(&display, &["mouseup", "1"]).expect("release");
+    xdo(&display, &["keyup", "alt"]).expect("alt");
+    line(&lines, "window level");
+    // The panel: 10% to 90% of the width, 72 px high above the bottom 56 rows (and its strip
+    // and values below).
+    let panel = Rect {
+        x0: 70,
+        y0: 480 - 56 - 72,
+        x1: 570,
+        y1: 480 - 56 + 20,
+    };
+    let below_hud = |_: usize, y: usize| y > 140;
+    let inside = during.changed_share(&before, panel, 12, &below_hud);
+    let outside = during.changed_share(&before, during.all(), 12, &|x, y| {
+        y > 140 && !panel.grown(6).contains(x, y)
+    });
+    assert!(inside > 0.3, "the panel changed {inside} of its pixels");
+    assert!(outside < 0.01, "{outside} of the rest changed");
+    title(&display, &window, " splats");
+    std::thread::sleep(Duration::from_millis(400));
+    let after = screen(&display, &window, &dir, "3-after");
+    let gone = after.changed_share(&before, panel, 12, &below_hud);
+    assert!(gone < 0.05, "the panel stays after the drag: {gone}");
+    // O and Shift+O on the selected mesh: its opacity, then its colour.
+    xdo(
+        &display,
+        &["mousemove", "--window", &window, "320", "240", "click", "1"],
+    )
+    .expect("click");
+    assert_eq!(line(&lines, "selected"), "box.obj");
+    xdo(&display, &["key", "o"]).expect("o");
+    assert_eq!(line(&lines, "look box.obj:"), "opacity 60%, its own colour");
+    xdo(&display, &["key", "shift+o"]).expect("shift+o");
+    assert_eq!(line(&lines, "look box.obj:"), "opacity 60%, bone");
+    title(&display, &window, " splats");
+    let seen = screen(&display, &window, &dir, "4-look");
+    assert!(
+        seen.changed_share(&after, Rect::around(320, 300, 40), 20, &anywhere) > 0.5,
+        "the box looks different"
+    );
+    // Saved with the plan: the ramp with the dragged window, the mesh's opacity and colour.
+    xdo(&display, &["key", "ctrl+s"]).expect("ctrl+s");
+    let saved = PathBuf::from(line(&lines, "saved plan"));
+    assert_eq!(saved, dir.join("gradient-plan.toml"));
+    let file = splatscene::scene::file::SceneFile::read(&saved).unwrap();
+    let volume = &file.volumes[0];
+    assert_eq!(volume.transfer.as_deref(), Some("ramp"));
+    assert!(volume.window.is_some() && volume.level_width.is_some());
+    assert_eq!(file.meshes[0].opacity, Some(0.6));
+    assert_eq!(file.meshes[0].color, Some(vec![0.89, 0.85, 0.76]));
+    splatscene::scene::file::load_scene_file(&saved).unwrap();
+}

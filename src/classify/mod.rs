@@ -217,42 +217,87 @@ pub fn finite_range(values: &Voxels) -> (f32, f32) {
 
 /// Two quantiles of the finite values above `lo` (`lo` and `hi` their range), from a histogram.
 fn percentiles_above_min(values: &Voxels, lo: f32, hi: f32, a: f64, b: f64) -> (f32, f32) {
-    if hi.partial_cmp(&lo) != Some(std::cmp::Ordering::Greater) {
-        return (lo.min(0.0), hi.max(1.0));
+    match Histogram::over(values, lo, hi) {
+        Some(h) => (h.quantile(a), h.quantile(b)),
+        None => (lo.min(0.0), hi.max(1.0)),
     }
-    let width = f64::from(hi) - f64::from(lo);
-    let bin = |v: f32| {
-        let t = (f64::from(v) - f64::from(lo)) / width;
-        ((t * HISTOGRAM_BINS as f64) as usize).min(HISTOGRAM_BINS - 1)
-    };
-    // Runs of a million values: a histogram each, a few hundred for the largest volumes.
-    let histogram = values
-        .par_chunks(1 << 20, |chunk| {
-            let mut h = vec![0u64; HISTOGRAM_BINS];
-            for &v in chunk.iter().filter(|v| v.is_finite() && **v > lo) {
-                h[bin(v)] += 1;
-            }
-            h
-        })
-        .into_iter()
-        .fold(vec![0u64; HISTOGRAM_BINS], |mut x, y| {
-            x.iter_mut().zip(&y).for_each(|(x, y)| *x += y);
-            x
-        });
-    let total: u64 = histogram.iter().sum();
-    let at = |q: f64| {
+}
+
+/// How many of a volume's finite values above their least fall in each of 4096 equal bins over
+/// their range (the least left out: it is most often the background around the scan). The
+/// automatic transfer function, the viewer's ramps for data that are no Hounsfield units and
+/// the histogram under its window come from it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Histogram {
+    /// The least finite value.
+    pub lo: f32,
+    /// The greatest finite value.
+    pub hi: f32,
+    /// The count in each bin, the first starting at `lo`.
+    pub counts: Vec<u64>,
+}
+
+impl Histogram {
+    /// The histogram of `values`; `None` where they hold fewer than two distinct finite values.
+    pub fn of(values: &Voxels) -> Option<Self> {
+        let (lo, hi) = finite_range(values);
+        Self::over(values, lo, hi)
+    }
+
+    /// The histogram of `values` whose finite range is `lo` to `hi`.
+    fn over(values: &Voxels, lo: f32, hi: f32) -> Option<Self> {
+        if hi.partial_cmp(&lo) != Some(std::cmp::Ordering::Greater) {
+            return None;
+        }
+        let width = f64::from(hi) - f64::from(lo);
+        let bin = |v: f32| {
+            let t = (f64::from(v) - f64::from(lo)) / width;
+            ((t * HISTOGRAM_BINS as f64) as usize).min(HISTOGRAM_BINS - 1)
+        };
+        // Runs of a million values: a histogram each, a few hundred for the largest volumes.
+        let counts = values
+            .par_chunks(1 << 20, |chunk| {
+                let mut h = vec![0u64; HISTOGRAM_BINS];
+                for &v in chunk.iter().filter(|v| v.is_finite() && **v > lo) {
+                    h[bin(v)] += 1;
+                }
+                h
+            })
+            .into_iter()
+            .fold(vec![0u64; HISTOGRAM_BINS], |mut x, y| {
+                x.iter_mut().zip(&y).for_each(|(x, y)| *x += y);
+                x
+            });
+        Some(Self { lo, hi, counts })
+    }
+
+    /// The value below which the fraction `q` of the counted values lie, to the middle of
+    /// its bin.
+    pub fn quantile(&self, q: f64) -> f32 {
+        let total: u64 = self.counts.iter().sum();
         let wanted = (q * total as f64).ceil() as u64;
         let mut seen = 0;
-        let i = histogram
+        let i = self
+            .counts
             .iter()
             .position(|&n| {
                 seen += n;
                 seen >= wanted.max(1)
             })
-            .unwrap_or(HISTOGRAM_BINS - 1);
-        (f64::from(lo) + width * (i as f64 + 0.5) / HISTOGRAM_BINS as f64) as f32
-    };
-    (at(a), at(b))
+            .unwrap_or(self.counts.len() - 1);
+        let width = f64::from(self.hi) - f64::from(self.lo);
+        (f64::from(self.lo) + width * (i as f64 + 0.5) / self.counts.len() as f64) as f32
+    }
+
+    /// The counts gathered into `n` bins over the same range (for drawing).
+    pub fn coarse(&self, n: usize) -> Vec<u64> {
+        let n = n.max(1);
+        let mut out = vec![0u64; n];
+        for (i, c) in self.counts.iter().enumerate() {
+            out[i * n / self.counts.len()] += c;
+        }
+        out
+    }
 }
 
 /// A splat's colour as every compositor reads it: the transfer function's straight colour in

@@ -518,3 +518,22 @@ fn a_uniform_field_gives_its_own_opacity_and_clear_space_no_splat() {
     .unwrap();
     assert!(none.grid.is_empty());
 }
+
+#[test]
+fn histogram_quantiles_match_a_sort_to_a_bin() {
+    // Background zeros, then values spread unevenly over 1..=4000.
+    let mut values: Vec<u16> = vec![0; 5000];
+    values.extend((1..=4000u32).map(|i| ((i * i) / 4000).max(1) as u16));
+    let h = Histogram::of(&Voxels::U16(values.clone())).unwrap();
+    assert_eq!((h.lo, h.hi), (0.0, 4000.0));
+    let mut above: Vec<u16> = values.into_iter().filter(|v| *v > 0).collect();
+    above.sort_unstable();
+    let bin = 4000.0 / h.counts.len() as f32;
+    for q in [0.1, 0.5, 0.9, 0.995] {
+        let sorted = f32::from(above[((q * above.len() as f64).ceil() as usize).max(1) - 1]);
+        let got = h.quantile(q);
+        assert!((got - sorted).abs() <= bin, "q {q}: {got} against {sorted}");
+    }
+    assert_eq!(h.coarse(64).iter().sum::<u64>(), 4000);
+    assert_eq!(Histogram::of(&Voxels::U8(vec![7; 10])), None);
+}

@@ -87,6 +87,11 @@ pub const KEYS: &[(&str, &str)] = &[
         "I",
         "four panes: the implant's long axis for the coronal pane",
     ),
+    ("O", "the selected mesh's opacity: 100, 60, 30%"),
+    (
+        "Shift+O",
+        "the selected mesh's colour: its own, bone, steel, cement, red, green, blue",
+    ),
     ("H", "this help"),
     ("Escape", "cancel, deselect; with nothing to cancel, quit"),
     (
@@ -202,6 +207,10 @@ pub enum Action {
     ImplantPane,
     /// The contact map on the selected mesh on and off.
     ToggleContactMap,
+    /// O: the selected mesh's opacity, in steps.
+    MeshOpacity,
+    /// Shift+O: the selected mesh's colour, from a palette.
+    MeshColour,
 }
 
 /// The action of `key` pressed with `modifiers` held; `None` for a key that does nothing.
@@ -286,6 +295,8 @@ fn character_action(c: &str, ctrl: bool, shift: bool, step: f64) -> Option<Actio
         "n" => Action::Snap,
         "x" => Action::ClearPoints,
         "k" if shift => Action::ToggleContactMap,
+        "o" if shift => Action::MeshColour,
+        "o" => Action::MeshOpacity,
         "k" => Action::Contact,
         "v" => Action::TogglePanes,
         "e" => Action::Place,

@@ -120,6 +120,7 @@ impl App {
         self.edit.measuring = None;
         self.edit.chosen = None;
         self.edit.marker = None;
+        self.looks.clear();
     }
     /// Reloads the scene file when it changed on disk, unless that would drop unsaved edits.
     pub(super) fn watch(&mut self) {
@@ -256,12 +257,36 @@ impl App {
             self.edit.scene.up_axis(),
         ));
         file.output.size = Some([size.0, size.1]);
+        // The looks set with O and Shift+O, on the mesh files they belong to (their top nodes
+        // follow the volumes', in the file's order).
+        let roots: Vec<crate::scene::NodeId> = (0..self.edit.scene.nodes().len())
+            .map(crate::scene::NodeId)
+            .filter(|id| self.edit.scene.nodes()[id.0].parent().is_none())
+            .collect();
+        let volumes = file.volumes.len();
+        for (i, spec) in file.meshes.iter_mut().enumerate() {
+            let Some(look) = roots.get(volumes + i).and_then(|id| self.looks.get(id)) else {
+                continue;
+            };
+            if look.colour > 0 {
+                let [r, g, b] = super::look::COLOURS[look.colour - 1].1;
+                spec.color = Some(match spec.color.as_deref() {
+                    Some([_, _, _, a]) => vec![r, g, b, *a],
+                    _ => vec![r, g, b],
+                });
+            }
+            if look.opacity > 0 {
+                spec.opacity =
+                    Some(spec.opacity.unwrap_or(1.0) * super::look::OPACITIES[look.opacity]);
+            }
+        }
         file.output.ordering = Some(self.ordering);
         for volume in &mut file.volumes {
-            if let Some(p) = self.preset {
-                volume.transfer = Some(p.to_owned());
-                volume.window = None;
-                volume.color = None;
+            if let Some(choice) = &self.preset {
+                (volume.transfer, volume.window, volume.color) = match choice.saved {
+                    Ok(name) => (Some(name.to_owned()), None, None),
+                    Err((window, colour)) => (Some("ramp".into()), Some(window), Some(colour)),
+                };
                 volume.level_width = None;
                 volume.shift = None;
             }

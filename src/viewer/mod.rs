@@ -160,6 +160,8 @@ pub fn run(scene: Scene, options: ViewerOptions) -> Result<(), ViewerError> {
         ordering,
         preset: None,
         fitting: Vec::new(),
+        histogram: None,
+        looks: Default::default(),
         own: Vec::new(),
         window: None,
         windowing: None,
@@ -238,10 +240,15 @@ struct App {
     home: SceneCamera,
     camera: SceneCamera,
     ordering: Ordering,
-    /// The preset the `T` key chose last; `None` while the scene's own functions hold.
-    preset: Option<&'static str>,
-    /// The presets that fit the data: the CT ones for Hounsfield data, else the MR one.
-    fitting: Vec<&'static str>,
+    /// The function the `T` key chose last; `None` while the scene's own functions hold.
+    preset: Option<look::Choice>,
+    /// The functions that fit the data: the CT presets for Hounsfield data, else ramps over
+    /// the values' percentiles and the MR preset.
+    fitting: Vec<look::Choice>,
+    /// The meshes whose opacity or colour was changed with O or Shift+O, by top node.
+    looks: std::collections::HashMap<NodeId, look::Look>,
+    /// The first volume's histogram, drawn under the window while it is dragged.
+    histogram: Option<crate::classify::Histogram>,
     /// Each volume's own transfer function, as the scene gave it.
     own: Vec<(NodeId, Arc<TransferFunction>)>,
     /// A window `(level, width)` set with Alt+drag over the chosen function.
@@ -506,6 +513,8 @@ impl App {
             Action::TogglePanes => self.toggle_panes(),
             Action::ImplantPane => self.toggle_implant_pane(),
             Action::ToggleContactMap => self.toggle_contact_map(),
+            Action::MeshOpacity => self.next_look(true),
+            Action::MeshColour => self.next_look(false),
             Action::ToggleClip => self.toggle_clip(),
             Action::MoveClip(mm) => self.move_clip(mm),
             Action::ToggleCrop => self.toggle_crop(),

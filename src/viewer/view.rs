@@ -165,6 +165,13 @@ impl App {
         };
         let surface_view = frame.texture.create_view(&Default::default());
         let (w, h) = window_size;
+        if self.windowing.is_some()
+            && self.panes.is_none()
+            && let (Some(histogram), Some((_, volume, _))) =
+                (&self.histogram, self.edit.scene.volumes().next())
+        {
+            draw_histogram(&mut overlay, histogram, &volume.transfer);
+        }
         draw_hud(&mut overlay, &hud, self.help);
         write_overlay(&gpu.ctx, &gpu.overlay, overlay.as_raw(), w, h);
         let overlay = Some(gpu.overlay.create_view(&Default::default()));
@@ -323,6 +330,9 @@ impl App {
                 "selected {}: {placement}; pivot {pivot}; steps {STEP} mm, {STEP}\u{b0} (Shift x10)",
                 node.name,
             ));
+            if let Some(look) = self.looks.get(&top) {
+                lines.push(format!("{}: {}", node.name, look.describe()));
+            }
         }
         if let Some(panes) = &self.panes {
             let p = self.edit.scene.patient_frame().patient(panes.point);
@@ -454,6 +464,73 @@ pub(super) fn shade(image: &mut image::RgbaImage, x0: u32, y0: u32, x1: u32, y1:
             }
         }
     }
+}
+
+/// The histogram of the volume's values (log counts, the background value left out) in a
+/// panel along the bottom of `image`, with the transfer function's opacity drawn over it and
+/// its colours in a strip beneath: what an Alt+drag of the window moves over the data.
+pub(super) fn draw_histogram(
+    image: &mut image::RgbaImage,
+    histogram: &crate::classify::Histogram,
+    transfer: &crate::classify::TransferFunction,
+) {
+    let (w, h) = (image.width() as f32, image.height() as f32);
+    let (x0, x1) = ((0.1 * w).round(), (0.9 * w).round());
+    let height = (0.15 * h).max(40.0).round();
+    let bottom = (h - 56.0).max(height + 8.0).round();
+    let top = bottom - height;
+    let strip = 6.0;
+    shade(
+        image,
+        (x0 - 4.0) as u32,
+        (top - 4.0) as u32,
+        (x1 + 4.0) as u32,
+        (bottom + strip + 18.0) as u32,
+    );
+    let columns = (x1 - x0) as usize;
+    let counts = histogram.coarse(columns);
+    let most = counts.iter().copied().max().unwrap_or(0).max(1) as f32;
+    let span = histogram.hi - histogram.lo;
+    let value_at = |c: usize| histogram.lo + span * (c as f32 + 0.5) / columns as f32;
+    for (c, &n) in counts.iter().enumerate() {
+        let x = x0 as u32 + c as u32;
+        let bar = height * (1.0 + n as f32).ln() / (1.0 + most).ln();
+        for y in (bottom - bar).round() as u32..bottom as u32 {
+            image.put_pixel(x, y, image::Rgba([150, 150, 150, 220]));
+        }
+        let [r, g, b, _] = transfer.sample(value_at(c));
+        for y in (bottom + 2.0) as u32..(bottom + 2.0 + strip) as u32 {
+            let px = |v: f32| (v.clamp(0.0, 1.0) * 255.0) as u8;
+            image.put_pixel(x, y, image::Rgba([px(r), px(g), px(b), 255]));
+        }
+    }
+    let Ok(mut painter) = Painter::new(image) else {
+        return;
+    };
+    painter.text_px = HUD_PX;
+    painter.halo_px = 1.5;
+    let curve: Vec<([f32; 2], [f32; 2])> = (0..columns.saturating_sub(1))
+        .map(|c| {
+            let y = |c: usize| bottom - height * transfer.sample(value_at(c))[3].clamp(0.0, 1.0);
+            ([x0 + c as f32, y(c)], [x0 + c as f32 + 1.0, y(c + 1)])
+        })
+        .collect();
+    painter.lines(&curve, 1.5, [255, 200, 90, 255]);
+    let below = bottom + strip + 3.0;
+    painter.text(
+        &format!("{}", histogram.lo),
+        x0,
+        below,
+        Anchor::TopLeft,
+        [235, 235, 235, 255],
+    );
+    painter.text(
+        &format!("{}", histogram.hi),
+        x1,
+        below,
+        Anchor::TopRight,
+        [235, 235, 235, 255],
+    );
 }
 
 /// Where the on-screen text starts: below the top edge's direction letter.
