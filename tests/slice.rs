@@ -242,6 +242,7 @@ fn measurements_show_on_the_slice_they_lie_in_only() {
         kind: MeasureKind::Distance,
         points: vec![DVec3::new(-10.0, 0.0, 5.0), DVec3::new(10.0, 0.0, 5.2)],
         node: None,
+        anchors: Vec::new(),
         label: Some("width".into()),
     });
     let on = |name: &str| {

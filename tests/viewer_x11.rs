@@ -750,7 +750,7 @@ fn marked_and_tinted(before: &Shot, after: &Shot, hud_lines: usize) -> Result<()
 /// change, a little; the background, the silhouette and the mesh (opaque, in front of the
 /// volume at `HEAD`) stay.
 fn reordered(before: &Shot, after: &Shot) -> Result<(), String> {
-    let area = scene_area(before.w, before.h, 4);
+    let area = scene_area(before.w, before.h, 6);
     let bg = before.background();
     let background: Vec<_> = before
         .pixels(before.all(), &area)
@@ -791,7 +791,7 @@ fn reordered(before: &Shot, after: &Shot) -> Result<(), String> {
 /// grows around the old one, the new pixels are the tissue's red, the prosthesis head seen
 /// through it changes, and the background beyond the new silhouette stays.
 fn denser(before: &Shot, after: &Shot) -> Result<(), String> {
-    let area = scene_area(before.w, before.h, 4);
+    let area = scene_area(before.w, before.h, 6);
     let (was, now) = (
         bounding_box(&before.object(12, &area)),
         bounding_box(&after.object(12, &area)),
@@ -840,7 +840,7 @@ fn denser(before: &Shot, after: &Shot) -> Result<(), String> {
 /// did under the bone transfer function (`bone`); the cut changes the inside of the old
 /// silhouette, and beyond it only the plane's thin outline is drawn.
 fn clipped(bone: &Shot, dense: &Shot, cut: &Shot) -> Result<(), String> {
-    let area = scene_area(dense.w, dense.h, 4);
+    let area = scene_area(dense.w, dense.h, 6);
     let (was, seen, now) = (
         bone.mean(HEAD, &anywhere),
         dense.mean(HEAD, &anywhere),
@@ -891,7 +891,7 @@ fn annotations_gone(annotated: &Shot, plain: &Shot, hud_lines: usize) -> Result<
 /// the window's centre: the silhouette grows (by a ninth at the target's depth, more nearer
 /// the eye), its sides moving away from the centre.
 fn zoomed_in(before: &Shot, after: &Shot) -> Result<(), String> {
-    let area = scene_area(before.w, before.h, 4);
+    let area = scene_area(before.w, before.h, 6);
     let (a, b) = (
         bounding_box(&before.object(12, &area)),
         bounding_box(&after.object(12, &area)),
@@ -965,7 +965,7 @@ fn viewer_picks_switches_orderings_and_takes_screenshots_under_xvfb() {
         "the pick lies on the head's sphere: {from_centre} mm from its centre"
     );
     let marked = screen_until(&display, &window, &dir, "marked", |shot| {
-        marked_and_tinted(&first, shot, 4)
+        marked_and_tinted(&first, shot, 6)
     });
 
     xdo(&display, &["key", "2"]).expect("key 2");
@@ -1402,11 +1402,11 @@ fn a_plan_made_in_the_viewer_is_saved_undone_measured_and_reloaded_under_xvfb() 
     line(&lines, "pick");
     assert_eq!(line(&lines, "selected"), "prosthesis");
     let selected = screen_until(&display, &window, &dir, "2-selected", |shot| {
-        marked_and_tinted(&first, shot, 4)
+        marked_and_tinted(&first, shot, 6)
     });
     // Where the mesh shows: where the tint changed the picture (but the pick marker).
     let near = Rect::around(PICKED.0, PICKED.1, 10);
-    let off_hud = outside(vec![hud(first.w, 4), near]);
+    let off_hud = outside(vec![hud(first.w, 6), near]);
     let mesh_pixels = first.changed(&selected, first.all(), 8, &off_hud);
 
     // Drag it 40 pixels to the right: a drag that starts on the selected mesh moves it.
@@ -2035,7 +2035,7 @@ fn matrix_of(json: &str) -> glam::DMat4 {
 }
 
 #[test]
-fn a_measurement_point_dragged_along_the_implant_changes_the_value_and_undoes() {
+fn a_dragged_measurement_point_undoes_and_an_implant_to_bone_distance_follows_the_implant() {
     let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     if !x11_tools() {
         return;
@@ -2094,6 +2094,64 @@ fn a_measurement_point_dragged_along_the_implant_changes_the_value_and_undoes() 
     assert!(now < first - 3.0, "{first} mm, then {now} mm ({moved})");
     xdo(&display, &["key", "ctrl+z"]).expect("ctrl+z");
     assert!(line(&lines, "undo").starts_with("move a point of measurement 1"));
+
+    // A distance from the implant's head to the bone: its implant end moves with the implant,
+    // its bone end stays.
+    let shot = screen(&display, &window, &dir, "bone");
+    let area = scene_area(shot.w, shot.h, 8);
+    let bone = shot
+        .object(40, &|x, y| {
+            area(x, y) && !PROSTHESIS.grown(20).contains(x, y)
+        })
+        .into_iter()
+        .min_by_key(|&(x, y)| x.abs_diff(410) + y.abs_diff(250))
+        .expect("bone on screen");
+    xdo(&display, &["key", "m"]).expect("m");
+    let mut clicked = Vec::new();
+    for (x, y) in [PICKED, bone] {
+        let (x, y) = (x.to_string(), y.to_string());
+        xdo(
+            &display,
+            &["mousemove", "--window", &window, &x, &y, "click", "1"],
+        )
+        .expect("click");
+        let pick: serde_json::Value = serde_json::from_str(&line(&lines, "pick")).unwrap();
+        clicked.push(hit_point(&pick).expect("a hit"));
+    }
+    line(&lines, "measurement 2 add distance");
+    for _ in 0..4 {
+        xdo(&display, &["key", "m"]).expect("measure off");
+    }
+    xdo(
+        &display,
+        &["mousemove", "--window", &window, "320", "160", "click", "1"],
+    )
+    .expect("select");
+    assert_eq!(line(&lines, "selected"), "prosthesis");
+    xdo(&display, &["key", "shift+Right"]).expect("move 10 mm");
+    line(&lines, "moved prosthesis");
+    xdo(&display, &["key", "ctrl+s"]).expect("ctrl+s");
+    let saved = PathBuf::from(line(&lines, "saved plan"));
+    let text = std::fs::read_to_string(&saved).unwrap();
+    assert!(text.contains("nodes = [\"prosthesis\", \"\"]"), "{text}");
+    let plan = splatscene::scene::file::load_scene_file(&saved)
+        .unwrap()
+        .scene;
+    // The bone end where it was clicked; the head end 10 mm on, with the implant.
+    let m = plan.measure(&plan.measurements[1]).unwrap();
+    let ends: Vec<glam::DVec3> = m.points.iter().map(|p| glam::DVec3::from(*p)).collect();
+    assert!(
+        ends[1].distance(clicked[1]) < 1e-6,
+        "{} against {}",
+        ends[1],
+        clicked[1]
+    );
+    assert!(
+        (ends[0].distance(clicked[0]) - 10.0).abs() < 1e-6,
+        "{} against {}",
+        ends[0],
+        clicked[0]
+    );
 }
 
 /// The shoulder scene copied into `dir` (the viewer autosaves edits beside the scene it

@@ -172,12 +172,27 @@ pub struct Scene {
 pub struct SceneMeasurement {
     /// Distance, angle, line angle or point.
     pub kind: MeasureKind,
-    /// The points, in the frame of `node` when it is set, else in the world.
+    /// The points, each in the frame of the node it moves with (see
+    /// [`SceneMeasurement::frame_of`]), else in the world.
     pub points: Vec<DVec3>,
     /// The node the points move with.
     pub node: Option<NodeId>,
+    /// For a measurement between things (an implant point and a bone point): the node each
+    /// point moves with, one a point (`None`: the world); empty where `node` holds for all.
+    pub anchors: Vec<Option<NodeId>>,
     /// The name written beside the value (`neck-shaft angle`).
     pub label: Option<String>,
+}
+
+impl SceneMeasurement {
+    /// The node point `i` moves with: its anchor where there are anchors, else `node`.
+    pub fn frame_of(&self, i: usize) -> Option<NodeId> {
+        if self.anchors.is_empty() {
+            self.node
+        } else {
+            self.anchors.get(i).copied().flatten()
+        }
+    }
 }
 
 impl Scene {
@@ -269,11 +284,14 @@ impl Scene {
     ///
     /// When the points make no measurement of its kind (see [`Measurement::new`]).
     pub fn measure(&self, m: &SceneMeasurement) -> Result<Measurement, MeasureError> {
-        let to_world = m.node.map_or(DMat4::IDENTITY, |id| self.world(id));
         let points: Vec<DVec3> = m
             .points
             .iter()
-            .map(|p| to_world.transform_point3(*p))
+            .enumerate()
+            .map(|(i, p)| {
+                m.frame_of(i)
+                    .map_or(*p, |id| self.world(id).transform_point3(*p))
+            })
             .collect();
         Measurement::new(m.kind, &points)
     }

@@ -316,21 +316,25 @@ impl Pending {
         let world: Vec<DVec3> = points.iter().map(|(p, _)| *p).collect();
         Measurement::new(self.kind, &world)?;
         let first = points[0].1;
-        let node = first.filter(|_| points.iter().all(|(_, n)| *n == first));
-        let points = match node {
-            Some(id) => {
-                let to_local = scene.world(id).inverse();
-                world
-                    .iter()
-                    .map(|p| to_local.transform_point3(*p))
-                    .collect()
-            }
-            None => world,
+        let same = points.iter().all(|(_, n)| *n == first);
+        // All on one mesh: in its frame; on different things: each point with its own
+        // (an implant point follows the implant, a bone point stays).
+        let (node, anchors) = if same {
+            (first, Vec::new())
+        } else {
+            (None, points.iter().map(|(_, n)| *n).collect())
         };
+        let frame = |i: usize| if same { first } else { points[i].1 };
+        let points = world
+            .iter()
+            .enumerate()
+            .map(|(i, p)| frame(i).map_or(*p, |id| scene.world(id).inverse().transform_point3(*p)))
+            .collect();
         Ok(Some(SceneMeasurement {
             kind: self.kind,
             points,
             node,
+            anchors,
             label: None,
         }))
     }
@@ -425,6 +429,7 @@ mod tests {
             kind: MeasureKind::Point,
             points: vec![DVec3::new(0.0, 0.0, 7.0)],
             node: Some(top),
+            anchors: Vec::new(),
             label: Some("head centre".into()),
         });
         let (p, name) = scene.pivot(top);
@@ -459,11 +464,15 @@ mod tests {
         assert_eq!(m.node, Some(top));
         assert_eq!(m.points[0], DVec3::ZERO, "in the implant's frame");
         assert_eq!(scene.measure(&m).unwrap().value, Some(5.0));
-        // Points on different things stay in the world.
+        // Points on different things: each in the frame of what it lies on.
         let mut pending = Pending::new(MeasureKind::Distance);
-        pending.add(&scene, DVec3::ZERO, Some(top)).unwrap();
+        pending
+            .add(&scene, DVec3::new(10.0, 0.0, 0.0), Some(top))
+            .unwrap();
         let m = pending.add(&scene, DVec3::X, None).unwrap().unwrap();
-        assert_eq!(m.node, None);
+        assert_eq!((m.node, m.anchors.clone()), (None, vec![Some(top), None]));
+        assert_eq!(m.points, vec![DVec3::ZERO, DVec3::X]);
+        assert_eq!(scene.measure(&m).unwrap().value, Some(9.0));
         // An angle on its vertex is refused, and the points start again.
         let mut pending = Pending::new(MeasureKind::Angle);
         pending.add(&scene, DVec3::X, None).unwrap();

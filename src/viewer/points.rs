@@ -77,7 +77,7 @@ impl App {
             return;
         };
         let world = hit.point();
-        let stored = match m.node {
+        let stored = match m.frame_of(j) {
             Some(id) => self.edit.scene.world(id).inverse().transform_point3(world),
             None => world,
         };

@@ -764,13 +764,15 @@ fn measurements_json(scene: &Scene) -> Result<String> {
         let mut entry = serde_json::to_value(&value)?;
         if let Some(object) = entry.as_object_mut() {
             object.insert("label".into(), m.label.clone().into());
-            object.insert(
-                "node".into(),
-                m.node
-                    .and_then(|id| scene.node(id).ok())
+            let name = |id: Option<NodeId>| {
+                id.and_then(|id| scene.node(id).ok())
                     .map(|n| n.name.clone())
-                    .into(),
-            );
+            };
+            object.insert("node".into(), name(m.node).into());
+            if !m.anchors.is_empty() {
+                let nodes: Vec<Option<String>> = m.anchors.iter().map(|a| name(*a)).collect();
+                object.insert("nodes".into(), nodes.into());
+            }
         }
         list.push(entry);
     }

@@ -642,16 +642,15 @@ pub(super) fn measurement(
             "{name}: label must be 1 to {MAX_LABEL} characters of text on one line"
         ));
     }
-    let node = match &spec.node {
-        None => None,
-        Some(n) if named_apart(scene, n) > 1 => {
+    let find = |n: &str| {
+        if named_apart(scene, n) > 1 {
             return Err(format!(
                 "{name}: node {:?} names {} meshes or volumes of the scene, so the measurement cannot tell which one it follows; give each its own `name`",
                 shortened(n),
                 named_apart(scene, n)
             ));
         }
-        Some(n) => Some(scene.find(n).ok_or_else(|| {
+        scene.find(n).ok_or_else(|| {
             let names: Vec<&str> = scene
                 .nodes()
                 .iter()
@@ -663,12 +662,36 @@ pub(super) fn measurement(
                 shortened(n),
                 names.join(", ")
             )
-        })?),
+        })
+    };
+    let node = spec.node.as_deref().map(find).transpose()?;
+    let anchors = match &spec.nodes {
+        None => Vec::new(),
+        Some(_) if spec.node.is_some() => {
+            return Err(format!(
+                "{name}: give node (every point) or nodes (one a point), not both"
+            ));
+        }
+        Some(names) if names.len() != spec.points.len() => {
+            return Err(format!(
+                "{name}: nodes names {} nodes for {} points: one a point (\"\" for the world)",
+                names.len(),
+                spec.points.len()
+            ));
+        }
+        Some(names) => names
+            .iter()
+            .map(|n| match n.as_str() {
+                "" => Ok(None),
+                n => find(n).map(Some),
+            })
+            .collect::<Result<_, _>>()?,
     };
     let m = SceneMeasurement {
         kind: spec.kind,
         points: spec.points.iter().map(|p| DVec3::from(*p)).collect(),
         node,
+        anchors,
         label: spec.label.clone(),
     };
     scene

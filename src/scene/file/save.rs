@@ -158,8 +158,18 @@ impl SceneFile {
                 label: m.label.clone(),
                 node: m
                     .node
+                    .filter(|_| m.anchors.is_empty())
                     .and_then(|id| scene.node(id).ok())
                     .map(|n| n.name.clone()),
+                nodes: (!m.anchors.is_empty()).then(|| {
+                    m.anchors
+                        .iter()
+                        .map(|a| {
+                            a.and_then(|id| scene.node(id).ok())
+                                .map_or(String::new(), |n| n.name.clone())
+                        })
+                        .collect()
+                }),
             })
             .collect();
         Ok(file)

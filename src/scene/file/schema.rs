@@ -339,6 +339,11 @@ pub struct MeasurementSpec {
     pub label: Option<String>,
     /// The name of the node (a mesh or volume) whose frame the points are in.
     pub node: Option<String>,
+    /// Instead of `node`, for a measurement between things: the node each point moves with,
+    /// one name a point, `""` for the world (`nodes = ["prosthesis", ""]`: an implant point
+    /// and a bone point).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub nodes: Option<Vec<String>>,
 }
 
 /// A slice `render` draws (`[[slice]]`): the CT reformatted on a plane, the meshes' outlines

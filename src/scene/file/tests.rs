@@ -217,6 +217,7 @@ fn a_plan_saved_from_a_scene_loads_to_the_same_placement() {
         kind: MeasureKind::Distance,
         points: vec![DVec3::ZERO, DVec3::X],
         node: None,
+        anchors: Vec::new(),
         label: Some("gap".into()),
     });
     let saved = file.with_plan(&scene).unwrap();
@@ -753,4 +754,58 @@ fn plans_write_transforms_as_people_do_where_they_load_back() {
     let written = transform_spec(shear);
     assert!(written.matrix.is_some() && written.translate.is_none());
     assert_eq!(transform_spec(DMat4::IDENTITY), TransformSpec::default());
+}
+
+#[test]
+fn a_measurement_between_an_implant_and_the_world_follows_the_implant_end_only() {
+    let dir = TempDir::new("anchors");
+    let mesh = "[[mesh]]\nname = \"implant\"\npath = \"builtin:prosthesis\"\n\n";
+    let path = dir.write(
+        "gap.toml",
+        &format!(
+            "{mesh}[[measurement]]\nkind = \"distance\"\nlabel = \"gap\"\nnodes = [\"implant\", \"\"]\npoints = [[0, 0, 0], [30, 0, 0]]\n"
+        ),
+    );
+    let file = SceneFile::read(&path).unwrap();
+    let mut scene = file.load(&path, dir.0.as_path()).unwrap().scene;
+    let implant = scene.find("implant").unwrap();
+    let m = scene.measurements[0].clone();
+    assert_eq!(m.anchors, vec![Some(implant), None]);
+    assert_eq!(scene.measure(&m).unwrap().value, Some(30.0));
+    // The implant moves 10 mm toward the world point: the distance shrinks by 10 mm.
+    let moved = DMat4::from_translation(DVec3::new(10.0, 0.0, 0.0));
+    scene.set_local(implant, moved).unwrap();
+    assert!((scene.measure(&m).unwrap().value.unwrap() - 20.0).abs() < 1e-9);
+    // Saved with its nodes, and loaded back to the same.
+    let text = file.with_plan(&scene).unwrap().to_toml().unwrap();
+    assert!(text.contains("nodes = [\"implant\", \"\"]"), "{text}");
+    let again = load_scene_file(&dir.write("again.toml", &text))
+        .unwrap()
+        .scene;
+    let back = &again.measurements[0];
+    assert!((again.measure(back).unwrap().value.unwrap() - 20.0).abs() < 1e-9);
+    // Refused: both keys, a name a point too few, a name the scene lacks.
+    for (nodes, wanted) in [
+        (
+            "node = \"implant\"\nnodes = [\"implant\", \"\"]",
+            "not both",
+        ),
+        ("nodes = [\"implant\"]", "1 nodes for 2 points"),
+        (
+            "nodes = [\"humerus\", \"\"]",
+            "\"humerus\" is not in the scene",
+        ),
+    ] {
+        let bad = dir.write(
+            "bad.toml",
+            &format!(
+                "{mesh}[[measurement]]\nkind = \"distance\"\n{nodes}\npoints = [[0, 0, 0], [30, 0, 0]]\n"
+            ),
+        );
+        let e = match load_scene_file(&bad) {
+            Ok(_) => panic!("{nodes}: loaded"),
+            Err(e) => e.to_string(),
+        };
+        assert!(e.contains(wanted), "{e}");
+    }
 }
