@@ -2163,6 +2163,38 @@ fn shoulder_copy(dir: &Path) -> PathBuf {
     copy
 }
 
+/// The viewer on a 32x32x32 raw u8 volume `ct` with the OBJ `mesh`, at 640x480, with the
+/// folder option `option` (`--screenshots`, `--plans`) at `folder`; its first frame drawn and
+/// the window focused.
+fn view_block(
+    display: &str,
+    ct: &Path,
+    mesh: &Path,
+    option: &str,
+    folder: &Path,
+) -> (Guard, Receiver<String>, String) {
+    let (viewer, lines, window) = open_viewer(
+        display,
+        &[
+            "view",
+            ct.to_str().unwrap(),
+            "--dims",
+            "32,32,32",
+            "--scalar",
+            "u8",
+            "--mesh",
+            mesh.to_str().unwrap(),
+            "--size",
+            "640x480",
+            option,
+            folder.to_str().unwrap(),
+        ],
+    );
+    title(display, &window, " splats");
+    xdo(display, &["windowfocus", "--sync", &window]);
+    (viewer, lines, window)
+}
+
 #[test]
 fn a_plan_of_a_volume_without_a_scene_file_is_saved_beside_it_with_relative_paths() {
     let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
@@ -2180,25 +2212,7 @@ fn a_plan_of_a_volume_without_a_scene_file_is_saved_beside_it_with_relative_path
     let mesh = dir.join("meshes/cube.obj");
     std::fs::write(&mesh, common::shapes::obj_text(&common::shapes::cube(8.0))).unwrap();
     let shots = dir.join("shots");
-    let (_viewer, lines, window) = open_viewer(
-        &display,
-        &[
-            "view",
-            ct.to_str().unwrap(),
-            "--dims",
-            "32,32,32",
-            "--scalar",
-            "u8",
-            "--mesh",
-            mesh.to_str().unwrap(),
-            "--size",
-            "640x480",
-            "--screenshots",
-            shots.to_str().unwrap(),
-        ],
-    );
-    title(&display, &window, " splats");
-    xdo(&display, &["windowfocus", "--sync", &window]);
+    let (_viewer, lines, window) = view_block(&display, &ct, &mesh, "--screenshots", &shots);
     xdo(&display, &["key", "m"]).expect("m");
     for (x, y) in [("300", "240"), ("340", "250")] {
         xdo(
@@ -2244,25 +2258,7 @@ fn data_ramps_a_histogram_under_the_window_and_a_meshs_look_are_offered_and_save
         common::shapes::obj_text(&common::shapes::cube(200.0)),
     )
     .unwrap();
-    let (_viewer, lines, window) = open_viewer(
-        &display,
-        &[
-            "view",
-            ct.to_str().unwrap(),
-            "--dims",
-            "32,32,32",
-            "--scalar",
-            "u8",
-            "--mesh",
-            mesh.to_str().unwrap(),
-            "--size",
-            "640x480",
-            "--plans",
-            dir.to_str().unwrap(),
-        ],
-    );
-    title(&display, &window, " splats");
-    xdo(&display, &["windowfocus", "--sync", &window]);
+    let (_viewer, lines, window) = view_block(&display, &ct, &mesh, "--plans", &dir);
     // T: ramps over the values' percentiles (the first is the automatic one, the scene's
     // own, so it is skipped), then the MR preset; no CT preset.
     let mut offered = Vec::new();

@@ -198,6 +198,23 @@ pub fn is_hounsfield(values: &Voxels) -> bool {
     lo <= HU_AIR && hi > 0.0
 }
 
+/// The window a slice of `volume` is drawn with when none is given: a bone window (-500 to
+/// 1500 HU, window 2000 at level 500, which shows cortical and cancellous bone apart and soft
+/// tissue dark) for CT, the values' whole range for other data.
+pub fn default_window(volume: &crate::volume::CpuVolume) -> [f32; 2] {
+    if is_hounsfield(&volume.values) {
+        return [-500.0, 1500.0];
+    }
+    let (lo, hi) = finite_range(&volume.values);
+    if lo < hi {
+        [lo, hi]
+    } else if lo.is_finite() {
+        [lo - 0.5, lo + 0.5]
+    } else {
+        [0.0, 1.0]
+    }
+}
+
 /// The least and greatest finite values (infinite, reversed, where there are none).
 pub fn finite_range(values: &Voxels) -> (f32, f32) {
     values

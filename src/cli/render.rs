@@ -407,15 +407,12 @@ fn contact_range(scene: &Scene, file: &SceneFile) -> [f64; 2] {
         .volumes
         .first()
         .is_some_and(|v| v.level_width.is_some() || v.window.is_some());
-    let ct = scene
-        .volumes()
-        .next()
-        .is_some_and(|(_, v, _)| splatscene::classify::is_hounsfield(&v.volume.values));
-    if ct && !given {
-        return [-100.0, 1000.0];
+    match scene.volumes().next() {
+        Some((_, v, _)) => {
+            splatscene::pick::paint::contact_range(&v.volume, given.then(|| window(scene, file)))
+        }
+        None => [0.0, 1.0],
     }
-    let w = window(scene, file);
-    [f64::from(w[0]), f64::from(w[1])]
 }
 
 /// Paints the mesh named `name` (the first where empty) in `scene` with the volume's value.

@@ -65,6 +65,18 @@ pub fn value_colour(value: f64, range: [f64; 2]) -> [f32; 4] {
     ]
 }
 
+/// The value range a contact map of `volume` spans: `window` where one was given; else, for CT,
+/// -100 to 1000 HU (fat and soft tissue through cancellous to cortical bone, the classes'
+/// span); else the volume's default grey window.
+pub fn contact_range(volume: &crate::volume::CpuVolume, window: Option<[f32; 2]>) -> [f64; 2] {
+    let [lo, hi] = match window {
+        Some(w) => w,
+        None if crate::classify::is_hounsfield(&volume.values) => return [-100.0, 1000.0],
+        None => crate::classify::default_window(volume),
+    };
+    [f64::from(lo), f64::from(hi)]
+}
+
 /// The meshes of the object named `mesh` (the first where `None`) painted with the scene's
 /// first volume over `range`.
 ///

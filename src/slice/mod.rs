@@ -25,9 +25,10 @@ pub mod plane;
 pub mod resample;
 pub mod section;
 
+pub use crate::classify::default_window;
 pub use frame::{Extent, SliceFrame};
 pub use plane::{BadSliceSpec, Plane, PlaneKind, SliceSpec, long_axis};
-pub use resample::{SliceValues, default_window, grey, resample};
+pub use resample::{SliceValues, grey, resample};
 pub use section::{Outline, outlines};
 
 /// Why a slice could not be made.

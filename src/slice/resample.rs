@@ -61,23 +61,6 @@ pub fn resample(scene: &Scene, frame: &SliceFrame) -> Result<SliceValues, SliceE
     })
 }
 
-/// The window a slice of `volume` is drawn with when none is given: a bone window (-500 to
-/// 1500 HU, window 2000 at level 500, which shows cortical and cancellous bone apart and soft
-/// tissue dark) for CT, the values' whole range for other data.
-pub fn default_window(volume: &CpuVolume) -> [f32; 2] {
-    if crate::classify::is_hounsfield(&volume.values) {
-        return [-500.0, 1500.0];
-    }
-    let (lo, hi) = crate::classify::finite_range(&volume.values);
-    if lo < hi {
-        [lo, hi]
-    } else if lo.is_finite() {
-        [lo - 0.5, lo + 0.5]
-    } else {
-        [0.0, 1.0]
-    }
-}
-
 /// The values as grey: black at `window[0]` and below, white at `window[1]` and above, linear
 /// between (as CT viewers map a window to the display); pixels outside the volume black.
 pub fn grey(values: &SliceValues, window: [f32; 2]) -> RgbaImage {

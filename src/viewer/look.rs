@@ -347,11 +347,7 @@ impl App {
             .and_then(|id| self.edit.scene.node(id).ok())
             .map(|n| n.name.clone());
         let range = match self.edit.scene.volumes().next() {
-            Some((_, v, _)) if crate::classify::is_hounsfield(&v.volume.values) => [-100.0, 1000.0],
-            Some((_, v, _)) => {
-                let [lo, hi] = crate::slice::default_window(&v.volume);
-                [f64::from(lo), f64::from(hi)]
-            }
+            Some((_, v, _)) => crate::pick::paint::contact_range(&v.volume, None),
             None => [0.0, 1.0],
         };
         match crate::pick::paint::paint(&self.edit.scene, name.as_deref(), range) {

@@ -303,18 +303,20 @@ impl App {
         if let Some(top) = self.edit.selected
             && let Ok(node) = self.edit.scene.node(top)
         {
-            // The placement in the scene file's words, as the plan would save it.
+            // The placement in the scene file's words, as the plan would save it: the mesh
+            // files' top nodes follow the volumes', in the file's order.
             let spec = self
                 .options
                 .scene_file
                 .as_ref()
-                .and_then(|f| f.with_plan(&self.edit.scene).ok())
                 .and_then(|f| {
-                    f.meshes
-                        .into_iter()
-                        .find(|m| m.name.as_deref() == Some(node.name.as_str()))
+                    let root = (0..top.0)
+                        .filter(|i| self.edit.scene.nodes()[*i].parent().is_none())
+                        .count();
+                    let mesh = root.checked_sub(f.volumes.len())?;
+                    f.mesh_transform(mesh, node.local()).ok()
                 })
-                .map_or_else(|| transform_spec(node.local()), |m| m.transform);
+                .unwrap_or_else(|| transform_spec(node.local()));
             let (_, pivot) = self.edit.scene.pivot(top);
             let placement = match (spec.matrix, spec.translate, spec.rotate_degrees) {
                 (Some(_), _, _) => "a sheared matrix".to_owned(),

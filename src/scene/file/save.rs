@@ -42,25 +42,14 @@ impl SceneFile {
     /// (the scene file's folder), so that it can be saved anywhere; `builtin:` and `data:`
     /// paths are kept as they are.
     pub fn with_paths_from(&self, base: &Path) -> Self {
-        let fix = |path: &str| {
-            let p = Path::new(path);
-            if path.starts_with("builtin:") || path.starts_with("data:") || p.is_absolute() {
-                path.to_owned()
+        self.with_file_paths(|p| {
+            if p.is_absolute() {
+                None
             } else {
-                std::path::absolute(base.join(p))
-                    .unwrap_or_else(|_| base.join(p))
-                    .to_string_lossy()
-                    .into_owned()
+                let joined = base.join(p);
+                Some(std::path::absolute(&joined).unwrap_or(joined))
             }
-        };
-        let mut file = self.clone();
-        for v in &mut file.volumes {
-            v.path = fix(&v.path);
-        }
-        for m in &mut file.meshes {
-            m.path = fix(&m.path);
-        }
-        file
+        })
     }
 
     /// The same file with every absolute volume and mesh path written relative to `dir`, the
@@ -69,23 +58,27 @@ impl SceneFile {
     /// drive), are kept as they are.
     pub fn with_paths_relative_to(&self, dir: &Path) -> Self {
         let dir = std::path::absolute(dir).unwrap_or_else(|_| dir.to_path_buf());
-        let fix = |path: &str| {
-            let p = Path::new(path);
-            if path.starts_with("builtin:") || path.starts_with("data:") || !p.is_absolute() {
-                return path.to_owned();
+        self.with_file_paths(|p| {
+            let rel = pathdiff::diff_paths(p, &dir).filter(|_| p.is_absolute())?;
+            (!rel.as_os_str().is_empty()).then_some(rel)
+        })
+    }
+
+    /// The same file with each volume and mesh path that names a file (not `builtin:` or
+    /// `data:`) replaced by what `fix` gives for it, where it gives one.
+    fn with_file_paths(&self, fix: impl Fn(&Path) -> Option<std::path::PathBuf>) -> Self {
+        let fixed = |path: &String| {
+            if path.starts_with("builtin:") || path.starts_with("data:") {
+                return path.clone();
             }
-            match pathdiff::diff_paths(p, &dir) {
-                Some(rel) if rel.as_os_str().is_empty() => path.to_owned(),
-                Some(rel) => rel.to_string_lossy().into_owned(),
-                None => path.to_owned(),
-            }
+            fix(Path::new(path)).map_or_else(|| path.clone(), |p| p.to_string_lossy().into_owned())
         };
         let mut file = self.clone();
         for v in &mut file.volumes {
-            v.path = fix(&v.path);
+            v.path = fixed(&v.path);
         }
         for m in &mut file.meshes {
-            m.path = fix(&m.path);
+            m.path = fixed(&m.path);
         }
         file
     }
@@ -111,18 +104,7 @@ impl SceneFile {
                 .get(self.volumes.len() + i)
                 .ok_or(PlanError::NoNode { mesh: i + 1 })?;
             let local = scene.node(id)?.local();
-            let seat = match spec.seat {
-                Some(Seat::Phantom) => {
-                    seat_in_phantom(&shoulder_landmarks(DEFAULT_DIMS, DEFAULT_SPACING))
-                }
-                None => DMat4::IDENTITY,
-            };
-            let frame = file_frame(spec);
-            let (ds, df) = (seat.determinant(), frame.determinant());
-            if !(ds.is_normal() && df.is_normal()) {
-                return Err(PlanError::Singular { mesh: i + 1 });
-            }
-            spec.transform = transform_spec(seat.inverse() * local * frame.inverse());
+            spec.transform = placement(spec, local).ok_or(PlanError::Singular { mesh: i + 1 })?;
         }
         file.clip = scene
             .clipping
@@ -183,6 +165,37 @@ impl SceneFile {
     pub fn to_toml(&self) -> Result<String, toml::ser::Error> {
         toml::to_string(self)
     }
+}
+
+impl SceneFile {
+    /// The `transform` of mesh `mesh` (from 0, in the file's order) that places it as `local`,
+    /// the transform of its node: in the file's convention, its seat and frame taken out.
+    ///
+    /// # Errors
+    ///
+    /// No such mesh, or its seat or frame is singular.
+    pub fn mesh_transform(&self, mesh: usize, local: DMat4) -> Result<TransformSpec, PlanError> {
+        let spec = self
+            .meshes
+            .get(mesh)
+            .ok_or(PlanError::NoNode { mesh: mesh + 1 })?;
+        placement(spec, local).ok_or(PlanError::Singular { mesh: mesh + 1 })
+    }
+}
+
+/// The `transform` that places the mesh of `spec` as `local` (its seat and frame taken out);
+/// `None` where its seat or frame is singular.
+fn placement(spec: &super::MeshSpec, local: DMat4) -> Option<TransformSpec> {
+    let seat = match spec.seat {
+        Some(Seat::Phantom) => seat_in_phantom(&shoulder_landmarks(DEFAULT_DIMS, DEFAULT_SPACING)),
+        None => DMat4::IDENTITY,
+    };
+    let frame = file_frame(spec);
+    let (ds, df) = (seat.determinant(), frame.determinant());
+    if !(ds.is_normal() && df.is_normal()) {
+        return None;
+    }
+    Some(transform_spec(seat.inverse() * local * frame.inverse()))
 }
 
 impl CameraSpec {
