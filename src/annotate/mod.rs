@@ -380,10 +380,11 @@ fn orientation_marker(
                 0.1 * painter.text_px,
             )
         };
-        // The letter beyond the tip; an axis seen end-on gets its letter beside the centre,
-        // for the end facing the viewer only.
+        // The letter just beyond the tip (a foreshortened axis's letter stays by its short
+        // line); an axis seen end-on gets its letter beside the centre, for the end facing
+        // the viewer only.
         let (start, step) = if length > 0.25 {
-            let reach = radius + 0.7 * painter.text_px;
+            let reach = radius * length + 0.7 * painter.text_px;
             let (ux, uy) = (sx / length, sy / length);
             (
                 [centre[0] + reach * ux, centre[1] + reach * uy],
