@@ -1894,7 +1894,16 @@ fn four_panes_show_slices_that_follow_the_crosshair_and_move_the_implant_in_thei
     .expect("press");
     std::thread::sleep(Duration::from_millis(200));
     xdo(&display, &["mousemove", "--window", &window, "190", "380"]).expect("drag");
-    std::thread::sleep(Duration::from_millis(200));
+    std::thread::sleep(Duration::from_millis(600));
+    // Meanwhile the values' histogram shows along the bottom, the slices' grey ramp in a strip
+    // under it (x 64..576, rows 426..432 at 640x480): black at the data's least, white at
+    // its greatest.
+    let dragging = screen(&display, &window, &dir, "9-windowing");
+    let (dark, light) = (dragging.at(66, 429), dragging.at(574, 429));
+    assert!(
+        dark.iter().all(|&c| c < 30) && light.iter().all(|&c| c > 220),
+        "the grey strip under the histogram: {dark:?} to {light:?}"
+    );
     xdo(&display, &["mouseup", "1"]).expect("release");
     xdo(&display, &["keyup", "alt"]).expect("alt");
     let window_said = line(&lines, "slices window");

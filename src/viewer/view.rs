@@ -149,6 +149,11 @@ impl App {
         let drawn_in = started.elapsed();
         self.this_frame = drawn_in;
         let hud = self.hud_lines();
+        let slices_window = self
+            .panes
+            .as_ref()
+            .is_some_and(|p| p.windowing.is_some())
+            .then(|| self.slice_window());
         let Some(gpu) = &mut self.gpu else {
             return Ok(());
         };
@@ -165,12 +170,18 @@ impl App {
         };
         let surface_view = frame.texture.create_view(&Default::default());
         let (w, h) = window_size;
-        if self.windowing.is_some()
-            && self.panes.is_none()
-            && let (Some(histogram), Some((_, volume, _))) =
-                (&self.histogram, self.edit.scene.volumes().next())
+        // Under a window being dragged, the histogram of the values it spans: the volume's
+        // transfer function in 3D, the slices' grey ramp in the four panes.
+
+        if let (Some(histogram), Some((_, volume, _))) =
+            (&self.histogram, self.edit.scene.volumes().next())
         {
-            draw_histogram(&mut overlay, histogram, &volume.transfer);
+            if let Some([lo, hi]) = slices_window {
+                let grey = crate::classify::TransferFunction::ramp(lo, hi, [1.0; 4]);
+                draw_histogram(&mut overlay, histogram, &grey);
+            } else if self.windowing.is_some() && self.panes.is_none() {
+                draw_histogram(&mut overlay, histogram, &volume.transfer);
+            }
         }
         draw_hud(&mut overlay, &hud, self.help);
         write_overlay(&gpu.ctx, &gpu.overlay, overlay.as_raw(), w, h);
@@ -470,7 +481,8 @@ pub(super) fn shade(image: &mut image::RgbaImage, x0: u32, y0: u32, x1: u32, y1:
 
 /// The histogram of the volume's values (log counts, the background value left out) in a
 /// panel along the bottom of `image`, with the transfer function's opacity drawn over it and
-/// its colours in a strip beneath: what an Alt+drag of the window moves over the data.
+/// its colours (over black) in a strip beneath: what an Alt+drag of the window moves over the
+/// data.
 pub(super) fn draw_histogram(
     image: &mut image::RgbaImage,
     histogram: &crate::classify::Histogram,
@@ -500,9 +512,11 @@ pub(super) fn draw_histogram(
         for y in (bottom - bar).round() as u32..bottom as u32 {
             image.put_pixel(x, y, image::Rgba([150, 150, 150, 220]));
         }
-        let [r, g, b, _] = transfer.sample(value_at(c));
+        // The colour as it shows over black: straight colour times opacity (a grey ramp
+        // shows black to white).
+        let [r, g, b, a] = transfer.sample(value_at(c));
         for y in (bottom + 2.0) as u32..(bottom + 2.0 + strip) as u32 {
-            let px = |v: f32| (v.clamp(0.0, 1.0) * 255.0) as u8;
+            let px = |v: f32| (v.clamp(0.0, 1.0) * a.clamp(0.0, 1.0) * 255.0) as u8;
             image.put_pixel(x, y, image::Rgba([px(r), px(g), px(b), 255]));
         }
     }
