@@ -35,6 +35,8 @@ pub mod annotate;
 pub mod budget;
 pub mod camera;
 pub mod classify;
+#[cfg(feature = "annotate")]
+pub mod figure;
 pub mod geometry;
 pub mod grid;
 pub mod input;

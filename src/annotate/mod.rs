@@ -73,6 +73,17 @@ impl Annotations {
         }
         Ok(parts)
     }
+
+    /// The measurements' values alone, as a plain figure of a scene with measurements has.
+    pub fn measurements_only() -> Self {
+        Self {
+            orientation_marker: false,
+            edge_letters: false,
+            scale_bar: false,
+            measurements: true,
+            caption: None,
+        }
+    }
 }
 
 /// A measurement value to write beside its place in the scene.

@@ -9,10 +9,9 @@ use anyhow::{Context, Result, bail};
 use glam::DVec3;
 use serde::Deserialize;
 
-use splatscene::camera::Camera;
+use splatscene::figure::CameraChoice;
 use splatscene::scene::file::{
-    CameraSpec, LoadedScene, MeshSpec, SceneFile, TransformSpec, Units, VolumeSpec,
-    named_view_camera,
+    CameraSpec, LoadedScene, MeshSpec, SceneFile, TransformSpec, Units, VolumeSpec, apply_transfer,
 };
 use splatscene::scene::patient::NamedView;
 use splatscene::scene::patient::OrientationCode;
@@ -300,38 +299,6 @@ impl InputArgs {
     }
 }
 
-/// A preset, a value window and a shift given for every volume (`--preset`, `--window`,
-/// `--shift`, and their batch manifest keys) applied to one volume's spec: a preset replaces
-/// the transfer function (stretched over the window when one is given); a window alone makes a
-/// ramp over it.
-pub fn apply_transfer(
-    spec: &mut VolumeSpec,
-    preset: Option<&str>,
-    window: Option<[f32; 2]>,
-    shift: Option<f32>,
-) {
-    match (preset, window) {
-        (Some(preset), window) => {
-            spec.transfer = Some(preset.to_owned());
-            spec.window = None;
-            spec.color = None;
-            spec.level_width = window.map(|[lo, hi]| [0.5 * (lo + hi), hi - lo]);
-        }
-        (None, Some(window)) => {
-            if spec.transfer.as_deref() != Some("ramp") {
-                spec.color = None;
-            }
-            spec.transfer = Some("ramp".into());
-            spec.window = Some(window);
-            spec.level_width = None;
-        }
-        (None, None) => {}
-    }
-    if let Some(shift) = shift {
-        spec.shift = Some(shift);
-    }
-}
-
 /// The scene file of the built-in scene (`examples/scenes/shoulder.toml`, which a test keeps
 /// equal to the scene `scene::shoulder::shoulder_scene` builds).
 fn builtin_file() -> Result<SceneFile> {
@@ -470,24 +437,21 @@ impl ViewArgs {
             },
             (None, None) => base.projection,
         };
+        let choice = |view: Option<NamedView>| CameraChoice {
+            view,
+            eye: self.eye.map(DVec3::from),
+            target: self.target.map(DVec3::from),
+            orbit: self.orbit,
+            projection: Some(projection),
+        };
         let cameras = if views.is_empty() {
-            vec![(None, self.adjust(&loaded, base, projection))]
+            vec![(None, choice(None).camera(&loaded.scene, base, aspect))]
         } else {
             views
-                .iter()
+                .into_iter()
                 .map(|v| {
-                    let Some(v) = v else {
-                        return (
-                            Some("scene".to_owned()),
-                            self.adjust(&loaded, base, projection),
-                        );
-                    };
-                    let mut camera = named_view_camera(&loaded.scene, v, projection, aspect);
-                    if let Some(target) = self.target {
-                        camera.target = DVec3::from(target);
-                    }
-                    camera.near = base.near;
-                    (Some(v.name.clone()), self.turn(&loaded, camera))
+                    let name = v.as_ref().map_or("scene".to_owned(), |v| v.name.clone());
+                    (Some(name), choice(v).camera(&loaded.scene, base, aspect))
                 })
                 .collect()
         };
@@ -497,37 +461,6 @@ impl ViewArgs {
             cameras,
             size,
         })
-    }
-
-    /// `--eye`, `--target`, the projection and `--orbit` applied to the scene's camera.
-    fn adjust(
-        &self,
-        loaded: &LoadedScene,
-        mut camera: SceneCamera,
-        projection: Projection,
-    ) -> SceneCamera {
-        if let Some(eye) = self.eye {
-            camera.eye = DVec3::from(eye);
-        }
-        if let Some(target) = self.target {
-            camera.target = DVec3::from(target);
-        }
-        if self.eye.is_some() || self.target.is_some() {
-            // Keep the scene's up vector unless the new view runs along it.
-            let forward = (camera.target - camera.eye).normalize_or_zero();
-            if forward.cross(camera.up.normalize_or_zero()).length() < 1e-6 {
-                camera.up = Camera::safe_up(camera.eye, camera.target);
-            }
-        }
-        camera.projection = projection;
-        self.turn(loaded, camera)
-    }
-
-    fn turn(&self, loaded: &LoadedScene, camera: SceneCamera) -> SceneCamera {
-        match self.orbit {
-            Some([yaw, pitch]) => camera.orbit_about(loaded.scene.up_axis(), yaw, pitch),
-            None => camera,
-        }
     }
 }
 

@@ -48,7 +48,7 @@ pub(crate) fn run_order(args: OrderArgs) -> Result<()> {
     let to_world = |p: [f64; 3]| geometry.index_to_world_point(DVec3::from(p));
     let target = args.target.map_or(geometry.centre_world(), to_world);
     let view = ViewCase::new(&geometry, to_world(args.eye), target)?;
-    let needed = dense_order_bytes(args.dims, args.ordering);
+    let needed = splatscene::order::dense_order_bytes(args.dims, args.ordering);
     let available = splatscene::budget::memory_budget();
     if needed > available {
         let gib = |b: u64| b as f64 / f64::from(1u32 << 30);
@@ -93,18 +93,4 @@ pub(crate) fn run_order(args: OrderArgs) -> Result<()> {
         elapsed.as_secs_f64() * 1e3
     );
     Ok(())
-}
-
-/// About how many bytes ordering a dense grid of `dims` takes: the voxel bits, a run table
-/// per axis (a row offset and a run per row), the order and its bytes, and the sort keys of
-/// the exact and bucketed orders.
-fn dense_order_bytes(dims: [u32; 3], ordering: Ordering) -> u64 {
-    let n = dims.iter().map(|&d| u64::from(d)).product::<u64>();
-    let rows: u64 = dims.iter().map(|&d| n / u64::from(d.max(1))).sum();
-    let keys = match ordering {
-        Ordering::Exact => 32 * n,
-        Ordering::Bucketed => 8 * n,
-        _ => 0,
-    };
-    n / 8 + 12 * rows + 8 * n + keys
 }

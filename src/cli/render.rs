@@ -7,15 +7,13 @@ use std::path::{Path, PathBuf};
 use anyhow::{Result, bail};
 use serde_json::Value;
 
-use splatscene::annotate::{Annotations, Label, annotate_image, colour_bar};
+use splatscene::annotate::{Annotations, Label, colour_bar};
+use splatscene::figure::{Measured, context_for, depth_distances, measured};
 use splatscene::order::Ordering;
 use splatscene::pick::contact::Classes;
-use splatscene::pick::measure::draw_scene_measurements;
 use splatscene::pick::paint::{paint, value_colour};
-use splatscene::pick::surface_distances;
 use splatscene::render::{
-    Compositor, DepthImage, DepthMode, FrameOptions, FrameReport, GpuContext, RenderError,
-    Renderer, encode_png, frame_to_rgba8,
+    Compositor, DepthImage, DepthMode, FrameOptions, FrameReport, GpuContext, Renderer, encode_png,
 };
 use splatscene::scene::file::SceneFile;
 use splatscene::scene::{Scene, SceneCamera};
@@ -149,7 +147,7 @@ pub(crate) fn figure(
 }
 
 /// The image of a screenshot, annotated when asked (with the patient frame of `scene`), and
-/// what the annotation drew.
+/// what the annotation drew; what was left out for want of room said on stderr.
 pub(crate) fn figure_image(
     shot: &splatscene::render::Screenshot,
     scene: &Scene,
@@ -157,17 +155,7 @@ pub(crate) fn figure_image(
     parts: Option<&Annotations>,
     labels: &[Label],
 ) -> Result<(image::RgbaImage, Option<splatscene::annotate::Drawn>)> {
-    let mut image = frame_to_rgba8(&shot.frame);
-    let drawn = match parts {
-        Some(parts) => Some(annotate_image(
-            &mut image,
-            camera,
-            &scene.patient_frame(),
-            labels,
-            parts,
-        )?),
-        None => None,
-    };
+    let (image, drawn) = splatscene::figure::figure_image(shot, scene, camera, parts, labels)?;
     say_dropped(drawn.as_ref(), parts);
     Ok((image, drawn))
 }
@@ -286,8 +274,7 @@ pub fn run_render(args: RenderArgs) -> Result<()> {
     let depth_mode = match args.depth_mode.as_deref() {
         Some("surface") => DepthMode::Surface,
         Some(_) => DepthMode::Mesh,
-        None if has_meshes => DepthMode::Mesh,
-        None => DepthMode::Surface,
+        None => splatscene::figure::default_depth_mode(&loaded.scene),
     };
     if args.depth.is_some() && depth_mode == DepthMode::Mesh && !has_meshes {
         bail!(
@@ -301,16 +288,11 @@ pub fn run_render(args: RenderArgs) -> Result<()> {
         Some(name) => Some(paint_contact(&mut drawn, &file, name)?),
         None => None,
     };
-    let mut labels = draw_scene_measurements(&mut drawn).map_err(anyhow::Error::msg)?;
-    if parts.as_ref().is_some_and(|p| !p.measurements) {
-        labels.clear();
-    }
-    let label_parts = match (&parts, labels.is_empty()) {
-        (None, false) => {
-            Some(Annotations::parse_parts("measurements").map_err(anyhow::Error::msg)?)
-        }
-        (p, _) => p.clone(),
-    };
+    let Measured {
+        scene: drawn,
+        labels,
+        parts: label_parts,
+    } = measured(&drawn, parts.as_ref())?;
     let ctx = context_for(args.compositor, &drawn)?;
     // One renderer for every view: the volumes are classified once.
     let mut renderer = Renderer::with_compositor(args.compositor);
@@ -510,15 +492,7 @@ pub(crate) fn depth_files(
     surface_opacity: f32,
 ) -> Result<(Vec<u8>, Value)> {
     let view = &shot.view;
-    let mut distances: Vec<Option<f64>> = shot.depth.iter().map(|&d| view.distance_of(d)).collect();
-    if mode == DepthMode::Surface {
-        let surface = surface_distances(scene, view, surface_opacity, Some(&distances));
-        for (d, s) in distances.iter_mut().zip(surface) {
-            if s.is_some() {
-                *d = s;
-            }
-        }
-    }
+    let distances = depth_distances(shot, scene, mode, surface_opacity);
     let image = DepthImage {
         size: view.size,
         distances,
@@ -655,22 +629,6 @@ pub(crate) fn describe(r: &FrameReport) -> String {
         ms(r.timings.mesh_pass),
         ms(r.timings.readback)
     )
-}
-
-/// The GPU context, or none where there is no adapter and the CPU can draw the whole scene
-/// (volumes only, a compositor other than the GPU's).
-fn context_for(compositor: Compositor, scene: &Scene) -> Result<Option<GpuContext>> {
-    match GpuContext::headless() {
-        Ok(ctx) => Ok(Some(ctx)),
-        Err(e @ RenderError::NoAdapter(_))
-            if compositor != Compositor::Gpu
-                && scene.meshes().chain(scene.overlays()).next().is_none() =>
-        {
-            eprintln!("{e}\ncompositing the volumes on the CPU");
-            Ok(None)
-        }
-        Err(e) => Err(e.into()),
-    }
 }
 
 /// Whether two output paths name one file, also when reached two ways (`./`, `..`, links,

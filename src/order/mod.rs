@@ -433,3 +433,17 @@ pub fn order(
     Orderer::new().order(grid, view, ordering, options, &mut out)?;
     Ok(out)
 }
+
+/// About how many bytes ordering a dense grid of `dims` takes: the voxel bits, a run table
+/// per axis (a row offset and a run per row), the order and its bytes, and the sort keys of
+/// the exact and bucketed orders.
+pub fn dense_order_bytes(dims: [u32; 3], ordering: Ordering) -> u64 {
+    let n = dims.iter().map(|&d| u64::from(d)).product::<u64>();
+    let rows: u64 = dims.iter().map(|&d| n / u64::from(d.max(1))).sum();
+    let keys = match ordering {
+        Ordering::Exact => 32 * n,
+        Ordering::Bucketed => 8 * n,
+        _ => 0,
+    };
+    n / 8 + 12 * rows + 8 * n + keys
+}

@@ -102,26 +102,41 @@ impl LoadedVolume {
 
     /// The description [`super::detect::volume_info`] gives, with `file` as the file name shown.
     pub fn info(&self, file: &Path) -> Value {
-        let v = &self.volume;
-        let d = v.direction;
-        let rows: Vec<[f64; 3]> = (0..3).map(|r| d.row(r).to_array()).collect();
-        let (min, max, mean) = match value_range(&v.values) {
-            Some((min, max, mean)) => (json!(min), json!(max), json!(mean)),
-            None => (Value::Null, Value::Null, Value::Null),
-        };
-        json!({
-            "file": file.display().to_string(),
-            "format": self.format.name(),
-            "size": v.dims,
-            "spacing": v.spacing,
-            "origin": v.origin,
-            "direction": rows,
-            "scalar_type": self.scalar_type.map(scalar_type_name),
-            "min": min,
-            "max": max,
-            "mean": mean,
-        })
+        describe(
+            &self.volume,
+            Some(file),
+            Some(self.format.name()),
+            self.scalar_type.map(scalar_type_name),
+        )
     }
+}
+
+/// A volume described as [`LoadedVolume::info`] describes one, for a volume that may come from
+/// no file: `file`, `format` and `scalar_type` are `null` where `None`.
+pub fn describe(
+    v: &CpuVolume,
+    file: Option<&Path>,
+    format: Option<&str>,
+    scalar_type: Option<&str>,
+) -> Value {
+    let d = v.direction;
+    let rows: Vec<[f64; 3]> = (0..3).map(|r| d.row(r).to_array()).collect();
+    let (min, max, mean) = match value_range(&v.values) {
+        Some((min, max, mean)) => (json!(min), json!(max), json!(mean)),
+        None => (Value::Null, Value::Null, Value::Null),
+    };
+    json!({
+        "file": file.map(|f| f.display().to_string()),
+        "format": format,
+        "size": v.dims,
+        "spacing": v.spacing,
+        "origin": v.origin,
+        "direction": rows,
+        "scalar_type": scalar_type,
+        "min": min,
+        "max": max,
+        "mean": mean,
+    })
 }
 
 /// The name [`super::detect::volume_info`] gives a stored value type: `uint8`, `int8`, `uint16`, `int16`,

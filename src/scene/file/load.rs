@@ -35,6 +35,20 @@ use crate::volume::{
 impl SceneFile {
     /// Loads everything the file names; relative paths are taken from `base`.
     pub fn load(&self, path: &Path, base: &Path) -> Result<LoadedScene, SceneFileError> {
+        self.load_given(path, base, Given::default())
+    }
+
+    /// [`SceneFile::load`], with the volumes and meshes `given` holds taken as they are
+    /// instead of read from their paths (which then only name them in messages): a front end
+    /// that already holds a volume or a mesh in memory (the Python module's arrays) loads the
+    /// rest of the file as any other. Raw and file keys (`dims`, `series`...) are refused on
+    /// a given volume, having nothing to read.
+    pub fn load_given(
+        &self,
+        path: &Path,
+        base: &Path,
+        mut given: Given,
+    ) -> Result<LoadedScene, SceneFileError> {
         let invalid = |message: String| SceneFileError::Invalid {
             path: path.into(),
             message,
@@ -46,7 +60,8 @@ impl SceneFile {
         let data = DataRoot::from_env();
         let mut scene = Scene::new();
         for (i, spec) in self.volumes.iter().enumerate() {
-            let node = load_volume(spec, path, base, &data, &invalid)?;
+            let held = given.volumes.get_mut(i).and_then(Option::take);
+            let node = load_volume(spec, held, path, base, &data, &invalid)?;
             let name = spec
                 .name
                 .clone()
@@ -61,6 +76,9 @@ impl SceneFile {
         let mut loaded_files = MeshFiles::default();
         for (i, spec) in self.meshes.iter().enumerate() {
             let files = &mut loaded_files;
+            if let Some(model) = given.meshes.get_mut(i).and_then(Option::take) {
+                files.give(given_key(i), model);
+            }
             let id = load_mesh_spec(&mut scene, spec, i, (path, base, &data), files, &invalid)?;
             meshes.push((
                 scene
@@ -242,14 +260,88 @@ pub(super) fn resolve_spec_path(
     Ok(resolved)
 }
 
+/// A preset, a value window and a shift given for every volume (`--preset`, `--window`,
+/// `--shift`, and their batch manifest keys) applied to one volume's spec: a preset replaces
+/// the transfer function (stretched over the window when one is given); a window alone makes a
+/// ramp over it.
+pub fn apply_transfer(
+    spec: &mut super::VolumeSpec,
+    preset: Option<&str>,
+    window: Option<[f32; 2]>,
+    shift: Option<f32>,
+) {
+    match (preset, window) {
+        (Some(preset), window) => {
+            spec.transfer = Some(preset.to_owned());
+            spec.window = None;
+            spec.color = None;
+            spec.level_width = window.map(|[lo, hi]| [0.5 * (lo + hi), hi - lo]);
+        }
+        (None, Some(window)) => {
+            if spec.transfer.as_deref() != Some("ramp") {
+                spec.color = None;
+            }
+            spec.transfer = Some("ramp".into());
+            spec.window = Some(window);
+            spec.level_width = None;
+        }
+        (None, None) => {}
+    }
+    if let Some(shift) = shift {
+        spec.shift = Some(shift);
+    }
+}
+
+/// Volumes and meshes a scene file's load takes as they are ([`SceneFile::load_given`]), by
+/// their index among the file's volumes and meshes.
+#[derive(Default)]
+pub struct Given {
+    /// The volume of each volume spec, where one is held.
+    pub volumes: Vec<Option<Arc<CpuVolume>>>,
+    /// The mesh file's content of each mesh spec, where one is held.
+    pub meshes: Vec<Option<crate::mesh::Model>>,
+}
+
+/// The key under which a given mesh is kept among the files read: no path can be it.
+fn given_key(index: usize) -> PathBuf {
+    PathBuf::from(format!("\0given mesh {index}"))
+}
+
 pub(super) fn load_volume(
     spec: &VolumeSpec,
+    held: Option<Arc<CpuVolume>>,
     scene_file: &Path,
     base: &Path,
     data: &DataRoot,
     invalid: &dyn Fn(String) -> SceneFileError,
 ) -> Result<VolumeNode, SceneFileError> {
-    let volume = if spec.path == "builtin:shoulder-phantom" {
+    let volume = if let Some(held) = held {
+        let keys = [
+            ("dims", spec.dims.is_some()),
+            ("scalar", spec.scalar.is_some()),
+            ("header_bytes", spec.header_bytes.is_some()),
+            ("spacing", spec.spacing.is_some()),
+            ("origin", spec.origin.is_some()),
+            ("orientation", spec.orientation.is_some()),
+            ("series", spec.series.is_some()),
+            ("skip_unreadable", spec.skip_unreadable.is_some()),
+            ("frame", spec.frame.is_some()),
+            ("nifti_transform", spec.nifti_transform.is_some()),
+            ("coordinate_frame", spec.coordinate_frame.is_some()),
+            ("resect_humeral_head", spec.resect_humeral_head),
+            (
+                "cut_away_anterior_humerus",
+                spec.cut_away_anterior_humerus.is_some(),
+            ),
+        ];
+        if let Some((key, _)) = keys.iter().find(|(_, g)| *g) {
+            return Err(invalid(format!(
+                "volume {}: {key} has no effect on a volume given in memory, which is read already",
+                spec.path
+            )));
+        }
+        held
+    } else if spec.path == "builtin:shoulder-phantom" {
         if spec.dims.is_some() || spec.scalar.is_some() || spec.orientation.is_some() {
             return Err(invalid(
                 "builtin:shoulder-phantom is made in code: dims, scalar and orientation do not apply"
@@ -269,7 +361,7 @@ pub(super) fn load_volume(
             }
             cut_away_anterior_humerus(&mut volume, &marks, reach);
         }
-        volume
+        Arc::new(volume)
     } else {
         if spec.cut_away_anterior_humerus.is_some() {
             // The cut is placed by the phantom's landmarks, which no other volume has.
@@ -279,7 +371,7 @@ pub(super) fn load_volume(
             )));
         }
         let file = resolve_spec_path(&spec.path, scene_file, base, data, invalid)?;
-        load_raw_volume(spec, &file, invalid)?
+        Arc::new(load_raw_volume(spec, &file, invalid)?)
     };
     let mut transfer = match spec.transfer.as_deref().unwrap_or("auto") {
         "ramp" => {
@@ -341,7 +433,7 @@ pub(super) fn load_volume(
         )));
     }
     Ok(VolumeNode {
-        volume: Arc::new(volume),
+        volume,
         transfer: Arc::new(transfer),
         splats: SplatSettings {
             min_opacity,
@@ -352,6 +444,16 @@ pub(super) fn load_volume(
                 .map_or(SplatSettings::default().shading, |v| v.clamp(0.0, 1.0)),
             ..Default::default()
         },
+    })
+}
+
+/// Reads the volume `spec` describes from `path` (resolved already) as a scene file reads it:
+/// a raw file with `dims` and `scalar`, else any format with a header or a DICOM folder; keys
+/// that cannot apply to it refused, naming them.
+pub fn read_volume(spec: &VolumeSpec, path: &Path) -> Result<CpuVolume, SceneFileError> {
+    load_raw_volume(spec, path, &|message| SceneFileError::Invalid {
+        path: path.into(),
+        message,
     })
 }
 
@@ -446,6 +548,22 @@ pub(super) fn load_raw_volume(
     Ok(volume)
 }
 
+/// A mesh file's content with its triangles behind shared pointers; its warnings are printed.
+fn shared(mut model: crate::mesh::Model) -> Arc<SharedModel> {
+    for warning in &model.warnings {
+        eprintln!("warning: {warning}");
+    }
+    let meshes = model
+        .parts
+        .iter_mut()
+        .map(|part| Arc::new(std::mem::take(&mut part.mesh)))
+        .collect();
+    Arc::new(SharedModel {
+        parts: model.parts,
+        meshes,
+    })
+}
+
 /// The mesh files a scene file's load has read, by resolved path: their parts, with triangles
 /// shared by every node drawn from them.
 #[derive(Default)]
@@ -460,6 +578,16 @@ pub(super) struct SharedModel {
 }
 
 impl MeshFiles {
+    /// Keeps `model` as the content of `key`, its warnings printed now.
+    fn give(&mut self, key: PathBuf, model: crate::mesh::Model) {
+        self.models.insert(key, shared(model));
+    }
+
+    /// The model kept under `key`, if one is.
+    fn given(&self, key: &Path) -> Option<Arc<SharedModel>> {
+        self.models.get(key).cloned()
+    }
+
     /// The model of the file at `key` (a resolved path, or the built-in prosthesis's name),
     /// read by `load` the first time; its warnings are printed then.
     fn get(
@@ -470,19 +598,7 @@ impl MeshFiles {
         if let Some(model) = self.models.get(&key) {
             return Ok(Arc::clone(model));
         }
-        let mut model = load()?;
-        for warning in &model.warnings {
-            eprintln!("warning: {warning}");
-        }
-        let meshes = model
-            .parts
-            .iter_mut()
-            .map(|part| Arc::new(std::mem::take(&mut part.mesh)))
-            .collect();
-        let shared = Arc::new(SharedModel {
-            parts: model.parts,
-            meshes,
-        });
+        let shared = shared(load()?);
         self.models.insert(key, Arc::clone(&shared));
         Ok(shared)
     }
@@ -496,7 +612,9 @@ pub(super) fn load_mesh_spec(
     files: &mut MeshFiles,
     invalid: &dyn Fn(String) -> SceneFileError,
 ) -> Result<NodeId, SceneFileError> {
-    let shared = if spec.path == "builtin:prosthesis" {
+    let shared = if let Some(model) = files.given(&given_key(index)) {
+        model
+    } else if spec.path == "builtin:prosthesis" {
         files.get(spec.path.clone().into(), || Ok(prosthesis_model()?))?
     } else {
         let path = resolve_spec_path(&spec.path, scene_file, base, data, invalid)?;

@@ -51,7 +51,10 @@ mod validate;
 
 pub use camera::{CameraSpecError, camera, named_view_camera, upright};
 pub use edit::EditError;
-pub use load::{DataPathError, load_scene_file, resolve_path, scale_warnings};
+pub use load::{
+    DataPathError, Given, apply_transfer, load_scene_file, read_volume, resolve_path,
+    scale_warnings,
+};
 pub use save::{PlanError, transform_spec};
 pub use schema::*;
 pub use validate::extra_elements;

@@ -29,7 +29,7 @@ use splatscene::scene::file::{CameraSpec, MeshSpec, SceneFile, VolumeSpec};
 use splatscene::scene::patient::NamedView;
 use splatscene::scene::slice_spec::SliceSpec;
 
-use crate::cli::input::apply_transfer;
+use splatscene::scene::file::apply_transfer;
 
 /// A manifest as written.
 #[derive(Debug, Deserialize, Serialize)]
