@@ -353,6 +353,12 @@ class Scene:
         """The scene's camera: eye, target and up in RAS millimetres."""
         return self._native.camera
 
+    @property
+    def report(self) -> Optional[dict]:
+        """What the last ``render`` drew and where its time went (splats, level of detail,
+        volumes classified: 0 when the renderer kept them, the stages' milliseconds)."""
+        return self._native.report
+
     def __repr__(self) -> str:
         return repr(self._native)
 

@@ -19,7 +19,9 @@ use splatscene::figure::{
 use splatscene::order::Ordering;
 use splatscene::pick::contact::{Classes, contact};
 use splatscene::pick::{PickOptions, Picker};
-use splatscene::render::{Compositor, DepthMode, FrameOptions, GpuContext, Renderer, ViewSetup};
+use splatscene::render::{
+    Compositor, DepthMode, FrameOptions, FrameReport, GpuContext, Renderer, ViewSetup,
+};
 use splatscene::scene::file::{
     BoxSpec, CameraSpec, Given, LoadedScene, MeshSpec, SceneFile, VolumeSpec, apply_transfer,
 };
@@ -36,6 +38,8 @@ struct State {
     renderer: Renderer,
     /// The GPU context, made on the first picture (`Some(None)`: no adapter, volumes only).
     ctx: Option<Option<GpuContext>>,
+    /// What the last picture drew and where its time went.
+    report: Option<FrameReport>,
 }
 
 /// A planning scene: volumes and meshes, a camera, lights, clip planes and measurements.
@@ -54,6 +58,7 @@ impl Scene {
                 loaded,
                 renderer: Renderer::with_compositor(Compositor::Auto),
                 ctx: None,
+                report: None,
             }),
             path,
         }
@@ -477,6 +482,7 @@ impl Scene {
                     .screenshot_without_gpu(&with_marks, &camera, size, &options),
             }
             .map_err(|e| e.to_string())?;
+            state.report = Some(shot.report);
             let (image, _) = figure_image(&shot, scene, &camera, parts.as_ref(), &labels)
                 .map_err(|e| e.to_string())?;
             let depth = depth.then(|| {
@@ -637,6 +643,50 @@ impl Scene {
                 "eye": camera.eye.to_array(),
                 "target": camera.target.to_array(),
                 "up": camera.up.to_array(),
+            }),
+        )
+    }
+
+    /// What the last `render` drew and where its time went, as `splatscene render` says it on
+    /// stderr: meshes, triangles, splats, the level of detail and refinement, how many volumes
+    /// were classified (0 when the renderer kept them), the CPU tiles' counts, and the stages'
+    /// milliseconds; `None` before the first picture.
+    #[getter]
+    fn report<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        let Some(r) = self.lock()?.report else {
+            return Ok(py.None().into_bound(py));
+        };
+        let ms = |d: std::time::Duration| d.as_secs_f64() * 1e3;
+        let t = r.timings;
+        let tiles = r.tiles.map(|t| {
+            serde_json::json!({
+                "projected": t.projected,
+                "culled": t.culled,
+                "drew": t.drew,
+                "composited": t.composited,
+                "skipped_opaque": t.skipped_opaque,
+                "tiles_opaque": t.tiles_opaque,
+                "project_ms": ms(t.project),
+                "bin_ms": ms(t.bin),
+                "tiles_ms": ms(t.tiles),
+            })
+        });
+        json_to_py(
+            py,
+            &serde_json::json!({
+                "meshes": r.meshes,
+                "triangles": r.triangles,
+                "splats": r.splats,
+                "level": r.level,
+                "refined": r.refined,
+                "classified": r.classified,
+                "tiles": tiles,
+                "classify_ms": ms(t.classify),
+                "order_ms": ms(t.order),
+                "upload_ms": ms(t.upload),
+                "mesh_pass_ms": ms(t.mesh_pass),
+                "splat_pass_ms": ms(t.splat_pass),
+                "readback_ms": ms(t.readback),
             }),
         )
     }

@@ -356,10 +356,22 @@ fn values_of(array: &Bound<'_, PyUntypedArray>) -> PyResult<Voxels> {
     )))
 }
 
-/// A 3x3 direction matrix, checked: finite and orthonormal within 1e-4 (a rotation, or one
-/// with a mirror, as a scanner's left-handed grid has).
+/// A 3x3 direction matrix (rows, or nine numbers row by row as SimpleITK's `GetDirection`
+/// gives them), checked: finite and orthonormal within 1e-4 (a rotation, or one with a
+/// mirror, as a scanner's left-handed grid has).
 pub fn rotation(value: &Bound<'_, PyAny>) -> PyResult<DMat3> {
-    let rows = matrix(value, 3, 3, "direction")?;
+    let flat = value.len().ok() == Some(9)
+        && value
+            .get_item(0)
+            .is_ok_and(|first| first.extract::<f64>().is_ok());
+    let rows = if flat {
+        crate::convert::numbers(value, 9, "direction")?
+            .chunks(3)
+            .map(<[f64]>::to_vec)
+            .collect()
+    } else {
+        matrix(value, 3, 3, "direction")?
+    };
     let m = DMat3::from_cols_array_2d(&[
         [rows[0][0], rows[1][0], rows[2][0]],
         [rows[0][1], rows[1][1], rows[2][1]],

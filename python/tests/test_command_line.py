@@ -172,3 +172,25 @@ def test_error_measures_each_ordering_against_the_exact_order():
         assert 0 <= r["rmse"] <= r["max_difference"] <= 1 and r["order_ms"] >= 0
     # Back to front by whole slabs (BTF) is no better than IP-PBTF on such a view.
     assert rows[1]["rmse"] <= rows[0]["rmse"] + 1e-9
+
+
+def test_the_renderer_is_kept_between_pictures_so_volumes_are_classified_once():
+    scene = splatscene.Scene.from_file(SHOULDER)
+    assert scene.report is None
+    scene.render(size=(160, 120))
+    first = scene.report
+    assert first["classified"] == 1 and first["splats"] > 1000 and first["meshes"] >= 1
+    scene.render(size=(160, 120), orbit=(40, 0))
+    assert scene.report["classified"] == 0
+    # A scene of its own has a renderer of its own.
+    other = splatscene.Scene.from_file(SHOULDER)
+    other.render(size=(160, 120))
+    assert other.report["classified"] == 1
+
+
+def test_error_takes_one_ordering_by_name():
+    volume = splatscene.load_volume(data_file("volumes/datraw_small/Bucky_32x32x32_uint8.dat"))
+    rows = splatscene.error(volume, (70, -40, 50), orderings="pbtf", size=(48, 48))
+    assert [r["ordering"] for r in rows] == ["pbtf"]
+    with pytest.raises(ValueError, match="empty"):
+        splatscene.error(volume, (70, -40, 50), orderings=[])

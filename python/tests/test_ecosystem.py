@@ -127,3 +127,13 @@ def test_a_mesh_from_arrays_draws_as_the_same_mesh_from_a_file(tmp_path):
     b = splatscene.Scene(meshes=[from_file.placed(rotate_degrees=(10, 20, 30))]).render(size=(100, 80))
     assert np.array_equal(a, b)
     assert (np.abs(a[..., :3].astype(int) - a[0, 0, :3]).sum(axis=2) > 30).mean() > 0.05
+
+
+def test_simpleitks_flat_direction_is_taken_row_by_row():
+    image = sitk.Image(6, 5, 4, sitk.sitkInt16)
+    turned = (0.0, -1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0)
+    image.SetDirection(turned)
+    v = splatscene.Volume.from_array(sitk.GetArrayFromImage(image), direction=image.GetDirection())
+    assert np.allclose(v.direction, np.array(turned).reshape(3, 3))
+    ras = splatscene.Volume.from_sitk(image)
+    assert np.allclose(ras.direction, np.diag([-1, -1, 1]) @ np.array(turned).reshape(3, 3))
