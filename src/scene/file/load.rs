@@ -316,25 +316,17 @@ pub(super) fn load_volume(
     invalid: &dyn Fn(String) -> SceneFileError,
 ) -> Result<VolumeNode, SceneFileError> {
     let volume = if let Some(held) = held {
-        let keys = [
-            ("dims", spec.dims.is_some()),
-            ("scalar", spec.scalar.is_some()),
-            ("header_bytes", spec.header_bytes.is_some()),
-            ("spacing", spec.spacing.is_some()),
-            ("origin", spec.origin.is_some()),
-            ("orientation", spec.orientation.is_some()),
-            ("series", spec.series.is_some()),
-            ("skip_unreadable", spec.skip_unreadable.is_some()),
-            ("frame", spec.frame.is_some()),
-            ("nifti_transform", spec.nifti_transform.is_some()),
-            ("coordinate_frame", spec.coordinate_frame.is_some()),
-            ("resect_humeral_head", spec.resect_humeral_head),
-            (
-                "cut_away_anterior_humerus",
-                spec.cut_away_anterior_humerus.is_some(),
-            ),
-        ];
-        if let Some((key, _)) = keys.iter().find(|(_, g)| *g) {
+        let keys = raw_keys(spec)
+            .into_iter()
+            .chain(file_keys(spec).map(|(key, given, _)| (key, given)))
+            .chain([
+                ("resect_humeral_head", spec.resect_humeral_head),
+                (
+                    "cut_away_anterior_humerus",
+                    spec.cut_away_anterior_humerus.is_some(),
+                ),
+            ]);
+        if let Some((key, _)) = keys.into_iter().find(|(_, g)| *g) {
             return Err(invalid(format!(
                 "volume {}: {key} has no effect on a volume given in memory, which is read already",
                 spec.path
@@ -457,20 +449,22 @@ pub fn read_volume(spec: &VolumeSpec, path: &Path) -> Result<CpuVolume, SceneFil
     })
 }
 
-pub(super) fn load_raw_volume(
-    spec: &VolumeSpec,
-    path: &Path,
-    invalid: &dyn Fn(String) -> SceneFileError,
-) -> Result<CpuVolume, SceneFileError> {
-    let raw_keys = [
+/// The keys of a volume spec that describe a headerless raw file, each with whether it is set.
+fn raw_keys(spec: &VolumeSpec) -> [(&'static str, bool); 6] {
+    [
         ("dims", spec.dims.is_some()),
         ("scalar", spec.scalar.is_some()),
         ("header_bytes", spec.header_bytes.is_some()),
         ("spacing", spec.spacing.is_some()),
         ("origin", spec.origin.is_some()),
         ("orientation", spec.orientation.is_some()),
-    ];
-    let file_keys = [
+    ]
+}
+
+/// The keys of a volume spec that choose how a file with a header is read, each with whether it
+/// is set and the files it applies to.
+fn file_keys(spec: &VolumeSpec) -> [(&'static str, bool, &'static str); 5] {
+    [
         ("series", spec.series.is_some(), "DICOM"),
         ("skip_unreadable", spec.skip_unreadable.is_some(), "DICOM"),
         ("frame", spec.frame.is_some(), "4-D NIfTI"),
@@ -480,7 +474,16 @@ pub(super) fn load_raw_volume(
             spec.coordinate_frame.is_some(),
             "files whose format states no frame (a raw volume takes orientation)",
         ),
-    ];
+    ]
+}
+
+pub(super) fn load_raw_volume(
+    spec: &VolumeSpec,
+    path: &Path,
+    invalid: &dyn Fn(String) -> SceneFileError,
+) -> Result<CpuVolume, SceneFileError> {
+    let raw_keys = raw_keys(spec);
+    let file_keys = file_keys(spec);
     if (spec.dims.is_some() || spec.scalar.is_some())
         && let Some((key, _, applies)) = file_keys.iter().find(|(_, given, _)| *given)
     {

@@ -809,3 +809,84 @@ fn a_measurement_between_an_implant_and_the_world_follows_the_implant_end_only()
         assert!(e.contains(wanted), "{e}");
     }
 }
+
+/// Volumes and meshes given in memory load as those read from files would, their paths only
+/// naming them; keys that would read a file are refused on them.
+#[test]
+fn given_volumes_and_meshes_stand_for_their_files() {
+    let volume = Arc::new(crate::volume::CpuVolume {
+        dims: [4, 3, 2],
+        spacing: [1.0, 2.0, 3.0],
+        origin: [5.0, 6.0, 7.0],
+        direction: glam::DMat3::IDENTITY,
+        values: (0..24).map(|v| v as f32 * 10.0).collect::<Vec<_>>().into(),
+    });
+    let cube =
+        crate::mesh::load_mesh_bytes(b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n", "triangle.obj")
+            .expect("an OBJ triangle");
+    let file = SceneFile {
+        volumes: vec![VolumeSpec {
+            name: Some("ct".into()),
+            path: "<array>".into(),
+            transfer: Some("ramp".into()),
+            window: Some([0.0, 200.0]),
+            ..VolumeSpec::default()
+        }],
+        meshes: vec![MeshSpec {
+            name: Some("implant".into()),
+            path: "<arrays>".into(),
+            transform: TransformSpec {
+                translate: Some([1.0, 2.0, 3.0]),
+                ..TransformSpec::default()
+            },
+            ..MeshSpec::default()
+        }],
+        ..SceneFile::default()
+    };
+    let given = || Given {
+        volumes: vec![Some(Arc::clone(&volume))],
+        meshes: vec![Some(cube.clone())],
+    };
+    let loaded = file
+        .load_given(Path::new("memory"), Path::new("."), given())
+        .expect("the given parts load");
+    let (_, node, _) = loaded.scene.volumes().next().expect("a volume");
+    assert!(
+        Arc::ptr_eq(&node.volume, &volume),
+        "the volume is not copied"
+    );
+    let (_, mesh, world) = loaded.scene.meshes().next().expect("a mesh");
+    assert_eq!(mesh.mesh.positions, cube.parts[0].mesh.positions);
+    assert_eq!(
+        world.transform_point3(DVec3::ZERO),
+        DVec3::new(1.0, 2.0, 3.0)
+    );
+    // Without them the paths are read, and there is no such file.
+    assert!(file.load(Path::new("memory"), Path::new(".")).is_err());
+    for (key, spec) in [
+        (
+            "dims",
+            VolumeSpec {
+                dims: Some([4, 3, 2]),
+                ..file.volumes[0].clone()
+            },
+        ),
+        (
+            "series",
+            VolumeSpec {
+                series: Some("2".into()),
+                ..file.volumes[0].clone()
+            },
+        ),
+    ] {
+        let with_key = SceneFile {
+            volumes: vec![spec],
+            ..file.clone()
+        };
+        let e = with_key
+            .load_given(Path::new("memory"), Path::new("."), given())
+            .expect_err("a key that reads a file is refused")
+            .to_string();
+        assert!(e.contains(key) && e.contains("in memory"), "{e}");
+    }
+}
