@@ -277,7 +277,7 @@ def _native_of(items: Optional[Iterable[Any]], kind: type) -> Optional[list]:
         return None
     if isinstance(items, (str, bytes, kind)):
         raise TypeError(f"expected a list of {kind.__name__} objects or paths")
-    return [item._native if isinstance(item, kind) else item for item in items]
+    return [getattr(item, "_native") if isinstance(item, kind) else item for item in items]
 
 
 class Scene:
@@ -367,7 +367,10 @@ def order(dims: Sequence[int], eye: Sequence[float], ordering: str = "ip-pbtf", 
     """The draw order of a dense grid, as ``splatscene order`` writes it: uint32 voxel ids
     ``x + nx * (y + ny * z)``, farthest first, for an ``eye`` in voxel index coordinates.
     Options: ``spacing``, ``target``, ``cull_behind_eye``, ``bucket_width``."""
-    return _native.order(tuple(int(d) for d in dims), eye, ordering, **options)
+    if len(dims) != 3:
+        raise ValueError(f"dims: expected three sizes (x, y, z), got {len(dims)}")
+    nx, ny, nz = (int(d) for d in dims)
+    return _native.order((nx, ny, nz), eye, ordering, **options)
 
 
 def error(volume: Volume, eye: Sequence[float], **options: Any) -> list:
