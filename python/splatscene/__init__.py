@@ -328,10 +328,12 @@ class Scene:
         ``opacity`` (what a voxel must exceed to be hit) and ``meshes_only``."""
         return self._native.pick(pixel, size, **options)
 
-    def contact(self, mesh: Optional[str] = None, classes: Optional[Sequence[float]] = None) -> dict:
+    def contact(self, mesh: Optional[Union[str, Mesh]] = None, classes: Optional[Sequence[float]] = None) -> dict:
         """What a mesh's surface touches in the first volume, as ``splatscene contact``
-        reports it (``classes``: value edges; CT classes by default)."""
-        return self._native.contact(mesh, classes=None if classes is None else list(classes))
+        reports it: ``mesh`` a mesh of the scene, by name or the Mesh it was built from (the
+        first by default); ``classes`` value edges (CT classes by default)."""
+        name = mesh.name if isinstance(mesh, Mesh) else mesh
+        return self._native.contact(name, classes=None if classes is None else list(classes))
 
     @property
     def size(self) -> Optional[Tuple[int, int]]:

@@ -137,3 +137,17 @@ def test_simpleitks_flat_direction_is_taken_row_by_row():
     assert np.allclose(v.direction, np.array(turned).reshape(3, 3))
     ras = splatscene.Volume.from_sitk(image)
     assert np.allclose(ras.direction, np.diag([-1, -1, 1]) @ np.array(turned).reshape(3, 3))
+
+
+def test_contact_of_a_mesh_built_in_python_is_that_of_its_file(tmp_path):
+    ct = splatscene.load_volume(data_file(NIFTI))
+    humerus = data_file("meshes/myosim_shoulder/humerus.stl")
+    bone = splatscene.Mesh.from_file(humerus, units="m", translate=(-20, 160, 660))
+    scene = splatscene.Scene([ct], [bone])
+    by_object = scene.contact(bone)
+    assert by_object == scene.contact("humerus.stl") == scene.contact()
+    from conftest import cli_json
+    theirs = cli_json("contact", data_file(NIFTI), "--mesh", humerus, "--mesh-units", "m",
+                      "--mesh-transform", "{ translate = [-20, 160, 660] }")
+    assert by_object == theirs
+    assert by_object["area_mm2"] > 1000
