@@ -930,10 +930,21 @@ impl Block {
         if self.voxel == Some(k) {
             return;
         }
-        self.voxel = Some(k);
+        let previous = self.voxel.replace(k);
         let dims = dims.map(|n| n as usize);
         let (row, plane) = (dims[0], dims[0] * dims[1]);
-        if (0..3).all(|a| k[a] >= 1 && k[a] + 1 < dims[a]) {
+        let inside = (0..3).all(|a| k[a] >= 1 && k[a] + 1 < dims[a]);
+        if inside && previous == Some([k[0] - 1, k[1], k[2]]) {
+            // The voxel before along x: its block shifted by one column, the new column read.
+            // (Its first column may have been clamped at x = 0: shifted out, it is not kept.)
+            let next = k[0] + 1 + row * k[1] + plane * k[2];
+            let values = &values[next - row - plane..=next + row + plane];
+            for (dz, layer) in self.values.iter_mut().enumerate() {
+                for (dy, line) in layer.iter_mut().enumerate() {
+                    *line = [line[1], line[2], values[dz * plane + dy * row].to_f32()];
+                }
+            }
+        } else if inside {
             // Inside: the 27 values by offsets from the centre, no clamping.
             let centre = k[0] + row * k[1] + plane * k[2];
             let values = &values[centre - 1 - row - plane..=centre + 1 + row + plane];
@@ -960,6 +971,42 @@ impl Block {
     fn sample(&self, p: [f32; 3]) -> f32 {
         let [(ix, tx), (iy, ty), (iz, tz)] = p.map(|c| Samples::between(f64::from(c)));
         self.lerp([ix, iy, iz], [tx, ty, tz])
+    }
+
+    /// The trilinear interpolation at the 2 x 2 x 2 points whose coordinates along each axis
+    /// are the two (lower value, weight of the next) of `at`, x fastest: what [`Block::lerp`]
+    /// gives at each, with the same operations in the same order (so the same bits), the
+    /// lerps along x and y that points share done once (38 lerps instead of 56).
+    #[inline]
+    fn lerp_2x2x2(&self, at: [&[(usize, f32); 2]; 3]) -> [f32; 8] {
+        let v = &self.values;
+        let [sx, sy, sz] = at;
+        // Along x: every line of the block at both x points.
+        let mut lines = [[[0.0f32; 2]; 3]; 3];
+        for (z, layer) in v.iter().enumerate() {
+            for (y, l) in layer.iter().enumerate() {
+                for (out, &(i, t)) in lines[z][y].iter_mut().zip(sx) {
+                    *out = l[i] + t * (l[i + 1] - l[i]);
+                }
+            }
+        }
+        // Along y: every plane at both y points, for both x points.
+        let mut planes = [[[0.0f32; 2]; 2]; 3];
+        for (z, plane) in planes.iter_mut().enumerate() {
+            for (row, &(i, t)) in plane.iter_mut().zip(sy) {
+                for (x, out) in row.iter_mut().enumerate() {
+                    let a = lines[z][i][x];
+                    *out = a + t * (lines[z][i + 1][x] - a);
+                }
+            }
+        }
+        // Along z.
+        std::array::from_fn(|corner| {
+            let (x, y) = (corner & 1, corner >> 1 & 1);
+            let (i, t) = sz[corner >> 2 & 1];
+            let a = planes[i][y][x];
+            a + t * (planes[i + 1][y][x] - a)
+        })
     }
 
     /// The trilinear interpolation in the cell whose lowest corner is `i`, at weights `t`.
@@ -1069,13 +1116,10 @@ impl Cells<'_> {
     /// voxels wide, where the interpolated field crosses the threshold over a fraction of them.
     fn color(&self, block: &Block, j: [usize; 3]) -> Option<SplatColor> {
         let [sx, sy, sz] = [0, 1, 2].map(|a| &self.samples[a].at[j[a]]);
+        let values = block.lerp_2x2x2([sx, sy, sz]);
         let mut depth = 0.0f64;
         let mut rgb = [0.0f64; 3];
-        for corner in 0..8 {
-            let (ix, tx) = sx[corner & 1];
-            let (iy, ty) = sy[corner >> 1 & 1];
-            let (iz, tz) = sz[corner >> 2 & 1];
-            let value = block.lerp([ix, iy, iz], [tx, ty, tz]);
+        for value in values {
             let [r, g, b, d] = self.table.sample(value);
             if d <= 0.0 {
                 continue;
