@@ -271,6 +271,54 @@ fn splats_left_out_behind_opaque_pixels_change_nothing() {
 }
 
 #[test]
+fn groups_of_splats_off_the_image_are_left_out_and_change_nothing() {
+    // Zoomed in on a corner of the shells: most of the volume lies off the image, perspective
+    // and orthographic; and the view of the whole volume.
+    let ctx = context();
+    let scene = volume_scene(shells(36, [1.0; 3]), Ordering::IpPbtfImplicit);
+    let whole = camera_of(&scene);
+    let corner = glam::DVec3::new(4.0, 4.0, 30.0);
+    let near = SceneCamera {
+        eye: corner + (whole.eye - whole.target).normalize() * 14.0,
+        target: corner,
+        ..whole
+    };
+    let flat = SceneCamera {
+        projection: Projection::Orthographic { height: 9.0 },
+        ..near
+    };
+    for (camera, size) in [(&near, (96, 80)), (&flat, (150, 71)), (&whole, (96, 80))] {
+        let mut culling = Renderer::with_compositor(Compositor::Cpu);
+        let mut all = Renderer::with_compositor(Compositor::Cpu);
+        all.tile_compositor_mut().cull_hidden = false;
+        let a = culling
+            .screenshot(&ctx, &scene, camera, size, &OPTIONS)
+            .unwrap();
+        let b = all
+            .screenshot(&ctx, &scene, camera, size, &OPTIONS)
+            .unwrap();
+        let (sa, sb) = (a.report.tiles.unwrap(), b.report.tiles.unwrap());
+        assert_eq!(sb.off_image, 0);
+        if camera.eye != whole.eye {
+            assert!(
+                sa.off_image > sa.splats / 2,
+                "most splats are off the image: {sa:?}"
+            );
+        }
+        // Left out unprojected: splats off the image and splats hidden; each would have been
+        // projected, or not, to no effect.
+        assert!(sa.projected + sa.culled >= sb.projected, "{sa:?} {sb:?}");
+        assert!(
+            sa.projected + sa.culled + sa.off_image <= sa.splats,
+            "{sa:?}"
+        );
+        assert_eq!(sa.drew, sb.drew);
+        assert!(sa.drew > 100, "the corner is drawn: {sa:?}");
+        assert_eq!(a.frame.pixels, b.frame.pixels);
+    }
+}
+
+#[test]
 fn the_built_in_scene_looks_the_same_on_either_compositor() {
     let scene = splatscene::scene::shoulder::shoulder_scene().unwrap();
     let camera = scene.camera.unwrap();

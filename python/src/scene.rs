@@ -662,6 +662,7 @@ impl Scene {
             serde_json::json!({
                 "projected": t.projected,
                 "culled": t.culled,
+                "off_image": t.off_image,
                 "drew": t.drew,
                 "composited": t.composited,
                 "skipped_opaque": t.skipped_opaque,

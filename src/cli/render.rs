@@ -597,10 +597,11 @@ pub(crate) fn describe(r: &FrameReport) -> String {
     let ms = |d: std::time::Duration| d.as_secs_f64() * 1e3;
     let splats = match r.tiles {
         Some(t) => format!(
-            "splats on the CPU ({} drew pixels; {} projected, {} left out unprojected behind opaque pixels, {} splat-tile pairs composited, {} skipped behind opaque pixels, {} tiles opaque), project {:.1} ms, bin {:.1} ms, tiles {:.1} ms",
+            "splats on the CPU ({} drew pixels; {} projected, {} left out unprojected behind opaque pixels, {} off the image, {} splat-tile pairs composited, {} skipped behind opaque pixels, {} tiles opaque), project {:.1} ms, bin {:.1} ms, tiles {:.1} ms",
             t.drew,
             t.projected,
             t.culled,
+            t.off_image,
             t.composited,
             t.skipped_opaque,
             t.tiles_opaque,

@@ -44,7 +44,7 @@ use rayon::prelude::*;
 
 use bin::{ChunkBins, bin_chunk};
 use mask::OpaqueMask;
-use project::{Group, Projected, group_hidden};
+use project::{Group, Projected, group_rect};
 pub use project::{SplatProjection, alpha_table};
 pub use simd::SIMD_VAR;
 pub use texels::{SplatTexels, texel};
@@ -73,6 +73,9 @@ pub struct TileStats {
     /// Splats left out before their texel was read because every pixel of their footprint was
     /// opaque already (and, once every pixel of the image is opaque, all the splats left).
     pub culled: usize,
+    /// Splats left out before projection because the pixel rectangle that holds every
+    /// footprint of their group (32 consecutive splats of the order) lies off the image.
+    pub off_image: usize,
     /// Splats that reached at least one pixel still open: all the others added nothing to
     /// the image.
     pub drew: usize,
@@ -92,8 +95,9 @@ pub struct TiledCompositor {
     /// The accumulated opacity past which a pixel takes no more splats ([`OPAQUE`] by
     /// default; above 1 no pixel and no tile ever stops).
     pub opaque: f32,
-    /// Leave out, before projecting them, splats whose footprint covers opaque pixels alone
-    /// (on by default; the image is the same either way, see [`TiledCompositor::composite`]).
+    /// Leave out, before projecting them, splats whose footprint covers opaque pixels alone,
+    /// and groups of splats whose footprints all lie off the image (on by default; the image
+    /// is the same either way, see [`TiledCompositor::composite`]).
     pub cull_hidden: bool,
     projected: Vec<Projected>,
     bins: Vec<ChunkBins>,
@@ -196,14 +200,15 @@ impl TiledCompositor {
                 }
                 // No test while no pixel is opaque.
                 let mask = (self.cull_hidden && open_pixels < w * h).then_some(&self.mask);
-                let (culled, project_time, bin_time) = self.projected[..ids.len()]
+                let cull = self.cull_hidden;
+                let (culled, off_image, project_time, bin_time) = self.projected[..ids.len()]
                     .par_chunks_mut(chunk)
                     .zip(ids.par_chunks(chunk))
                     .zip(self.bins[..chunks].par_iter_mut())
                     .enumerate()
                     .map(|(c, ((out, ids), bins))| {
                         let started = std::time::Instant::now();
-                        let mut culled = 0;
+                        let (mut culled, mut off_image) = (0, 0);
                         let group = Group {
                             u: projection,
                             texels,
@@ -214,11 +219,19 @@ impl TiledCompositor {
                         // its share of the buffer.
                         let mut kept = 0;
                         for ids in ids.chunks(GROUP) {
-                            if let Some(mask) = mask
-                                && group_hidden(projection, ids, &screen, mask)
-                            {
-                                culled += ids.len();
-                                continue;
+                            // The group's rectangle: off the image, or on opaque pixels alone,
+                            // the group is left out whole. (Its bounds cost less than a splat's
+                            // own test; the order's rows make most groups short segments.)
+                            match cull.then(|| group_rect(projection, ids, &screen)).flatten() {
+                                Some([x0, y0, x1, y1]) if x0 > x1 || y0 > y1 => {
+                                    off_image += ids.len();
+                                    continue;
+                                }
+                                Some(rect) if mask.is_some_and(|m| m.covers_rect(rect)) => {
+                                    culled += ids.len();
+                                    continue;
+                                }
+                                _ => {}
                             }
                             let (hidden, placed) =
                                 simd::project_group(&group, ids, &mut out[kept..]);
@@ -227,11 +240,11 @@ impl TiledCompositor {
                         }
                         let projected = started.elapsed();
                         bin_chunk(&out[..kept], (c * chunk) as u32, tx, ty, bins);
-                        (culled, projected, started.elapsed() - projected)
+                        (culled, off_image, projected, started.elapsed() - projected)
                     })
                     .reduce(
-                        || (0, Duration::ZERO, Duration::ZERO),
-                        |a, b| (a.0 + b.0, a.1 + b.1, a.2 + b.2),
+                        || (0, 0, Duration::ZERO, Duration::ZERO),
+                        |a, b| (a.0 + b.0, a.1 + b.1, a.2 + b.2, a.3 + b.3),
                     );
                 // The phase's time, shared between its two stages as their processor time.
                 let wall = started.elapsed().as_secs_f64();
@@ -242,10 +255,17 @@ impl TiledCompositor {
                 stats.project += Duration::from_secs_f64(wall * share);
                 stats.bin += Duration::from_secs_f64(wall * (1.0 - share));
                 stats.culled += culled;
-                stats.projected += self.bins[..chunks]
+                stats.off_image += off_image;
+                let projected = self.bins[..chunks]
                     .iter()
                     .map(|b| b.projected)
                     .sum::<usize>();
+                stats.projected += projected;
+                if projected == 0 {
+                    // Nothing of this batch is on the image (a view zoomed in on part of the
+                    // volume passes many such): no tile changes.
+                    continue;
+                }
                 // Composite every tile, nearest splat first.
                 let started = std::time::Instant::now();
                 let batch = Batch {

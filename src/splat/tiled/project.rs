@@ -168,10 +168,11 @@ impl Group<'_> {
     }
 }
 
-/// Whether every splat of `ids` (a stretch of the draw order) is hidden behind the opaque
-/// pixels `mask`: the pixel rectangle that holds every one of their footprints, as
-/// [`place`] would give them, lies on opaque pixels alone. Decoding a voxel id and taking the
-/// box's bounds costs less than a splat's own test; the order's rows make most stretches short
+/// The pixel rectangle `[x0, y0, x1, y1]` that holds every footprint of the splats of `ids`
+/// (a stretch of the draw order), as [`place`] would give them, clamped to the image (empty,
+/// `x0 > x1` or `y0 > y1`, where all of them lie off it); `None` where it cannot be bounded
+/// (a splat behind the near cut, no splat, NaN). Decoding a voxel id and taking the box's
+/// bounds costs less than a splat's own test; the order's rows make most stretches short
 /// segments.
 ///
 /// The rectangle: the voxels' box projected (its corners' centres bound every centre in it,
@@ -181,17 +182,6 @@ impl Group<'_> {
 /// `a = (f / z)^2 (S00 - 2 S02 s + S22 s^2) + pixel variance` is largest at the nearest depth
 /// and, convex in the slope `s`, at one of the slope's bounds (likewise `c` with `S11`, `S12`
 /// and the slope `y / z`; orthographic, both are constant).
-pub(super) fn group_hidden(
-    u: &SplatProjection,
-    ids: &[u32],
-    s: &Screen,
-    mask: &OpaqueMask,
-) -> bool {
-    group_rect(u, ids, s).is_some_and(|rect| mask.covers_rect(rect))
-}
-
-/// The pixel rectangle `[x0, y0, x1, y1]` of [`group_hidden`]; `None` where it cannot be
-/// bounded (a splat behind the near cut, no splat, NaN).
 pub(super) fn group_rect(u: &SplatProjection, ids: &[u32], s: &Screen) -> Option<[i32; 4]> {
     let (mut lo, mut hi) = ([u32::MAX; 3], [0u32; 3]);
     for &id in ids {
