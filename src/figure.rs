@@ -65,6 +65,24 @@ pub fn measured(
     })
 }
 
+/// A caption with its placeholders filled: `{view}` the view's name (`scene` for the scene's
+/// own camera), `{size}` the image's `WxH`, `{ordering}` the ordering asked for (`the
+/// scene's` where none was).
+pub fn fill_caption(
+    caption: &str,
+    view: &str,
+    size: (u32, u32),
+    ordering: Option<crate::order::Ordering>,
+) -> String {
+    caption
+        .replace("{view}", view)
+        .replace("{size}", &format!("{}x{}", size.0, size.1))
+        .replace(
+            "{ordering}",
+            &ordering.map_or("the scene's".into(), |o| o.to_string()),
+        )
+}
+
 /// The image of a screenshot, annotated when `parts` asks (with the patient frame of
 /// `scene`), and what the annotation drew.
 pub fn figure_image(

@@ -14,7 +14,7 @@ use pyo3::types::{PyBool, PyString, PyTuple};
 use splatscene::annotate::Annotations;
 use splatscene::figure::{
     CameraChoice, Measured, context_for, default_depth_mode, depth_distances, figure_image,
-    measured,
+    fill_caption, measured,
 };
 use splatscene::order::Ordering;
 use splatscene::pick::contact::{Classes, contact};
@@ -456,15 +456,24 @@ impl Scene {
             let Measured {
                 scene: with_marks,
                 labels,
-                parts,
+                mut parts,
             } = measured(scene, parts.as_ref()).map_err(|e| e.to_string())?;
+            // The caption's placeholders, as the command line fills them.
+            let view_name = choice.view.as_ref().map_or("scene", |v| v.name.as_str());
+            let ordering = ordering.or(state.loaded.ordering);
+            if let Some(p) = parts.as_mut() {
+                p.caption = p
+                    .caption
+                    .take()
+                    .map(|c| fill_caption(&c, view_name, size, ordering));
+            }
             if state.ctx.is_none() {
                 state.ctx =
                     Some(context_for(Compositor::Auto, &with_marks).map_err(|e| e.to_string())?);
             }
             state.renderer.set_level_of_detail(lod);
             let options = FrameOptions {
-                ordering: ordering.or(state.loaded.ordering),
+                ordering,
                 background: if transparent {
                     None
                 } else {

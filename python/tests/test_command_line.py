@@ -28,8 +28,9 @@ def test_a_scene_file_renders_as_the_command_line_renders_it(tmp_path):
 def test_named_views_orbits_annotations_and_orderings_match_the_command_line(tmp_path):
     scene = splatscene.Scene.from_file(SHOULDER)
     cases = [
-        (dict(view="left", annotate=True), ["--view", "left", "--annotate"]),
-        (dict(orbit=(30, 10), ordering="btf", caption="stem"), ["--orbit", "30,10", "--ordering", "btf", "--caption", "stem"]),
+        (dict(view="left", annotate=True, caption="{view}"), ["--view", "left", "--annotate", "--caption", "{view}"]),
+        (dict(orbit=(30, 10), ordering="btf", caption="stem {view} {size} {ordering}"),
+         ["--orbit", "30,10", "--ordering", "btf", "--caption", "stem {view} {size} {ordering}"]),
         (dict(eye=(300, 40, 60), target=(47, 33, 55), annotate="marker,scale"), ["--eye", "300,40,60", "--target", "47,33,55", "--annotate", "marker,scale"]),
         (dict(view="superior", orthographic=160.0, lod=False), ["--view", "superior", "--orthographic", "160", "--lod", "off"]),
     ]

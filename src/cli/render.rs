@@ -8,7 +8,7 @@ use anyhow::{Result, bail};
 use serde_json::Value;
 
 use splatscene::annotate::{Annotations, Label, colour_bar};
-use splatscene::figure::{Measured, context_for, depth_distances, measured};
+use splatscene::figure::{Measured, context_for, depth_distances, fill_caption, measured};
 use splatscene::order::Ordering;
 use splatscene::pick::contact::Classes;
 use splatscene::pick::paint::{paint, value_colour};
@@ -308,16 +308,9 @@ pub fn run_render(args: RenderArgs) -> Result<()> {
         // The caption's placeholders filled for this view.
         let view_name = name.as_deref().unwrap_or("scene");
         let parts_here = label_parts.clone().map(|mut p| {
-            p.caption = p.caption.map(|c| {
-                c.replace("{view}", view_name)
-                    .replace("{size}", &format!("{}x{}", size.0, size.1))
-                    .replace(
-                        "{ordering}",
-                        &options
-                            .ordering
-                            .map_or("the scene's".into(), |o| o.to_string()),
-                    )
-            });
+            p.caption = p
+                .caption
+                .map(|c| fill_caption(&c, view_name, size, options.ordering));
             p
         });
         let mut image = figure(&shot, &loaded.scene, camera, parts_here.as_ref(), &labels)?;
