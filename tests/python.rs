@@ -1,6 +1,6 @@
 //! The Python module's tests (`python/tests`, pytest), run against this build's command line.
 //!
-//! They need a Python with the module installed, pytest, SimpleITK, nibabel and Pillow:
+//! They need a Python with the module installed, pytest, SimpleITK, nibabel, Pillow and mypy:
 //! `SPLATSCENE_PYTHON` names its interpreter (default `target/python/bin/python`, the virtual
 //! environment `.ci/run` makes with `pip install ./python`). Without one the test says what is
 //! missing and passes, except under CI (`CI` set), where it fails.
@@ -16,12 +16,12 @@ fn python() -> Result<PathBuf, String> {
     );
     if !python.exists() {
         return Err(format!(
-            "{}: no such interpreter; make one with `python3 -m venv target/python && target/python/bin/pip install ./python pytest SimpleITK nibabel pillow` or set SPLATSCENE_PYTHON",
+            "{}: no such interpreter; make one with `python3 -m venv target/python && target/python/bin/pip install ./python pytest SimpleITK nibabel pillow mypy` or set SPLATSCENE_PYTHON",
             python.display()
         ));
     }
     let probe = Command::new(&python)
-        .args(["-c", "import splatscene, pytest, SimpleITK, nibabel, PIL"])
+        .args(["-c", "import splatscene, pytest, SimpleITK, nibabel, PIL, mypy"])
         .output()
         .map_err(|e| format!("{}: {e}", python.display()))?;
     if !probe.status.success() {

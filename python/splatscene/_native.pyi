@@ -2,23 +2,26 @@
 The package ``splatscene`` wraps it; its classes are what users hold."""
 
 import os
-from typing import Any, Optional, Sequence, Tuple, Union
+from typing import Any, Optional, Sequence, Tuple, Union, final
 
 import numpy as np
 import numpy.typing as npt
 
-PathLike = Union[str, os.PathLike]
-Vec3 = Sequence[float]
+__all__ = ["Mesh", "Scene", "SplatsceneError", "Volume", "encode_png", "error", "load_volume", "order"]
+
+_PathLike = Union[str, os.PathLike]
+_Vec3 = Sequence[float]
 
 class SplatsceneError(Exception):
     """What the library refused: a file it cannot read, a scene that does not load."""
 
+@final
 class Volume:
     @staticmethod
     def from_array(
         array: np.ndarray,
-        spacing: Optional[Vec3] = ...,
-        origin: Optional[Vec3] = ...,
+        spacing: Optional[_Vec3] = ...,
+        origin: Optional[_Vec3] = ...,
         direction: Optional[Any] = ...,
         axes: str = ...,
     ) -> Volume: ...
@@ -45,7 +48,7 @@ class Volume:
     def info(self) -> dict: ...
 
 def load_volume(
-    path: PathLike,
+    path: _PathLike,
     *,
     series: Optional[Union[str, int]] = ...,
     skip_unreadable: bool = ...,
@@ -55,24 +58,25 @@ def load_volume(
     dims: Optional[Tuple[int, int, int]] = ...,
     scalar: Optional[str] = ...,
     header_bytes: Optional[int] = ...,
-    spacing: Optional[Vec3] = ...,
-    origin: Optional[Vec3] = ...,
+    spacing: Optional[_Vec3] = ...,
+    origin: Optional[_Vec3] = ...,
     orientation: Optional[str] = ...,
 ) -> Volume: ...
 
+@final
 class Mesh:
     @staticmethod
     def from_file(
-        path: PathLike,
+        path: _PathLike,
         *,
         units: Optional[str] = ...,
         frame: Optional[str] = ...,
         name: Optional[str] = ...,
         color: Optional[Sequence[float]] = ...,
         opacity: Optional[float] = ...,
-        translate: Optional[Vec3] = ...,
-        rotate_degrees: Optional[Vec3] = ...,
-        scale: Optional[Vec3] = ...,
+        translate: Optional[_Vec3] = ...,
+        rotate_degrees: Optional[_Vec3] = ...,
+        scale: Optional[_Vec3] = ...,
         matrix: Optional[Any] = ...,
     ) -> Mesh: ...
     @staticmethod
@@ -83,17 +87,17 @@ class Mesh:
         name: Optional[str] = ...,
         color: Optional[Sequence[float]] = ...,
         opacity: Optional[float] = ...,
-        translate: Optional[Vec3] = ...,
-        rotate_degrees: Optional[Vec3] = ...,
-        scale: Optional[Vec3] = ...,
+        translate: Optional[_Vec3] = ...,
+        rotate_degrees: Optional[_Vec3] = ...,
+        scale: Optional[_Vec3] = ...,
         matrix: Optional[Any] = ...,
     ) -> Mesh: ...
     def placed(
         self,
         *,
-        translate: Optional[Vec3] = ...,
-        rotate_degrees: Optional[Vec3] = ...,
-        scale: Optional[Vec3] = ...,
+        translate: Optional[_Vec3] = ...,
+        rotate_degrees: Optional[_Vec3] = ...,
+        scale: Optional[_Vec3] = ...,
         matrix: Optional[Any] = ...,
     ) -> Mesh: ...
     @property
@@ -103,32 +107,33 @@ class Mesh:
     @property
     def faces(self) -> npt.NDArray[np.uint32]: ...
 
+@final
 class Scene:
-    def __init__(
-        self,
-        volumes: Optional[Sequence[Union[Volume, PathLike]]] = ...,
-        meshes: Optional[Sequence[Union[Mesh, PathLike]]] = ...,
+    def __new__(
+        cls,
+        volumes: Optional[Sequence[Union[Volume, _PathLike]]] = ...,
+        meshes: Optional[Sequence[Union[Mesh, _PathLike]]] = ...,
         *,
         transfer: Optional[str] = ...,
         window: Optional[Tuple[float, float]] = ...,
         shift: Optional[float] = ...,
-        crop_box: Optional[Tuple[Vec3, Vec3]] = ...,
+        crop_box: Optional[Tuple[_Vec3, _Vec3]] = ...,
         clip_meshes: Optional[bool] = ...,
-        background: Optional[Vec3] = ...,
+        background: Optional[_Vec3] = ...,
         transparent: bool = ...,
         size: Optional[Tuple[int, int]] = ...,
         ordering: Optional[str] = ...,
         view: str = ...,
-    ) -> None: ...
+    ) -> Scene: ...
     @staticmethod
-    def from_file(path: PathLike) -> Scene: ...
+    def from_file(path: _PathLike) -> Scene: ...
     def render(
         self,
         size: Optional[Tuple[int, int]] = ...,
         *,
         view: Optional[str] = ...,
-        eye: Optional[Vec3] = ...,
-        target: Optional[Vec3] = ...,
+        eye: Optional[_Vec3] = ...,
+        target: Optional[_Vec3] = ...,
         orbit: Optional[Tuple[float, float]] = ...,
         fov: Optional[float] = ...,
         orthographic: Optional[float] = ...,
@@ -147,8 +152,8 @@ class Scene:
         size: Optional[Tuple[int, int]] = ...,
         *,
         view: Optional[str] = ...,
-        eye: Optional[Vec3] = ...,
-        target: Optional[Vec3] = ...,
+        eye: Optional[_Vec3] = ...,
+        target: Optional[_Vec3] = ...,
         orbit: Optional[Tuple[float, float]] = ...,
         fov: Optional[float] = ...,
         orthographic: Optional[float] = ...,
@@ -169,19 +174,19 @@ class Scene:
 
 def order(
     dims: Tuple[int, int, int],
-    eye: Vec3,
+    eye: _Vec3,
     ordering: str = ...,
     *,
-    spacing: Optional[Vec3] = ...,
-    target: Optional[Vec3] = ...,
+    spacing: Optional[_Vec3] = ...,
+    target: Optional[_Vec3] = ...,
     cull_behind_eye: bool = ...,
     bucket_width: Optional[float] = ...,
 ) -> npt.NDArray[np.uint32]: ...
 def error(
     volume: Volume,
-    eye: Vec3,
+    eye: _Vec3,
     *,
-    target: Optional[Vec3] = ...,
+    target: Optional[_Vec3] = ...,
     orderings: Optional[Sequence[str]] = ...,
     size: Optional[Tuple[int, int]] = ...,
     transfer: Optional[str] = ...,
