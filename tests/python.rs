@@ -21,7 +21,10 @@ fn python() -> Result<PathBuf, String> {
         ));
     }
     let probe = Command::new(&python)
-        .args(["-c", "import splatscene, pytest, SimpleITK, nibabel, PIL, mypy"])
+        .args([
+            "-c",
+            "import splatscene, pytest, SimpleITK, nibabel, PIL, mypy",
+        ])
         .output()
         .map_err(|e| format!("{}: {e}", python.display()))?;
     if !probe.status.success() {
