@@ -10,7 +10,7 @@ use glam::{DMat4, DVec3};
 use splatscene::classify::TransferFunction;
 use splatscene::mesh::{CpuMesh, Material};
 use splatscene::order::Ordering;
-use splatscene::render::{Compositor, FrameOptions, GpuContext, Renderer};
+use splatscene::render::{Compositor, FrameOptions, GpuContext, Renderer, Screenshot};
 use splatscene::scene::{ClipPlane, MeshNode, NodeContent, Projection, Scene, SceneCamera};
 use splatscene::splat::reference::{Frame, ImageDifference, SplatStyle, compare};
 
@@ -216,6 +216,24 @@ fn early_termination_leaves_out_no_more_than_its_threshold() {
     assert!(d.max_abs <= bound + 1e-5, "{d:?} against {bound}");
 }
 
+/// The tile compositor's picture of `scene` with its culling (splats hidden behind opaque
+/// pixels, groups off the image) and without.
+fn with_and_without_culling(
+    ctx: &GpuContext,
+    scene: &Scene,
+    camera: &SceneCamera,
+    size: (u32, u32),
+) -> (Screenshot, Screenshot) {
+    let mut culling = Renderer::with_compositor(Compositor::Cpu);
+    let mut all = Renderer::with_compositor(Compositor::Cpu);
+    all.tile_compositor_mut().cull_hidden = false;
+    let a = culling
+        .screenshot(ctx, scene, camera, size, &OPTIONS)
+        .unwrap();
+    let b = all.screenshot(ctx, scene, camera, size, &OPTIONS).unwrap();
+    (a, b)
+}
+
 #[test]
 fn splats_left_out_behind_opaque_pixels_change_nothing() {
     let ctx = context();
@@ -243,15 +261,7 @@ fn splats_left_out_behind_opaque_pixels_change_nothing() {
         .map(|c| (c, (96, 80)))
         .chain([(&cameras[1], (150, 71))]);
     for (camera, size) in views {
-        let mut culling = Renderer::with_compositor(Compositor::Cpu);
-        let mut all = Renderer::with_compositor(Compositor::Cpu);
-        all.tile_compositor_mut().cull_hidden = false;
-        let a = culling
-            .screenshot(&ctx, &scene, camera, size, &OPTIONS)
-            .unwrap();
-        let b = all
-            .screenshot(&ctx, &scene, camera, size, &OPTIONS)
-            .unwrap();
+        let (a, b) = with_and_without_culling(&ctx, &scene, camera, size);
         let (sa, sb) = (a.report.tiles.unwrap(), b.report.tiles.unwrap());
         assert_eq!(sb.culled, 0);
         assert!(
@@ -288,15 +298,7 @@ fn groups_of_splats_off_the_image_are_left_out_and_change_nothing() {
         ..near
     };
     for (camera, size) in [(&near, (96, 80)), (&flat, (150, 71)), (&whole, (96, 80))] {
-        let mut culling = Renderer::with_compositor(Compositor::Cpu);
-        let mut all = Renderer::with_compositor(Compositor::Cpu);
-        all.tile_compositor_mut().cull_hidden = false;
-        let a = culling
-            .screenshot(&ctx, &scene, camera, size, &OPTIONS)
-            .unwrap();
-        let b = all
-            .screenshot(&ctx, &scene, camera, size, &OPTIONS)
-            .unwrap();
+        let (a, b) = with_and_without_culling(&ctx, &scene, camera, size);
         let (sa, sb) = (a.report.tiles.unwrap(), b.report.tiles.unwrap());
         assert_eq!(sb.off_image, 0);
         if camera.eye != whole.eye {
@@ -492,15 +494,7 @@ fn a_bone_rendering_of_the_ct_head_skips_most_of_its_splats() {
     );
     let ctx = context();
     for camera in [camera, camera.orbit_about(scene.up_axis(), 70.0, 0.0)] {
-        let mut culling = Renderer::with_compositor(Compositor::Cpu);
-        let mut all = Renderer::with_compositor(Compositor::Cpu);
-        all.tile_compositor_mut().cull_hidden = false;
-        let a = culling
-            .screenshot(&ctx, &scene, &camera, (512, 512), &OPTIONS)
-            .unwrap();
-        let b = all
-            .screenshot(&ctx, &scene, &camera, (512, 512), &OPTIONS)
-            .unwrap();
+        let (a, b) = with_and_without_culling(&ctx, &scene, &camera, (512, 512));
         let (sa, sb) = (a.report.tiles.unwrap(), b.report.tiles.unwrap());
         assert!(sa.splats > 400_000, "{sa:?}");
         assert!(
