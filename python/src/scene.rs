@@ -23,12 +23,12 @@ use splatscene::render::{
     Compositor, DepthMode, FrameOptions, FrameReport, GpuContext, Renderer, ViewSetup,
 };
 use splatscene::scene::file::{
-    BoxSpec, CameraSpec, Given, LoadedScene, MeshSpec, SceneFile, VolumeSpec, apply_transfer,
+    BoxSpec, CameraSpec, Given, LoadedScene, SceneFile, VolumeSpec, apply_transfer,
 };
 use splatscene::scene::patient::NamedView;
 use splatscene::scene::{Projection, SceneCamera};
 
-use crate::convert::{bad, fail, image_array, json_to_py, size, three, two};
+use crate::convert::{bad, fail, image_array, json_to_py, three, two};
 use crate::mesh::Mesh;
 use crate::volume::{Volume, load_volume};
 
@@ -132,11 +132,8 @@ impl CameraArgs<'_, '_> {
 }
 
 /// The image size asked for, else the scene file's, else 800 x 600 (as the command line).
-fn size_or_default(asked: Option<&Bound<'_, PyAny>>, loaded: &LoadedScene) -> PyResult<(u32, u32)> {
-    Ok(match asked {
-        Some(s) => size(s)?,
-        None => loaded.size.unwrap_or((800, 600)),
-    })
+fn size_or_default(asked: Option<(u32, u32)>, loaded: &LoadedScene) -> (u32, u32) {
+    asked.unwrap_or(loaded.size.unwrap_or((800, 600)))
 }
 
 /// The camera of a scene for an image of `size`.
@@ -144,11 +141,8 @@ fn camera_of(
     loaded: &LoadedScene,
     choice: &CameraChoice,
     size: (u32, u32),
-) -> PyResult<SceneCamera> {
-    let base = loaded
-        .scene
-        .camera
-        .ok_or_else(|| fail("the scene has no camera"))?;
+) -> Result<SceneCamera, String> {
+    let base = loaded.scene.camera.ok_or("the scene has no camera")?;
     let aspect = f64::from(size.0) / f64::from(size.1);
     Ok(choice.camera(&loaded.scene, base, aspect))
 }
@@ -317,9 +311,7 @@ impl Scene {
                     Bound::new(py, mesh)?.borrow()
                 }
             };
-            file.meshes.push(MeshSpec {
-                ..mesh.spec.clone()
-            });
+            file.meshes.push(mesh.spec.clone());
             given.meshes.push(Some((*mesh.model).clone()));
         }
         file.camera = Some(CameraSpec {
@@ -435,17 +427,8 @@ impl Scene {
                 .lock()
                 .map_err(|_| "the scene was left broken by an earlier failure".to_owned())?;
             let state = &mut *guard;
-            let size = asked.unwrap_or(state.loaded.size.unwrap_or((800, 600)));
-            let camera = state
-                .loaded
-                .scene
-                .camera
-                .ok_or("the scene has no camera")?;
-            let camera = choice.camera(
-                &state.loaded.scene,
-                camera,
-                f64::from(size.0) / f64::from(size.1),
-            );
+            let size = size_or_default(asked, &state.loaded);
+            let camera = camera_of(&state.loaded, &choice, size)?;
             let scene = &state.loaded.scene;
             let mode = mode.unwrap_or_else(|| default_depth_mode(scene));
             if depth && mode == DepthMode::Mesh && scene.meshes().next().is_none() {
@@ -548,8 +531,9 @@ impl Scene {
             return Err(bad(format!("opacity: {opacity} is not from 0 to 1")));
         }
         let [x, y] = two(pixel, "pixel")?;
+        let asked = size.map(crate::convert::size).transpose()?;
         let state = self.lock()?;
-        let size = size_or_default(size, &state.loaded)?;
+        let size = size_or_default(asked, &state.loaded);
         if x.fract() != 0.0 || y.fract() != 0.0 || x < 0.0 || y < 0.0 {
             return Err(bad(format!(
                 "pixel: ({x}, {y}) is not two whole numbers from 0"
@@ -562,7 +546,7 @@ impl Scene {
                 size.0, size.1
             )));
         }
-        let camera = camera_of(&state.loaded, &choice, size)?;
+        let camera = camera_of(&state.loaded, &choice, size).map_err(fail)?;
         let scene = &state.loaded.scene;
         let out = py.detach(|| -> Result<serde_json::Value, String> {
             let view = ViewSetup::new(&camera, size, scene.bounds()).map_err(|e| e.to_string())?;
