@@ -1,5 +1,6 @@
 //! Every WGSL file in `shaders/` parses and validates with naga, with no GPU involved (those
-//! that use the shared footprint with `footprint.wgsl` before them, as the renderer builds them).
+//! that use the shared footprint with `footprint.wgsl` before them, and the tile passes with
+//! the splat pass too, as the renderer builds them).
 
 #[test]
 fn every_shader_parses_and_validates() {
@@ -12,6 +13,11 @@ fn every_shader_parses_and_validates() {
         }
         let mut source = std::fs::read_to_string(&path).unwrap();
         // A shader that calls the shared footprint has it prepended, as the renderer does.
+        // The tile passes share the splat pass's uniforms and helpers too, as the renderer
+        // builds them.
+        if path.ends_with("tiles.wgsl") {
+            source = std::fs::read_to_string(dir.join("splat.wgsl")).unwrap() + &source;
+        }
         if source.contains("footprint(") && !path.ends_with("footprint.wgsl") {
             source = std::fs::read_to_string(dir.join("footprint.wgsl")).unwrap() + &source;
         }

@@ -358,7 +358,7 @@ fn auto_takes_the_cpu_on_a_cpu_adapter() {
         .unwrap();
     let said = String::from_utf8_lossy(&bad.stderr);
     assert!(
-        !bad.status.success() && said.contains("auto, gpu or cpu"),
+        !bad.status.success() && said.contains("auto, gpu, cpu or gpu-tiles"),
         "{said}"
     );
 }

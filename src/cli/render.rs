@@ -53,8 +53,9 @@ pub struct RenderArgs {
     #[arg(long, default_value_t = 0.3, value_parser = parse_opacity)]
     surface_opacity: f32,
     /// Who composites the splats: gpu (the splat pass), cpu (the tile compositor, meshes
-    /// still on the GPU), or auto: the CPU where the GPU adapter is itself a CPU (lavapipe),
-    /// and where there is no adapter at all for a scene without meshes.
+    /// still on the GPU), gpu-tiles (the tile compositor as GPU compute passes), or auto: the
+    /// CPU where the GPU adapter is itself a CPU (lavapipe), and where there is no adapter at
+    /// all for a scene without meshes, else the splat pass.
     #[arg(long, default_value = "auto")]
     compositor: Compositor,
     /// Level of detail: `on` draws each volume from the level of its pyramid (2x2x2 voxels a

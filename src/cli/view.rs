@@ -35,7 +35,8 @@ pub struct ViewerArgs {
     #[arg(long, conflicts_with = "annotate")]
     no_annotate: bool,
     /// Who composites the splats: auto (the CPU tile compositor where the GPU adapter is
-    /// itself a CPU), gpu or cpu.
+    /// itself a CPU, else the GPU's splat pass), gpu (the splat pass), cpu (the tile
+    /// compositor on the CPU) or gpu-tiles (the tile compositor as GPU compute passes).
     #[arg(long, default_value = "auto")]
     compositor: Compositor,
 }

@@ -13,6 +13,7 @@ mod output;
 mod renderer;
 mod splat_pass;
 mod target;
+mod tile_pass;
 mod view;
 
 pub use blit::{Blit, OVERLAY_FORMAT, overlay_texture, write_overlay};

@@ -45,10 +45,21 @@ pub(crate) struct SplatPass {
 /// One classified volume on the GPU.
 #[derive(Debug)]
 pub(crate) struct GpuVolume {
-    uniforms: wgpu::Buffer,
+    pub(super) uniforms: wgpu::Buffer,
     group: wgpu::BindGroup,
-    order: Option<wgpu::Buffer>,
-    count: u32,
+    /// The texels, for the tile pass's projection.
+    pub(super) texels: wgpu::TextureView,
+    /// The draw order (a vertex buffer for the splat pass, a storage buffer for the tile
+    /// pass).
+    pub(super) order: Option<wgpu::Buffer>,
+    pub(super) count: u32,
+    /// The millimetres one index step spans along the view, as the uniforms last written
+    /// hold it (the tile pass's opacity table follows it).
+    pub(super) step_mm: f32,
+    /// The cut-off of the Gaussian's exponent, as the uniforms last written hold it.
+    pub(super) cutoff: f32,
+    /// The tile pass's opacity table and the bits of the step it was made for.
+    pub(super) alpha: Option<(u32, wgpu::Buffer)>,
 }
 
 fn texture_3d(
@@ -266,8 +277,12 @@ impl SplatPass {
         Ok(GpuVolume {
             uniforms,
             group,
+            texels,
             order: None,
             count: 0,
+            step_mm: 0.0,
+            cutoff: 0.0,
+            alpha: None,
         })
     }
 
@@ -290,7 +305,9 @@ impl SplatPass {
             volume.order = Some(ctx.device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("splat order"),
                 size: bytes.next_multiple_of(4096),
-                usage: wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::COPY_DST,
+                usage: wgpu::BufferUsages::VERTEX
+                    | wgpu::BufferUsages::STORAGE
+                    | wgpu::BufferUsages::COPY_DST,
                 mapped_at_creation: false,
             }));
         }
@@ -304,13 +321,15 @@ impl SplatPass {
     /// Writes the projection of this frame for one volume.
     pub(crate) fn write_uniforms(
         ctx: &GpuContext,
-        volume: &GpuVolume,
+        volume: &mut GpuVolume,
         geometry: &VolumeGeometry,
         view: &ViewSetup,
         settings: &SplatSettings,
         clipping: &Clipping,
     ) {
         let u = uniforms(geometry, view, settings, clipping);
+        volume.step_mm = u.depth[3];
+        volume.cutoff = u.size[2];
         ctx.queue
             .write_buffer(&volume.uniforms, 0, bytemuck::bytes_of(&u));
     }

@@ -12,7 +12,9 @@ use super::{App, PREVIEW_ABOVE, SETTLE, ViewerError};
 use crate::annotate::{Anchor, Label, Painter, Rect, annotate_image_clear_of, colour_bar};
 use crate::pick::measure::{MarkerStyle, Measurement, annotate, draw_scene_measurements};
 use crate::pick::paint::value_colour;
-use crate::render::{FrameOptions, RenderError, ViewSetup, frame_to_rgba8, write_overlay};
+use crate::render::{
+    Compositor, FrameOptions, RenderError, ViewSetup, frame_to_rgba8, write_overlay,
+};
 use crate::scene::file::transform_spec;
 use crate::scene::{ClipPlane, NodeContent, NodeId, Scene};
 use crate::slice::draw::colour8;
@@ -207,6 +209,8 @@ impl App {
             self.ordering,
             if on_cpu && self.panes.is_none() {
                 " (CPU tiles)"
+            } else if gpu.renderer.compositor() == Compositor::GpuTiles {
+                " (GPU tiles)"
             } else {
                 ""
             },

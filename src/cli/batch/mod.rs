@@ -56,7 +56,8 @@ pub struct BatchArgs {
     #[arg(long, value_name = "DIR", conflicts_with_all = ["manifest", "out", "shard", "force", "check"])]
     merge: Option<PathBuf>,
     /// Who composites the splats: auto (the CPU tile compositor where the GPU adapter is
-    /// itself a CPU), gpu or cpu.
+    /// itself a CPU, else the GPU's splat pass), gpu (the splat pass), cpu (the tile
+    /// compositor on the CPU) or gpu-tiles (the tile compositor as GPU compute passes).
     #[arg(long, default_value = "auto")]
     compositor: Compositor,
     /// Level of detail: `on` draws each volume from the level of its pyramid whose voxels are
@@ -335,6 +336,7 @@ fn compositor_name(c: Compositor) -> &'static str {
         Compositor::Auto => "auto",
         Compositor::Gpu => "gpu",
         Compositor::Cpu => "cpu",
+        Compositor::GpuTiles => "gpu-tiles",
     }
 }
 

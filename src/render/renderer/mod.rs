@@ -10,6 +10,7 @@ use glam::{DMat3, DMat4, DVec3};
 use super::mesh_pass::{GpuMesh, MeshPass};
 use super::splat_pass::{GpuVolume, SplatPass, projection};
 use super::target::RenderTarget;
+use super::tile_pass::TilePass;
 use super::view::ViewSetup;
 use super::{GpuContext, RenderError};
 use crate::classify::{Classified, ClassifyOptions, Opacity, classify_refined, classify_with};
@@ -184,6 +185,10 @@ pub enum Compositor {
     Gpu,
     /// The CPU tile compositor ([`crate::splat::tiled`]); meshes keep their GPU pass.
     Cpu,
+    /// The tile compositor as GPU compute passes: the CPU tile compositor's projection,
+    /// binning, order and early termination, with the meshes' colour and depth kept on the
+    /// GPU.
+    GpuTiles,
 }
 
 impl std::str::FromStr for Compositor {
@@ -194,7 +199,10 @@ impl std::str::FromStr for Compositor {
             "auto" => Ok(Self::Auto),
             "gpu" => Ok(Self::Gpu),
             "cpu" => Ok(Self::Cpu),
-            other => Err(format!("unknown compositor {other:?}: auto, gpu or cpu")),
+            "gpu-tiles" => Ok(Self::GpuTiles),
+            other => Err(format!(
+                "unknown compositor {other:?}: auto, gpu, cpu or gpu-tiles"
+            )),
         }
     }
 }
@@ -219,6 +227,8 @@ pub struct Renderer {
     compositor: Compositor,
     /// The CPU tile compositor's buffers.
     tiles: TiledCompositor,
+    /// The tile compositor on the GPU ([`Compositor::GpuTiles`]), made on its first frame.
+    tile_pass: Option<TilePass>,
 }
 
 impl std::fmt::Debug for Renderer {
@@ -272,11 +282,16 @@ impl Renderer {
         &mut self.tiles
     }
 
+    /// Who composites the splats, as asked.
+    pub fn compositor(&self) -> Compositor {
+        self.compositor
+    }
+
     /// Whether screenshots on `ctx` composite on the CPU: asked for, or chosen by
     /// [`Compositor::Auto`] for an adapter that is itself a CPU.
     pub fn composites_on_cpu(&self, ctx: &GpuContext) -> bool {
         match self.compositor {
-            Compositor::Gpu => false,
+            Compositor::Gpu | Compositor::GpuTiles => false,
             Compositor::Cpu => true,
             Compositor::Auto => ctx.adapter.get_info().device_type == wgpu::DeviceType::Cpu,
         }
@@ -314,7 +329,7 @@ impl Renderer {
         }
         report.timings.mesh_pass = started.elapsed();
         let started = Instant::now();
-        self.splat_stage(ctx, &ordered, color, depth);
+        self.splat_stage(ctx, view.size, &ordered, color, depth)?;
         if options.measure {
             finish_drawing(ctx, color)?;
         }
@@ -905,14 +920,43 @@ impl Renderer {
     }
 
     fn splat_stage(
-        &self,
+        &mut self,
         ctx: &GpuContext,
+        size: (u32, u32),
         ordered: &[(NodeId, VolumeGeometry)],
         color: &wgpu::TextureView,
         depth: &wgpu::TextureView,
-    ) {
+    ) -> Result<(), RenderError> {
+        let bindable = depth
+            .texture()
+            .usage()
+            .contains(wgpu::TextureUsages::TEXTURE_BINDING);
+        if self.compositor == Compositor::GpuTiles && bindable {
+            // Near to far, as the tile pass walks them.
+            let mut near_to_far = Vec::with_capacity(ordered.len());
+            for (id, _) in ordered.iter().rev() {
+                let level = self.levels.get(id).copied().unwrap_or_default();
+                if let Some(gpu) = self
+                    .volumes
+                    .get_mut(&(*id, level))
+                    .and_then(|s| s.gpu.as_mut())
+                {
+                    TilePass::prepare(ctx, gpu);
+                    near_to_far.push((*id, level));
+                }
+            }
+            let volumes: Vec<&GpuVolume> = near_to_far
+                .iter()
+                .filter_map(|key| self.volumes.get(key).and_then(|s| s.gpu.as_ref()))
+                .collect();
+            if volumes.is_empty() {
+                return Ok(());
+            }
+            let pass = self.tile_pass.get_or_insert_with(|| TilePass::new(ctx));
+            return pass.draw(ctx, &volumes, size, self.tiles.opaque, color, depth);
+        }
         let Some(splat_pass) = &self.splat_pass else {
-            return;
+            return Ok(());
         };
         let mut encoder = ctx.device.create_command_encoder(&Default::default());
         {
@@ -925,6 +969,7 @@ impl Renderer {
             }
         }
         ctx.queue.submit([encoder.finish()]);
+        Ok(())
     }
 
     /// Draws overlay meshes over the finished frame.

@@ -1,0 +1,316 @@
+// The tile compositor (src/splat/tiled/) as two compute passes, appended to
+// shaders/footprint.wgsl and shaders/splat.wgsl (whose uniforms `u`, texels and helpers it
+// shares; src/render/tile_pass.rs builds it).
+//
+// The draw order is walked nearest first in batches, as on the CPU. Per batch:
+// - `project` places each splat of the batch (its centre, conic, premultiplied colour, reversed
+//   depth and pixel rectangle, exactly as `tiled::project` does), one thread a splat, and writes
+//   the rectangle that holds the footprints of every 256 consecutive splats (a group);
+// - `composite` runs one workgroup a 16x16-pixel tile, one thread a pixel. Binning is done in
+//   two levels inside the workgroup, keeping the draw order: the groups whose rectangle meets
+//   the tile, in order, then in each such group its splats that meet the tile, in order. Each
+//   pixel takes them front to back with the "under" operator `C += (1 - A) c; A += (1 - A) a`
+//   and stops at the opacity `batch.opaque`; a tile whose pixels have all stopped stops.
+// The accumulated layer (premultiplied RGBA a pixel) persists across batches; src/render/
+// tile_pass.rs lays it over the meshes at the end.
+
+const TILE: u32 = 16u;
+const GROUP: u32 = 256u;
+
+// A splat on the screen (`Projected` in src/splat/tiled/project.rs).
+struct Projected {
+    // Centre in pixels; conic a' and b'.
+    a: vec4<f32>,
+    // Premultiplied colour.
+    color: vec4<f32>,
+    // Conic c' and the reversed depth, as bits; the pixel rectangle, inclusive, as
+    // x0 | x1 << 16 and y0 | y1 << 16 (x0 > x1 for a splat left out).
+    b: vec4<u32>,
+}
+
+// One batch: a stretch of one volume's draw order. Keep in sync with `BatchUniforms` in
+// src/render/tile_pass.rs.
+struct Batch {
+    // Splats in the batch; the index, within the bound order, of its first (farthest) splat.
+    count: u32,
+    first: u32,
+    // Image size in pixels.
+    width: u32,
+    height: u32,
+    // Opacity that stops a pixel; cut-off of the Gaussian's exponent.
+    opaque: f32,
+    cutoff: f32,
+    // Groups in the batch.
+    groups: u32,
+    pad: u32,
+}
+
+@group(0) @binding(2) var<storage, read> order: array<u32>;
+// A splat's peak opacity by the f16 bits of its density (`tiled::alpha_table`).
+@group(0) @binding(3) var<storage, read> peak_alpha: array<f32>;
+@group(0) @binding(4) var<storage, read_write> projected: array<Projected>;
+@group(0) @binding(5) var<storage, read_write> group_rects: array<vec4<i32>>;
+@group(0) @binding(6) var<uniform> batch: Batch;
+
+var<workgroup> rect_lo: array<atomic<i32>, 2>;
+var<workgroup> rect_hi: array<atomic<i32>, 2>;
+
+fn left_out() -> Projected {
+    return Projected(vec4<f32>(0.0), vec4<f32>(0.0), vec4<u32>(0u, 0u, 1u, 0u));
+}
+
+// `tiled::place` and `tiled::project`: the splat of voxel id `id` on the screen.
+fn project_splat(id: u32) -> Projected {
+    let n = u.dims.xyz;
+    let k = vec3<u32>(id % n.x, (id / n.x) % n.y, id / (n.x * n.y));
+    let d = vec3<f32>(k) - u.eye.xyz;
+    let p = vec3<f32>(dot(u.m0.xyz, d), dot(u.m1.xyz, d), dot(u.m2.xyz, d));
+    let ortho = u.size.w > 0.5;
+    var depth = 0.0;
+    if ortho {
+        if p.z <= u.depth.y {
+            return left_out();
+        }
+        depth = clamp((u.depth.z - p.z) / (u.depth.z - u.depth.y), 0.0, 1.0);
+    } else {
+        if p.z <= u.eye.w {
+            return left_out();
+        }
+        depth = u.depth.x / p.z;
+    }
+    let cov = mat3x3<f32>(u.cov0.xyz, u.cov1.xyz, u.cov2.xyz);
+    let fp = footprint(p, cov, u.screen.z, u.screen.xy, u.screen.w, ortho);
+    if !fp.ok {
+        return left_out();
+    }
+    let radius = sqrt(u.size.z);
+    let ex = radius * sqrt(fp.cov.x) + 0.5;
+    let ey = radius * sqrt(fp.cov.z) + 0.5;
+    let w = f32(batch.width);
+    let h = f32(batch.height);
+    let x0 = max(i32(ceil(clamp(fp.centre.x - ex - 0.5, -1.0, w + 1.0))), 0);
+    let x1 = min(i32(floor(clamp(fp.centre.x + ex - 0.5, -1.0, w + 1.0))), i32(batch.width) - 1);
+    let y0 = max(i32(ceil(clamp(fp.centre.y - ey - 0.5, -1.0, h + 1.0))), 0);
+    let y1 = min(i32(floor(clamp(fp.centre.y + ey - 0.5, -1.0, h + 1.0))), i32(batch.height) - 1);
+    if x0 > x1 || y0 > y1 {
+        return left_out();
+    }
+    let texel = textureLoad(texels, k, 0).xy;
+    let peak = peak_alpha[texel.y >> 16u];
+    if !(peak > 0.0) {
+        return left_out();
+    }
+    for (var i = 0u; i < u.dims.w; i++) {
+        if dot(u.clip[i].xyz, p) > u.clip[i].w {
+            return left_out();
+        }
+    }
+    var rgb = unpack4x8unorm(texel.x).xyz;
+    let strength = u.n0.w;
+    let g = vec3<f32>(unpack4x8snorm(texel.x).w, unpack4x8snorm(texel.y).xy);
+    if strength > 0.0 && any(g != vec3<f32>(0.0)) {
+        let nrm = vec3<f32>(dot(u.n0.xyz, g), dot(u.n1.xyz, g), dot(u.n2.xyz, g));
+        let lambert = abs(normalize(nrm).z);
+        rgb *= 1.0 - strength + strength * lambert;
+    }
+    let alpha = peak * fp.kept;
+    let conic = footprint_conic(fp);
+    return Projected(
+        vec4<f32>(fp.centre, conic.x, conic.y),
+        vec4<f32>(rgb * alpha, alpha),
+        vec4<u32>(
+            bitcast<u32>(conic.z),
+            bitcast<u32>(depth),
+            u32(x0) | (u32(x1) << 16u),
+            u32(y0) | (u32(y1) << 16u),
+        ),
+    );
+}
+
+// One thread a splat of the batch, nearest first; the group's rectangle from its threads.
+@compute @workgroup_size(256)
+fn project(
+    @builtin(workgroup_id) wg: vec3<u32>,
+    @builtin(local_invocation_index) li: u32,
+) {
+    if li == 0u {
+        atomicStore(&rect_lo[0], 0x3fffffff);
+        atomicStore(&rect_lo[1], 0x3fffffff);
+        atomicStore(&rect_hi[0], -1);
+        atomicStore(&rect_hi[1], -1);
+    }
+    workgroupBarrier();
+    let i = wg.x * GROUP + li;
+    if i < batch.count {
+        let s = project_splat(order[batch.first + batch.count - 1u - i]);
+        let x0 = i32(s.b.z & 0xffffu);
+        let x1 = i32(s.b.z >> 16u);
+        if x0 <= x1 {
+            atomicMin(&rect_lo[0], x0);
+            atomicMax(&rect_hi[0], x1);
+            atomicMin(&rect_lo[1], i32(s.b.w & 0xffffu));
+            atomicMax(&rect_hi[1], i32(s.b.w >> 16u));
+        }
+        projected[i] = s;
+    }
+    workgroupBarrier();
+    if li == 0u {
+        group_rects[wg.x] = vec4<i32>(
+            atomicLoad(&rect_lo[0]),
+            atomicLoad(&rect_lo[1]),
+            atomicLoad(&rect_hi[0]),
+            atomicLoad(&rect_hi[1]),
+        );
+    }
+}
+
+@group(0) @binding(8) var<storage, read> splats: array<Projected>;
+@group(0) @binding(9) var<storage, read> rects: array<vec4<i32>>;
+@group(0) @binding(10) var<storage, read_write> layer: array<vec4<f32>>;
+@group(0) @binding(11) var mesh_depth: texture_depth_2d;
+@group(0) @binding(12) var<uniform> tiles: Batch;
+
+var<workgroup> scan: array<u32, 256>;
+var<workgroup> total: u32;
+var<workgroup> picked: array<u32, 256>;
+var<workgroup> tile_splats: array<Projected, 256>;
+var<workgroup> open_pixels: atomic<u32>;
+var<workgroup> still_open: u32;
+
+// The inclusive prefix sum of `flag` over the workgroup's threads (Hillis and Steele); the sum
+// of all of them in `total`, which the caller reads with `workgroupUniformLoad`.
+fn prefix(li: u32, flag: u32) -> u32 {
+    scan[li] = flag;
+    for (var step = 1u; step < 256u; step <<= 1u) {
+        workgroupBarrier();
+        var v = scan[li];
+        if li >= step {
+            v += scan[li - step];
+        }
+        workgroupBarrier();
+        scan[li] = v;
+    }
+    workgroupBarrier();
+    if li == 255u {
+        total = scan[255];
+    }
+    return scan[li];
+}
+
+// Whether the inclusive rectangle `r` (x0, y0, x1, y1) meets the tile whose first pixel is `t`.
+fn meets(r: vec4<i32>, t: vec2<i32>) -> bool {
+    return r.x <= r.z && r.y <= r.w && r.x <= t.x + 15 && r.z >= t.x && r.y <= t.y + 15
+        && r.w >= t.y;
+}
+
+fn rect_of(s: Projected) -> vec4<i32> {
+    return vec4<i32>(
+        i32(s.b.z & 0xffffu),
+        i32(s.b.w & 0xffffu),
+        i32(s.b.z >> 16u),
+        i32(s.b.w >> 16u),
+    );
+}
+
+// How many of the tile's pixels are still open (every thread calls it).
+fn count_open(li: u32, open: bool) -> u32 {
+    if li == 0u {
+        atomicStore(&open_pixels, 0u);
+    }
+    workgroupBarrier();
+    if open {
+        atomicAdd(&open_pixels, 1u);
+    }
+    workgroupBarrier();
+    if li == 0u {
+        still_open = atomicLoad(&open_pixels);
+    }
+    return workgroupUniformLoad(&still_open);
+}
+
+@compute @workgroup_size(16, 16)
+fn composite(
+    @builtin(workgroup_id) wg: vec3<u32>,
+    @builtin(local_invocation_id) lid: vec3<u32>,
+    @builtin(local_invocation_index) li: u32,
+) {
+    let origin = vec2<i32>(wg.xy * TILE);
+    let px = wg.xy * TILE + lid.xy;
+    let inside = px.x < tiles.width && px.y < tiles.height;
+    let at = px.y * tiles.width + px.x;
+    var acc = vec4<f32>(0.0);
+    var mesh = 0.0;
+    if inside {
+        acc = layer[at];
+        mesh = textureLoad(mesh_depth, vec2<i32>(px), 0);
+    }
+    var open = inside && acc.w < tiles.opaque;
+    let centre = vec2<f32>(px) + 0.5;
+    var done = count_open(li, open) == 0u;
+    for (var base = 0u; base < tiles.groups && !done; base += 256u) {
+        // The groups of this stretch that meet the tile, in order.
+        let g = base + li;
+        var hit = 0u;
+        if g < tiles.groups && meets(rects[g], origin) {
+            hit = 1u;
+        }
+        let slot = prefix(li, hit);
+        if hit == 1u {
+            picked[slot - 1u] = g;
+        }
+        let groups = workgroupUniformLoad(&total);
+        for (var j = 0u; j < groups && !done; j++) {
+            // The group's splats that meet the tile, in order.
+            let s = picked[j] * GROUP + li;
+            var splat = left_out();
+            var touch = 0u;
+            if s < tiles.count {
+                splat = splats[s];
+                if meets(rect_of(splat), origin) {
+                    touch = 1u;
+                }
+            }
+            let place = prefix(li, touch);
+            if touch == 1u {
+                tile_splats[place - 1u] = splat;
+            }
+            let n = workgroupUniformLoad(&total);
+            for (var k = 0u; k < n; k++) {
+                let sp = tile_splats[k];
+                let r = rect_of(sp);
+                let p = vec2<i32>(px);
+                if open && p.x >= r.x && p.x <= r.z && p.y >= r.y && p.y <= r.w {
+                    let dx = centre.x - sp.a.x;
+                    let dy = centre.y - sp.a.y;
+                    let q = (sp.a.z * dx + 2.0 * sp.a.w * dy) * dx + bitcast<f32>(sp.b.x) * dy * dy;
+                    if q <= tiles.cutoff && bitcast<f32>(sp.b.y) >= mesh {
+                        let weight = (1.0 - acc.w) * exp(-0.5 * q);
+                        acc += weight * sp.color;
+                        open = acc.w < tiles.opaque;
+                    }
+                }
+            }
+            done = count_open(li, open) == 0u;
+        }
+    }
+    if inside {
+        layer[at] = acc;
+    }
+}
+
+// Laying the layer over what lies under it: a triangle over the whole target, blended "over".
+@group(0) @binding(13) var<storage, read> finished: array<vec4<f32>>;
+@group(0) @binding(14) var<uniform> image: Batch;
+
+@vertex
+fn cover_vs(@builtin(vertex_index) i: u32) -> @builtin(position) vec4<f32> {
+    let x = f32(i & 1u) * 4.0 - 1.0;
+    let y = f32(i >> 1u) * 4.0 - 1.0;
+    return vec4<f32>(x, y, 0.0, 1.0);
+}
+
+@fragment
+fn cover_fs(@builtin(position) pos: vec4<f32>) -> @location(0) vec4<f32> {
+    let p = vec2<u32>(pos.xy);
+    return finished[p.y * image.width + p.x];
+}

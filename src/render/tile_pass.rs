@@ -1,0 +1,399 @@
+//! The tile compositor on the GPU: the CPU tile compositor's projection, binning to 16x16-pixel
+//! tiles, front-to-back "under" compositing and early termination
+//! ([`crate::splat::tiled`]), as compute passes (`shaders/tiles.wgsl`), then the finished
+//! layer laid "over" the meshes already in the colour target.
+//!
+//! The draw orders are walked nearest first in batches that double from [`FIRST_BATCH`] to
+//! [`MAX_BATCH`] splats, so that tiles stop early while later batches are still large enough
+//! to fill a GPU. Each batch is one dispatch that projects it and one that composites every
+//! tile; the layer of accumulated colour lives in a storage buffer between them. Nothing is
+//! read back: the meshes' colour and depth stay on the GPU, where the CPU compositor must read
+//! both back first.
+//!
+//! Binning differs in form from the CPU's counting sort, not in result: a GPU workgroup (a
+//! tile) gathers, in order, the groups of 256 consecutive splats whose rectangle meets it and
+//! then each such group's splats that meet it, by prefix sums in workgroup memory, so that
+//! every tile takes its splats in the draw order without a global sort.
+
+use bytemuck::{Pod, Zeroable};
+
+use super::splat_pass::GpuVolume;
+use super::target::color_format;
+use super::{GpuContext, RenderError};
+
+/// Splats in the first (nearest) batch.
+const FIRST_BATCH: usize = 1 << 14;
+/// Splats in the largest batch.
+const MAX_BATCH: usize = 1 << 19;
+/// Splats a workgroup projects; the groups whose rectangles the tiles test.
+const GROUP: usize = 256;
+/// Tile side in pixels, as `shaders/tiles.wgsl` has it.
+const TILE: u32 = 16;
+/// Bytes of a projected splat (`Projected` in `shaders/tiles.wgsl`).
+const PROJECTED_BYTES: u64 = 48;
+/// Uniform slots are this far apart (wgpu's largest `min_uniform_buffer_offset_alignment`).
+const SLOT: u64 = 256;
+
+/// Keep in sync with `Batch` in shaders/tiles.wgsl.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Pod, Zeroable)]
+struct BatchUniforms {
+    count: u32,
+    first: u32,
+    width: u32,
+    height: u32,
+    opaque: f32,
+    cutoff: f32,
+    groups: u32,
+    pad: u32,
+}
+
+/// The tile pass's shader: the footprint and the splat pass's uniforms and helpers, then the
+/// passes themselves.
+const TILES_WGSL: &str = concat!(
+    include_str!("../../shaders/footprint.wgsl"),
+    include_str!("../../shaders/splat.wgsl"),
+    include_str!("../../shaders/tiles.wgsl")
+);
+
+/// The tile pass's pipelines and the buffers it reuses from frame to frame.
+#[derive(Debug)]
+pub(crate) struct TilePass {
+    project: wgpu::ComputePipeline,
+    composite: wgpu::ComputePipeline,
+    cover: wgpu::RenderPipeline,
+    /// Projected splats of one batch.
+    projected: Option<wgpu::Buffer>,
+    /// The group rectangles of one batch.
+    rects: Option<wgpu::Buffer>,
+    /// The accumulated layer, premultiplied RGBA as f32 a pixel.
+    layer: Option<wgpu::Buffer>,
+    /// The batches' uniforms, one slot each.
+    batches: Option<wgpu::Buffer>,
+}
+
+/// A buffer of at least `bytes`, kept where the one held is large enough.
+fn ensure(
+    ctx: &GpuContext,
+    slot: &mut Option<wgpu::Buffer>,
+    bytes: u64,
+    usage: wgpu::BufferUsages,
+    label: &str,
+) -> wgpu::Buffer {
+    if let Some(buffer) = slot.as_ref().filter(|b| b.size() >= bytes) {
+        return buffer.clone();
+    }
+    let buffer = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some(label),
+        size: bytes.max(16).next_multiple_of(256),
+        usage,
+        mapped_at_creation: false,
+    });
+    *slot = Some(buffer.clone());
+    buffer
+}
+
+fn entry(binding: u32, resource: wgpu::BindingResource<'_>) -> wgpu::BindGroupEntry<'_> {
+    wgpu::BindGroupEntry { binding, resource }
+}
+
+/// One stretch of one volume's draw order, composited as a whole.
+struct Stretch {
+    volume: usize,
+    begin: usize,
+    end: usize,
+}
+
+/// The stretches of the draw orders, nearest first: the volumes near to far, each one's order
+/// (back to front) from its end, in batches that double.
+fn stretches(counts: &[usize]) -> Vec<Stretch> {
+    let mut out = Vec::new();
+    let mut batch = FIRST_BATCH;
+    for (volume, &count) in counts.iter().enumerate() {
+        let mut end = count;
+        while end > 0 {
+            let begin = end.saturating_sub(batch);
+            out.push(Stretch { volume, begin, end });
+            end = begin;
+            batch = (batch * 2).min(MAX_BATCH);
+        }
+    }
+    out
+}
+
+impl TilePass {
+    pub(crate) fn new(ctx: &GpuContext) -> Self {
+        let device = &ctx.device;
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("tiles.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(TILES_WGSL.into()),
+        });
+        let compute = |entry: &str| {
+            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some(entry),
+                layout: None,
+                module: &module,
+                entry_point: Some(entry),
+                compilation_options: Default::default(),
+                cache: None,
+            })
+        };
+        let over = wgpu::BlendComponent {
+            src_factor: wgpu::BlendFactor::One,
+            dst_factor: wgpu::BlendFactor::OneMinusSrcAlpha,
+            operation: wgpu::BlendOperation::Add,
+        };
+        let cover = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+            label: Some("tile layer"),
+            layout: None,
+            vertex: wgpu::VertexState {
+                module: &module,
+                entry_point: Some("cover_vs"),
+                compilation_options: Default::default(),
+                buffers: &[],
+            },
+            primitive: Default::default(),
+            depth_stencil: None,
+            multisample: Default::default(),
+            fragment: Some(wgpu::FragmentState {
+                module: &module,
+                entry_point: Some("cover_fs"),
+                compilation_options: Default::default(),
+                targets: &[Some(wgpu::ColorTargetState {
+                    format: color_format(device),
+                    blend: Some(wgpu::BlendState {
+                        color: over,
+                        alpha: over,
+                    }),
+                    write_mask: wgpu::ColorWrites::ALL,
+                })],
+            }),
+            multiview_mask: None,
+            cache: None,
+        });
+        Self {
+            project: compute("project"),
+            composite: compute("composite"),
+            cover,
+            projected: None,
+            rects: None,
+            layer: None,
+            batches: None,
+        }
+    }
+
+    /// Makes `volume`'s opacity table for the step its uniforms were last written with, where
+    /// the one it has was made for another.
+    pub(crate) fn prepare(ctx: &GpuContext, volume: &mut GpuVolume) {
+        let bits = volume.step_mm.to_bits();
+        if volume.alpha.as_ref().is_some_and(|(b, _)| *b == bits) {
+            return;
+        }
+        let table = crate::splat::tiled::alpha_table(volume.step_mm);
+        let buffer = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("opacity table"),
+            size: (table.len() * 4) as u64,
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        ctx.queue
+            .write_buffer(&buffer, 0, bytemuck::cast_slice(&table));
+        volume.alpha = Some((bits, buffer));
+    }
+
+    /// Composites `volumes` (near to far, each with its order and uniforms written and
+    /// [`TilePass::prepare`]d) over the
+    /// colour target `color` of `size`, depth-tested against `depth` (the meshes' reversed
+    /// depth; its texture must allow binding), stopping a pixel at the accumulated opacity
+    /// `opaque`.
+    pub(crate) fn draw(
+        &mut self,
+        ctx: &GpuContext,
+        volumes: &[&GpuVolume],
+        size: (u32, u32),
+        opaque: f32,
+        color: &wgpu::TextureView,
+        depth: &wgpu::TextureView,
+    ) -> Result<(), RenderError> {
+        let device = &ctx.device;
+        let limits = device.limits();
+        let (w, h) = size;
+        let layer_bytes = u64::from(w) * u64::from(h) * 16;
+        if layer_bytes > limits.max_storage_buffer_binding_size {
+            return Err(RenderError::Unsupported {
+                adapter: ctx.describe(),
+                what: "hold the tile compositor's layer for an image this large in one storage buffer",
+            });
+        }
+        let counts: Vec<usize> = volumes.iter().map(|v| v.count as usize).collect();
+        let stretches = stretches(&counts);
+        let largest = stretches.iter().map(|s| s.end - s.begin).max().unwrap_or(0);
+        let storage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST;
+        let projected = ensure(
+            ctx,
+            &mut self.projected,
+            largest as u64 * PROJECTED_BYTES,
+            storage,
+            "projected splats",
+        );
+        let rects = ensure(
+            ctx,
+            &mut self.rects,
+            largest.div_ceil(GROUP) as u64 * 16,
+            storage,
+            "group rectangles",
+        );
+        let layer = ensure(ctx, &mut self.layer, layer_bytes, storage, "tile layer");
+        let batches = ensure(
+            ctx,
+            &mut self.batches,
+            (stretches.len() as u64 + 1) * SLOT,
+            wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            "tile batches",
+        );
+        let mut uniforms = vec![0u8; (stretches.len() + 1) * SLOT as usize];
+        let cutoffs: Vec<f32> = volumes.iter().map(|v| v.cutoff).collect();
+        // An order is bound from a 256-byte boundary (64 ids) before the stretch.
+        let align = (limits.min_storage_buffer_offset_alignment / 4).max(1) as usize;
+        for (i, s) in stretches.iter().enumerate() {
+            let count = s.end - s.begin;
+            let u = BatchUniforms {
+                count: count as u32,
+                first: (s.begin % align) as u32,
+                width: w,
+                height: h,
+                opaque,
+                cutoff: cutoffs[s.volume],
+                groups: count.div_ceil(GROUP) as u32,
+                pad: 0,
+            };
+            let at = i * SLOT as usize;
+            uniforms[at..at + size_of::<BatchUniforms>()].copy_from_slice(bytemuck::bytes_of(&u));
+        }
+        // The last slot: the image alone, for laying the layer over the target.
+        let image = BatchUniforms {
+            count: 0,
+            first: 0,
+            width: w,
+            height: h,
+            opaque,
+            cutoff: 0.0,
+            groups: 0,
+            pad: 0,
+        };
+        let at = stretches.len() * SLOT as usize;
+        uniforms[at..at + size_of::<BatchUniforms>()].copy_from_slice(bytemuck::bytes_of(&image));
+        ctx.queue.write_buffer(&batches, 0, &uniforms);
+        let slot = |i: usize| wgpu::BufferBinding {
+            buffer: &batches,
+            offset: i as u64 * SLOT,
+            size: wgpu::BufferSize::new(size_of::<BatchUniforms>() as u64),
+        };
+        let mut encoder = device.create_command_encoder(&Default::default());
+        encoder.clear_buffer(&layer, 0, Some(layer_bytes));
+        {
+            let mut pass = encoder.begin_compute_pass(&Default::default());
+            let project_layout = self.project.get_bind_group_layout(0);
+            let composite_layout = self.composite.get_bind_group_layout(0);
+            for (i, s) in stretches.iter().enumerate() {
+                let volume = &volumes[s.volume];
+                let (Some(order), Some((_, alpha))) = (&volume.order, &volume.alpha) else {
+                    continue;
+                };
+                let from = s.begin - s.begin % align;
+                let order_range = wgpu::BufferBinding {
+                    buffer: order,
+                    offset: from as u64 * 4,
+                    size: wgpu::BufferSize::new((s.end - from) as u64 * 4),
+                };
+                let project = device.create_bind_group(&wgpu::BindGroupDescriptor {
+                    label: Some("tile projection"),
+                    layout: &project_layout,
+                    entries: &[
+                        entry(0, volume.uniforms.as_entire_binding()),
+                        entry(1, wgpu::BindingResource::TextureView(&volume.texels)),
+                        entry(2, wgpu::BindingResource::Buffer(order_range)),
+                        entry(3, alpha.as_entire_binding()),
+                        entry(4, projected.as_entire_binding()),
+                        entry(5, rects.as_entire_binding()),
+                        entry(6, wgpu::BindingResource::Buffer(slot(i))),
+                    ],
+                });
+                let composite = device.create_bind_group(&wgpu::BindGroupDescriptor {
+                    label: Some("tile compositing"),
+                    layout: &composite_layout,
+                    entries: &[
+                        entry(8, projected.as_entire_binding()),
+                        entry(9, rects.as_entire_binding()),
+                        entry(10, layer.as_entire_binding()),
+                        entry(11, wgpu::BindingResource::TextureView(depth)),
+                        entry(12, wgpu::BindingResource::Buffer(slot(i))),
+                    ],
+                });
+                pass.set_pipeline(&self.project);
+                pass.set_bind_group(0, &project, &[]);
+                pass.dispatch_workgroups((s.end - s.begin).div_ceil(GROUP) as u32, 1, 1);
+                pass.set_pipeline(&self.composite);
+                pass.set_bind_group(0, &composite, &[]);
+                pass.dispatch_workgroups(w.div_ceil(TILE), h.div_ceil(TILE), 1);
+            }
+        }
+        let cover = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("tile layer"),
+            layout: &self.cover.get_bind_group_layout(0),
+            entries: &[
+                entry(13, layer.as_entire_binding()),
+                entry(14, wgpu::BindingResource::Buffer(slot(stretches.len()))),
+            ],
+        });
+        {
+            let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+                label: Some("tile layer"),
+                color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                    view: color,
+                    depth_slice: None,
+                    resolve_target: None,
+                    ops: wgpu::Operations {
+                        load: wgpu::LoadOp::Load,
+                        store: wgpu::StoreOp::Store,
+                    },
+                })],
+                depth_stencil_attachment: None,
+                timestamp_writes: None,
+                occlusion_query_set: None,
+                multiview_mask: None,
+            });
+            pass.set_pipeline(&self.cover);
+            pass.set_bind_group(0, &cover, &[]);
+            pass.draw(0..3, 0..1);
+        }
+        ctx.queue.submit([encoder.finish()]);
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The stretches cover every order exactly once, nearest first: volumes near to far, each
+    /// from its end, batches doubling to the largest.
+    #[test]
+    fn stretches_cover_the_orders_nearest_first() {
+        let counts = [100_000, 0, 3, 2_000_000];
+        let s = stretches(&counts);
+        for (v, &n) in counts.iter().enumerate() {
+            let mine: Vec<&Stretch> = s.iter().filter(|s| s.volume == v).collect();
+            let mut end = n;
+            for stretch in &mine {
+                assert_eq!(stretch.end, end);
+                assert!(stretch.begin < stretch.end);
+                end = stretch.begin;
+            }
+            assert_eq!(end, 0);
+        }
+        assert_eq!(s[0].end - s[0].begin, FIRST_BATCH);
+        assert!(s.iter().all(|s| s.end - s.begin <= MAX_BATCH));
+        assert!(s.windows(2).all(|p| p[0].volume <= p[1].volume));
+    }
+}
