@@ -14,6 +14,12 @@ and times whole frames: renWin.Render() followed by a readback of the image to t
 each (volume, mapper) is a warm-up and is not timed (it uploads the volume and, for the CPU
 mapper, computes the gradients).
 
+With `--raw` it draws a headerless raw volume instead (any size and scalar type, placed in the
+world by `--spacing`, `--orientation` and `--origin` as `splatscene render` places it), with a
+ramp transfer function (`--window`, `--color`, `--alpha`) and an explicit camera (`--eye`,
+`--target`, `--fov`, `--up`), so that its frames can be compared with `splatscene render` on the
+same picture.
+
 Prints a JSON object on stdout and a table on stderr. Exits non-zero when VTK or an offscreen
 OpenGL context is not available.
 
@@ -52,6 +58,7 @@ try:
     import vtkmodules.vtkRenderingVolumeOpenGL2  # noqa: F401  (GPU volume mapper)
     from vtkmodules.util import numpy_support
     from vtkmodules.vtkCommonCore import vtkMultiThreader, vtkOutputWindow, vtkVersion
+    from vtkmodules.vtkCommonMath import vtkMatrix4x4
     from vtkmodules.vtkCommonDataModel import vtkImageData, vtkPiecewiseFunction
     from vtkmodules.vtkIOImage import vtkPNGWriter
     from vtkmodules.vtkRenderingCore import (
@@ -95,6 +102,20 @@ DIRECTION = (-0.4, 1.0, -0.55)
 VIEW_UP = (0.0, 0.0, 1.0)
 TURN_DEGREES = 7.0
 
+# Raw volumes (--raw): scalar names as splatscene takes them, all little-endian.
+RAW_SCALARS = {"u8": np.dtype("u1"), "u16": np.dtype("<u2"), "i16": np.dtype("<i2")}
+# Patient directions in the RAS world frame (+x right, +y anterior, +z superior).
+LETTERS = {
+    "R": (1.0, 0.0, 0.0),
+    "L": (-1.0, 0.0, 0.0),
+    "A": (0.0, 1.0, 0.0),
+    "P": (0.0, -1.0, 0.0),
+    "S": (0.0, 0.0, 1.0),
+    "I": (0.0, 0.0, -1.0),
+}
+DEFAULT_RAW_COLOR = (1.0, 0.93, 0.85)
+DEFAULT_RAW_ALPHA = 0.6
+
 
 def data_dir():
     return os.path.join(os.environ.get("SPLATSCENE_DATA", os.path.join("..", "shared", "data")), "volumes")
@@ -129,6 +150,57 @@ def load_volume(name):
     return np.ascontiguousarray(values), VOLUMES[name]["spacing"]
 
 
+def load_raw(path, dims, scalar):
+    """A headerless little-endian raw volume, x fastest, as a (nz, ny, nx) array."""
+    dtype = RAW_SCALARS[scalar]
+    nx, ny, nz = dims
+    expected = nx * ny * nz
+    try:
+        size = os.path.getsize(path)
+    except OSError as e:
+        die(f"cannot read {path} ({e})")
+    if size != expected * dtype.itemsize:
+        die(
+            f"{path}: {nx}x{ny}x{nz} {scalar} needs {expected * dtype.itemsize} bytes, "
+            f"the file has {size}"
+        )
+    values = np.fromfile(path, dtype=dtype)
+    # VTK takes native byte order.
+    values = values.astype(dtype.newbyteorder("="), copy=False)
+    return np.ascontiguousarray(values.reshape(nz, ny, nx))
+
+
+def direction_matrix(code):
+    """The 3x3 matrix (rows) whose columns are the unit vectors of the three letters."""
+    columns = [LETTERS[c] for c in code]
+    return [[columns[j][i] for j in range(3)] for i in range(3)]
+
+
+def user_matrix(direction, origin):
+    """world = origin + direction * (spacing * index): the vtkImageData applies the spacing, this
+    matrix the rest."""
+    m = vtkMatrix4x4()
+    m.Identity()
+    for i in range(3):
+        for j in range(3):
+            m.SetElement(i, j, direction[i][j])
+        m.SetElement(i, 3, origin[i])
+    return m
+
+
+def world_corners(dims, spacing, direction, origin):
+    """The eight corners of the voxel-centre box in world coordinates."""
+    corners = []
+    for cx in (0, dims[0] - 1):
+        for cy in (0, dims[1] - 1):
+            for cz in (0, dims[2] - 1):
+                local = (cx * spacing[0], cy * spacing[1], cz * spacing[2])
+                corners.append(
+                    [origin[i] + sum(direction[i][j] * local[j] for j in range(3)) for i in range(3)]
+                )
+    return corners
+
+
 def image_data(values, spacing):
     nz, ny, nx = values.shape
     image = vtkImageData()
@@ -141,8 +213,7 @@ def image_data(values, spacing):
     return image
 
 
-def volume_property(name):
-    spec = VOLUMES[name]
+def volume_property(spec, opacity_unit_distance):
     lo, hi = spec["ramp"]
     r, g, b, alpha = spec["rgba"]
     colour = vtkColorTransferFunction()
@@ -157,29 +228,38 @@ def volume_property(name):
     prop.SetScalarOpacity(opacity)
     prop.SetInterpolationTypeToLinear()
     prop.ShadeOn()
+    prop.SetScalarOpacityUnitDistance(opacity_unit_distance)
     return prop
 
 
-def fitted_camera(dims, spacing):
-    """Eye, focal point and distance of the project's fitted camera (aspect 1, as frame.rs)."""
-    hi = [(n - 1) * s for n, s in zip(dims, spacing)]
-    centre = [0.5 * h for h in hi]
-    radius = 0.5 * math.sqrt(sum(h * h for h in hi))
+def fitted_camera(corners, fov_degrees=FOV_Y_DEGREES):
+    """Eye and focal point of the project's fitted camera (aspect 1, as frame.rs) for the box of
+    the given world corners."""
+    lo = [min(c[i] for c in corners) for i in range(3)]
+    hi = [max(c[i] for c in corners) for i in range(3)]
+    centre = [0.5 * (a + b) for a, b in zip(lo, hi)]
+    radius = 0.5 * math.sqrt(sum((b - a) ** 2 for a, b in zip(lo, hi)))
     length = math.sqrt(sum(d * d for d in DIRECTION))
     forward = [d / length for d in DIRECTION]
-    distance = radius / math.sin(math.radians(0.5 * FOV_Y_DEGREES)) * 1.02
+    distance = radius / math.sin(math.radians(0.5 * fov_degrees)) * 1.02
     eye = [c - f * distance for c, f in zip(centre, forward)]
-    return eye, centre, distance
+    return eye, centre
 
 
-def turned(eye, centre, degrees):
-    """`eye` turned about the view up (+z) through `centre`, as SceneCamera::orbit(degrees, 0)."""
+def turned(eye, centre, degrees, up=VIEW_UP):
+    """`eye` turned by `degrees` about the axis `up` through `centre` (right-handed), as
+    SceneCamera::orbit(degrees, 0) turns it about +z."""
     a = math.radians(degrees)
-    dx, dy, dz = (e - c for e, c in zip(eye, centre))
+    length = math.sqrt(sum(u * u for u in up))
+    k = [u / length for u in up]
+    v = [e - c for e, c in zip(eye, centre)]
+    cos, sin = math.cos(a), math.sin(a)
+    kv = sum(ki * vi for ki, vi in zip(k, v))
+    cross = [k[1] * v[2] - k[2] * v[1], k[2] * v[0] - k[0] * v[2], k[0] * v[1] - k[1] * v[0]]
+    # Rodrigues' rotation formula.
     return [
-        centre[0] + dx * math.cos(a) - dy * math.sin(a),
-        centre[1] + dx * math.sin(a) + dy * math.cos(a),
-        centre[2] + dz,
+        c + vi * cos + ci * sin + ki * kv * (1.0 - cos)
+        for c, vi, ci, ki in zip(centre, v, cross, k)
     ]
 
 
@@ -219,7 +299,7 @@ def to_numpy(image):
     return numpy_support.vtk_to_numpy(scalars).reshape(h, w, -1)
 
 
-def run_one(name, kind, image, args, size):
+def run_one(spec, kind, image, args, size):
     window = vtkRenderWindow()
     window.SetOffScreenRendering(1)
     window.SetSize(*size)
@@ -228,26 +308,30 @@ def run_one(name, kind, image, args, size):
     renderer.SetBackground(0.0, 0.0, 0.0)
     window.AddRenderer(renderer)
 
-    prop = volume_property(name)
+    name = spec["name"]
+    prop = volume_property(spec, args.opacity_unit_distance)
     mapper = make_mapper(kind, args)
     mapper.SetInputData(image)
     volume = vtkVolume()
     volume.SetMapper(mapper)
     volume.SetProperty(prop)
+    if spec.get("matrix") is not None:
+        volume.SetUserMatrix(spec["matrix"])
     renderer.AddVolume(volume)
 
-    dims = image.GetDimensions()
-    eye, centre, distance = fitted_camera(dims, image.GetSpacing())
+    eye, centre = spec["eye"], spec["target"]
+    up, fov, turn = spec["up"], spec["fov"], spec["turn"]
+    distance = math.sqrt(sum((e - c) ** 2 for e, c in zip(eye, centre)))
     camera = renderer.GetActiveCamera()
     camera.SetParallelProjection(0)
-    camera.SetViewAngle(FOV_Y_DEGREES)  # vertical (UseHorizontalViewAngle is off)
+    camera.SetViewAngle(fov)  # vertical (UseHorizontalViewAngle is off)
     camera.SetFocalPoint(*centre)
-    camera.SetViewUp(*VIEW_UP)
+    camera.SetViewUp(*up)
 
     def place(degrees):
-        camera.SetPosition(*turned(eye, centre, degrees))
+        camera.SetPosition(*turned(eye, centre, degrees, up))
         camera.SetFocalPoint(*centre)
-        camera.SetViewUp(*VIEW_UP)
+        camera.SetViewUp(*up)
         renderer.ResetCameraClippingRange()
 
     w2i = vtkWindowToImageFilter()
@@ -269,6 +353,9 @@ def run_one(name, kind, image, args, size):
         "mapper_class": mapper.GetClassName(),
         "eye": [round(v, 4) for v in eye],
         "focal_point": [round(v, 4) for v in centre],
+        "view_up": [round(v, 4) for v in up],
+        "view_angle": fov,
+        "turn_degrees_per_frame": turn,
         "distance": round(distance, 4),
         "clipping_range": [round(v, 3) for v in camera.GetClippingRange()],
         "scalar_opacity_unit_distance": prop.GetScalarOpacityUnitDistance(),
@@ -284,7 +371,7 @@ def run_one(name, kind, image, args, size):
     info["lit_fraction"] = round(float((pixels.max(axis=2) > 0).mean()), 4)
     if args.save:
         os.makedirs(args.save, exist_ok=True)
-        path = os.path.join(args.save, f"{name}_{kind}.png")
+        path = os.path.join(args.save, f"{spec['file_stem']}_{kind}.png")
         copy = vtkImageData()
         copy.DeepCopy(first)
         writer = vtkPNGWriter()
@@ -295,7 +382,7 @@ def run_one(name, kind, image, args, size):
 
     times = []
     for i in range(1, args.frames + 1):
-        place(TURN_DEGREES * i)
+        place(turn * i)
         t0 = time.perf_counter()
         window.Render()
         grab(window, w2i)
@@ -334,9 +421,42 @@ def check_offscreen_gl():
     return name, renderer_string
 
 
-def parse_args():
+# Options whose value may start with '-' (a negative coordinate): argparse of Python 3.11 would
+# take "-179.3,879.3,-165" for an option, so these are joined to their value with '='.
+VALUE_OPTIONS = ("--eye", "--target", "--up", "--origin", "--spacing", "--window", "--color")
+
+
+def join_values(argv):
+    out = []
+    i = 0
+    while i < len(argv):
+        a = argv[i]
+        if a in VALUE_OPTIONS and i + 1 < len(argv):
+            out.append(f"{a}={argv[i + 1]}")
+            i += 2
+        else:
+            out.append(a)
+            i += 1
+    return out
+
+
+def parse_floats(p, option, text, n):
+    try:
+        values = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        values = ()
+    if len(values) != n or not all(math.isfinite(v) for v in values):
+        p.error(f"{option} takes {n} comma-separated numbers, not {text!r}")
+    return values
+
+
+def parse_args(argv=None):
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--volumes", default="engine,cthead", help="comma-separated: engine,cthead")
+    p.add_argument(
+        "--volumes",
+        default=None,
+        help="comma-separated: engine,cthead (default both; not with --raw)",
+    )
     p.add_argument("--mappers", default="fixed,gpu", help="comma-separated: fixed,gpu")
     p.add_argument("--frames", type=int, default=20, help="timed frames per (volume, mapper)")
     p.add_argument("--size", default="512x512", help="image size WxH")
@@ -352,8 +472,63 @@ def parse_args():
         default=0.5,
         help="ray sample distance in world units for both mappers (default 0.5)",
     )
+    p.add_argument(
+        "--opacity-unit-distance",
+        type=float,
+        default=1.0,
+        metavar="MM",
+        help="vtkVolumeProperty scalar opacity unit distance in world units (default 1.0)",
+    )
     p.add_argument("--save", metavar="DIR", help="write the first (untimed) frame of each as PNG")
-    args = p.parse_args()
+
+    raw = p.add_argument_group("raw volume (instead of --volumes)")
+    raw.add_argument("--raw", metavar="PATH", help="headerless little-endian raw volume, x fastest")
+    raw.add_argument("--dims", metavar="X,Y,Z", help="grid size in voxels")
+    raw.add_argument("--scalar", choices=sorted(RAW_SCALARS), help="voxel type")
+    raw.add_argument("--spacing", metavar="SX,SY,SZ", help="voxel spacing in world units (mm)")
+    raw.add_argument(
+        "--orientation",
+        metavar="CODE",
+        help="where index axes x, y, z run in the RAS world, e.g. LAI (default RAS)",
+    )
+    raw.add_argument("--origin", metavar="X,Y,Z", help="world position of voxel (0,0,0) (default 0,0,0)")
+    raw.add_argument(
+        "--window",
+        metavar="LO,HI",
+        help="opacity ramps linearly from 0 at LO to --alpha at HI and above",
+    )
+    raw.add_argument(
+        "--color",
+        metavar="R,G,B",
+        help="constant colour, 0..1 (default %s)" % ",".join(str(v) for v in DEFAULT_RAW_COLOR),
+    )
+    raw.add_argument(
+        "--alpha",
+        type=float,
+        default=None,
+        help=f"opacity at HI and above (default {DEFAULT_RAW_ALPHA})",
+    )
+
+    cam = p.add_argument_group("camera (any volume; default: the fitted camera of frame.rs)")
+    cam.add_argument("--eye", metavar="X,Y,Z", help="camera position in world units")
+    cam.add_argument("--target", metavar="X,Y,Z", help="focal point (with --eye)")
+    cam.add_argument(
+        "--fov",
+        type=float,
+        default=FOV_Y_DEGREES,
+        metavar="DEG",
+        help=f"vertical view angle in degrees (default {FOV_Y_DEGREES:g})",
+    )
+    cam.add_argument("--up", metavar="X,Y,Z", help="view up, also the turning axis (default 0,0,1)")
+    cam.add_argument(
+        "--turn",
+        type=float,
+        default=TURN_DEGREES,
+        metavar="DEG",
+        help=f"degrees the camera turns per frame about --up through the target (default {TURN_DEGREES:g}; 0 = same view)",
+    )
+
+    args = p.parse_args(join_values(sys.argv[1:] if argv is None else argv))
     try:
         w, h = (int(v) for v in args.size.lower().split("x"))
         assert w > 0 and h > 0
@@ -362,15 +537,112 @@ def parse_args():
     args.size_wh = (w, h)
     if args.frames < 1:
         p.error("--frames must be at least 1")
-    args.volume_list = [v.strip() for v in args.volumes.split(",") if v.strip()]
+    if not (args.sample_distance > 0):
+        p.error("--sample-distance must be positive")
+    if not (args.opacity_unit_distance > 0):
+        p.error("--opacity-unit-distance must be positive")
+    if not (0.1 <= args.fov <= 170.0):
+        p.error("--fov must be from 0.1 to 170 degrees")
+    if not math.isfinite(args.turn):
+        p.error("--turn must be a number")
     args.mapper_list = [m.strip() for m in args.mappers.split(",") if m.strip()]
-    for v in args.volume_list:
-        if v not in VOLUMES:
-            p.error(f"unknown volume {v!r} (engine, cthead)")
     for m in args.mapper_list:
         if m not in ("fixed", "gpu"):
             p.error(f"unknown mapper {m!r} (fixed, gpu)")
+
+    # Camera.
+    args.eye_xyz = parse_floats(p, "--eye", args.eye, 3) if args.eye else None
+    args.target_xyz = parse_floats(p, "--target", args.target, 3) if args.target else None
+    if (args.eye_xyz is None) != (args.target_xyz is None):
+        p.error("--eye and --target go together")
+    args.up_xyz = parse_floats(p, "--up", args.up, 3) if args.up else VIEW_UP
+    if math.sqrt(sum(u * u for u in args.up_xyz)) < 1e-9:
+        p.error("--up must not be zero")
+    if args.eye_xyz is not None:
+        view = [t - e for e, t in zip(args.eye_xyz, args.target_xyz)]
+        length = math.sqrt(sum(v * v for v in view))
+        if length < 1e-9:
+            p.error("--eye and --target are the same point")
+        ulen = math.sqrt(sum(u * u for u in args.up_xyz))
+        cos = abs(sum(v * u for v, u in zip(view, args.up_xyz))) / (length * ulen)
+        if cos > 0.9999:
+            p.error("--up is parallel to the view direction")
+
+    raw_only = ("dims", "scalar", "spacing", "orientation", "origin", "window", "color", "alpha")
+    if args.raw is None:
+        given = [f"--{k}" for k in raw_only if getattr(args, k) is not None]
+        if given:
+            p.error(f"{', '.join(given)} only apply with --raw")
+        volumes = args.volumes if args.volumes is not None else "engine,cthead"
+        args.volume_list = [v.strip() for v in volumes.split(",") if v.strip()]
+        for v in args.volume_list:
+            if v not in VOLUMES:
+                p.error(f"unknown volume {v!r} (engine, cthead)")
+        return args
+
+    if args.volumes is not None:
+        p.error("--volumes and --raw: give one")
+    for k in ("dims", "scalar", "spacing", "window"):
+        if getattr(args, k) is None:
+            p.error(f"--raw needs --{k}")
+    try:
+        dims = tuple(int(v) for v in args.dims.split(","))
+    except ValueError:
+        dims = ()
+    if len(dims) != 3 or min(dims) < 1:
+        p.error(f"--dims takes X,Y,Z positive integers, not {args.dims!r}")
+    spacing = parse_floats(p, "--spacing", args.spacing, 3)
+    if min(spacing) <= 0:
+        p.error("--spacing must be positive")
+    code = (args.orientation or "RAS").upper()
+    axes = {"R": 0, "L": 0, "A": 1, "P": 1, "S": 2, "I": 2}
+    if len(code) != 3 or any(c not in axes for c in code) or sorted(axes[c] for c in code) != [0, 1, 2]:
+        p.error(
+            f"--orientation {args.orientation!r} is not three letters, one each from R/L, A/P and S/I"
+        )
+    origin = parse_floats(p, "--origin", args.origin, 3) if args.origin else (0.0, 0.0, 0.0)
+    lo, hi = parse_floats(p, "--window", args.window, 2)
+    if not lo < hi:
+        p.error("--window needs LO < HI")
+    color = parse_floats(p, "--color", args.color, 3) if args.color else DEFAULT_RAW_COLOR
+    alpha = DEFAULT_RAW_ALPHA if args.alpha is None else args.alpha
+    if not (0.0 <= alpha <= 1.0) or not all(0.0 <= c <= 1.0 for c in color):
+        p.error("--color and --alpha take values from 0 to 1")
+    args.raw_spec = dict(
+        dims=dims,
+        spacing=spacing,
+        orientation=code,
+        origin=origin,
+        ramp=(lo, hi),
+        rgba=(*color, alpha),
+    )
     return args
+
+
+def volume_spec(name, spacing, dims, args, ramp, rgba, orientation="RAS", origin=(0.0, 0.0, 0.0)):
+    """Everything run_one needs about one volume besides its image: transfer function, placement
+    and camera."""
+    direction = direction_matrix(orientation)
+    identity = orientation == "RAS" and tuple(origin) == (0.0, 0.0, 0.0)
+    if args.eye_xyz is not None:
+        eye, target = list(args.eye_xyz), list(args.target_xyz)
+    else:
+        eye, target = fitted_camera(world_corners(dims, spacing, direction, origin), args.fov)
+    stem = os.path.splitext(name)[0] if args.raw else name
+    return dict(
+        name=name,
+        file_stem="".join(c if c.isalnum() or c in "-_." else "_" for c in stem),
+        ramp=ramp,
+        rgba=rgba,
+        matrix=None if identity else user_matrix(direction, origin),
+        orientation=orientation,
+        origin=list(origin),
+        eye=eye,
+        target=target,
+        up=list(args.up_xyz),
+        fov=args.fov,
+        turn=args.turn,
+    )
 
 
 def main():
@@ -395,19 +667,49 @@ def main():
         "gl_renderer": gl,
         "size": list(args.size_wh),
         "frames": args.frames,
-        "turn_degrees_per_frame": TURN_DEGREES,
+        "turn_degrees_per_frame": args.turn,
         "sample_distance": args.sample_distance,
+        "scalar_opacity_unit_distance": args.opacity_unit_distance,
         "timing": "renWin.Render() plus vtkWindowToImageFilter readback per frame; warm-up render excluded",
         "cpu_count": os.cpu_count(),
         "results": {},
     }
+
+    def volumes():
+        if args.raw is None:
+            for name in args.volume_list:
+                values, spacing = load_volume(name)
+                nz, ny, nx = values.shape
+                v = VOLUMES[name]
+                yield volume_spec(name, spacing, (nx, ny, nz), args, v["ramp"], v["rgba"]), values, spacing
+        else:
+            r = args.raw_spec
+            name = os.path.basename(args.raw)
+            values = load_raw(args.raw, r["dims"], args.scalar)
+            spec = volume_spec(
+                name, r["spacing"], r["dims"], args, r["ramp"], r["rgba"], r["orientation"], r["origin"]
+            )
+            report["raw"] = {
+                "path": os.path.abspath(args.raw),
+                "dims": list(r["dims"]),
+                "scalar": args.scalar,
+                "spacing": list(r["spacing"]),
+                "orientation": r["orientation"],
+                "origin": list(r["origin"]),
+                "window": list(r["ramp"]),
+                "color": list(r["rgba"][:3]),
+                "alpha": r["rgba"][3],
+            }
+            yield spec, values, r["spacing"]
+
     rows = []
-    for name in args.volume_list:
-        values, spacing = load_volume(name)
+    for spec, values, spacing in volumes():
+        name = spec["name"]
         image = image_data(values, spacing)
+        del values
         report["results"][name] = {}
         for kind in args.mapper_list:
-            info = run_one(name, kind, image, args, args.size_wh)
+            info = run_one(spec, kind, image, args, args.size_wh)
             report["results"][name][kind] = info
             extra = (
                 f"threads {info['threads']}"
@@ -422,11 +724,12 @@ def main():
             )
             rows.append((name, kind, info))
 
+    width = max([8] + [len(name) for name, _, _ in rows])
     print(file=sys.stderr)
-    print(f"{'volume':<8} {'mapper':<6} {'frames':>6} {'median ms':>10} {'min ms':>9}", file=sys.stderr)
+    print(f"{'volume':<{width}} {'mapper':<6} {'frames':>6} {'median ms':>10} {'min ms':>9}", file=sys.stderr)
     for name, kind, info in rows:
         print(
-            f"{name:<8} {kind:<6} {info['frames']:>6} {info['median_ms']:>10.1f} {info['min_ms']:>9.1f}",
+            f"{name:<{width}} {kind:<6} {info['frames']:>6} {info['median_ms']:>10.1f} {info['min_ms']:>9.1f}",
             file=sys.stderr,
         )
     json.dump(report, sys.stdout, indent=2)
