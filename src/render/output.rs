@@ -10,7 +10,13 @@ pub fn frame_to_rgba8(frame: &Frame) -> RgbaImage {
     RgbaImage::from_fn(frame.width, frame.height, |x, y| {
         let p = frame.pixels[(y * frame.width + x) as usize];
         let a = p[3].clamp(0.0, 1.0);
-        let q = |v: f32| (v.clamp(0.0, 1.0) * 255.0).round() as u8;
+        // `round()` without its library call: the integer part and the fraction of a value in
+        // 0..=255 are exact in f32.
+        let q = |v: f32| {
+            let x = v.clamp(0.0, 1.0) * 255.0;
+            let whole = x as u32;
+            (whole + u32::from(x - whole as f32 >= 0.5)) as u8
+        };
         if a <= 0.0 {
             return image::Rgba([0, 0, 0, 0]);
         }

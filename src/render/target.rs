@@ -92,29 +92,32 @@ impl RenderTarget {
         })
     }
 
-    /// Reads the colour target back as a premultiplied RGBA frame.
+    /// Reads the colour target back as a premultiplied RGBA frame, converted row by row from
+    /// the mapped buffer (no copy of the bytes in between).
     pub fn read_color(&self, ctx: &GpuContext) -> Result<Frame, RenderError> {
         let texel = color_bytes(&ctx.device);
-        let bytes = read_texture(ctx, &self.color, wgpu::TextureAspect::All, texel)?;
-        let pixels = if texel == 16 {
-            bytes
-                .chunks_exact(16)
-                .map(|p| {
-                    std::array::from_fn(|c| {
-                        f32::from_le_bytes([p[4 * c], p[4 * c + 1], p[4 * c + 2], p[4 * c + 3]])
-                    })
-                })
-                .collect()
-        } else {
-            bytes
-                .chunks_exact(8)
-                .map(|p| {
+        let mut pixels: Vec<[f32; 4]> =
+            Vec::with_capacity(self.size.0 as usize * self.size.1 as usize);
+        read_texture_rows(ctx, &self.color, wgpu::TextureAspect::All, texel, |row| {
+            if texel == 16 {
+                match bytemuck::try_cast_slice::<u8, [f32; 4]>(row) {
+                    Ok(texels) if cfg!(target_endian = "little") => {
+                        pixels.extend_from_slice(texels);
+                    }
+                    _ => pixels.extend(row.chunks_exact(16).map(|p| {
+                        std::array::from_fn(|c| {
+                            f32::from_le_bytes([p[4 * c], p[4 * c + 1], p[4 * c + 2], p[4 * c + 3]])
+                        })
+                    })),
+                }
+            } else {
+                pixels.extend(row.chunks_exact(8).map(|p| {
                     std::array::from_fn(|c| {
                         f16_to_f32(u16::from_le_bytes([p[2 * c], p[2 * c + 1]]))
                     })
-                })
-                .collect()
-        };
+                }));
+            }
+        })?;
         Ok(Frame {
             width: self.size.0,
             height: self.size.1,
@@ -124,11 +127,14 @@ impl RenderTarget {
 
     /// Reads the depth target back: reversed depth per pixel, 0 where nothing was drawn.
     pub fn read_depth(&self, ctx: &GpuContext) -> Result<Vec<f32>, RenderError> {
-        let bytes = read_texture(ctx, &self.depth, wgpu::TextureAspect::DepthOnly, 4)?;
-        Ok(bytes
-            .chunks_exact(4)
-            .map(|p| f32::from_le_bytes([p[0], p[1], p[2], p[3]]))
-            .collect())
+        let mut depth = Vec::with_capacity(self.size.0 as usize * self.size.1 as usize);
+        read_texture_rows(ctx, &self.depth, wgpu::TextureAspect::DepthOnly, 4, |row| {
+            depth.extend(
+                row.chunks_exact(4)
+                    .map(|p| f32::from_le_bytes([p[0], p[1], p[2], p[3]])),
+            );
+        })?;
+        Ok(depth)
     }
 }
 
@@ -165,6 +171,23 @@ pub fn read_texture(
     aspect: wgpu::TextureAspect,
     bytes_per_texel: u32,
 ) -> Result<Vec<u8>, RenderError> {
+    let (width, height) = (texture.width(), texture.height());
+    let mut out = Vec::with_capacity((width * bytes_per_texel * height) as usize);
+    read_texture_rows(ctx, texture, aspect, bytes_per_texel, |row| {
+        out.extend_from_slice(row);
+    })?;
+    Ok(out)
+}
+
+/// Copies a 2D texture to a buffer and hands each of its rows (`bytes_per_texel` a texel, the
+/// padding left out) to `row`, top to bottom, from the mapped buffer.
+fn read_texture_rows(
+    ctx: &GpuContext,
+    texture: &wgpu::Texture,
+    aspect: wgpu::TextureAspect,
+    bytes_per_texel: u32,
+    mut each_row: impl FnMut(&[u8]),
+) -> Result<(), RenderError> {
     let depth_copies = ctx
         .adapter
         .get_downlevel_capabilities()
@@ -216,13 +239,12 @@ pub fn read_texture(
     let mapped = buffer
         .get_mapped_range(..)
         .map_err(|e| RenderError::Readback(e.to_string()))?;
-    let mut out = Vec::with_capacity((row * height) as usize);
     for r in mapped.chunks_exact(padded as usize) {
-        out.extend_from_slice(&r[..row as usize]);
+        each_row(&r[..row as usize]);
     }
     drop(mapped);
     buffer.unmap();
-    Ok(out)
+    Ok(())
 }
 
 #[cfg(test)]
