@@ -140,6 +140,8 @@ struct VolumeState {
     texels: Option<SplatTexels>,
     orderer: Orderer,
     ids: Vec<u32>,
+    /// Where its splats lie, by bricks (the volume's own grid only).
+    occupied: Option<Occupied>,
 }
 
 impl VolumeState {
@@ -160,6 +162,7 @@ impl VolumeState {
             texels: None,
             orderer,
             ids,
+            occupied: None,
         }
     }
 }
@@ -653,10 +656,10 @@ impl Renderer {
                     continue;
                 }
                 let (orderer, ids) = old.map(|o| (o.orderer, o.ids)).unwrap_or_default();
-                self.volumes.insert(
-                    own,
-                    VolumeState::new(key, Arc::clone(&node.volume), [1; 3], result, orderer, ids),
-                );
+                let mut state =
+                    VolumeState::new(key, Arc::clone(&node.volume), [1; 3], result, orderer, ids);
+                state.occupied = Some(Occupied::of(&state.classified));
+                self.volumes.insert(own, state);
             }
             let Some(full) = self.volumes.get(&own) else {
                 continue;
@@ -666,7 +669,7 @@ impl Renderer {
             } else {
                 let geometry =
                     placed_geometry(&full.volume, world).map_err(|e| fail(e.to_string()))?;
-                let apart = pixels_apart(&geometry, view);
+                let apart = pixels_apart_near(&geometry, view, full.occupied.as_ref());
                 let wanted = detail_at(geometry.dims(), apart);
                 // A refinement made already stays while its voxels are still between half a
                 // pixel and REFINE_TO apart, so that a camera orbiting at one distance does not

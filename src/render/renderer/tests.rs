@@ -59,3 +59,62 @@ fn the_detail_follows_the_pixels_a_voxel_spans() {
     let v = ViewSetup::new(&inside, (256, 256), None).unwrap();
     assert_eq!(detail_for(&g, &v), Detail::Level(0));
 }
+
+#[test]
+fn the_detail_goes_by_where_the_content_comes_nearest() {
+    // A 64^3 grid of 1 mm voxels, air but for a 6-voxel cube near its far corner.
+    let n = 64u32;
+    let inside = |k: [u32; 3]| k.iter().all(|&c| (50..56).contains(&c));
+    let values = (0..n * n * n)
+        .map(|id| {
+            let k = [id % n, id / n % n, id / n / n];
+            if inside(k) { 1000.0 } else { 0.0 }
+        })
+        .collect();
+    let volume = CpuVolume {
+        dims: [n; 3],
+        spacing: [1.0; 3],
+        origin: [0.0; 3],
+        direction: DMat3::IDENTITY,
+        values,
+    };
+    let tf = crate::classify::TransferFunction::ramp(100.0, 900.0, [1.0, 1.0, 1.0, 0.8]);
+    let classified = crate::classify::classify(&volume, &tf, 0.0).unwrap();
+    assert!(!classified.grid.is_empty());
+    let occupied = Occupied::of(&classified);
+    let geometry = VolumeGeometry::new([n; 3], glam::DAffine3::from_scale(DVec3::ONE)).unwrap();
+    let eye = DVec3::new(-100.0, -80.0, -120.0);
+    // Brute force over the splats' voxel boxes (half a voxel beyond each centre): the
+    // bricks' distance is never farther, and at most a brick's diagonal nearer.
+    let exact = classified
+        .grid
+        .ids()
+        .map(|id| {
+            let k = DVec3::from(classified.grid.coords(id).map(f64::from));
+            (eye.clamp(k - 0.5, k + 0.5) - eye).length()
+        })
+        .fold(f64::INFINITY, f64::min);
+    let near = occupied.nearest(&geometry, eye).unwrap();
+    let diagonal = f64::from(BRICK) * 3f64.sqrt();
+    assert!(
+        near <= exact + 1e-9 && near >= exact - diagonal,
+        "{near} against {exact}"
+    );
+    // The box's corner is far nearer than the content: by the content the voxels are fewer
+    // pixels apart, and a view that the box keeps at the own grid draws a coarser level.
+    let camera = SceneCamera::look_at(eye, DVec3::splat(53.0));
+    let mut coarser = 0;
+    for pixels in (16..=256).step_by(4) {
+        let view = ViewSetup::new(&camera, (pixels, pixels), None).unwrap();
+        let by_box = pixels_apart(&geometry, &view).unwrap()[0];
+        let by_content = pixels_apart_near(&geometry, &view, Some(&occupied)).unwrap()[0];
+        assert!(by_content < 0.7 * by_box, "{by_content} against {by_box}");
+        let level = |d| match detail_at([n; 3], Some([d; 3])) {
+            Detail::Level(l) => l,
+            Detail::Refined(_) => 0,
+        };
+        assert!(level(by_content) >= level(by_box));
+        coarser += usize::from(level(by_content) > level(by_box));
+    }
+    assert!(coarser > 5, "{coarser} sizes drawn coarser");
+}
