@@ -60,8 +60,8 @@ pub(super) const MAX_REFINED_DIM: u64 = 2048;
 
 /// The detail a volume placed as `geometry` is drawn at in `view`, from how many pixels apart
 /// its voxels are along each axis where the volume comes nearest the eye (its grid's box, half
-/// a voxel beyond the centres; the renderer takes the bricks that hold its splats instead,
-/// see [`Occupied`]):
+/// a voxel beyond the centres; the renderer takes the 16^3-voxel bricks that hold its splats
+/// instead):
 ///
 /// - Where they are more than [`REFINE_TO`] (1.5) pixels apart along some axis, its own grid
 ///   refined along each such axis until they are at most that far apart ([`Detail::Refined`],
