@@ -10,13 +10,13 @@ use std::sync::Arc;
 
 use glam::{DMat4, DVec3};
 use splatscene::classify::TransferFunction;
-use splatscene::mesh::{CpuMesh, Material};
 use splatscene::order::Ordering;
 use splatscene::render::{Compositor, FrameOptions, GpuContext, Renderer};
-use splatscene::scene::{ClipPlane, MeshNode, NodeContent, Projection, Scene, SceneCamera};
+use splatscene::scene::{ClipPlane, NodeContent, Projection, Scene, SceneCamera};
 use splatscene::splat::reference::{Frame, ImageDifference, compare};
 
 mod common;
+use common::shapes::{add_blue_mesh, camera_of, wall};
 use common::{data_file, rotated_anisotropic, shells, volume_scene};
 
 const OPTIONS: FrameOptions = FrameOptions {
@@ -90,38 +90,6 @@ fn compare_views(scene: &Scene, camera: &SceneCamera, what: &str) -> ImageDiffer
     compare_at(scene, camera, (96, 80), &OPTIONS, what)
 }
 
-fn camera_of(scene: &Scene) -> SceneCamera {
-    let centre = {
-        let (lo, hi) = scene.bounds().unwrap();
-        0.5 * (lo + hi)
-    };
-    SceneCamera::look_at(centre + DVec3::new(14.0, -42.0, 18.0), centre)
-}
-
-fn wall(y: f32, lo: f32, hi: f32) -> Arc<CpuMesh> {
-    let mut mesh = CpuMesh {
-        colors: Vec::new(),
-        positions: vec![[lo, y, lo], [hi, y, lo], [hi, y, hi], [lo, y, hi]],
-        normals: Vec::new(),
-        indices: vec![0, 1, 2, 0, 2, 3],
-    };
-    mesh.compute_normals();
-    Arc::new(mesh)
-}
-
-fn add_mesh(scene: &mut Scene, name: &str, mesh: Arc<CpuMesh>) {
-    let node = MeshNode {
-        mesh,
-        material: Material {
-            base_color: [0.2, 0.5, 0.9, 1.0],
-            ..Default::default()
-        },
-    };
-    scene
-        .add(name, DMat4::IDENTITY, None, NodeContent::Mesh(node))
-        .unwrap();
-}
-
 /// `scene`'s volume made a dense, nearly opaque block (every value 1800).
 fn solid(n: u32) -> Scene {
     let mut volume = shells(n, [1.0; 3]);
@@ -169,7 +137,7 @@ fn rotated_clipped_and_behind_meshes() {
     // hides all it covers, one behind hides none.
     for (name, y) in [("through", 9.5), ("in front", -3.0), ("behind", 25.0)] {
         let mut scene = volume_scene(shells(20, [1.0; 3]), Ordering::IpPbtfImplicit);
-        add_mesh(&mut scene, "wall", wall(y, 4.0, 15.0));
+        add_blue_mesh(&mut scene, "wall", Arc::new(wall(y, 4.0, 15.0)));
         let camera = camera_of(&volume_scene(shells(20, [1.0; 3]), Ordering::Exact));
         compare_views(&scene, &camera, name);
     }

@@ -14,6 +14,7 @@ use splatscene::splat::reference::{SplatStyle, compare};
 use splatscene::volume::CpuVolume;
 
 mod common;
+use common::shapes::wall;
 use common::{reference_frame, shells, volume_scene};
 
 fn context() -> GpuContext {
@@ -132,18 +133,6 @@ fn orthographic_gpu_frame_matches_a_distant_cpu_pinhole() {
     eprintln!("GPU vs CPU, orthographic: {d:?}, {covered} covered pixels");
     assert!(covered > 1000, "the volume fills much of the image");
     assert_matches_reference(&d);
-}
-
-/// A square in the plane y = `y`, spanning `lo..hi` in x and z, facing -y.
-fn wall(y: f32, lo: f32, hi: f32) -> CpuMesh {
-    let mut mesh = CpuMesh {
-        colors: Vec::new(),
-        positions: vec![[lo, y, lo], [hi, y, lo], [hi, y, hi], [lo, y, hi]],
-        normals: Vec::new(),
-        indices: vec![0, 1, 2, 0, 2, 3],
-    };
-    mesh.compute_normals();
-    mesh
 }
 
 fn add_wall(scene: &mut Scene) {

@@ -8,13 +8,13 @@ use std::sync::Arc;
 
 use glam::{DMat4, DVec3};
 use splatscene::classify::TransferFunction;
-use splatscene::mesh::{CpuMesh, Material};
 use splatscene::order::Ordering;
 use splatscene::render::{Compositor, FrameOptions, GpuContext, Renderer, Screenshot};
-use splatscene::scene::{ClipPlane, MeshNode, NodeContent, Projection, Scene, SceneCamera};
+use splatscene::scene::{ClipPlane, NodeContent, Projection, Scene, SceneCamera};
 use splatscene::splat::reference::{Frame, ImageDifference, SplatStyle, compare};
 
 mod common;
+use common::shapes::{add_blue_mesh, camera_of, wall};
 use common::{data_file, reference_frame, rotated_anisotropic, shells, volume_scene};
 
 fn context() -> GpuContext {
@@ -76,38 +76,6 @@ fn gpu_against_tiles_at(
     d
 }
 
-fn wall(y: f32, lo: f32, hi: f32) -> Arc<CpuMesh> {
-    let mut mesh = CpuMesh {
-        colors: Vec::new(),
-        positions: vec![[lo, y, lo], [hi, y, lo], [hi, y, hi], [lo, y, hi]],
-        normals: Vec::new(),
-        indices: vec![0, 1, 2, 0, 2, 3],
-    };
-    mesh.compute_normals();
-    Arc::new(mesh)
-}
-
-fn add_mesh(scene: &mut Scene, name: &str, mesh: Arc<CpuMesh>) {
-    let node = MeshNode {
-        mesh,
-        material: Material {
-            base_color: [0.2, 0.5, 0.9, 1.0],
-            ..Default::default()
-        },
-    };
-    scene
-        .add(name, DMat4::IDENTITY, None, NodeContent::Mesh(node))
-        .unwrap();
-}
-
-fn camera_of(scene: &Scene) -> SceneCamera {
-    let centre = {
-        let (lo, hi) = scene.bounds().unwrap();
-        0.5 * (lo + hi)
-    };
-    SceneCamera::look_at(centre + DVec3::new(14.0, -42.0, 18.0), centre)
-}
-
 #[test]
 fn tiles_draw_what_the_gpu_draws() {
     // Perspective and orthographic, shaded shells.
@@ -141,7 +109,7 @@ fn tiles_draw_what_the_gpu_draws() {
     // all it covers, one behind hides none.
     for (name, y) in [("through", 9.5), ("in front", -3.0), ("behind", 25.0)] {
         let mut scene = volume_scene(shells(20, [1.0; 3]), Ordering::IpPbtfImplicit);
-        add_mesh(&mut scene, "wall", wall(y, 4.0, 15.0));
+        add_blue_mesh(&mut scene, "wall", Arc::new(wall(y, 4.0, 15.0)));
         let camera = camera_of(&volume_scene(shells(20, [1.0; 3]), Ordering::Exact));
         gpu_against_tiles(&scene, &camera, name);
     }

@@ -11,7 +11,7 @@ use bytemuck::{Pod, Zeroable};
 use glam::DVec3;
 use rayon::prelude::*;
 
-use super::target::{DEPTH_FORMAT, color_format};
+use super::target::{DEPTH_FORMAT, over_target};
 use super::view::ViewSetup;
 use super::{GpuContext, RenderError};
 use crate::classify::{Classified, view_step_mm};
@@ -180,11 +180,6 @@ impl SplatPass {
             immediate_size: 0,
         });
         let attributes = wgpu::vertex_attr_array![0 => Uint32];
-        let over = wgpu::BlendComponent {
-            src_factor: wgpu::BlendFactor::One,
-            dst_factor: wgpu::BlendFactor::OneMinusSrcAlpha,
-            operation: wgpu::BlendOperation::Add,
-        };
         let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
             label: Some("splat"),
             layout: Some(&pipeline_layout),
@@ -214,14 +209,7 @@ impl SplatPass {
                 module: &module,
                 entry_point: Some("fs_main"),
                 compilation_options: Default::default(),
-                targets: &[Some(wgpu::ColorTargetState {
-                    format: color_format(device),
-                    blend: Some(wgpu::BlendState {
-                        color: over,
-                        alpha: over,
-                    }),
-                    write_mask: wgpu::ColorWrites::ALL,
-                })],
+                targets: &[Some(over_target(device))],
             }),
             multiview_mask: None,
             cache: None,

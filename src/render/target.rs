@@ -20,6 +20,24 @@ pub fn color_format(device: &wgpu::Device) -> wgpu::TextureFormat {
     }
 }
 
+/// The colour target of a pipeline that lays premultiplied colour "over" what the target
+/// holds (the splat pass, the tile pass's finished layer).
+pub(crate) fn over_target(device: &wgpu::Device) -> wgpu::ColorTargetState {
+    let over = wgpu::BlendComponent {
+        src_factor: wgpu::BlendFactor::One,
+        dst_factor: wgpu::BlendFactor::OneMinusSrcAlpha,
+        operation: wgpu::BlendOperation::Add,
+    };
+    wgpu::ColorTargetState {
+        format: color_format(device),
+        blend: Some(wgpu::BlendState {
+            color: over,
+            alpha: over,
+        }),
+        write_mask: wgpu::ColorWrites::ALL,
+    }
+}
+
 /// Bytes a texel of the colour target on `device` takes.
 fn color_bytes(device: &wgpu::Device) -> u32 {
     match color_format(device) {

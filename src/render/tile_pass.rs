@@ -18,7 +18,7 @@
 use bytemuck::{Pod, Zeroable};
 
 use super::splat_pass::GpuVolume;
-use super::target::color_format;
+use super::target::over_target;
 use super::{GpuContext, RenderError};
 
 /// Splats in the first (nearest) batch.
@@ -138,11 +138,6 @@ impl TilePass {
                 cache: None,
             })
         };
-        let over = wgpu::BlendComponent {
-            src_factor: wgpu::BlendFactor::One,
-            dst_factor: wgpu::BlendFactor::OneMinusSrcAlpha,
-            operation: wgpu::BlendOperation::Add,
-        };
         let cover = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
             label: Some("tile layer"),
             layout: None,
@@ -159,14 +154,7 @@ impl TilePass {
                 module: &module,
                 entry_point: Some("cover_fs"),
                 compilation_options: Default::default(),
-                targets: &[Some(wgpu::ColorTargetState {
-                    format: color_format(device),
-                    blend: Some(wgpu::BlendState {
-                        color: over,
-                        alpha: over,
-                    }),
-                    write_mask: wgpu::ColorWrites::ALL,
-                })],
+                targets: &[Some(over_target(device))],
             }),
             multiview_mask: None,
             cache: None,

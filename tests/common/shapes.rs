@@ -3,10 +3,10 @@
 
 use std::sync::Arc;
 
-use glam::DMat4;
+use glam::{DMat4, DVec3};
 use splatscene::classify::TransferFunction;
 use splatscene::mesh::{CpuMesh, Material};
-use splatscene::scene::{MeshNode, NodeContent, Scene, SplatSettings, VolumeNode};
+use splatscene::scene::{MeshNode, NodeContent, Scene, SceneCamera, SplatSettings, VolumeNode};
 use splatscene::volume::CpuVolume;
 
 /// A scene of `volume` (node "ct", ct-bone) and, where given, a mesh placed so (node "stem").
@@ -161,4 +161,39 @@ pub fn obj_text(mesh: &CpuMesh) -> String {
         obj.push_str(&format!("f {} {} {}\n", t[0] + 1, t[1] + 1, t[2] + 1));
     }
     obj
+}
+
+/// A square in the plane y = `y`, spanning `lo..hi` in x and z, facing -y.
+pub fn wall(y: f32, lo: f32, hi: f32) -> CpuMesh {
+    let mut mesh = CpuMesh {
+        colors: Vec::new(),
+        positions: vec![[lo, y, lo], [hi, y, lo], [hi, y, hi], [lo, y, hi]],
+        normals: Vec::new(),
+        indices: vec![0, 1, 2, 0, 2, 3],
+    };
+    mesh.compute_normals();
+    mesh
+}
+
+/// Adds `mesh` to `scene` at the identity as node `name`, opaque blue.
+pub fn add_blue_mesh(scene: &mut Scene, name: &str, mesh: Arc<CpuMesh>) {
+    let node = MeshNode {
+        mesh,
+        material: Material {
+            base_color: [0.2, 0.5, 0.9, 1.0],
+            ..Default::default()
+        },
+    };
+    scene
+        .add(name, DMat4::IDENTITY, None, NodeContent::Mesh(node))
+        .unwrap();
+}
+
+/// A camera on the centre of `scene`'s bounds from (14, -42, 18) mm off it.
+pub fn camera_of(scene: &Scene) -> SceneCamera {
+    let centre = {
+        let (lo, hi) = scene.bounds().unwrap();
+        0.5 * (lo + hi)
+    };
+    SceneCamera::look_at(centre + DVec3::new(14.0, -42.0, 18.0), centre)
 }
