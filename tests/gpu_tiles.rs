@@ -12,12 +12,12 @@ use glam::{DMat4, DVec3};
 use splatscene::classify::TransferFunction;
 use splatscene::order::Ordering;
 use splatscene::render::{Compositor, FrameOptions, GpuContext, Renderer};
-use splatscene::scene::{ClipPlane, NodeContent, Projection, Scene, SceneCamera};
+use splatscene::scene::{NodeContent, Projection, Scene, SceneCamera};
 use splatscene::splat::reference::{Frame, ImageDifference, compare};
 
 mod common;
-use common::shapes::{add_blue_mesh, camera_of, wall};
-use common::{data_file, rotated_anisotropic, shells, volume_scene};
+use common::shapes::camera_of;
+use common::{compositor_cases, data_file, shells, volume_scene};
 
 const OPTIONS: FrameOptions = FrameOptions {
     ordering: None,
@@ -102,45 +102,17 @@ fn solid(n: u32) -> Scene {
 }
 
 #[test]
-fn shaded_shells_perspective_and_orthographic() {
-    let mut scene = volume_scene(shells(20, [1.0, 1.0, 1.5]), Ordering::IpPbtfImplicit);
-    let (id, node, _) = scene.volumes().next().unwrap();
-    let mut shaded = node.clone();
-    shaded.splats.shading = 1.0;
-    scene.set_content(id, NodeContent::Volume(shaded)).unwrap();
-    let camera = camera_of(&scene);
-    compare_views(&scene, &camera, "perspective");
-    let ortho = SceneCamera {
-        projection: Projection::Orthographic { height: 40.0 },
-        ..camera
-    };
-    compare_views(&scene, &ortho, "orthographic");
+fn the_views_the_splat_pass_is_held_to() {
+    for (name, scene, camera) in compositor_cases() {
+        compare_views(&scene, &camera, name);
+    }
+    // A transparent background.
+    let (_, scene, camera) = compositor_cases().swap_remove(0);
     let transparent = FrameOptions {
         background: None,
         ..OPTIONS
     };
     compare_at(&scene, &camera, (96, 80), &transparent, "transparent");
-}
-
-#[test]
-fn rotated_clipped_and_behind_meshes() {
-    let rotated = volume_scene(rotated_anisotropic(), Ordering::Bucketed);
-    compare_views(&rotated, &camera_of(&rotated), "rotated anisotropic");
-    let mut clipped = volume_scene(shells(20, [1.0; 3]), Ordering::Pbtf);
-    clipped.clipping.planes.push(ClipPlane {
-        normal: DVec3::new(1.0, 0.3, 0.0),
-        offset: 12.03,
-        meshes: false,
-    });
-    compare_views(&clipped, &camera_of(&clipped), "clipped");
-    // A wall through the middle hides the splats behind it; one in front of the volume
-    // hides all it covers, one behind hides none.
-    for (name, y) in [("through", 9.5), ("in front", -3.0), ("behind", 25.0)] {
-        let mut scene = volume_scene(shells(20, [1.0; 3]), Ordering::IpPbtfImplicit);
-        add_blue_mesh(&mut scene, "wall", Arc::new(wall(y, 4.0, 15.0)));
-        let camera = camera_of(&volume_scene(shells(20, [1.0; 3]), Ordering::Exact));
-        compare_views(&scene, &camera, name);
-    }
 }
 
 #[test]

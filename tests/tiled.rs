@@ -10,12 +10,12 @@ use glam::{DMat4, DVec3};
 use splatscene::classify::TransferFunction;
 use splatscene::order::Ordering;
 use splatscene::render::{Compositor, FrameOptions, GpuContext, Renderer, Screenshot};
-use splatscene::scene::{ClipPlane, NodeContent, Projection, Scene, SceneCamera};
+use splatscene::scene::{NodeContent, Projection, Scene, SceneCamera};
 use splatscene::splat::reference::{Frame, ImageDifference, SplatStyle, compare};
 
 mod common;
-use common::shapes::{add_blue_mesh, camera_of, wall};
-use common::{data_file, reference_frame, rotated_anisotropic, shells, volume_scene};
+use common::shapes::camera_of;
+use common::{compositor_cases, data_file, reference_frame, shells, volume_scene};
 
 fn context() -> GpuContext {
     GpuContext::headless().expect("a GPU adapter (install mesa-vulkan-drivers)")
@@ -78,39 +78,7 @@ fn gpu_against_tiles_at(
 
 #[test]
 fn tiles_draw_what_the_gpu_draws() {
-    // Perspective and orthographic, shaded shells.
-    let mut scene = volume_scene(shells(20, [1.0, 1.0, 1.5]), Ordering::IpPbtfImplicit);
-    let (id, node, _) = scene.volumes().next().unwrap();
-    let mut shaded = node.clone();
-    shaded.splats.shading = 1.0;
-    scene.set_content(id, NodeContent::Volume(shaded)).unwrap();
-    let camera = camera_of(&scene);
-    gpu_against_tiles(&scene, &camera, "perspective");
-    let ortho = SceneCamera {
-        projection: Projection::Orthographic { height: 40.0 },
-        ..camera
-    };
-    gpu_against_tiles(&scene, &ortho, "orthographic");
-    // A rotated anisotropic volume far from the origin.
-    let rotated = volume_scene(rotated_anisotropic(), Ordering::Bucketed);
-    gpu_against_tiles(&rotated, &camera_of(&rotated), "rotated anisotropic");
-    // Clip planes cut the splats alike. (At offset 12 the refined grid drawn here differed at
-    // 0.3% of the pixels, by up to 0.068, as a splat centre within f32 rounding of the plane,
-    // kept by one compositor and cut by the other, would; the plane is moved off the grid's
-    // quarter-millimetre lattice.)
-    let mut clipped = volume_scene(shells(20, [1.0; 3]), Ordering::Pbtf);
-    clipped.clipping.planes.push(ClipPlane {
-        normal: DVec3::new(1.0, 0.3, 0.0),
-        offset: 12.03,
-        meshes: false,
-    });
-    gpu_against_tiles(&clipped, &camera_of(&clipped), "clipped");
-    // A wall through the middle hides the splats behind it; one in front of the volume hides
-    // all it covers, one behind hides none.
-    for (name, y) in [("through", 9.5), ("in front", -3.0), ("behind", 25.0)] {
-        let mut scene = volume_scene(shells(20, [1.0; 3]), Ordering::IpPbtfImplicit);
-        add_blue_mesh(&mut scene, "wall", Arc::new(wall(y, 4.0, 15.0)));
-        let camera = camera_of(&volume_scene(shells(20, [1.0; 3]), Ordering::Exact));
+    for (name, scene, camera) in compositor_cases() {
         gpu_against_tiles(&scene, &camera, name);
     }
 }
