@@ -144,6 +144,15 @@ fn splat_texels(volume: &CpuVolume, factors: [u32; 3], classified: &Classified) 
     texels
 }
 
+/// Whether the adapter runs compute shaders (every Vulkan, Metal and D3D12 adapter does; some
+/// GL ones do not).
+pub(crate) fn computes(ctx: &GpuContext) -> bool {
+    ctx.adapter
+        .get_downlevel_capabilities()
+        .flags
+        .contains(wgpu::DownlevelFlags::COMPUTE_SHADERS)
+}
+
 /// The splat pass's shader: the footprint shared with the CPU compositors
 /// (`shaders/footprint.wgsl`), then the pass itself (`shaders/splat.wgsl`).
 const SPLAT_WGSL: &str = concat!(
@@ -293,9 +302,15 @@ impl SplatPass {
             volume.order = Some(ctx.device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("splat order"),
                 size: bytes.next_multiple_of(4096),
+                // A storage buffer too for the tile pass, where the adapter runs compute
+                // shaders (a GLES adapter may not, and refuses the usage).
                 usage: wgpu::BufferUsages::VERTEX
-                    | wgpu::BufferUsages::STORAGE
-                    | wgpu::BufferUsages::COPY_DST,
+                    | wgpu::BufferUsages::COPY_DST
+                    | if computes(ctx) {
+                        wgpu::BufferUsages::STORAGE
+                    } else {
+                        wgpu::BufferUsages::empty()
+                    },
                 mapped_at_creation: false,
             }));
         }

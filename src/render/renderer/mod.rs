@@ -934,7 +934,19 @@ impl Renderer {
             .texture()
             .usage()
             .contains(wgpu::TextureUsages::TEXTURE_BINDING);
-        if self.compositor == Compositor::GpuTiles && bindable {
+        if self.compositor == Compositor::GpuTiles {
+            if !super::splat_pass::computes(ctx) {
+                return Err(RenderError::Unsupported {
+                    adapter: ctx.describe(),
+                    what: "run compute shaders (the GPU tile compositor, --compositor gpu-tiles)",
+                });
+            }
+            if !bindable {
+                return Err(RenderError::Unsupported {
+                    adapter: ctx.describe(),
+                    what: "composite the GPU tiles against a depth target that cannot be bound",
+                });
+            }
             // Near to far, as the tile pass walks them.
             let mut near_to_far = Vec::with_capacity(ordered.len());
             for (id, _) in ordered.iter().rev() {
