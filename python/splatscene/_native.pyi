@@ -55,7 +55,7 @@ def load_volume(
     frame: Optional[int] = ...,
     nifti_transform: Optional[str] = ...,
     coordinate_frame: Optional[str] = ...,
-    dims: Optional[Tuple[int, int, int]] = ...,
+    dims: Optional[Sequence[int]] = ...,
     scalar: Optional[str] = ...,
     header_bytes: Optional[int] = ...,
     spacing: Optional[_Vec3] = ...,
@@ -173,7 +173,7 @@ class Scene:
     def report(self) -> Optional[dict]: ...
 
 def order(
-    dims: Tuple[int, int, int],
+    dims: Sequence[int],
     eye: _Vec3,
     ordering: str = ...,
     *,

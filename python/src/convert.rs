@@ -58,6 +58,40 @@ pub fn numbers(value: &Bound<'_, PyAny>, n: usize, name: &str) -> PyResult<Vec<f
     items.iter().map(|v| finite(v, name)).collect()
 }
 
+/// A grid's three sizes from a sequence (a tuple, a list, a numpy array) of whole numbers:
+/// `name` names the argument in errors.
+pub fn grid_dims(value: &Bound<'_, PyAny>, name: &str) -> PyResult<[u32; 3]> {
+    if value.is_instance_of::<pyo3::types::PyString>() {
+        return Err(PyTypeError::new_err(format!(
+            "{name}: expected 3 whole numbers, not a string"
+        )));
+    }
+    let items: Vec<Bound<'_, PyAny>> = value
+        .try_iter()
+        .map_err(|_| {
+            PyTypeError::new_err(format!(
+                "{name}: expected 3 whole numbers, got {}",
+                repr(value)
+            ))
+        })?
+        .collect::<PyResult<_>>()?;
+    if items.len() != 3 {
+        return Err(bad(format!(
+            "{name}: expected 3 whole numbers, got {}",
+            items.len()
+        )));
+    }
+    let mut dims = [0u32; 3];
+    for (slot, item) in dims.iter_mut().zip(&items) {
+        let n: i64 = item.extract().map_err(|_| {
+            PyTypeError::new_err(format!("{name}: {} is not a whole number", repr(item)))
+        })?;
+        *slot = u32::try_from(n)
+            .map_err(|_| bad(format!("{name}: {n} is not a size from 0 to {}", u32::MAX)))?;
+    }
+    Ok(dims)
+}
+
 /// Three finite numbers.
 pub fn three(value: &Bound<'_, PyAny>, name: &str) -> PyResult<[f64; 3]> {
     let v = numbers(value, 3, name)?;

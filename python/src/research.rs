@@ -10,7 +10,7 @@ use splatscene::grid::SparseGrid;
 use splatscene::order::{OrderOptions, Orderer, Ordering, VolumeGeometry, dense_order_bytes};
 use splatscene::report::{Entry, ReportSettings, View, measure_views};
 
-use crate::convert::{bad, fail, json_to_py, three, two};
+use crate::convert::{bad, fail, grid_dims, json_to_py, three, two};
 use crate::volume::Volume;
 
 /// An ordering by its name (btf, wbtf, pbtf, ip-pbtf, ip-pbtf-explicit, ip-pbtf-implicit,
@@ -30,7 +30,7 @@ fn ordering_named(name: &str) -> PyResult<Ordering> {
 #[allow(clippy::too_many_arguments)]
 pub fn order<'py>(
     py: Python<'py>,
-    dims: (u32, u32, u32),
+    dims: &Bound<'py, PyAny>,
     eye: &Bound<'py, PyAny>,
     ordering: &str,
     spacing: Option<&Bound<'py, PyAny>>,
@@ -39,7 +39,7 @@ pub fn order<'py>(
     bucket_width: Option<f64>,
 ) -> PyResult<Bound<'py, PyArray1<u32>>> {
     let ordering = ordering_named(ordering)?;
-    let dims = [dims.0, dims.1, dims.2];
+    let dims = grid_dims(dims, "dims")?;
     let spacing = spacing.map_or(Ok([1.0; 3]), |s| three(s, "spacing"))?;
     let eye = three(eye, "eye")?;
     let target = target.map(|t| three(t, "target")).transpose()?;

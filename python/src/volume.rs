@@ -13,7 +13,7 @@ use splatscene::scene::file::{VolumeSpec, read_volume};
 use splatscene::volume::detect::{LoadOptions, SeriesChoice, load_volume_with, scalar_type_name};
 use splatscene::volume::{CpuVolume, Voxels};
 
-use crate::convert::{bad, fail, json_to_py, matrix, three};
+use crate::convert::{bad, fail, grid_dims, json_to_py, matrix, three};
 
 /// A CT or MR volume: values on a regular grid placed in RAS millimetres.
 #[pyclass(frozen, module = "splatscene")]
@@ -404,7 +404,7 @@ pub fn load_volume(
     frame: Option<u32>,
     nifti_transform: Option<&str>,
     coordinate_frame: Option<&str>,
-    dims: Option<(u32, u32, u32)>,
+    dims: Option<&Bound<'_, PyAny>>,
     scalar: Option<&str>,
     header_bytes: Option<u64>,
     spacing: Option<&Bound<'_, PyAny>>,
@@ -422,7 +422,7 @@ pub fn load_volume(
     let series = series.map(|s| s.str().map(|s| s.to_string())).transpose()?;
     let spec = VolumeSpec {
         path: path.display().to_string(),
-        dims: dims.map(|(x, y, z)| [x, y, z]),
+        dims: dims.map(|d| grid_dims(d, "dims")).transpose()?,
         scalar: parsed(scalar, "scalar")?,
         header_bytes,
         spacing: spacing.map(|s| three(s, "spacing")).transpose()?,

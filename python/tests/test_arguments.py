@@ -69,6 +69,25 @@ def test_bad_files_and_options_are_the_librarys_errors(tmp_path):
         splatscene.Mesh.from_file(junk)
 
 
+def test_grid_sizes_are_any_sequence_of_whole_numbers(tmp_path):
+    raw = tmp_path / "ramp.raw"
+    np.arange(4 * 3 * 2, dtype=np.uint8).tofile(raw)
+    for dims in [(4, 3, 2), [4, 3, 2], np.array([4, 3, 2]), (np.int64(4), 3, 2)]:
+        v = splatscene.load_volume(raw, dims=dims, scalar="u8")
+        assert v.dims == (4, 3, 2)
+        assert v.array.shape == (2, 3, 4)
+    assert splatscene.order([3, 2, 2], (10.0, 1.0, 1.0)).shape == (12,)
+    for dims, error, match in [
+        ((4.5, 3, 2), TypeError, "dims: 4.5 is not a whole number"),
+        ((4, -3, 2), ValueError, "dims: -3 is not a size"),
+        ((4, 3), ValueError, "dims: expected 3 whole numbers, got 2"),
+        ("432", TypeError, "not a string"),
+        (7, TypeError, "expected 3 whole numbers"),
+    ]:
+        with pytest.raises(error, match=match):
+            splatscene.load_volume(raw, dims=dims, scalar="u8")
+
+
 def test_bad_render_arguments_are_refused():
     scene = splatscene.Scene.from_file(REPO / "examples" / "scenes" / "shoulder.toml")
     for kwargs, error, match in [
