@@ -6,10 +6,7 @@
 //! off the image, orders long enough to take several batches, a transparent background, and
 //! a real CT volume.
 
-use std::sync::Arc;
-
 use glam::{DMat4, DVec3};
-use splatscene::classify::TransferFunction;
 use splatscene::order::Ordering;
 use splatscene::render::{Compositor, FrameOptions, GpuContext, Renderer};
 use splatscene::scene::{NodeContent, Projection, Scene, SceneCamera};
@@ -17,7 +14,7 @@ use splatscene::splat::reference::{Frame, ImageDifference, compare};
 
 mod common;
 use common::shapes::camera_of;
-use common::{compositor_cases, data_file, shells, volume_scene};
+use common::{compositor_cases, engine_view, shells, volume_scene};
 
 const OPTIONS: FrameOptions = FrameOptions {
     ordering: None,
@@ -201,32 +198,8 @@ fn the_built_in_scene_and_the_engine() {
     compare_at(&scene, &camera, (160, 120), &OPTIONS, "built-in");
     // The GE engine block (Open SciVis datasets, General Electric): 1.05M faint sub-pixel
     // splats, in batches up to the largest.
-    let Some(path) = data_file("volumes/engine/engine_256x256x128_uint8.raw") else {
+    let Some((engine, camera)) = engine_view(1.2) else {
         return;
     };
-    let spec = splatscene::volume::RawSpec::new(
-        [256, 256, 128],
-        splatscene::volume::ScalarType::U8,
-        splatscene::volume::ByteOrder::Little,
-    );
-    let volume = splatscene::volume::load_raw(&path, &spec).unwrap();
-    let mut engine = Scene::new();
-    let node = splatscene::scene::VolumeNode {
-        volume: Arc::new(volume),
-        transfer: Arc::new(TransferFunction::ramp(100.0, 200.0, [0.85, 0.8, 0.75, 0.5])),
-        splats: splatscene::scene::SplatSettings {
-            opacity_reference_mm: 0.5,
-            ..Default::default()
-        },
-    };
-    engine
-        .add("engine", DMat4::IDENTITY, None, NodeContent::Volume(node))
-        .unwrap();
-    let camera = SceneCamera::fit(
-        engine.bounds().unwrap(),
-        DVec3::new(-0.4, 1.0, -0.55),
-        Default::default(),
-        1.2,
-    );
     compare_at(&engine, &camera, (144, 120), &OPTIONS, "engine");
 }

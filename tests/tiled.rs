@@ -4,9 +4,6 @@
 //! rotated anisotropic volume and an orthographic camera; early termination leaves out at most
 //! what its threshold allows; the command line picks the CPU on a CPU adapter.
 
-use std::sync::Arc;
-
-use glam::{DMat4, DVec3};
 use splatscene::classify::TransferFunction;
 use splatscene::order::Ordering;
 use splatscene::render::{Compositor, FrameOptions, GpuContext, Renderer, Screenshot};
@@ -15,7 +12,9 @@ use splatscene::splat::reference::{Frame, ImageDifference, SplatStyle, compare};
 
 mod common;
 use common::shapes::camera_of;
-use common::{compositor_cases, data_file, reference_frame, shells, volume_scene};
+use common::{
+    benchmark_view, compositor_cases, data_file, engine_view, reference_frame, shells, volume_scene,
+};
 
 fn context() -> GpuContext {
     GpuContext::headless().expect("a GPU adapter (install mesa-vulkan-drivers)")
@@ -355,54 +354,12 @@ fn a_volume_renders_without_any_gpu_adapter_and_meshes_say_what_they_need() {
     );
 }
 
-/// A real volume alone, seen as `benches/compositors.rs` and the VTK peer script see it: fitted
-/// to its bounds looking along (-0.4, 1, -0.55), for an image of width over height `aspect`.
-fn benchmark_view(
-    volume: splatscene::volume::CpuVolume,
-    transfer: TransferFunction,
-    aspect: f64,
-) -> (Scene, SceneCamera) {
-    let mut scene = Scene::new();
-    // Opacities per half millimetre: about the look these views had when a splat took the
-    // ramp's opacity at its centre (a 1 mm voxel's splat now carries 1 / 1.87 mm of tissue's,
-    // `2 pi sigma^2` of the default splat).
-    let node = splatscene::scene::VolumeNode {
-        volume: Arc::new(volume),
-        transfer: Arc::new(transfer),
-        splats: splatscene::scene::SplatSettings {
-            opacity_reference_mm: 0.5,
-            ..Default::default()
-        },
-    };
-    scene
-        .add("volume", DMat4::IDENTITY, None, NodeContent::Volume(node))
-        .unwrap();
-    let camera = SceneCamera::fit(
-        scene.bounds().unwrap(),
-        DVec3::new(-0.4, 1.0, -0.55),
-        Default::default(),
-        aspect,
-    );
-    (scene, camera)
-}
-
 #[test]
 fn the_engine_looks_the_same_on_either_compositor() {
     // The GE engine block (Open SciVis datasets, General Electric), 1.05M splats.
-    let Some(path) = data_file("volumes/engine/engine_256x256x128_uint8.raw") else {
+    let Some((scene, camera)) = engine_view(1.2) else {
         return;
     };
-    let spec = splatscene::volume::RawSpec::new(
-        [256, 256, 128],
-        splatscene::volume::ScalarType::U8,
-        splatscene::volume::ByteOrder::Little,
-    );
-    let volume = splatscene::volume::load_raw(&path, &spec).unwrap();
-    let (scene, camera) = benchmark_view(
-        volume,
-        TransferFunction::ramp(100.0, 200.0, [0.85, 0.8, 0.75, 0.5]),
-        1.2,
-    );
     // Many faint sub-pixel splats share each pixel here: a GPU blending in 16-bit float
     // drifts from the tiles' f32 (RMSE 0.0047, largest 0.052 on lavapipe), one blending in
     // 32-bit float, as the renderer asks where the device can, does not.

@@ -36,51 +36,46 @@ fn repr(value: &Bound<'_, PyAny>) -> String {
         .map_or_else(|_| "the value".into(), |r| r.to_string())
 }
 
-/// The finite numbers of a sequence (a tuple, a list, a numpy array), exactly `n` of them.
-pub fn numbers(value: &Bound<'_, PyAny>, n: usize, name: &str) -> PyResult<Vec<f64>> {
+/// The items of a sequence (a tuple, a list, a numpy array), exactly `n` of them; `what` says
+/// what they should be in errors, `name` the argument.
+fn items<'py>(
+    value: &Bound<'py, PyAny>,
+    n: usize,
+    what: &str,
+    name: &str,
+) -> PyResult<Vec<Bound<'py, PyAny>>> {
     if value.is_instance_of::<pyo3::types::PyString>() {
         return Err(PyTypeError::new_err(format!(
-            "{name}: expected {n} numbers, not a string"
+            "{name}: expected {n} {what}, not a string"
         )));
     }
-    let items: Vec<Bound<'_, PyAny>> = value
+    let items: Vec<Bound<'py, PyAny>> = value
         .try_iter()
         .map_err(|_| {
-            PyTypeError::new_err(format!("{name}: expected {n} numbers, got {}", repr(value)))
+            PyTypeError::new_err(format!("{name}: expected {n} {what}, got {}", repr(value)))
         })?
         .collect::<PyResult<_>>()?;
     if items.len() != n {
         return Err(bad(format!(
-            "{name}: expected {n} numbers, got {}",
+            "{name}: expected {n} {what}, got {}",
             items.len()
         )));
     }
-    items.iter().map(|v| finite(v, name)).collect()
+    Ok(items)
+}
+
+/// The finite numbers of a sequence (a tuple, a list, a numpy array), exactly `n` of them.
+pub fn numbers(value: &Bound<'_, PyAny>, n: usize, name: &str) -> PyResult<Vec<f64>> {
+    items(value, n, "numbers", name)?
+        .iter()
+        .map(|v| finite(v, name))
+        .collect()
 }
 
 /// A grid's three sizes from a sequence (a tuple, a list, a numpy array) of whole numbers:
 /// `name` names the argument in errors.
 pub fn grid_dims(value: &Bound<'_, PyAny>, name: &str) -> PyResult<[u32; 3]> {
-    if value.is_instance_of::<pyo3::types::PyString>() {
-        return Err(PyTypeError::new_err(format!(
-            "{name}: expected 3 whole numbers, not a string"
-        )));
-    }
-    let items: Vec<Bound<'_, PyAny>> = value
-        .try_iter()
-        .map_err(|_| {
-            PyTypeError::new_err(format!(
-                "{name}: expected 3 whole numbers, got {}",
-                repr(value)
-            ))
-        })?
-        .collect::<PyResult<_>>()?;
-    if items.len() != 3 {
-        return Err(bad(format!(
-            "{name}: expected 3 whole numbers, got {}",
-            items.len()
-        )));
-    }
+    let items = items(value, 3, "whole numbers", name)?;
     let mut dims = [0u32; 3];
     for (slot, item) in dims.iter_mut().zip(&items) {
         let n: i64 = item.extract().map_err(|_| {

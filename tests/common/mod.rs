@@ -151,3 +151,51 @@ pub fn compositor_cases() -> Vec<(&'static str, Scene, SceneCamera)> {
     }
     cases
 }
+
+/// A real volume alone, seen as `benches/compositors.rs` and the VTK peer script see it: fitted
+/// to its bounds looking along (-0.4, 1, -0.55), for an image of width over height `aspect`.
+pub fn benchmark_view(
+    volume: CpuVolume,
+    transfer: TransferFunction,
+    aspect: f64,
+) -> (Scene, SceneCamera) {
+    let mut scene = Scene::new();
+    // Opacities per half millimetre: about the look these views had when a splat took the
+    // ramp's opacity at its centre (a 1 mm voxel's splat now carries 1 / 1.87 mm of tissue's,
+    // `2 pi sigma^2` of the default splat).
+    let node = VolumeNode {
+        volume: Arc::new(volume),
+        transfer: Arc::new(transfer),
+        splats: SplatSettings {
+            opacity_reference_mm: 0.5,
+            ..Default::default()
+        },
+    };
+    scene
+        .add("volume", DMat4::IDENTITY, None, NodeContent::Volume(node))
+        .unwrap();
+    let camera = SceneCamera::fit(
+        scene.bounds().unwrap(),
+        DVec3::new(-0.4, 1.0, -0.55),
+        Default::default(),
+        aspect,
+    );
+    (scene, camera)
+}
+
+/// The GE engine block (Open SciVis datasets, General Electric; 1.05M splats with its
+/// benchmark ramp) in [`benchmark_view`] for `aspect`; `None` without the shared data.
+pub fn engine_view(aspect: f64) -> Option<(Scene, SceneCamera)> {
+    let path = data_file("volumes/engine/engine_256x256x128_uint8.raw")?;
+    let spec = splatscene::volume::RawSpec::new(
+        [256, 256, 128],
+        splatscene::volume::ScalarType::U8,
+        splatscene::volume::ByteOrder::Little,
+    );
+    let volume = splatscene::volume::load_raw(&path, &spec).unwrap();
+    Some(benchmark_view(
+        volume,
+        TransferFunction::ramp(100.0, 200.0, [0.85, 0.8, 0.75, 0.5]),
+        aspect,
+    ))
+}
