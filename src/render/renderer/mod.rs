@@ -930,10 +930,6 @@ impl Renderer {
         color: &wgpu::TextureView,
         depth: &wgpu::TextureView,
     ) -> Result<(), RenderError> {
-        let bindable = depth
-            .texture()
-            .usage()
-            .contains(wgpu::TextureUsages::TEXTURE_BINDING);
         if self.compositor == Compositor::GpuTiles {
             if !super::splat_pass::computes(ctx) {
                 return Err(RenderError::Unsupported {
@@ -941,11 +937,15 @@ impl Renderer {
                     what: "run compute shaders (the GPU tile compositor, --compositor gpu-tiles)",
                 });
             }
-            if !bindable {
-                return Err(RenderError::Unsupported {
-                    adapter: ctx.describe(),
-                    what: "composite the GPU tiles against a depth target that cannot be bound",
-                });
+            // The tile pass reads the meshes' depth as a texture (every `RenderTarget` allows it).
+            if !depth
+                .texture()
+                .usage()
+                .contains(wgpu::TextureUsages::TEXTURE_BINDING)
+            {
+                return Err(RenderError::Device(
+                    "the GPU tile compositor reads the depth target as a texture, and this one was made without TEXTURE_BINDING".into(),
+                ));
             }
             // Near to far, as the tile pass walks them.
             let mut near_to_far = Vec::with_capacity(ordered.len());
