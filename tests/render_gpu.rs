@@ -675,15 +675,25 @@ fn a_preview_frame_draws_an_eighth_of_the_splats_and_keeps_the_look() {
     let b = renderer
         .screenshot(&ctx, &scene, &camera, size, &preview)
         .unwrap();
-    let ratio = b.report.splats as f64 / a.report.splats as f64;
+    let mut own_grid = Renderer::new();
+    own_grid.set_level_of_detail(false);
+    let own = own_grid
+        .screenshot(&ctx, &scene, &camera, size, &full)
+        .unwrap();
+    let ratio = b.report.splats as f64 / own.report.splats as f64;
     let d = compare(&a.frame, &b.frame).unwrap();
     eprintln!(
-        "full {} splats, preview {} ({ratio:.3}); preview against full: {d:?}",
-        a.report.splats, b.report.splats
+        "own grid {} splats, full frame {}, preview {} ({ratio:.3}); preview against full: {d:?}",
+        own.report.splats, a.report.splats, b.report.splats
     );
     assert!((0.08..0.2).contains(&ratio), "about an eighth: {ratio}");
+    assert!(b.report.splats < a.report.splats);
     assert_eq!(a.report.classified, 1);
-    assert_eq!(b.report.classified, 1, "the halved copy is classified once");
+    assert_eq!(
+        b.report.classified, 0,
+        "the halved copy is not classified anew"
+    );
+    assert_eq!(b.report.levels_made, 1, "the halved copy is made once");
     // The same picture, softer: on lavapipe the preview is 0.036 (RMSE) from the full frame,
     // the frame without the volume 0.168.
     let mut meshes_only = scene.clone();
@@ -695,13 +705,17 @@ fn a_preview_frame_draws_an_eighth_of_the_splats_and_keeps_the_look() {
     let without = compare(&a.frame, &c.frame).unwrap();
     eprintln!("meshes only against full: {without:?}");
     assert!(d.rmse < 0.3 * without.rmse, "{d:?} against {without:?}");
-    // Both classifications are kept: turning the camera and going back costs none.
+    // The classification and the levels are kept: turning the camera classifies nothing, and
+    // going back to a level drawn before makes nothing.
     let turned = camera.orbit(20.0, 5.0);
-    for options in [&preview, &full, &preview] {
+    for (i, options) in [&preview, &full, &preview].into_iter().enumerate() {
         let shot = renderer
             .screenshot(&ctx, &scene, &turned, size, options)
             .unwrap();
         assert_eq!(shot.report.classified, 0);
+        if i != 1 {
+            assert_eq!(shot.report.levels_made, 0, "{i}");
+        }
     }
     // The meshes are drawn as before: the depth buffer is the same.
     assert_eq!(a.depth, b.depth);

@@ -380,17 +380,42 @@ impl Classified {
     /// meets the same optical depth and emission. A block with no significant voxel is left
     /// out.
     pub fn halved(&self) -> Result<Classified, GridError> {
+        self.halved_along([true; 3], None)
+    }
+
+    /// [`Classified::halved`] along the `axes` given alone: each block of 2 voxels along each
+    /// of them (1 along the others) becomes one splat, on a grid of half as many voxels along
+    /// them. An axis of one voxel is not halved.
+    ///
+    /// With a `front` along the one axis halved (ignored otherwise), that axis runs along the
+    /// view direction, and the pair of voxels along it that a ray crosses one after the other
+    /// are weighted as the ray composites them: the nearer by its opacity, the farther by its
+    /// opacity times what the nearer lets through. The splat then shows the colour of a
+    /// surface's first voxel, not a mean that the denser voxels behind it dominate. Its
+    /// density is the pair's mean either way.
+    pub fn halved_along(
+        &self,
+        axes: [bool; 3],
+        front: Option<Front>,
+    ) -> Result<Classified, GridError> {
         let dims = self.grid.dims();
-        let step = dims.map(|n| if n > 1 { 2u32 } else { 1 });
+        let step: [u32; 3] = std::array::from_fn(|a| if axes[a] && dims[a] > 1 { 2 } else { 1 });
+        // A front along the one axis halved; else none.
+        let front = front.filter(|f| f.axis < 3 && (0..3).all(|a| (step[a] == 2) == (a == f.axis)));
         let out: [u32; 3] = std::array::from_fn(|a| dims[a].div_ceil(step[a]));
         let [ox, oy, oz] = out.map(|n| n as usize);
+        // Opaque voxels (infinite density) count as the largest half, still opaque over any
+        // step.
+        let density = |c: &SplatColor| c.density.to_f32().min(65504.0);
         let slices: Vec<(Vec<u32>, Vec<SplatColor>)> = (0..oz)
             .into_par_iter()
             .map(|k| {
                 let (mut ids, mut colors) = (Vec::new(), Vec::new());
-                let mut sums = vec![(0.0f64, [0.0f64; 3]); ox];
+                // Per output voxel of the row: the density, and the weight and weighted colour
+                // of its voxels (with a front, of its nearer voxel, then of its farther).
+                let mut sums = vec![Pair::default(); ox];
                 for j in 0..oy {
-                    sums.fill((0.0, [0.0; 3]));
+                    sums.fill(Pair::default());
                     let mut any = false;
                     for z in (k as u32 * step[2]..(k as u32 + 1) * step[2]).filter(|&z| z < dims[2])
                     {
@@ -403,14 +428,20 @@ impl Classified {
                                     continue;
                                 };
                                 for (i, x) in (run.start..run.end()).enumerate() {
-                                    let c = self.colors[rank as usize + i];
-                                    // Opaque voxels (infinite density) count as the largest
-                                    // half, still opaque over any step.
-                                    let d = f64::from(c.density.to_f32().min(65504.0));
+                                    let c = &self.colors[rank as usize + i];
+                                    let d = density(c);
                                     let slot = &mut sums[(x / step[0]) as usize];
-                                    slot.0 += d;
-                                    for (sum, v) in slot.1.iter_mut().zip(c.rgb) {
-                                        *sum += d * f64::from(v);
+                                    slot.density += f64::from(d);
+                                    let (w, part) = match front {
+                                        None => (f64::from(d), &mut slot.near),
+                                        Some(f) if f.is_nearer([x, y, z]) => {
+                                            (f64::from(f.alpha(d)), &mut slot.near)
+                                        }
+                                        Some(f) => (f64::from(f.alpha(d)), &mut slot.far),
+                                    };
+                                    part.0 += w;
+                                    for (sum, v) in part.1.iter_mut().zip(c.rgb) {
+                                        *sum += w * f64::from(v);
                                     }
                                     any = true;
                                 }
@@ -420,8 +451,8 @@ impl Classified {
                     if !any {
                         continue;
                     }
-                    for (i, (d, rgb)) in sums.iter().enumerate() {
-                        if *d <= 0.0 {
+                    for (i, pair) in sums.iter().enumerate() {
+                        if pair.density <= 0.0 {
                             continue;
                         }
                         // The block's voxels inside the grid.
@@ -433,8 +464,8 @@ impl Classified {
                             .product();
                         ids.push((i + ox * (j + oy * k)) as u32);
                         colors.push(SplatColor {
-                            rgb: rgb.map(|v| (v / d).round().clamp(0.0, 255.0) as u8),
-                            density: half::f16::from_f64(d / f64::from(count)),
+                            rgb: pair.color(),
+                            density: half::f16::from_f64(pair.density / f64::from(count)),
                         });
                     }
                 }
@@ -442,6 +473,59 @@ impl Classified {
             })
             .collect();
         Self::joined(out, slices)
+    }
+}
+
+/// A block of voxels becoming one splat ([`Classified::halved_along`]): its density summed,
+/// and the weight and weighted colour of its voxels, those of the nearer voxel and of the
+/// farther one apart where the block is a pair along the view.
+#[derive(Debug, Clone, Copy, Default)]
+struct Pair {
+    density: f64,
+    near: (f64, [f64; 3]),
+    far: (f64, [f64; 3]),
+}
+
+impl Pair {
+    /// The block's colour: the nearer voxel's over the farther one's, their weights their
+    /// opacities (`near` holds every voxel of a block weighted by density, `far` none).
+    fn color(&self) -> [u8; 3] {
+        let through = 1.0 - self.near.0.min(1.0);
+        let weight = self.near.0 + through * self.far.0;
+        if weight.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
+            return [0; 3];
+        }
+        std::array::from_fn(|c| {
+            ((self.near.1[c] + through * self.far.1[c]) / weight)
+                .round()
+                .clamp(0.0, 255.0) as u8
+        })
+    }
+}
+
+/// The view direction a level of detail is halved along ([`Classified::halved_along`]): which
+/// voxel of each pair along the axis a ray meets first, and how opaque a voxel is along it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Front {
+    /// The axis halved along the view direction (0, 1 or 2).
+    pub axis: usize,
+    /// Whether the voxel of the larger index along it lies nearer the eye.
+    pub larger_nearer: bool,
+    /// The length in millimetres of one index step along the axis, for the voxels' opacities
+    /// ([`splat_alpha`]).
+    pub step_mm: f32,
+}
+
+impl Front {
+    /// Whether voxel `k` is the nearer of its pair along the axis (pairs start at even
+    /// indices).
+    pub fn is_nearer(&self, k: [u32; 3]) -> bool {
+        (k[self.axis] % 2 == 1) == self.larger_nearer
+    }
+
+    /// The opacity along the axis of a voxel of density `density`.
+    pub fn alpha(&self, density: f32) -> f32 {
+        splat_alpha(density, self.step_mm)
     }
 }
 

@@ -438,6 +438,117 @@ fn a_coarser_level_keeps_each_blocks_optical_depth_and_emission() {
 }
 
 #[test]
+fn a_level_halved_along_the_view_composites_each_pair_as_a_ray_does() {
+    // A 5 x 5 x 3 grid (odd along y, the axis halved) of varied splats, some left out, some
+    // opaque; halved along y seen from either end. Each pair's splat against the two voxels
+    // composited plainly, nearer over farther: the same opacity over twice the step, and the
+    // same emission.
+    let dims = [5u32, 5, 3];
+    let mut ids = Vec::new();
+    let mut colors = Vec::new();
+    for id in 0..75u32 {
+        if id % 4 == 1 {
+            continue;
+        }
+        ids.push(id);
+        let density = if id % 7 == 0 {
+            f32::INFINITY
+        } else {
+            0.1 + 0.6 * (id % 5) as f32
+        };
+        colors.push(SplatColor {
+            rgb: [
+                (id * 37 % 256) as u8,
+                (id * 91 % 256) as u8,
+                (id * 13 % 256) as u8,
+            ],
+            density: half::f16::from_f32(density),
+        });
+    }
+    let fine = Classified {
+        grid: SparseGrid::from_sorted_ids(dims, &ids).unwrap(),
+        colors,
+    };
+    let step_mm = 0.8f32;
+    let mut differs = false;
+    let mut drawn = Vec::new();
+    for larger_nearer in [true, false] {
+        let front = Front {
+            axis: 1,
+            larger_nearer,
+            step_mm,
+        };
+        let coarse = fine
+            .halved_along([false, true, false], Some(front))
+            .unwrap();
+        assert_eq!(coarse.grid.dims(), [5, 3, 3]);
+        let voxel = |k: [u32; 3]| -> Option<(f64, [f64; 3])> {
+            if k[1] >= dims[1] {
+                return None;
+            }
+            let rank = fine.grid.rank(k[0] + 5 * (k[1] + 5 * k[2]))?;
+            let c = fine.colors[rank as usize];
+            let d = f64::from(c.density.to_f32()).min(65504.0);
+            Some((
+                1.0 - (-d * f64::from(step_mm)).exp(),
+                c.rgb.map(|v| f64::from(v) / 255.0),
+            ))
+        };
+        for id in 0..45u32 {
+            let b = [id % 5, id / 5 % 3, id / 15];
+            let (lo, hi) = (
+                voxel([b[0], 2 * b[1], b[2]]),
+                voxel([b[0], 2 * b[1] + 1, b[2]]),
+            );
+            let (near, far) = if larger_nearer { (hi, lo) } else { (lo, hi) };
+            let (an, cn) = near.unwrap_or((0.0, [0.0; 3]));
+            let (af, cf) = far.unwrap_or((0.0, [0.0; 3]));
+            let alpha = 1.0 - (1.0 - an) * (1.0 - af);
+            let Some(rank) = coarse.grid.rank(id) else {
+                assert!(near.is_none() && far.is_none(), "block {b:?}");
+                continue;
+            };
+            let c = coarse.colors[rank as usize];
+            // The pair's optical depth over the coarse voxel's step, twice the fine one (at
+            // the odd end a block of one voxel takes its density as the mean, as
+            // `halved` does).
+            if 2 * b[1] + 1 < dims[1] {
+                let got = 1.0 - (-f64::from(c.density.to_f32()) * 2.0 * f64::from(step_mm)).exp();
+                assert!(
+                    (got - alpha).abs() < 2e-3,
+                    "block {b:?}: {got} against {alpha}"
+                );
+            }
+            for ch in 0..3 {
+                let want = (an * cn[ch] + (1.0 - an) * af * cf[ch]) / alpha * 255.0;
+                let got = f64::from(c.rgb[ch]);
+                assert!(
+                    (got - want).abs() <= 0.51,
+                    "block {b:?}: {got} against {want}"
+                );
+            }
+            drawn.push((larger_nearer, id, c.rgb));
+        }
+    }
+    // The two ends give other colours where a pair's voxels differ.
+    for (end, id, rgb) in &drawn {
+        if *end {
+            differs |= drawn.iter().any(|(e, i, c)| !*e && i == id && c != rgb);
+        }
+    }
+    assert!(differs);
+    // A front along an axis not halved alone is ignored: the mean by density.
+    let front = Front {
+        axis: 1,
+        larger_nearer: true,
+        step_mm,
+    };
+    let both = fine.halved_along([true, true, false], Some(front)).unwrap();
+    let plain = fine.halved_along([true, true, false], None).unwrap();
+    assert_eq!(both.colors, plain.colors);
+}
+
+#[test]
 fn the_shell_keeps_the_surface_of_an_opaque_block() {
     // A 6^3 grid with an opaque 4^3 block inside: its 2^3 core has only opaque neighbours.
     let values: Voxels = (0..216u32)

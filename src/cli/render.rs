@@ -59,9 +59,10 @@ pub struct RenderArgs {
     #[arg(long, default_value = "auto")]
     compositor: Compositor,
     /// Level of detail: `on` draws each volume from the level of its pyramid (2x2x2 voxels a
-    /// splat a level) whose voxels are about a pixel apart where it comes nearest the eye, or,
-    /// where its voxels are more than 1.5 pixels apart, from its field on a grid refined until
-    /// they are not; `off` from its own grid, every voxel a splat
+    /// splat a level; an axis along the view halved once more) whose voxels are about a pixel
+    /// apart on the screen where it is drawn largest, or, where its voxels are more than 1.5
+    /// pixels apart, from its field on a grid refined until they are not; `off` from its own
+    /// grid, every voxel a splat
     #[arg(long, default_value = "on", value_parser = ["on", "off"])]
     lod: String,
     /// Transparent background (the PNG's alpha is the coverage).
@@ -606,19 +607,31 @@ pub(crate) fn describe(r: &FrameReport) -> String {
         None => format!("splat pass {:.1} ms", ms(r.timings.splat_pass)),
     };
     format!(
-        "{} meshes ({} triangles), {} splats{}; classify {:.0} ms, order {:.1} ms, upload {:.1} ms, mesh pass {:.1} ms, {splats}, readback {:.1} ms",
+        "{} meshes ({} triangles), {} splats{}; classify {:.0} ms{}, order {:.1} ms, upload {:.1} ms, mesh pass {:.1} ms, {splats}, readback {:.1} ms",
         r.meshes,
         r.triangles,
         r.splats,
-        match (r.level, r.refined) {
-            (0, None) => String::new(),
-            (0, Some([x, y, z])) => format!(" (the grid refined {x}x{y}x{z})"),
-            (level, None) => format!(" (level of detail {level})"),
-            (level, Some([x, y, z])) => {
-                format!(" (level of detail {level}; a grid refined {x}x{y}x{z})")
+        {
+            // Halvings along each axis where they differ ("level of detail 0/1/0").
+            let level = match r.levels {
+                [x, y, z] if x != y || y != z => format!("{x}/{y}/{z} along x/y/z"),
+                _ => r.level.to_string(),
+            };
+            match (r.level, r.refined) {
+                (0, None) => String::new(),
+                (0, Some([x, y, z])) => format!(" (the grid refined {x}x{y}x{z})"),
+                (_, None) => format!(" (level of detail {level})"),
+                (_, Some([x, y, z])) => {
+                    format!(" (level of detail {level}; a grid refined {x}x{y}x{z})")
+                }
             }
         },
         ms(r.timings.classify),
+        if r.timings.levels.is_zero() {
+            String::new()
+        } else {
+            format!(", levels {:.0} ms", ms(r.timings.levels))
+        },
         ms(r.timings.order),
         ms(r.timings.upload),
         ms(r.timings.mesh_pass),

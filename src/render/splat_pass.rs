@@ -17,7 +17,6 @@ use super::{GpuContext, RenderError};
 use crate::classify::{Classified, view_step_mm};
 use crate::geometry::VolumeGeometry;
 use crate::scene::{ClipPlane, Clipping, SplatSettings};
-use crate::volume::CpuVolume;
 
 /// Keep in sync with `Splat` in shaders/splat.wgsl.
 #[repr(C)]
@@ -113,7 +112,10 @@ fn texture_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
 /// The 8-byte texel of every voxel of the grid (zero where not significant), as the tile
 /// compositor stores them ([`crate::splat::tiled::SplatTexels`]): the splat pass's one texture. One
 /// z-slice a task, walking the slice's x rows, so only significant voxels are visited.
-fn splat_texels(volume: &CpuVolume, factors: [u32; 3], classified: &Classified) -> Vec<u8> {
+fn splat_texels(
+    classified: &Classified,
+    texel: &(dyn Fn([u32; 3], usize) -> [u8; 8] + Sync),
+) -> Vec<u8> {
     let grid = &classified.grid;
     let [nx, ny, nz] = grid.dims().map(|n| n as usize);
     let mut texels = vec![0u8; nx * ny * nz * 8];
@@ -128,14 +130,7 @@ fn splat_texels(volume: &CpuVolume, factors: [u32; 3], classified: &Classified) 
                         if let Some(rank) = grid.rank(id) {
                             let k = [x, y as u32, z as u32];
                             let i = (x as usize + nx * y) * 8;
-                            let t = crate::splat::tiled::texel(
-                                volume,
-                                factors,
-                                classified,
-                                k,
-                                rank as usize,
-                            );
-                            slice[i..i + 8].copy_from_slice(&t);
+                            slice[i..i + 8].copy_from_slice(&texel(k, rank as usize));
                         }
                     }
                 }
@@ -230,9 +225,8 @@ impl SplatPass {
     pub(crate) fn upload(
         &self,
         ctx: &GpuContext,
-        volume: &CpuVolume,
-        factors: [u32; 3],
         classified: &Classified,
+        texel: &(dyn Fn([u32; 3], usize) -> [u8; 8] + Sync),
     ) -> Result<GpuVolume, RenderError> {
         let dims = classified.grid.dims();
         let max = ctx.device.limits().max_texture_dimension_3d;
@@ -247,7 +241,7 @@ impl SplatPass {
             ctx,
             dims,
             wgpu::TextureFormat::Rg32Uint,
-            &splat_texels(volume, factors, classified),
+            &splat_texels(classified, texel),
             "splat texels",
         );
         let uniforms = ctx.device.create_buffer(&wgpu::BufferDescriptor {

@@ -14,12 +14,27 @@ pub(super) fn refinement(factors: [u32; 3]) -> DMat4 {
     )
 }
 
+/// Fine voxel indices of a grid to those of the grid halved `levels[a]` times along each axis
+/// `a` (inverse of [`coarsening`]'s map, which takes coarse indices to fine ones).
+///
+/// Coarse voxel `k` of a grid halved `l` times along an axis sits at the centre of its block
+/// of `s = 2^l` fine voxels: `k s + (s - 1) / 2`, whatever the order of the halvings.
+pub(super) fn coarsening(levels: [u8; 3]) -> DMat4 {
+    let s = DVec3::from(levels.map(|l| f64::from(1u32 << l.min(31))));
+    DMat4::from_scale_rotation_translation(s, glam::DQuat::IDENTITY, 0.5 * (s - DVec3::ONE))
+}
+
 /// How finely a volume is drawn.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum Detail {
-    /// Level `n` of its pyramid, 2^n x 2^n x 2^n voxels a splat ([`Classified::halved`]); 0 is
-    /// the volume's own grid.
-    Level(u8),
+    /// Its grid halved `n[a]` times along each axis `a`, `2^n[a]` voxels a splat along it
+    /// ([`Classified::halved_along`]); `[0, 0, 0]` is the volume's own grid. Levels differ
+    /// between axes where the voxels fall nearer together on the screen along one axis than
+    /// along another: most along the view direction, whose voxels lie on top of each other.
+    /// The second array tells, for an axis halved more than the others, which of its ends
+    /// faces the eye (1: the larger indices, -1: the smaller; 0 for the other axes): a ray
+    /// meets the voxels of each pair along it in that order ([`crate::classify::Front`]).
+    Level([u8; 3], [i8; 3]),
     /// Its trilinear field classified on a grid `factors[a]` times finer along each axis `a`
     /// ([`classify_refined`]), for a grid whose voxels are more than [`REFINE_TO`] pixels
     /// apart.
@@ -28,30 +43,38 @@ pub enum Detail {
 
 impl Default for Detail {
     fn default() -> Self {
-        Detail::Level(0)
+        Detail::Level([0; 3], [0; 3])
     }
 }
 
-/// The most levels of detail above a volume's own grid (a splat for 8^4 = 4,096 voxels).
+/// The most levels of detail above a volume's own grid along an axis (a splat for 16 voxels
+/// along it).
 pub const MAX_LEVEL: u8 = 4;
 
 /// A grid whose voxels are more than this many pixels apart along an axis is refined along
 /// it until they are at most this far apart ([`detail_for`]).
 pub const REFINE_TO: f64 = 1.5;
 
-/// A level of detail is drawn where its voxels are at most this many pixels apart where the
-/// volume's content comes nearest the eye ([`detail_for`]). 1.5, as for refinement, was
-/// measured and not kept: the LIDC2 CT resampled to 0.7 mm, seen from the front at 384 x 384,
-/// went from level 0 to level 1 and from RMSE 0.027-0.028 to 0.038 against the reference ray
-/// marcher (soft tissue and bone), though a 512^3 textured ball at 512 x 512 drawn at level 1
-/// stayed within 0.025 of it (0.018 at level 0) for a sixth of the frame.
+/// A level of detail is drawn along an axis where its voxels are at most this many pixels
+/// apart on the screen, where the volume's content is drawn largest ([`detail_for`]). 1.5,
+/// as for refinement, was measured and not kept: the LIDC2 CT resampled to 0.7 mm, seen from
+/// the front at 384 x 384, went from level 0 to level 1 and from RMSE 0.027-0.028 to 0.038
+/// against the reference ray marcher (soft tissue and bone), though a 512^3 textured ball at
+/// 512 x 512 drawn at level 1 stayed within 0.025 of it (0.018 at level 0) for a sixth of
+/// the frame.
 pub(super) const COARSEN_TO: f64 = 1.0;
+
+/// The most levels an axis is halved beyond the axis halved least ([`detail_for`]). An axis
+/// along the view direction has its voxels on top of each other on the screen and would be
+/// halved [`MAX_LEVEL`] times by the pixels alone; each splat would then carry the emission
+/// of 16 voxels in depth as one, losing which of them lies in front.
+pub const MAX_DEPTH_LEVELS: u8 = 1;
 
 /// The most a grid is refined along one axis ([`Detail::Refined`]).
 pub const MAX_REFINE: u32 = 8;
 
 /// The most voxels a refined grid has (2^28, a 645^3 grid; the LIDC2 CT's 256 x 256 x 133
-/// grid refined 2 x 2 x 3 at 512 x 512 has 105M): past it the factors are lowered, largest
+/// grid refined 2 x 1 x 3 at 512 x 512 has 52M): past it the factors are lowered, largest
 /// first.
 pub const MAX_REFINED_VOXELS: u64 = 1 << 28;
 
@@ -59,48 +82,85 @@ pub const MAX_REFINED_VOXELS: u64 = 1 << 28;
 pub(super) const MAX_REFINED_DIM: u64 = 2048;
 
 /// The detail a volume placed as `geometry` is drawn at in `view`, from how many pixels apart
-/// its voxels are along each axis where the volume comes nearest the eye (its grid's box, half
-/// a voxel beyond the centres; the renderer takes the 16^3-voxel bricks that hold its splats
-/// instead):
+/// its voxels fall on the screen along each of its axes where the volume is drawn largest
+/// ([`pixels_apart`]: the voxel's edge along the axis projected across the line of sight,
+/// so an axis along the view direction has its voxels nearly on top of each other):
 ///
-/// - Where they are more than [`REFINE_TO`] (1.5) pixels apart along some axis, its own grid
-///   refined along each such axis until they are at most that far apart ([`Detail::Refined`],
-///   at most [`MAX_REFINE`] times an axis and [`MAX_REFINED_VOXELS`] in all): splats a coarse
-///   voxel wide are far softer than the trilinear field a ray caster samples. On the LIDC2
-///   CT's 1.4 x 1.4 x 2.5 mm grid at 512 x 512 (voxels 2.2 and 3.9 pixels apart) refining it
-///   2 x 2 x 3 brings the picture to 0.029-0.031 of the reference ray marcher, from
-///   0.049-0.053, and to 0.015-0.017 of the 0.7 mm grid's; refining to a pixel (2 x 2 x 4)
-///   gained 0.001 for 16-26% more frame time, and three times the classification on the
-///   built-in scene (BENCHMARKS.md, "Grids coarser than the pixels").
-/// - Else the coarsest level of its pyramid whose voxels are still at most a pixel apart, so
-///   that the picture keeps the detail the pixels can show there while a grid two or more times
-///   finer than the pixels does not put four or more splats under each. (A level one coarser,
-///   with voxels up to two pixels apart, was measured on the LIDC2 CT resampled to 0.7 mm at
-///   512 x 512: 3.4 times faster, but RMSE 0.037 against the reference ray marcher where the
-///   full grid gives 0.024.)
+/// - Where a voxel's edge along some axis spans more than [`REFINE_TO`] (1.5) pixels at that
+///   distance (whether it lies across the view or along it), its own grid refined along each
+///   such axis until they span at most that ([`Detail::Refined`], at most [`MAX_REFINE`]
+///   times an axis and [`MAX_REFINED_VOXELS`] in all): splats a coarse voxel wide are far
+///   softer than the trilinear field a ray caster samples. On the LIDC2 CT's 1.4 x 1.4 x 2.5
+///   mm grid at 512 x 512 (voxels 2.2 and 3.9 pixels apart) refining it 2 x 2 x 3 brought the
+///   picture to 0.029-0.031 of the reference ray marcher, from 0.049-0.053 (BENCHMARKS.md,
+///   "Grids coarser than the pixels"). The axis along the view is refined too: one splat
+///   for a coarse voxel's depth takes the mean of its field's colours and gradients where a
+///   ray composites them one after the other (refined 2 x 1 x 3 the same view was 0.036-0.037
+///   from the marcher).
+/// - Else, along each axis, the coarsest level of its pyramid whose voxels are still at most
+///   a pixel apart there, and at most [`MAX_DEPTH_LEVELS`] more than along
+///   the axis halved least, so that the picture keeps the detail the pixels can show while a
+///   grid finer than the pixels does not put several splats under each. (A level one
+///   coarser across the view, with voxels up to two pixels apart, was measured on the LIDC2 CT
+///   resampled to 0.7 mm at 512 x 512: 3.4 times faster, but RMSE 0.037 against the reference
+///   ray marcher where the full grid gives 0.024.)
 ///
 /// The volume's own grid when the eye is inside the box.
 pub fn detail_for(geometry: &VolumeGeometry, view: &ViewSetup) -> Detail {
-    detail_at(geometry.dims(), pixels_apart(geometry, view))
+    detail_at(geometry.dims(), apart_near(geometry, view, None))
 }
 
-/// [`detail_for`] a `dims` grid whose voxels are `apart` pixels apart along each axis where it
-/// comes nearest the eye (`None`: the eye inside it).
-pub(super) fn detail_at(dims: [u32; 3], apart: Option<[f64; 3]>) -> Detail {
-    let Some(apart) = apart else {
-        return Detail::Level(0);
+/// [`detail_for`] a `dims` grid whose voxels are `apart` pixels apart on the screen along
+/// each axis where it is drawn largest, facing the eye as `apart` says (`None`: the eye
+/// inside it).
+pub(super) fn detail_at(dims: [u32; 3], apart: Option<Apart>) -> Detail {
+    let Some(Apart {
+        pixels: apart,
+        full,
+        facing,
+    }) = apart
+    else {
+        return Detail::Level([0; 3], [0; 3]);
     };
-    if let Some(factors) = refine_factors(dims, apart) {
+    if let Some(factors) = refine_factors(dims, full) {
         return Detail::Refined(factors);
     }
-    // Coarser while the next level's voxels are still at most a pixel apart.
-    let mut apart = apart.into_iter().fold(f64::INFINITY, f64::min);
-    let mut level = 0;
-    while level < MAX_LEVEL && apart.is_finite() && apart > 0.0 && 2.0 * apart <= COARSEN_TO {
-        apart *= 2.0;
-        level += 1;
-    }
-    Detail::Level(level)
+    // Coarser along each axis while the next level's voxels are still at most a pixel apart
+    // and the axis still has more than one voxel.
+    let levels: [u8; 3] = std::array::from_fn(|a| {
+        let (mut apart, mut level, mut n) = (apart[a], 0, dims[a]);
+        while level < MAX_LEVEL && apart.is_finite() && apart >= 0.0 && 2.0 * apart <= COARSEN_TO {
+            if n <= 1 {
+                break;
+            }
+            apart *= 2.0;
+            level += 1;
+            n = n.div_ceil(2);
+        }
+        level
+    });
+    // (Axes of one voxel are never halved and do not count.)
+    let least = (0..3)
+        .filter(|&a| dims[a] > 1)
+        .map(|a| levels[a])
+        .min()
+        .unwrap_or(0);
+    level_facing(
+        levels.map(|l| l.min(least.saturating_add(MAX_DEPTH_LEVELS))),
+        facing,
+    )
+}
+
+/// The level of `levels` halvings along each axis, with which end of each axis halved more
+/// than the least faces the eye (`facing`, as [`Apart::facing`]). Such an axis whose sight
+/// lines run both ways (a grid finer along it than across) is halved as the others are, its
+/// voxels weighted by density alone.
+pub(super) fn level_facing(levels: [u8; 3], facing: [i8; 3]) -> Detail {
+    let least = levels.into_iter().min().unwrap_or(0);
+    Detail::Level(
+        levels,
+        std::array::from_fn(|a| if levels[a] > least { facing[a] } else { 0 }),
+    )
 }
 
 /// Side, in voxels, of the bricks whose occupancy tells where a volume's content comes
@@ -148,72 +208,183 @@ impl Occupied {
         Self { bricks }
     }
 
-    /// The distance from `eye` to the nearest point of the occupied bricks' world boxes (each
-    /// brick's voxels' box, half a voxel beyond their centres, as a world axis-aligned box)
-    /// for a grid placed as `geometry`; 0 when the eye is in one, `None` when none is
-    /// occupied.
-    pub(super) fn nearest(&self, geometry: &VolumeGeometry, eye: DVec3) -> Option<f64> {
+    /// The world boxes of the occupied bricks (each brick's voxels' box, half a voxel beyond
+    /// their centres, as a world axis-aligned box: centre and half size) for a grid placed as
+    /// `geometry`.
+    fn world_boxes<'a>(
+        &'a self,
+        geometry: &VolumeGeometry,
+    ) -> impl Iterator<Item = (DVec3, DVec3)> + 'a {
         let to_world = geometry.index_to_world();
         let m = to_world.matrix3;
         let dims = geometry.dims();
         let abs = glam::DMat3::from_cols(m.x_axis.abs(), m.y_axis.abs(), m.z_axis.abs());
-        self.bricks
-            .iter()
-            .map(|b| {
-                let lo = DVec3::from(std::array::from_fn::<f64, 3, _>(|a| {
-                    f64::from(b[a] * BRICK) - 0.5
-                }));
-                let hi = DVec3::from(std::array::from_fn::<f64, 3, _>(|a| {
-                    f64::from(((b[a] + 1) * BRICK).min(dims[a])) - 0.5
-                }));
-                let centre = to_world.transform_point3(0.5 * (lo + hi));
-                let half = abs * (0.5 * (hi - lo));
-                (eye.clamp(centre - half, centre + half) - eye).length()
-            })
+        self.bricks.iter().map(move |b| {
+            let lo = DVec3::from(std::array::from_fn::<f64, 3, _>(|a| {
+                f64::from(b[a] * BRICK) - 0.5
+            }));
+            let hi = DVec3::from(std::array::from_fn::<f64, 3, _>(|a| {
+                f64::from(((b[a] + 1) * BRICK).min(dims[a])) - 0.5
+            }));
+            (
+                to_world.transform_point3(0.5 * (lo + hi)),
+                abs * (0.5 * (hi - lo)),
+            )
+        })
+    }
+
+    /// The distance from `eye` to the nearest point of the occupied bricks' world boxes for a
+    /// grid placed as `geometry`; 0 when the eye is in one, `None` when none is occupied.
+    #[cfg(test)]
+    pub(super) fn nearest(&self, geometry: &VolumeGeometry, eye: DVec3) -> Option<f64> {
+        self.world_boxes(geometry)
+            .map(|(centre, half)| (eye.clamp(centre - half, centre + half) - eye).length())
             .min_by(f64::total_cmp)
     }
 }
 
-/// How many pixels apart the voxels of a grid placed as `geometry` are along each of its axes
-/// where it comes nearest the eye in `view`; `None` when the eye is inside its box.
+/// How many pixels apart on the screen the voxels of a grid placed as `geometry` fall along
+/// each of its axes in `view`, where the grid is drawn largest: a voxel's edge along the axis
+/// projected across the line of sight, at the distance of the grid's box from the eye.
+/// `None` when the eye is inside the box.
 pub fn pixels_apart(geometry: &VolumeGeometry, view: &ViewSetup) -> Option<[f64; 3]> {
     pixels_apart_near(geometry, view, None)
 }
 
-/// [`pixels_apart`] where the grid's content comes nearest, where its `occupied` bricks are
-/// known (the volume's own grid), else where its box does.
+/// [`pixels_apart`] where the grid's content is drawn largest, where its `occupied` bricks
+/// are known (the volume's own grid), else where its box is. Along each axis, the largest
+/// over the bricks of the voxel's edge across the line of sight (the least cosine between the
+/// axis and the lines of sight to the brick's corners; none where they fall on both sides of
+/// it) over the world size of a pixel at the brick's nearest point.
 pub(super) fn pixels_apart_near(
     geometry: &VolumeGeometry,
     view: &ViewSetup,
     occupied: Option<&Occupied>,
 ) -> Option<[f64; 3]> {
-    // The world size of a pixel where the volume comes nearest.
-    let pixel = if view.is_orthographic() {
-        1.0 / view.focal
-    } else if let Some(nearest) = occupied.and_then(|o| o.nearest(geometry, view.camera.eye)) {
-        if nearest <= 0.0 {
-            return None;
+    apart_near(geometry, view, occupied).map(|a| a.pixels)
+}
+
+/// How many pixels apart a grid's voxels fall on the screen along each of its axes, and
+/// which end of each axis faces the eye ([`apart_near`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(super) struct Apart {
+    /// Pixels apart along each axis where the grid is drawn largest.
+    pub(super) pixels: [f64; 3],
+    /// Pixels a voxel's whole edge along each axis would span there, were it across the
+    /// view.
+    pub(super) full: [f64; 3],
+    /// Per axis, 1 where every sight line to the grid's content runs towards its smaller
+    /// indices (the larger face the eye), -1 where every one runs towards the larger, 0 where
+    /// they run both ways.
+    pub(super) facing: [i8; 3],
+}
+
+/// [`pixels_apart_near`], with which end of each axis faces the eye.
+pub(super) fn apart_near(
+    geometry: &VolumeGeometry,
+    view: &ViewSetup,
+    occupied: Option<&Occupied>,
+) -> Option<Apart> {
+    let m = geometry.index_to_world().matrix3;
+    let spacing = geometry.spacing();
+    let axes: [DVec3; 3] = [m.x_axis, m.y_axis, m.z_axis].map(|c| c.normalize_or_zero());
+    let eye = view.camera.eye;
+    let forward = view.axes.z_axis;
+    // Which end of an axis faces the eye along sight lines whose cosines with it span
+    // `[lo, hi]`.
+    let facing_of = |lo: f64, hi: f64| -> i8 {
+        if hi < 0.0 {
+            1
+        } else if lo > 0.0 {
+            -1
+        } else {
+            0
         }
-        nearest / view.focal
-    } else {
-        let dims = geometry.dims().map(|n| f64::from(n) - 0.5);
-        let (mut lo, mut hi) = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
-        for corner in 0..8 {
-            let c = DVec3::from(std::array::from_fn::<f64, 3, _>(|a| {
-                if corner >> a & 1 == 1 { dims[a] } else { -0.5 }
-            }));
-            let p = geometry.index_to_world_point(c);
-            lo = lo.min(p);
-            hi = hi.max(p);
-        }
-        let eye = view.camera.eye;
-        let nearest = (eye.clamp(lo, hi) - eye).length();
-        if nearest <= 0.0 {
-            return None;
-        }
-        nearest / view.focal
     };
-    (pixel.is_finite() && pixel > 0.0).then(|| geometry.spacing().map(|s| s / pixel))
+    // The share of an edge along `axis` that lies across sight lines whose cosines with it
+    // span `[lo, hi]`.
+    let across = |lo: f64, hi: f64| {
+        if lo <= 0.0 && hi >= 0.0 {
+            1.0
+        } else {
+            let least = lo.abs().min(hi.abs()).min(1.0);
+            (1.0 - least * least).sqrt()
+        }
+    };
+    let of_box = |(centre, half): (DVec3, DVec3)| -> Option<Apart> {
+        let pixel = if view.is_orthographic() {
+            1.0 / view.focal
+        } else {
+            let nearest = (eye.clamp(centre - half, centre + half) - eye).length();
+            if nearest.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
+                return None;
+            }
+            nearest / view.focal
+        };
+        let cosines: [(f64, f64); 3] = std::array::from_fn(|a| {
+            if view.is_orthographic() {
+                let c = axes[a].dot(forward);
+                return (c, c);
+            }
+            let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+            for corner in 0..8 {
+                let sign = DVec3::from(std::array::from_fn::<f64, 3, _>(|k| {
+                    if corner >> k & 1 == 1 { 1.0 } else { -1.0 }
+                }));
+                let c = axes[a].dot((centre + sign * half - eye).normalize_or_zero());
+                lo = lo.min(c);
+                hi = hi.max(c);
+            }
+            (lo, hi)
+        });
+        let pixels: [f64; 3] = std::array::from_fn(|a| {
+            let (lo, hi) = cosines[a];
+            spacing[a] * across(lo, hi) / pixel
+        });
+        let full: [f64; 3] = std::array::from_fn(|a| spacing[a] / pixel);
+        let facing = cosines.map(|(lo, hi)| facing_of(lo, hi));
+        pixels
+            .iter()
+            .chain(&full)
+            .all(|v| v.is_finite())
+            .then_some(Apart {
+                pixels,
+                full,
+                facing,
+            })
+    };
+    let worst = |boxes: &mut dyn Iterator<Item = (DVec3, DVec3)>| {
+        let mut most: Option<Apart> = None;
+        for b in boxes {
+            // The eye in a box (or a box at no distance): the own grid.
+            let apart = of_box(b)?;
+            let m = most.get_or_insert(apart);
+            for a in 0..3 {
+                m.pixels[a] = m.pixels[a].max(apart.pixels[a]);
+                m.full[a] = m.full[a].max(apart.full[a]);
+                if m.facing[a] != apart.facing[a] {
+                    m.facing[a] = 0;
+                }
+            }
+        }
+        most
+    };
+    match occupied {
+        Some(occupied) if !occupied.bricks.is_empty() => worst(&mut occupied.world_boxes(geometry)),
+        _ => {
+            let dims = geometry.dims().map(|n| f64::from(n) - 0.5);
+            let (mut lo, mut hi) = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
+            for corner in 0..8 {
+                let c = DVec3::from(std::array::from_fn::<f64, 3, _>(|a| {
+                    if corner >> a & 1 == 1 { dims[a] } else { -0.5 }
+                }));
+                let p = geometry.index_to_world_point(c);
+                lo = lo.min(p);
+                hi = hi.max(p);
+            }
+            worst(&mut std::iter::once((0.5 * (lo + hi), 0.5 * (hi - lo))))
+        }
+    }
 }
 
 /// The factors a `dims` grid whose voxels are `apart` pixels apart along each axis is refined

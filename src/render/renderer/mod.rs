@@ -13,7 +13,9 @@ use super::target::RenderTarget;
 use super::tile_pass::TilePass;
 use super::view::ViewSetup;
 use super::{GpuContext, RenderError};
-use crate::classify::{Classified, ClassifyOptions, Opacity, classify_refined, classify_with};
+use crate::classify::{
+    Classified, ClassifyOptions, Front, Opacity, classify_refined, classify_with,
+};
 use crate::geometry::{GeometryError, VolumeGeometry};
 use crate::order::{OrderOptions, Orderer, Ordering, ViewCase};
 use crate::scene::{
@@ -27,7 +29,8 @@ mod detail;
 
 use detail::*;
 pub use detail::{
-    Detail, MAX_LEVEL, MAX_REFINE, MAX_REFINED_VOXELS, REFINE_TO, detail_for, pixels_apart,
+    Detail, MAX_DEPTH_LEVELS, MAX_LEVEL, MAX_REFINE, MAX_REFINED_VOXELS, REFINE_TO, detail_for,
+    pixels_apart,
 };
 
 /// Per-frame choices that are not part of the scene.
@@ -63,6 +66,9 @@ impl Default for FrameOptions {
 pub struct FrameTimings {
     /// Classification (only on frames where a volume or transfer function changed).
     pub classify: Duration,
+    /// Making levels of detail from the classification (only on frames that draw a level
+    /// not made yet).
+    pub levels: Duration,
     /// Computing the draw orders on the CPU.
     pub order: Duration,
     /// Writing the draw orders and uniforms to the GPU.
@@ -93,9 +99,11 @@ pub struct FrameReport {
     pub overlays: usize,
     /// Splats drawn (significant voxels in front of the eye).
     pub splats: usize,
-    /// The coarsest level of detail a volume was drawn at (0: every volume from its own grid
-    /// or finer).
+    /// The coarsest level of detail a volume was drawn at, the most halvings along any axis
+    /// (0: every volume from its own grid or finer).
     pub level: u8,
+    /// The most halvings of a volume's grid along each of its axes ([`Detail::Level`]).
+    pub levels: [u8; 3],
     /// The most a volume's grid was refined along each axis, where one was
     /// ([`Detail::Refined`]).
     pub refined: Option<[u32; 3]>,
@@ -104,6 +112,9 @@ pub struct FrameReport {
     pub unrefined: bool,
     /// Volumes classified this frame (0 when nothing changed).
     pub classified: usize,
+    /// Levels of detail made this frame from a classification (0 when every level drawn was
+    /// made already).
+    pub levels_made: usize,
     /// What the CPU tile compositor did, when it composited the splats.
     pub tiles: Option<TileStats>,
     /// Where the time went.
@@ -128,11 +139,18 @@ type ClassKey = (usize, usize, u32, u64, u64, u64, Option<u32>);
 
 struct VolumeState {
     key: ClassKey,
-    /// The volume drawn: the node's own at level 0 and refined, halved once per level above
-    /// (for the splats' placement and gradients).
+    /// The node's volume (the splats' placement, and the gradients of its own grid and its
+    /// refinement).
     volume: Arc<CpuVolume>,
     /// How many times finer than `volume`'s the grid is along each axis.
     factors: [u32; 3],
+    /// How many times the grid was halved along each axis (a level of detail above the own
+    /// grid, whose texels are made from the level below's when the level is).
+    levels: [u8; 3],
+    /// The frame that last drew this grid or made a level from it (levels halved along some
+    /// axes more than others are dropped, least recently used first, past
+    /// [`KEPT_UNEVEN_LEVELS`]).
+    used: u64,
     classified: Classified,
     /// The GPU copy, made on the first frame the splat pass draws it.
     gpu: Option<GpuVolume>,
@@ -157,6 +175,8 @@ impl VolumeState {
             key,
             volume,
             factors,
+            levels: [0; 3],
+            used: 0,
             classified,
             gpu: None,
             texels: None,
@@ -172,10 +192,62 @@ impl VolumeState {
     fn geometry(&self, world: DMat4) -> Result<VolumeGeometry, GeometryError> {
         placed_grid(
             self.classified.grid.dims(),
-            world * volume_placement(&self.volume) * refinement(self.factors),
+            world
+                * volume_placement(&self.volume)
+                * refinement(self.factors)
+                * coarsening(self.levels),
         )
     }
+
+    /// The 8-byte texel of significant voxel `k` (rank `rank`) of this state's grid: from its
+    /// texels where they are made (a level above the own grid has them from the start), else
+    /// from the volume's gradients.
+    fn texel(&self, k: [u32; 3], rank: usize) -> [u8; 8] {
+        match &self.texels {
+            Some(texels) => texels.get(k[0], k[1], k[2]).copied().unwrap_or([0; 8]),
+            None => {
+                crate::splat::tiled::texel(&self.volume, self.factors, &self.classified, k, rank)
+            }
+        }
+    }
 }
+
+/// The level above `below` made by halving its grid along `axes` (its levels then `levels`;
+/// `front` where the one axis halved runs along the view):
+/// its classification combined ([`Classified::halved_along`]) and its texels made from the
+/// level below's ([`SplatTexels::halved`]; the level below's are made first where they are
+/// not yet). `None` where the level would have no splat.
+fn make_level(
+    below: &mut VolumeState,
+    axes: [bool; 3],
+    front: Option<Front>,
+    levels: [u8; 3],
+) -> Result<Option<VolumeState>, crate::grid::GridError> {
+    let classified = below.classified.halved_along(axes, front)?;
+    if classified.grid.is_empty() {
+        return Ok(None);
+    }
+    let texels = below
+        .texels
+        .get_or_insert_with(|| SplatTexels::new(&below.classified, &below.volume, below.factors));
+    let step = axes.map(|h| if h { 2 } else { 1 });
+    let texels = texels.halved(&classified, step, front);
+    let mut state = VolumeState::new(
+        below.key,
+        Arc::clone(&below.volume),
+        below.factors,
+        classified,
+        Orderer::new(),
+        Vec::new(),
+    );
+    state.levels = levels;
+    state.texels = Some(texels);
+    Ok(Some(state))
+}
+
+/// The most levels of detail a volume keeps that are halved along some axes more than others
+/// (a camera orbiting a volume wants one for each axis its view runs along).
+const KEPT_UNEVEN_LEVELS: usize = 2;
 
 /// Who composites the splats of screenshots.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -232,6 +304,9 @@ pub struct Renderer {
     tiles: TiledCompositor,
     /// The tile compositor on the GPU ([`Compositor::GpuTiles`]), made on its first frame.
     tile_pass: Option<TilePass>,
+    /// Frames whose levels of detail were chosen, counted (to drop levels least recently
+    /// used).
+    frame: u64,
 }
 
 impl std::fmt::Debug for Renderer {
@@ -315,7 +390,7 @@ impl Renderer {
         self.sync_meshes(ctx, scene);
         let started = Instant::now();
         report.classified = self.sync_volumes(scene, view, options.preview, &mut report)?;
-        report.timings.classify = started.elapsed();
+        report.timings.classify = started.elapsed().saturating_sub(report.timings.levels);
         let ordered = self.order_volumes(scene, view, options, &mut report)?;
         let started = Instant::now();
         self.upload(ctx, scene, view, &ordered, &mut report)?;
@@ -412,7 +487,7 @@ impl Renderer {
         let mut report = FrameReport::default();
         let started = Instant::now();
         report.classified = self.sync_volumes(scene, &view, options.preview, &mut report)?;
-        report.timings.classify = started.elapsed();
+        report.timings.classify = started.elapsed().saturating_sub(report.timings.levels);
         let ordered = self.order_volumes(scene, &view, options, &mut report)?;
         // What lies under the splats: the meshes on the GPU, or the background alone.
         let has_meshes = scene.meshes().chain(scene.overlays()).next().is_some();
@@ -602,8 +677,8 @@ impl Renderer {
 
     /// Classifies volumes whose data, transfer function or threshold changed, chooses the
     /// level of detail each is drawn at in `view` (at least 1 for a preview frame) and makes
-    /// the levels up to it that are missing; returns how many classifications and levels were
-    /// made.
+    /// the levels up to it that are missing (counted in `report.levels_made`); returns how
+    /// many classifications were made.
     fn sync_volumes(
         &mut self,
         scene: &Scene,
@@ -642,7 +717,7 @@ impl Renderer {
                 )
                 .map_err(|e| fail(e.to_string()))
             };
-            let own = (id, Detail::Level(0));
+            let own = (id, Detail::default());
             if self.volumes.get(&own).is_none_or(|v| v.key != key) {
                 let result = classify_with(&node.volume, &node.transfer, &options)
                     .map_err(|e| fail(e.to_string()))?;
@@ -665,12 +740,14 @@ impl Renderer {
                 continue;
             };
             let wanted = if self.full_grid {
-                Detail::Level(0)
+                Detail::default()
             } else {
                 let geometry =
                     placed_geometry(&full.volume, world).map_err(|e| fail(e.to_string()))?;
-                let apart = pixels_apart_near(&geometry, view, full.occupied.as_ref());
+                let apart = apart_near(&geometry, view, full.occupied.as_ref());
                 let wanted = detail_at(geometry.dims(), apart);
+                // Refinement goes by the voxels' whole edges.
+                let apart = apart.map(|a| a.full);
                 // A refinement made already stays while its voxels are still between half a
                 // pixel and REFINE_TO apart, so that a camera orbiting at one distance does not
                 // classify anew.
@@ -691,49 +768,93 @@ impl Renderer {
                 }
             };
             let wanted = match wanted {
-                Detail::Level(level) if preview => Detail::Level(level.max(1)),
-                Detail::Refined(_) if preview => Detail::Level(1),
+                Detail::Level(level, facing) if preview => {
+                    level_facing(level.map(|l| l.max(1)), facing)
+                }
+                Detail::Refined(_) if preview => Detail::Level([1; 3], [0; 3]),
                 Detail::Refined(_) if self.no_refinement => {
                     report.unrefined = true;
-                    Detail::Level(0)
+                    Detail::default()
                 }
                 wanted => wanted,
             };
             let drawn = match wanted {
-                Detail::Level(wanted) => {
-                    // Make the levels up to the one wanted, each from the one below; a level
-                    // whose grid would have no splat, or that would not shrink the grid, is
-                    // not made.
-                    let mut level = 0;
-                    while level < wanted {
-                        let above = (id, Detail::Level(level + 1));
-                        if !self.volumes.contains_key(&above) {
-                            let below = &self.volumes[&(id, Detail::Level(level))];
-                            if below.volume.dims.iter().all(|&n| n <= 1) {
-                                break;
-                            }
-                            let classified =
-                                below.classified.halved().map_err(|e| fail(e.to_string()))?;
-                            if classified.grid.is_empty() {
-                                break;
-                            }
-                            let volume = Arc::new(below.volume.halved());
-                            made += 1;
-                            self.volumes.insert(
-                                above,
-                                VolumeState::new(
-                                    key,
-                                    volume,
-                                    [1; 3],
-                                    classified,
-                                    Orderer::new(),
-                                    Vec::new(),
-                                ),
-                            );
+                Detail::Level(wanted, facing) => {
+                    // Make the levels up to the one wanted, each from the one below by halving
+                    // every axis still below its level (the levels even across axes first,
+                    // shared by other views; then the axes along the view, their voxels
+                    // weighted as the rays composite them); a level that would have no
+                    // splat, or whose axes cannot be halved further, is not made.
+                    // The own grid's voxel size in the world (the opacities' step).
+                    let spacing = placed_geometry(&node.volume, world)
+                        .map_err(|e| fail(e.to_string()))?
+                        .spacing();
+                    let mut level = [0u8; 3];
+                    self.frame += 1;
+                    let frame = self.frame;
+                    let mut key = Detail::default();
+                    while let Some(state) = self.volumes.get_mut(&(id, key)) {
+                        state.used = frame;
+                        let dims = state.classified.grid.dims();
+                        let axes: [bool; 3] =
+                            std::array::from_fn(|a| level[a] < wanted[a] && dims[a] > 1);
+                        if axes == [false; 3] {
+                            break;
                         }
-                        level += 1;
+                        let next: [u8; 3] = std::array::from_fn(|a| level[a] + u8::from(axes[a]));
+                        let above = level_facing(next, facing);
+                        if !self.volumes.contains_key(&(id, above)) {
+                            // The one axis halved along the view, where this step halves it
+                            // alone.
+                            let Detail::Level(_, along) = above else {
+                                break;
+                            };
+                            let mut halved = (0..3).filter(|&a| axes[a]);
+                            let front = match (halved.next(), halved.next()) {
+                                (Some(a), None) if along[a] != 0 => Some(Front {
+                                    axis: a,
+                                    larger_nearer: along[a] > 0,
+                                    step_mm: (spacing[a] * f64::from(1u32 << level[a])) as f32,
+                                }),
+                                _ => None,
+                            };
+                            let Some(state) = self.volumes.get_mut(&(id, key)) else {
+                                break;
+                            };
+                            let started = Instant::now();
+                            let made_level = make_level(state, axes, front, next)
+                                .map_err(|e| fail(e.to_string()))?;
+                            report.timings.levels += started.elapsed();
+                            let Some(made_level) = made_level else {
+                                break;
+                            };
+                            report.levels_made += 1;
+                            self.volumes.insert((id, above), made_level);
+                        }
+                        level = next;
+                        key = above;
                     }
-                    Detail::Level(level)
+                    if let Some(state) = self.volumes.get_mut(&(id, key)) {
+                        state.used = frame;
+                    }
+                    // Uneven levels past the few kept go, least recently used first.
+                    let mut uneven: Vec<(Detail, u64)> = self
+                        .volumes
+                        .iter()
+                        .filter_map(|((v, d), state)| match d {
+                            Detail::Level(l, _) if *v == id && (l[0] != l[1] || l[1] != l[2]) => {
+                                Some((*d, state.used))
+                            }
+                            _ => None,
+                        })
+                        .collect();
+                    uneven.sort_by_key(|(_, used)| std::cmp::Reverse(*used));
+                    for (d, used) in uneven.into_iter().skip(KEPT_UNEVEN_LEVELS) {
+                        if used != frame {
+                            self.volumes.remove(&(id, d));
+                        }
+                    }
+                    key
                 }
                 Detail::Refined(factors) => {
                     let refined = (id, wanted);
@@ -741,7 +862,7 @@ impl Renderer {
                         // One refinement a volume is kept: a view that wants another makes it
                         // anew.
                         self.volumes
-                            .retain(|(v, d), _| *v != id || matches!(d, Detail::Level(_)));
+                            .retain(|(v, d), _| *v != id || matches!(d, Detail::Level(..)));
                         let result =
                             classify_refined(&node.volume, &node.transfer, &options, factors)
                                 .map_err(|e| fail(e.to_string()))?;
@@ -808,7 +929,12 @@ impl Renderer {
                 .map_err(|e| fail(e.to_string()))?;
             report.splats += state.ids.len();
             match self.levels.get(&id).copied().unwrap_or_default() {
-                Detail::Level(level) => report.level = report.level.max(level),
+                Detail::Level(level, _) => {
+                    for (most, l) in report.levels.iter_mut().zip(level) {
+                        *most = (*most).max(l);
+                    }
+                    report.level = report.levels.into_iter().max().unwrap_or(0);
+                }
                 Detail::Refined(factors) => {
                     let most = report.refined.get_or_insert([1; 3]);
                     for a in 0..3 {
@@ -851,17 +977,13 @@ impl Renderer {
                 .find(|(v, _, _)| v == id)
                 .map(|(_, node, _)| node.splats)
                 .unwrap_or_default();
-            let gpu = match &mut state.gpu {
-                Some(gpu) => gpu,
-                empty => {
-                    let pass = splat_pass.get_or_insert_with(|| SplatPass::new(ctx));
-                    empty.insert(pass.upload(
-                        ctx,
-                        &state.volume,
-                        state.factors,
-                        &state.classified,
-                    )?)
-                }
+            if state.gpu.is_none() {
+                let pass = splat_pass.get_or_insert_with(|| SplatPass::new(ctx));
+                let gpu = pass.upload(ctx, &state.classified, &|k, rank| state.texel(k, rank))?;
+                state.gpu = Some(gpu);
+            }
+            let Some(gpu) = &mut state.gpu else {
+                continue;
             };
             SplatPass::upload_order(ctx, gpu, &state.ids)?;
             SplatPass::write_uniforms(ctx, gpu, geometry, view, &settings, &scene.clipping);

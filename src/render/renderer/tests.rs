@@ -34,30 +34,78 @@ fn refinement_brings_voxels_to_about_a_pixel_within_its_caps() {
 
 #[test]
 fn the_detail_follows_the_pixels_a_voxel_spans() {
-    // A 100 mm cube of 50 voxels (2 mm) seen from 400 mm at 35 degrees.
+    // A 100 mm cube of 50 voxels (2 mm) seen from 400 mm at 35 degrees, along its z axis.
     let geometry = |spacing: f64| {
         VolumeGeometry::new([50; 3], glam::DAffine3::from_scale(DVec3::splat(spacing))).unwrap()
     };
     let camera = SceneCamera::look_at(DVec3::new(50.0, 50.0, -400.0), DVec3::splat(50.0));
     let view = |pixels: u32| ViewSetup::new(&camera, (pixels, pixels), None).unwrap();
-    let apart = |g: &VolumeGeometry, v: &ViewSetup| pixels_apart(g, v).unwrap()[0];
-    // About 2 pixels apart at 256: refined 2 x 2 x 2.
+    let apart = |g: &VolumeGeometry, v: &ViewSetup| pixels_apart(g, v).unwrap();
+    // About 2 pixels apart across the view at 256: refined 2 x 2 x 2 (the voxels' edges
+    // along z, the view, would span as many pixels across it). Along z the voxels lie nearly
+    // on top of each other: the edge of a voxel across the sight lines to the cube's near
+    // corners (10 degrees off the axis, the most) is about a sixth of a voxel.
     let g = geometry(2.0);
     let a = apart(&g, &view(256));
-    assert!((1.9..2.1).contains(&a), "{a}");
+    assert!(
+        (1.9..2.1).contains(&a[0]) && (1.9..2.1).contains(&a[1]),
+        "{a:?}"
+    );
+    let share = (50.0f64.hypot(50.0) / 50.0f64.hypot(50.0).hypot(400.0)).min(1.0);
+    assert!(
+        (a[2] - a[0] * share).abs() < 0.05 * a[0],
+        "{a:?} against {share}"
+    );
     assert_eq!(detail_for(&g, &view(256)), Detail::Refined([2; 3]));
-    // Under half a pixel apart at 48: a level coarser, whose voxels are under a pixel
-    // apart; the next would be more.
+    // Under half a pixel apart at 48: a level coarser across the view, whose voxels are
+    // under a pixel apart; along the view one more, with its smaller indices facing the eye
+    // (the view runs towards +z).
     let a = apart(&g, &view(48));
-    assert!((0.25..0.5).contains(&a), "{a}");
-    assert_eq!(detail_for(&g, &view(48)), Detail::Level(1));
-    // About a pixel apart: the own grid.
-    assert_eq!(detail_for(&g, &view(160)), Detail::Level(0));
-    assert_eq!(detail_for(&g, &view(64)), Detail::Level(0));
+    assert!((0.25..0.5).contains(&a[0]), "{a:?}");
+    assert_eq!(
+        detail_for(&g, &view(48)),
+        Detail::Level([1, 1, 2], [0, 0, -1])
+    );
+    // About a pixel apart: the own grid across the view, halved once along it.
+    for pixels in [64, 160] {
+        assert_eq!(
+            detail_for(&g, &view(pixels)),
+            Detail::Level([0, 0, 1], [0, 0, -1]),
+            "{pixels}"
+        );
+    }
+    // From the other side its larger indices face the eye.
+    let behind = SceneCamera::look_at(DVec3::new(50.0, 50.0, 500.0), DVec3::splat(50.0));
+    let v = ViewSetup::new(&behind, (160, 160), None).unwrap();
+    assert_eq!(detail_for(&g, &v), Detail::Level([0, 0, 1], [0, 0, 1]));
+    // Along the diagonal no axis lies along the view: every axis alike.
+    let diagonal = SceneCamera::look_at(DVec3::splat(-300.0), DVec3::splat(50.0));
+    let v = ViewSetup::new(&diagonal, (48, 48), None).unwrap();
+    let a = apart(&g, &v);
+    assert!(
+        (a[0] - a[1]).abs() < 1e-9 && (a[1] - a[2]).abs() < 1e-9,
+        "{a:?}"
+    );
+    assert!(
+        matches!(detail_for(&g, &v), Detail::Level(l, [0, 0, 0]) if l[0] == l[1] && l[1] == l[2])
+    );
+    // Orthographic along x: the voxels along x fall on each other exactly, and x is halved
+    // once more than the others (no further: MAX_DEPTH_LEVELS).
+    let ortho = SceneCamera {
+        projection: crate::scene::Projection::Orthographic { height: 200.0 },
+        ..SceneCamera::look_at(DVec3::new(-400.0, 50.0, 50.0), DVec3::splat(50.0))
+    };
+    let v = ViewSetup::new(&ortho, (100, 100), None).unwrap();
+    let a = apart(&g, &v);
+    assert!(a[0].abs() < 1e-9 && (a[1] - 1.0).abs() < 1e-9, "{a:?}");
+    assert_eq!(
+        detail_for(&g, &v),
+        Detail::Level([MAX_DEPTH_LEVELS, 0, 0], [-1, 0, 0])
+    );
     // The eye inside the box: the own grid.
     let inside = SceneCamera::look_at(DVec3::splat(50.0), DVec3::new(50.0, 50.0, 400.0));
     let v = ViewSetup::new(&inside, (256, 256), None).unwrap();
-    assert_eq!(detail_for(&g, &v), Detail::Level(0));
+    assert_eq!(detail_for(&g, &v), Detail::default());
 }
 
 #[test]
@@ -109,8 +157,15 @@ fn the_detail_goes_by_where_the_content_comes_nearest() {
         let by_box = pixels_apart(&geometry, &view).unwrap()[0];
         let by_content = pixels_apart_near(&geometry, &view, Some(&occupied)).unwrap()[0];
         assert!(by_content < 0.7 * by_box, "{by_content} against {by_box}");
-        let level = |d| match detail_at([n; 3], Some([d; 3])) {
-            Detail::Level(l) => l,
+        let level = |d| match detail_at(
+            [n; 3],
+            Some(Apart {
+                pixels: [d; 3],
+                full: [d; 3],
+                facing: [0; 3],
+            }),
+        ) {
+            Detail::Level(l, _) => l[0],
             Detail::Refined(_) => 0,
         };
         assert!(level(by_content) >= level(by_box));

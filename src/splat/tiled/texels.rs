@@ -2,7 +2,7 @@
 
 use rayon::prelude::*;
 
-use crate::classify::{Classified, refined_gradient_snorm8};
+use crate::classify::{Classified, Front, refined_gradient_snorm8};
 use crate::grid::SparseGrid;
 use crate::volume::CpuVolume;
 
@@ -126,10 +126,78 @@ impl SplatTexels {
         }
     }
 
+    /// The texels of the level above these texels' grid: `above` is the classification
+    /// [`Classified::halved_along`] made from theirs, halving the axes whose `step` is 2, with
+    /// the same `front`. Each splat takes its colour and density from `above`, and as its
+    /// normal the mean of its block's normals with the weights its colour had (the densities,
+    /// or along a `front` the opacities as a ray composites them), taken into the coarser
+    /// grid's index space (a gradient's component along an axis halved doubles) and made unit
+    /// again: the block's surface, with no volume resampled for it. No normal where the
+    /// block's cancel.
+    pub fn halved(&self, above: &Classified, step: [u32; 3], front: Option<Front>) -> Self {
+        let scale = glam::Vec3::from(step.map(|s| s as f32));
+        // As in the colours: a front along the one axis halved, else none.
+        let front = front.filter(|f| f.axis < 3 && (0..3).all(|a| (step[a] == 2) == (a == f.axis)));
+        let density = |t: &[u8; 8]| {
+            let d = half::f16::from_le_bytes([t[6], t[7]]).to_f32();
+            // Opaque voxels count as the largest half, as in the colours.
+            if d.is_nan() { 0.0 } else { d.min(65504.0) }
+        };
+        let normal = |t: &[u8; 8]| {
+            glam::Vec3::new(
+                f32::from(t[3] as i8),
+                f32::from(t[4] as i8),
+                f32::from(t[5] as i8),
+            )
+        };
+        Self::build(&above.grid, |k, rank| {
+            let c = above.colors.get(rank).copied().unwrap_or_default();
+            let fine = |d: [u32; 3]| {
+                let [x, y, z] = std::array::from_fn(|a| k[a] * step[a] + d[a]);
+                self.get(x, y, z)
+            };
+            let sum = match front {
+                Some(front) => {
+                    // The pair along the axis, nearer first, weighted as a ray composites them.
+                    let mut ends = [[0; 3]; 2];
+                    ends[usize::from(!front.larger_nearer)][front.axis] = 1;
+                    let [near, far] = ends.map(&fine);
+                    let near_alpha = near.map_or(0.0, |t| front.alpha(density(t)));
+                    let mut normals = [(0.0, glam::Vec3::ZERO); 2];
+                    if let Some(t) = near {
+                        normals[0] = (near_alpha, normal(t));
+                    }
+                    if let Some(t) = far {
+                        normals[1] = ((1.0 - near_alpha) * front.alpha(density(t)), normal(t));
+                    }
+                    shading_normal(&normals, front.axis)
+                }
+                None => {
+                    let mut sum = glam::Vec3::ZERO;
+                    for dz in 0..step[2] {
+                        for dy in 0..step[1] {
+                            for dx in 0..step[0] {
+                                if let Some(t) = fine([dx, dy, dz]) {
+                                    sum += density(t) * normal(t);
+                                }
+                            }
+                        }
+                    }
+                    sum
+                }
+            };
+            let n = (sum * scale).try_normalize().map_or([0; 3], |n| {
+                n.to_array().map(|v| (v * 127.0).round() as i8 as u8)
+            });
+            let d = c.density.to_bits().to_le_bytes();
+            [c.rgb[0], c.rgb[1], c.rgb[2], n[0], n[1], n[2], d[0], d[1]]
+        })
+    }
+
     /// The texel of voxel `(x, y, z)`: straight RGB8, the gradient as snorm8, the density's
     /// f16 bits (little-endian); `None` off the grid or where the voxel is not significant.
     #[inline]
-    pub(super) fn get(&self, x: u32, y: u32, z: u32) -> Option<&[u8; 8]> {
+    pub fn get(&self, x: u32, y: u32, z: u32) -> Option<&[u8; 8]> {
         let [nx, ny, nz] = self.dims;
         if x >= nx || y >= ny || z >= nz {
             return None;
@@ -163,8 +231,152 @@ pub fn texel(
     [c.rgb[0], c.rgb[1], c.rgb[2], n[0], n[1], n[2], d[0], d[1]]
 }
 
+/// One normal for a block of voxels a ray along `axis` composites with the weights given,
+/// shading as they do together. Shading is two-sided (`|n . view|`, the splats' headlight), so
+/// the weighted mean of the normals would not do: the two faces of a structure one voxel thin
+/// along the view have opposite gradients, whose mean cancels to a normal across the view and
+/// shades the structure dark, and turning them to one side first shades it too bright where
+/// the normals scatter. The normal returned has the weighted mean of their shading along the
+/// axis, `|n . axis|`, as its component along it, and across it the direction of their
+/// weighted sum turned to one side of the axis. (The view runs along the axis within the
+/// share [`detail_for`](crate::render::detail_for) allows; the index space is taken as
+/// isotropic, as fine grids nearly are.)
+fn shading_normal(normals: &[(f32, glam::Vec3)], axis: usize) -> glam::Vec3 {
+    let along = glam::Vec3::AXES[axis];
+    let total: f32 = normals.iter().map(|(w, _)| w).sum();
+    if normals.is_empty() || total.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
+        return glam::Vec3::ZERO;
+    }
+    let lit = normals
+        .iter()
+        // A voxel with no gradient is drawn unshaded, as lit as a normal along the view.
+        .map(|&(w, n)| w * n.try_normalize().map_or(1.0, |n| n.dot(along).abs()))
+        .sum::<f32>()
+        / total;
+    let lit = lit.clamp(0.0, 1.0);
+    let across: glam::Vec3 = normals
+        .iter()
+        .map(|&(w, n)| {
+            let n = if n.dot(along) < 0.0 { -n } else { n };
+            w * (n - n.dot(along) * along)
+        })
+        .sum();
+    let across = across
+        .try_normalize()
+        .unwrap_or(glam::Vec3::AXES[(axis + 1) % 3]);
+    lit * along + (1.0 - lit * lit).max(0.0).sqrt() * across
+}
+
 /// The bit of voxel `(x, y, z)` in its brick's mask.
 #[inline(always)]
 pub(super) fn within_brick(x: usize, y: usize, z: usize) -> usize {
     ((z % BRICK) * BRICK + y % BRICK) * BRICK + x % BRICK
+}
+
+#[cfg(test)]
+mod tests {
+    use glam::Vec3;
+
+    use super::*;
+    use crate::classify::SplatColor;
+
+    /// The shading a normal gets from a headlight along `axis`, as the compositors shade.
+    fn lit(n: Vec3, axis: usize) -> f32 {
+        n.try_normalize().map_or(1.0, |n| n[axis].abs())
+    }
+
+    #[test]
+    fn a_blocks_normal_shades_as_its_voxels_do_together() {
+        // The two faces of a structure one voxel thin along the view: opposite normals, both
+        // fully lit; their mean would be no normal at all.
+        let n = shading_normal(&[(0.7, Vec3::Z), (0.3, -Vec3::Z)], 2);
+        assert!((lit(n, 2) - 1.0).abs() < 1e-6, "{n}");
+        // Normals tilted 60 and 0 degrees off the view: lit as their weighted mean, tilted
+        // towards the first.
+        let tilted = Vec3::new(3f32.sqrt() / 2.0, 0.0, 0.5);
+        let n = shading_normal(&[(0.25, tilted), (0.75, -Vec3::Z)], 2);
+        let want = 0.25 * 0.5 + 0.75;
+        assert!((lit(n, 2) - want).abs() < 1e-6, "{n}");
+        assert!(n.x > 0.0 && n.y.abs() < 1e-6, "{n}");
+        // A voxel with no gradient is drawn unshaded: it counts as fully lit.
+        let n = shading_normal(&[(0.5, Vec3::ZERO), (0.5, Vec3::X)], 2);
+        assert!((lit(n, 2) - 0.5).abs() < 1e-6, "{n}");
+        // No weight: no normal.
+        assert_eq!(shading_normal(&[], 2), Vec3::ZERO);
+    }
+
+    #[test]
+    fn texels_halved_along_the_view_shade_as_the_pairs_they_replace() {
+        // A 2 x 4 x 2 grid, every voxel present, halved along y; each voxel's normal and
+        // density varied. Each coarse texel's shading along y against the pair's, weighted
+        // nearer over farther, computed plainly; its colour and density from the coarse
+        // classification.
+        let dims = [2u32, 4, 2];
+        let normal = |k: [u32; 3]| {
+            let a = 0.4 * (k[0] + 3 * k[1] + 5 * k[2]) as f32;
+            let flip = if (k[1] + k[2]).is_multiple_of(2) {
+                1.0
+            } else {
+                -1.0
+            };
+            Vec3::new(a.cos(), flip * (0.3 + 0.1 * k[1] as f32), a.sin()).normalize()
+        };
+        let density = |k: [u32; 3]| 0.2 + 0.5 * ((k[0] + k[1] * 2 + k[2]) % 4) as f32;
+        let ids: Vec<u32> = (0..16).collect();
+        let fine = Classified {
+            grid: SparseGrid::from_sorted_ids(dims, &ids).unwrap(),
+            colors: ids
+                .iter()
+                .map(|&id| {
+                    let k = [id % 2, id / 2 % 4, id / 8];
+                    SplatColor {
+                        rgb: [id as u8 * 10, 50, 200],
+                        density: half::f16::from_f32(density(k)),
+                    }
+                })
+                .collect(),
+        };
+        let texels = SplatTexels::build(&fine.grid, |k, rank| {
+            let n = normal(k)
+                .to_array()
+                .map(|v| (v * 127.0).round() as i8 as u8);
+            let d = fine.colors[rank].density.to_bits().to_le_bytes();
+            [0, 0, 0, n[0], n[1], n[2], d[0], d[1]]
+        });
+        for larger_nearer in [true, false] {
+            let front = Front {
+                axis: 1,
+                larger_nearer,
+                step_mm: 0.7,
+            };
+            let coarse = fine
+                .halved_along([false, true, false], Some(front))
+                .unwrap();
+            let halved = texels.halved(&coarse, [1, 2, 1], Some(front));
+            for id in coarse.grid.ids() {
+                let k = coarse.grid.coords(id);
+                let t = halved.get(k[0], k[1], k[2]).unwrap();
+                let rank = coarse.grid.rank(id).unwrap() as usize;
+                assert_eq!(t[..3], coarse.colors[rank].rgb);
+                assert_eq!(t[6..], coarse.colors[rank].density.to_bits().to_le_bytes());
+                // Back into the fine grid's index space: the y component halves.
+                let n = Vec3::new(
+                    f32::from(t[3] as i8),
+                    f32::from(t[4] as i8) / 2.0,
+                    f32::from(t[5] as i8),
+                );
+                let (lo, hi) = ([k[0], 2 * k[1], k[2]], [k[0], 2 * k[1] + 1, k[2]]);
+                let (near, far) = if larger_nearer { (hi, lo) } else { (lo, hi) };
+                let alpha = |k| front.alpha(density(k));
+                let (wn, wf) = (alpha(near), (1.0 - alpha(near)) * alpha(far));
+                let want = (wn * lit(normal(near), 1) + wf * lit(normal(far), 1)) / (wn + wf);
+                // Within the snorm8 quantisation.
+                assert!(
+                    (lit(n, 1) - want).abs() < 0.02,
+                    "{k:?}: {} against {want}",
+                    lit(n, 1)
+                );
+            }
+        }
+    }
 }
