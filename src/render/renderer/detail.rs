@@ -252,8 +252,9 @@ pub fn pixels_apart(geometry: &VolumeGeometry, view: &ViewSetup) -> Option<[f64;
 }
 
 /// [`pixels_apart`] where the grid's content is drawn largest, where its `occupied` bricks
-/// are known (the volume's own grid), else where its box is. Along each axis, the largest
-/// over the bricks of the voxel's edge across the line of sight (the least cosine between the
+/// are known (the volume's own grid), else where its box is; bricks off the image do not
+/// count. Along each axis, the largest over the bricks of the voxel's edge across the line of
+/// sight (the least cosine between the
 /// axis and the lines of sight to the brick's corners; none where they fall on both sides of
 /// it) over the world size of a pixel at the brick's nearest point.
 pub(super) fn pixels_apart_near(
@@ -356,6 +357,10 @@ pub(super) fn apart_near(
     let worst = |boxes: &mut dyn Iterator<Item = (DVec3, DVec3)>| {
         let mut most: Option<Apart> = None;
         for b in boxes {
+            // Content off the image draws no pixel, however fine or coarse.
+            if off_image(view, b) {
+                continue;
+            }
             // The eye in a box (or a box at no distance): the own grid.
             let apart = of_box(b)?;
             let m = most.get_or_insert(apart);
@@ -384,6 +389,31 @@ pub(super) fn apart_near(
             }
             worst(&mut std::iter::once((0.5 * (lo + hi), 0.5 * (hi - lo))))
         }
+    }
+}
+
+/// Whether the world box `(centre, half size)` lies wholly outside what `view` sees: beyond
+/// one of the planes through the image's edges (for perspective, through the eye), or
+/// behind the eye.
+pub(super) fn off_image(view: &ViewSetup, (centre, half): (DVec3, DVec3)) -> bool {
+    let [right, up, forward] = [view.axes.x_axis, view.axes.y_axis, view.axes.z_axis];
+    let (w, h) = (f64::from(view.size.0), f64::from(view.size.1));
+    let (tan_x, tan_y) = (0.5 * w / view.focal, 0.5 * h / view.focal);
+    let to = centre - view.camera.eye;
+    // The box lies beyond the plane of outward normal `n` at `offset` from the eye.
+    let beyond = |n: DVec3, offset: f64| n.dot(to) - n.abs().dot(half) > offset;
+    if view.is_orthographic() {
+        beyond(right, tan_x)
+            || beyond(-right, tan_x)
+            || beyond(up, tan_y)
+            || beyond(-up, tan_y)
+            || beyond(-forward, 0.0)
+    } else {
+        beyond(right - tan_x * forward, 0.0)
+            || beyond(-right - tan_x * forward, 0.0)
+            || beyond(up - tan_y * forward, 0.0)
+            || beyond(-up - tan_y * forward, 0.0)
+            || beyond(-forward, 0.0)
     }
 }
 

@@ -173,3 +173,83 @@ fn the_detail_goes_by_where_the_content_comes_nearest() {
     }
     assert!(coarser > 5, "{coarser} sizes drawn coarser");
 }
+
+#[test]
+fn content_off_the_image_does_not_set_the_detail() {
+    // Looking along +z from the origin at 35 degrees (half-angle 17.5): a box 100 mm ahead
+    // is on the image; one as far ahead but 100 mm to a side, or behind the eye, is not.
+    let camera = SceneCamera::look_at(DVec3::ZERO, DVec3::new(0.0, 0.0, 100.0));
+    let view = ViewSetup::new(&camera, (200, 100), None).unwrap();
+    let half = DVec3::splat(5.0);
+    let at = |x: f64, y: f64, z: f64| (DVec3::new(x, y, z), half);
+    assert!(!off_image(&view, at(0.0, 0.0, 100.0)));
+    // The image is twice as wide as high: 35 degrees high, about 64 wide.
+    assert!(!off_image(&view, at(50.0, 0.0, 100.0)));
+    assert!(off_image(&view, at(0.0, 50.0, 100.0)));
+    for side in [
+        at(100.0, 0.0, 100.0),
+        at(-100.0, 0.0, 100.0),
+        at(0.0, 100.0, 100.0),
+        at(0.0, -100.0, 100.0),
+        at(0.0, 0.0, -100.0),
+    ] {
+        assert!(off_image(&view, side), "{side:?}");
+    }
+    // A box reaching into the image from off it is on it.
+    assert!(!off_image(
+        &view,
+        (DVec3::new(0.0, 60.0, 100.0), DVec3::splat(40.0))
+    ));
+    // Orthographic, 100 mm high and 200 wide: the planes are parallel.
+    let ortho = SceneCamera {
+        projection: crate::scene::Projection::Orthographic { height: 100.0 },
+        ..camera
+    };
+    let view = ViewSetup::new(&ortho, (200, 100), None).unwrap();
+    assert!(!off_image(&view, at(90.0, 0.0, 500.0)));
+    assert!(off_image(&view, at(0.0, 60.0, 500.0)));
+    assert!(off_image(&view, at(0.0, 0.0, -100.0)));
+    // A grid whose content nearest the eye lies off the image: the detail goes by the
+    // content on it, farther and so coarser.
+    let n = 64u32;
+    let near_off = |k: [u32; 3]| k[0] >= 56 && k[2] < 8;
+    let far_on = |k: [u32; 3]| (28..36).contains(&k[0]) && (28..36).contains(&k[1]) && k[2] >= 56;
+    let values = (0..n * n * n)
+        .map(|id| {
+            let k = [id % n, id / n % n, id / n / n];
+            if near_off(k) || far_on(k) {
+                1000.0
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    let volume = CpuVolume {
+        dims: [n; 3],
+        spacing: [1.0; 3],
+        origin: [0.0; 3],
+        direction: DMat3::IDENTITY,
+        values,
+    };
+    let tf = crate::classify::TransferFunction::ramp(100.0, 900.0, [1.0, 1.0, 1.0, 0.8]);
+    let classified = crate::classify::classify(&volume, &tf, 0.0).unwrap();
+    let occupied = Occupied::of(&classified);
+    let geometry = VolumeGeometry::new([n; 3], glam::DAffine3::from_scale(DVec3::ONE)).unwrap();
+    // From 40 mm in front of the grid's face, narrowly at the far cube.
+    let camera = SceneCamera {
+        projection: crate::scene::Projection::Perspective {
+            fov_y_degrees: 10.0,
+        },
+        ..SceneCamera::look_at(DVec3::new(32.0, 32.0, -40.0), DVec3::new(32.0, 32.0, 60.0))
+    };
+    let view = ViewSetup::new(&camera, (64, 64), None).unwrap();
+    let on_image = pixels_apart_near(&geometry, &view, Some(&occupied)).unwrap();
+    // By the far cube's brick alone (z from 47.5), 87.5 mm from the eye; the near cube's
+    // brick, off the image, lies 42 mm from it.
+    let pixel = 87.5 / view.focal;
+    assert!(
+        (on_image[0] * pixel - 1.0).abs() < 0.01,
+        "{on_image:?} against {}",
+        1.0 / pixel
+    );
+}
