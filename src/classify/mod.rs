@@ -406,7 +406,16 @@ impl Classified {
         let [ox, oy, oz] = out.map(|n| n as usize);
         // Opaque voxels (infinite density) count as the largest half, still opaque over any
         // step.
-        let density = |c: &SplatColor| c.density.to_f32().min(65504.0);
+        let density = |d: half::f16| d.to_f32().min(65504.0);
+        // A voxel's opacity along the front by the bits of its density, tabulated once (the
+        // same expression for every value) rather than an exponential a voxel.
+        let alphas: Vec<f32> = match front {
+            Some(f) => (0..=u16::MAX)
+                .map(|bits| f.alpha(density(half::f16::from_bits(bits))))
+                .collect(),
+            None => Vec::new(),
+        };
+        let alpha = |d: half::f16| alphas.get(usize::from(d.to_bits())).copied().unwrap_or(0.0);
         let slices: Vec<(Vec<u32>, Vec<SplatColor>)> = (0..oz)
             .into_par_iter()
             .map(|k| {
@@ -429,15 +438,15 @@ impl Classified {
                                 };
                                 for (i, x) in (run.start..run.end()).enumerate() {
                                     let c = &self.colors[rank as usize + i];
-                                    let d = density(c);
+                                    let d = density(c.density);
                                     let slot = &mut sums[(x / step[0]) as usize];
                                     slot.density += f64::from(d);
                                     let (w, part) = match front {
                                         None => (f64::from(d), &mut slot.near),
                                         Some(f) if f.is_nearer([x, y, z]) => {
-                                            (f64::from(f.alpha(d)), &mut slot.near)
+                                            (f64::from(alpha(c.density)), &mut slot.near)
                                         }
-                                        Some(f) => (f64::from(f.alpha(d)), &mut slot.far),
+                                        Some(_) => (f64::from(alpha(c.density)), &mut slot.far),
                                     };
                                     part.0 += w;
                                     for (sum, v) in part.1.iter_mut().zip(c.rgb) {

@@ -138,11 +138,18 @@ impl SplatTexels {
         let scale = glam::Vec3::from(step.map(|s| s as f32));
         // As in the colours: a front along the one axis halved, else none.
         let front = front.filter(|f| f.axis < 3 && (0..3).all(|a| (step[a] == 2) == (a == f.axis)));
-        let density = |t: &[u8; 8]| {
-            let d = half::f16::from_le_bytes([t[6], t[7]]).to_f32();
+        let density = |bits: u16| {
+            let d = half::f16::from_bits(bits).to_f32();
             // Opaque voxels count as the largest half, as in the colours.
             if d.is_nan() { 0.0 } else { d.min(65504.0) }
         };
+        let bits = |t: &[u8; 8]| u16::from_le_bytes([t[6], t[7]]);
+        // The opacity along the front by the density's bits, tabulated once.
+        let alphas: Vec<f32> = match front {
+            Some(f) => (0..=u16::MAX).map(|b| f.alpha(density(b))).collect(),
+            None => Vec::new(),
+        };
+        let alpha = |t: &[u8; 8]| alphas.get(usize::from(bits(t))).copied().unwrap_or(0.0);
         let normal = |t: &[u8; 8]| {
             glam::Vec3::new(
                 f32::from(t[3] as i8),
@@ -162,13 +169,13 @@ impl SplatTexels {
                     let mut ends = [[0; 3]; 2];
                     ends[usize::from(!front.larger_nearer)][front.axis] = 1;
                     let [near, far] = ends.map(&fine);
-                    let near_alpha = near.map_or(0.0, |t| front.alpha(density(t)));
+                    let near_alpha = near.map_or(0.0, alpha);
                     let mut normals = [(0.0, glam::Vec3::ZERO); 2];
                     if let Some(t) = near {
                         normals[0] = (near_alpha, normal(t));
                     }
                     if let Some(t) = far {
-                        normals[1] = ((1.0 - near_alpha) * front.alpha(density(t)), normal(t));
+                        normals[1] = ((1.0 - near_alpha) * alpha(t), normal(t));
                     }
                     shading_normal(&normals, front.axis)
                 }
@@ -178,7 +185,7 @@ impl SplatTexels {
                         for dy in 0..step[1] {
                             for dx in 0..step[0] {
                                 if let Some(t) = fine([dx, dy, dz]) {
-                                    sum += density(t) * normal(t);
+                                    sum += density(bits(t)) * normal(t);
                                 }
                             }
                         }
