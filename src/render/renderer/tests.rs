@@ -108,11 +108,12 @@ fn the_detail_follows_the_pixels_a_voxel_spans() {
     assert_eq!(detail_for(&g, &v), Detail::default());
 }
 
-#[test]
-fn the_detail_goes_by_where_the_content_comes_nearest() {
-    // A 64^3 grid of 1 mm voxels, air but for a 6-voxel cube near its far corner.
-    let n = 64u32;
-    let inside = |k: [u32; 3]| k.iter().all(|&c| (50..56).contains(&c));
+/// An `n`^3 grid of 1 mm voxels, air but where `inside` (1000), classified by a ramp: its
+/// classification, occupied bricks and geometry.
+fn content_grid(
+    n: u32,
+    inside: impl Fn([u32; 3]) -> bool,
+) -> (Classified, Occupied, VolumeGeometry) {
     let values = (0..n * n * n)
         .map(|id| {
             let k = [id % n, id / n % n, id / n / n];
@@ -128,9 +129,18 @@ fn the_detail_goes_by_where_the_content_comes_nearest() {
     };
     let tf = crate::classify::TransferFunction::ramp(100.0, 900.0, [1.0, 1.0, 1.0, 0.8]);
     let classified = crate::classify::classify(&volume, &tf, 0.0).unwrap();
-    assert!(!classified.grid.is_empty());
     let occupied = Occupied::of(&classified);
     let geometry = VolumeGeometry::new([n; 3], glam::DAffine3::from_scale(DVec3::ONE)).unwrap();
+    (classified, occupied, geometry)
+}
+
+#[test]
+fn the_detail_goes_by_where_the_content_comes_nearest() {
+    // A 64^3 grid of 1 mm voxels, air but for a 6-voxel cube near its far corner.
+    let n = 64u32;
+    let (classified, occupied, geometry) =
+        content_grid(n, |k| k.iter().all(|&c| (50..56).contains(&c)));
+    assert!(!classified.grid.is_empty());
     let eye = DVec3::new(-100.0, -80.0, -120.0);
     // Brute force over the splats' voxel boxes (half a voxel beyond each centre): the
     // bricks' distance is never farther, and at most a brick's diagonal nearer.
@@ -214,27 +224,7 @@ fn content_off_the_image_does_not_set_the_detail() {
     let n = 64u32;
     let near_off = |k: [u32; 3]| k[0] >= 56 && k[2] < 8;
     let far_on = |k: [u32; 3]| (28..36).contains(&k[0]) && (28..36).contains(&k[1]) && k[2] >= 56;
-    let values = (0..n * n * n)
-        .map(|id| {
-            let k = [id % n, id / n % n, id / n / n];
-            if near_off(k) || far_on(k) {
-                1000.0
-            } else {
-                0.0
-            }
-        })
-        .collect();
-    let volume = CpuVolume {
-        dims: [n; 3],
-        spacing: [1.0; 3],
-        origin: [0.0; 3],
-        direction: DMat3::IDENTITY,
-        values,
-    };
-    let tf = crate::classify::TransferFunction::ramp(100.0, 900.0, [1.0, 1.0, 1.0, 0.8]);
-    let classified = crate::classify::classify(&volume, &tf, 0.0).unwrap();
-    let occupied = Occupied::of(&classified);
-    let geometry = VolumeGeometry::new([n; 3], glam::DAffine3::from_scale(DVec3::ONE)).unwrap();
+    let (_, occupied, geometry) = content_grid(n, |k| near_off(k) || far_on(k));
     // From 40 mm in front of the grid's face, narrowly at the far cube.
     let camera = SceneCamera {
         projection: crate::scene::Projection::Perspective {
