@@ -322,21 +322,23 @@ pub(super) fn apart_near(
             }
             nearest / view.focal
         };
-        let cosines: [(f64, f64); 3] = std::array::from_fn(|a| {
+        // The sight lines to the box's corners (one, the view direction, orthographic).
+        let sights: [DVec3; 8] = std::array::from_fn(|corner| {
             if view.is_orthographic() {
-                let c = axes[a].dot(forward);
-                return (c, c);
+                return forward;
             }
-            let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
-            for corner in 0..8 {
-                let sign = DVec3::from(std::array::from_fn::<f64, 3, _>(|k| {
-                    if corner >> k & 1 == 1 { 1.0 } else { -1.0 }
-                }));
-                let c = axes[a].dot((centre + sign * half - eye).normalize_or_zero());
-                lo = lo.min(c);
-                hi = hi.max(c);
-            }
-            (lo, hi)
+            let sign = DVec3::from(std::array::from_fn::<f64, 3, _>(|k| {
+                if corner >> k & 1 == 1 { 1.0 } else { -1.0 }
+            }));
+            (centre + sign * half - eye).normalize_or_zero()
+        });
+        let cosines: [(f64, f64); 3] = std::array::from_fn(|a| {
+            sights
+                .iter()
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), s| {
+                    let c = axes[a].dot(*s);
+                    (lo.min(c), hi.max(c))
+                })
         });
         let pixels: [f64; 3] = std::array::from_fn(|a| {
             let (lo, hi) = cosines[a];

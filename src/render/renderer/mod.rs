@@ -834,9 +834,6 @@ impl Renderer {
                         level = next;
                         key = above;
                     }
-                    if let Some(state) = self.volumes.get_mut(&(id, key)) {
-                        state.used = frame;
-                    }
                     // Uneven levels past the few kept go, least recently used first.
                     let mut uneven: Vec<(Detail, u64)> = self
                         .volumes
