@@ -402,3 +402,109 @@ fn a_bone_rendering_of_the_ct_head_skips_most_of_its_splats() {
         assert_eq!(a.frame.pixels, b.frame.pixels);
     }
 }
+
+/// The CPU tile compositor reads back only the pixels that the meshes' bounding boxes can
+/// cover, once for the opaque meshes, once for the translucent ones and once for the
+/// overlays; the picture and the depth must be those of the whole targets, which the GPU
+/// path reads back. Views with the meshes inside the image, cut by its edge, off it, around
+/// the eye (the near plane through a bounding box) and orthographic.
+#[test]
+fn mesh_layers_read_back_by_their_rectangles_are_the_whole_layers() {
+    use common::shapes::{cube, sphere};
+    use glam::{DMat4, DVec3};
+    use splatscene::mesh::Material;
+    use splatscene::scene::MeshNode;
+    use std::sync::Arc;
+    let ctx = context();
+    let mut scene = Scene::new();
+    let node = |mesh, rgba: [f32; 4]| MeshNode {
+        mesh: Arc::new(mesh),
+        material: Material {
+            base_color: rgba,
+            ..Default::default()
+        },
+    };
+    let at = |x: f64, y: f64, z: f64| Some(DMat4::from_translation(DVec3::new(x, y, z)));
+    let mut add = |name: &str, world: Option<DMat4>, content| {
+        scene.add(name, world.unwrap(), None, content).unwrap();
+    };
+    add(
+        "cube",
+        at(0.0, 0.0, 0.0),
+        NodeContent::Mesh(node(cube(20.0), [0.2, 0.5, 0.9, 1.0])),
+    );
+    add(
+        "far cube",
+        at(-30.0, 40.0, 5.0),
+        NodeContent::Mesh(node(cube(10.0), [0.9, 0.5, 0.2, 1.0])),
+    );
+    add(
+        "glass",
+        at(12.0, -6.0, 8.0),
+        NodeContent::Mesh(node(sphere(9.0, 12, 16), [0.3, 0.9, 0.4, 0.5])),
+    );
+    add(
+        "marker",
+        at(-8.0, -12.0, 10.0),
+        NodeContent::Overlay(node(sphere(2.0, 6, 8), [1.0, 1.0, 0.0, 1.0])),
+    );
+    let size = (96, 80);
+    let pixels = 96 * 80;
+    let look = |eye: DVec3, target: DVec3| SceneCamera::look_at(eye, target);
+    let cases = [
+        (
+            "inside the image",
+            look(DVec3::new(40.0, -160.0, 60.0), DVec3::ZERO),
+            1..pixels,
+        ),
+        (
+            "cut by the image's edge",
+            look(DVec3::new(30.0, -70.0, 20.0), DVec3::new(22.0, 0.0, 15.0)),
+            1..pixels,
+        ),
+        (
+            "off the image",
+            look(DVec3::new(0.0, -100.0, 0.0), DVec3::new(0.0, -200.0, 0.0)),
+            0..1,
+        ),
+        (
+            "around the eye",
+            look(DVec3::new(2.0, -3.0, 1.0), DVec3::new(-30.0, 40.0, 5.0)),
+            pixels..pixels * 4,
+        ),
+        (
+            "orthographic",
+            SceneCamera {
+                projection: Projection::Orthographic { height: 70.0 },
+                ..look(DVec3::new(-50.0, -150.0, 40.0), DVec3::ZERO)
+            },
+            1..pixels,
+        ),
+    ];
+    for (what, camera, read_back) in cases {
+        let gpu = Renderer::with_compositor(Compositor::Gpu)
+            .screenshot(&ctx, &scene, &camera, size, &OPTIONS)
+            .unwrap();
+        let cpu = Renderer::with_compositor(Compositor::Cpu)
+            .screenshot(&ctx, &scene, &camera, size, &OPTIONS)
+            .unwrap();
+        let worst = gpu
+            .frame
+            .pixels
+            .iter()
+            .zip(&cpu.frame.pixels)
+            .flat_map(|(a, b)| (0..4).map(move |k| (a[k] - b[k]).abs()))
+            .fold(0.0f32, f32::max);
+        assert!(worst < 1e-5, "{what}: colour differs by {worst}");
+        assert!(gpu.depth == cpu.depth, "{what}: the depth differs");
+        let drawn = gpu.depth.iter().filter(|&&d| d > 0.0).count();
+        assert!(
+            read_back.contains(&cpu.report.read_back),
+            "{what}: {} pixels read back",
+            cpu.report.read_back
+        );
+        if what != "off the image" {
+            assert!(drawn > 0, "{what}: the view shows no mesh");
+        }
+    }
+}

@@ -684,6 +684,7 @@ impl Scene {
                 "mesh_pass_ms": ms(t.mesh_pass),
                 "splat_pass_ms": ms(t.splat_pass),
                 "readback_ms": ms(t.readback),
+                "read_back_pixels": r.read_back,
             }),
         )
     }

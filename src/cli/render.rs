@@ -607,7 +607,7 @@ pub(crate) fn describe(r: &FrameReport) -> String {
         None => format!("splat pass {:.1} ms", ms(r.timings.splat_pass)),
     };
     format!(
-        "{} meshes ({} triangles), {} splats{}; classify {:.0} ms{}, order {:.1} ms, upload {:.1} ms, mesh pass {:.1} ms, {splats}, readback {:.1} ms",
+        "{} meshes ({} triangles), {} splats{}; classify {:.0} ms{}, order {:.1} ms, upload {:.1} ms, mesh pass {:.1} ms, {splats}, readback {:.1} ms{}",
         r.meshes,
         r.triangles,
         r.splats,
@@ -635,7 +635,12 @@ pub(crate) fn describe(r: &FrameReport) -> String {
         ms(r.timings.order),
         ms(r.timings.upload),
         ms(r.timings.mesh_pass),
-        ms(r.timings.readback)
+        ms(r.timings.readback),
+        if r.read_back == 0 {
+            String::new()
+        } else {
+            format!(" ({} pixels of mesh layers)", r.read_back)
+        }
     )
 }
 

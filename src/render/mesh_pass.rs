@@ -68,6 +68,8 @@ pub(crate) struct MeshPass {
 pub(crate) struct GpuMesh {
     /// The CPU mesh it was made from (compared by pointer to know when to upload again).
     pub(crate) source: Arc<CpuMesh>,
+    /// The mesh's bounding box in its own frame (none without vertices).
+    pub(crate) bounds: Option<([f32; 3], [f32; 3])>,
     vertices: wgpu::Buffer,
     indices: wgpu::Buffer,
     index_count: u32,
@@ -154,9 +156,12 @@ impl MeshPass {
         let device = &ctx.device;
         let buffers = shared
             .filter(|g| Arc::ptr_eq(&g.source, mesh))
-            .map(|g| (g.vertices.clone(), g.indices.clone()))
-            .unwrap_or_else(|| self.buffers(ctx, mesh));
-        let (vertices, indices) = buffers;
+            .map(|g| (g.vertices.clone(), g.indices.clone(), g.bounds))
+            .unwrap_or_else(|| {
+                let (vertices, indices) = self.buffers(ctx, mesh);
+                (vertices, indices, mesh.bounds())
+            });
+        let (vertices, indices, bounds) = buffers;
         let uniforms = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("mesh object"),
             size: size_of::<ObjectUniforms>() as u64,
@@ -173,6 +178,7 @@ impl MeshPass {
         });
         GpuMesh {
             source: Arc::clone(mesh),
+            bounds,
             vertices,
             indices,
             index_count: (mesh.indices.len() / 3 * 3) as u32,

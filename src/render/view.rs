@@ -3,6 +3,7 @@
 use glam::{DMat3, DMat4, DVec3, Mat4};
 
 use super::RenderError;
+use super::target::PixelRect;
 use crate::camera::Camera;
 use crate::scene::{Projection, SceneCamera};
 
@@ -122,6 +123,61 @@ impl ViewSetup {
         let mut m = world;
         m.w_axis -= self.camera.eye.extend(0.0);
         m.as_mat4()
+    }
+
+    /// The pixels that anything within the convex hull of `points` (world) can cover: their
+    /// projections' bounding rectangle, two pixels wider each side, on the image. The whole
+    /// image where a point is not beyond the near plane (the hull may then reach past the
+    /// image's edges, or behind the eye); an empty rectangle where every pixel lies off it or
+    /// every point before the near plane.
+    pub(crate) fn screen_rect(&self, points: impl IntoIterator<Item = DVec3>) -> PixelRect {
+        let (w, h) = (f64::from(self.size.0), f64::from(self.size.1));
+        let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+        let (mut before, mut beyond) = (false, false);
+        for p in points {
+            let d = p - self.camera.eye;
+            let (x, y, z) = (
+                d.dot(self.axes.x_axis),
+                d.dot(self.axes.y_axis),
+                d.dot(self.axes.z_axis),
+            );
+            let scale = if self.is_orthographic() {
+                self.focal
+            } else if z > self.near && z.is_finite() {
+                beyond = true;
+                self.focal / z
+            } else {
+                before = true;
+                continue;
+            };
+            let pixel = [0.5 * w + scale * x, 0.5 * h - scale * y];
+            if !pixel.iter().all(|v| v.is_finite()) {
+                return PixelRect::whole(self.size);
+            }
+            for a in 0..2 {
+                lo[a] = lo[a].min(pixel[a]);
+                hi[a] = hi[a].max(pixel[a]);
+            }
+        }
+        match (before, beyond) {
+            // Wholly before the near plane: clipped away.
+            (true, false) => return PixelRect::EMPTY,
+            (true, true) => return PixelRect::whole(self.size),
+            _ => {}
+        }
+        // Rasterisation covers pixels whose centres lie inside; the margin takes rounding.
+        let edge = |v: f64, n: f64| (v.clamp(-1.0, n + 1.0) as i64).clamp(0, n as i64) as u32;
+        let rect = PixelRect([
+            edge((lo[0] - 2.0).floor(), w),
+            edge((lo[1] - 2.0).floor(), h),
+            edge((hi[0] + 2.0).ceil(), w),
+            edge((hi[1] + 2.0).ceil(), h),
+        ]);
+        if rect.is_empty() {
+            PixelRect::EMPTY
+        } else {
+            rect
+        }
     }
 
     /// Reversed depth of a point at view distance `d` (along the view direction).

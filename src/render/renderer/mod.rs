@@ -9,7 +9,7 @@ use glam::{DMat3, DMat4, DVec3};
 
 use super::mesh_pass::{GpuMesh, MeshPass};
 use super::splat_pass::{GpuVolume, SplatPass, projection};
-use super::target::RenderTarget;
+use super::target::{PixelRect, RenderTarget};
 use super::tile_pass::TilePass;
 use super::view::ViewSetup;
 use super::{GpuContext, RenderError};
@@ -117,6 +117,10 @@ pub struct FrameReport {
     pub levels_made: usize,
     /// What the CPU tile compositor did, when it composited the splats.
     pub tiles: Option<TileStats>,
+    /// Pixels of the mesh and overlay layers' colour read back for the CPU tile compositor:
+    /// only those that their meshes' bounding boxes can cover (the depth, when a mesh is on
+    /// the image, is read whole).
+    pub read_back: usize,
     /// Where the time went.
     pub timings: FrameTimings,
 }
@@ -208,6 +212,22 @@ impl VolumeState {
             None => {
                 crate::splat::tiled::texel(&self.volume, self.factors, &self.classified, k, rank)
             }
+        }
+    }
+}
+
+/// Lays the premultiplied `layer`, the pixels of `rect` row by row, over `frame` (`width`
+/// pixels a row).
+fn lay_over(frame: &mut [[f32; 4]], layer: &[[f32; 4]], rect: PixelRect, width: u32) {
+    let [x0, y0, x1, _] = rect.0.map(|v| v as usize);
+    let (w, rw) = (width as usize, x1 - x0);
+    if rw == 0 {
+        return;
+    }
+    for (r, layer) in layer.chunks_exact(rw).enumerate() {
+        let y = y0 + r;
+        for (px, o) in frame[y * w + x0..y * w + x1].iter_mut().zip(layer) {
+            *px = std::array::from_fn(|k| o[k] + (1.0 - o[3]) * px[k]);
         }
     }
 }
@@ -307,6 +327,9 @@ pub struct Renderer {
     /// Frames whose levels of detail were chosen, counted (to drop levels least recently
     /// used).
     frame: u64,
+    /// The targets the CPU tile compositor's screenshots draw their meshes into, kept from
+    /// frame to frame for the last two sizes drawn, the latest first.
+    layer_targets: Vec<RenderTarget>,
 }
 
 impl std::fmt::Debug for Renderer {
@@ -446,8 +469,7 @@ impl Renderer {
             options,
         )?;
         let started = Instant::now();
-        let frame = target.read_color(ctx)?;
-        let depth = target.read_depth(ctx)?;
+        let (frame, depth) = target.read_region(ctx, PixelRect::whole(size), None, true)?;
         report.timings.readback = started.elapsed();
         Ok(Screenshot {
             frame,
@@ -492,17 +514,29 @@ impl Renderer {
         // What lies under the splats: the meshes on the GPU, or the background alone.
         let has_meshes = scene.meshes().chain(scene.overlays()).next().is_some();
         let pixels = size.0 as usize * size.1 as usize;
+        let fill = options
+            .background
+            .map_or([0.0; 4], |[r, g, b]| [r, g, b, 1.0]);
         let (mut frame, mut depth, target) = match ctx {
             Some(ctx) if has_meshes => {
                 self.sync_meshes(ctx, scene);
-                let target = RenderTarget::new(ctx, size.0, size.1)?;
+                let kept = self.layer_targets.iter().position(|t| t.size == size);
+                let target = match kept {
+                    Some(i) => self.layer_targets.remove(i),
+                    None => RenderTarget::new(ctx, size.0, size.1)?,
+                };
                 self.upload(ctx, scene, &view, &[], &mut report)?;
                 let started = Instant::now();
                 self.mesh_stage(ctx, scene, &target.color_view, &target.depth_view, options);
                 report.timings.mesh_pass = started.elapsed();
                 let started = Instant::now();
-                let (frame, depth) = (target.read_color(ctx)?, target.read_depth(ctx)?);
+                // Only the pixels the opaque meshes can cover are read back; the others hold
+                // the clear colour and no depth.
+                let opaque = scene.meshes().filter(|(_, m, _)| !is_translucent(m));
+                let rect = self.layer_rect(&view, opaque);
+                let (frame, depth) = target.read_region(ctx, rect, Some(fill), true)?;
                 report.timings.readback = started.elapsed();
+                report.read_back += rect.pixels();
                 (frame, depth, Some((ctx, target)))
             }
             None if has_meshes => {
@@ -511,9 +545,6 @@ impl Renderer {
                 ));
             }
             _ => {
-                let fill = options
-                    .background
-                    .map_or([0.0; 4], |[r, g, b]| [r, g, b, 1.0]);
                 let frame = Frame {
                     width: size.0,
                     height: size.1,
@@ -525,8 +556,12 @@ impl Renderer {
         let started = Instant::now();
         report.tiles = Some(self.composite_tiles(scene, &view, &ordered, &depth, &mut frame));
         report.timings.splat_pass = started.elapsed();
+        let translucent: Vec<_> = scene
+            .meshes()
+            .filter(|(_, m, _)| is_translucent(m))
+            .collect();
         if let Some((ctx, target)) = &target
-            && scene.meshes().any(|(_, m, _)| is_translucent(m))
+            && !translucent.is_empty()
         {
             // Translucent meshes go over the splats: drawn alone on a clear colour against
             // the opaque meshes' depth, then laid over the frame.
@@ -537,13 +572,16 @@ impl Renderer {
             }
             ctx.queue.submit([encoder.finish()]);
             self.translucent_stage(ctx, scene, &view, &target.color_view, &target.depth_view);
-            let layer = target.read_color(ctx)?;
-            // The depth now holds the translucent surfaces too, as the GPU path's does.
-            depth = target.read_depth(ctx)?;
-            for (px, o) in frame.pixels.iter_mut().zip(&layer.pixels) {
-                *px = std::array::from_fn(|k| o[k] + (1.0 - o[3]) * px[k]);
+            let rect = self.layer_rect(&view, translucent.into_iter());
+            let (layer, layer_depth) = target.read_region(ctx, rect, None, true)?;
+            lay_over(&mut frame.pixels, &layer.pixels, rect, size.0);
+            // The depth now holds the translucent surfaces too, as the GPU path's does (none
+            // drawn, it is as it was).
+            if !rect.is_empty() {
+                depth = layer_depth;
             }
             report.timings.readback += started.elapsed();
+            report.read_back += rect.pixels();
         }
         if let Some((ctx, target)) = &target
             && scene.overlays().next().is_some()
@@ -551,11 +589,16 @@ impl Renderer {
             // Measurement markers go over everything: drawn alone, then laid over the frame.
             let started = Instant::now();
             self.overlay_alone(ctx, scene, &target.color_view, &target.depth_view);
-            let overlay = target.read_color(ctx)?;
-            for (px, o) in frame.pixels.iter_mut().zip(&overlay.pixels) {
-                *px = std::array::from_fn(|k| o[k] + (1.0 - o[3]) * px[k]);
-            }
+            let rect = self.layer_rect(&view, scene.overlays());
+            let (overlay, _) = target.read_region(ctx, rect, None, false)?;
+            lay_over(&mut frame.pixels, &overlay.pixels, rect, size.0);
             report.timings.readback += started.elapsed();
+            report.read_back += rect.pixels();
+        }
+        if let Some((_, target)) = target {
+            // The last two sizes (the viewer's previews and its full frames) are kept.
+            self.layer_targets.insert(0, target);
+            self.layer_targets.truncate(2);
         }
         report.mesh_pipeline = self.mesh_pass.is_some();
         report.overlay_pipeline = self.mesh_pass.as_ref().is_some_and(MeshPass::has_overlay);
@@ -612,6 +655,27 @@ impl Renderer {
     }
 
     /// Draws the overlay meshes alone into cleared targets (transparent, far depth).
+    /// The pixels that the drawn meshes among `nodes` can cover in this view: the union of
+    /// their bounding boxes' screen rectangles ([`ViewSetup::screen_rect`]).
+    fn layer_rect<'a>(
+        &self,
+        view: &ViewSetup,
+        nodes: impl Iterator<Item = (NodeId, &'a crate::scene::MeshNode, DMat4)>,
+    ) -> PixelRect {
+        let mut rect = PixelRect::EMPTY;
+        for (id, _, world) in nodes {
+            let Some((lo, hi)) = self.meshes.get(&id).and_then(|m| m.bounds) else {
+                continue;
+            };
+            let corners = (0..8).map(|c| {
+                let pick = |a: usize| f64::from(if c >> a & 1 == 0 { lo[a] } else { hi[a] });
+                world.transform_point3(DVec3::new(pick(0), pick(1), pick(2)))
+            });
+            rect = rect.union(view.screen_rect(corners));
+        }
+        rect
+    }
+
     fn overlay_alone(
         &self,
         ctx: &GpuContext,
