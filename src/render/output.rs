@@ -7,21 +7,31 @@ use crate::splat::reference::Frame;
 /// A premultiplied frame as straight 8-bit RGBA (what PNG stores): opaque where the frame is,
 /// and with the frame's coverage as alpha over a transparent background.
 pub fn frame_to_rgba8(frame: &Frame) -> RgbaImage {
-    RgbaImage::from_fn(frame.width, frame.height, |x, y| {
-        let p = frame.pixels[(y * frame.width + x) as usize];
-        let a = p[3].clamp(0.0, 1.0);
-        // `round()` without its library call: the integer part and the fraction of a value in
-        // 0..=255 are exact in f32.
-        let q = |v: f32| {
-            let x = v.clamp(0.0, 1.0) * 255.0;
-            let whole = x as u32;
-            (whole + u32::from(x - whole as f32 >= 0.5)) as u8
-        };
-        if a <= 0.0 {
-            return image::Rgba([0, 0, 0, 0]);
-        }
-        image::Rgba([q(p[0] / a), q(p[1] / a), q(p[2] / a), q(a)])
-    })
+    use rayon::prelude::*;
+    // `round()` without its library call: the integer part and the fraction of a value in
+    // 0..=255 are exact in f32.
+    let q = |v: f32| {
+        let x = v.clamp(0.0, 1.0) * 255.0;
+        let whole = x as u32;
+        (whole + u32::from(x - whole as f32 >= 0.5)) as u8
+    };
+    let (w, h) = (frame.width as usize, frame.height as usize);
+    let mut out = vec![0u8; w * h * 4];
+    // Rows in parallel: a viewer's frame is a million pixels, each with a division.
+    if w > 0 {
+        out.par_chunks_exact_mut(w * 4)
+            .zip(frame.pixels.par_chunks(w))
+            .for_each(|(row, pixels)| {
+                for (px, p) in row.chunks_exact_mut(4).zip(pixels) {
+                    let a = p[3].clamp(0.0, 1.0);
+                    if a > 0.0 {
+                        px.copy_from_slice(&[q(p[0] / a), q(p[1] / a), q(p[2] / a), q(a)]);
+                    }
+                }
+            });
+    }
+    RgbaImage::from_raw(frame.width, frame.height, out)
+        .unwrap_or_else(|| RgbaImage::new(frame.width, frame.height))
 }
 
 /// Encodes an 8-bit RGBA or 16-bit grey image as PNG bytes.
