@@ -5,8 +5,8 @@
 //! [`GridError::TooLarge`] rather than wrapping. Besides a bitmap (with a rank index, so that the
 //! attributes of the significant voxels can be stored compactly), the grid keeps run-length rows
 //! along each of the three axes: the inner loop of every ordering walks runs, so empty space costs
-//! nothing there. An axis's rows are built the first time they are asked for: a view needs one
-//! or two of them. A dense grid is the case where every voxel is significant.
+//! nothing there. An axis's rows are built the first time they are asked for (a view needs one
+//! or two of them), slabs of rows in parallel. A dense grid is the case where every voxel is significant.
 
 use std::sync::OnceLock;
 
@@ -202,49 +202,109 @@ impl SparseGrid {
     /// Builds the run-length rows along `axis` in two passes over the bitmap: count the runs that
     /// start in each row, then fill them in.
     fn build_rows(&self, axis: usize) -> AxisRows {
+        use rayon::prelude::*;
         let (b, c) = other_axes(axis);
-        let n_rows = self.dims[b] as usize * self.dims[c] as usize;
-        let strides = self.strides();
-        let stride = strides[axis];
-        let mut offsets = vec![0u32; n_rows + 1];
-        let row_of = |k: [u32; 3]| k[b] as usize + self.dims[b] as usize * k[c] as usize;
+        let (nb, nc) = (self.dims[b] as usize, self.dims[c] as usize);
+        let n_rows = nb * nc;
+        let stride = self.strides()[axis];
+        let n = self.dims[axis];
         let is_start = |id: u32, k: [u32; 3]| k[axis] == 0 || !self.contains(id - stride);
-        self.for_each_significant(|id, k| {
-            if is_start(id, k) {
-                offsets[row_of(k) + 1] += 1;
-            }
-        });
+        // Slabs of the rows' slowest coordinate `c`, a task each: a slab's rows are a stretch
+        // of the table, and its voxels a few stretches of ids (one, or one a z-slice).
+        let per = nc.div_ceil(4 * rayon::current_num_threads()).max(1);
+        let slabs: Vec<(usize, usize)> = (0..nc)
+            .step_by(per)
+            .map(|c0| (c0, (c0 + per).min(nc)))
+            .collect();
+        let row_of = |k: [u32; 3]| k[b] as usize + nb * k[c] as usize;
+        let mut offsets = vec![0u32; n_rows + 1];
+        offsets[1..]
+            .par_chunks_mut(per * nb)
+            .zip(&slabs)
+            .for_each(|(counts, &(c0, c1))| {
+                self.for_each_in_slab(c, c0..c1, |id, k| {
+                    if is_start(id, k) {
+                        counts[row_of(k) - c0 * nb] += 1;
+                    }
+                });
+            });
         for r in 0..n_rows {
             offsets[r + 1] += offsets[r];
         }
-        let mut fill = offsets.clone();
         let mut runs = vec![Run { start: 0, len: 0 }; offsets[n_rows] as usize];
-        let n = self.dims[axis];
-        self.for_each_significant(|id, k| {
-            if is_start(id, k) {
-                let mut len = 1;
-                while k[axis] + len < n && self.contains(id + len * stride) {
-                    len += 1;
-                }
-                let slot = &mut fill[row_of(k)];
-                runs[*slot as usize] = Run {
-                    start: k[axis],
-                    len,
-                };
-                *slot += 1;
-            }
-        });
+        let mut parts = Vec::with_capacity(slabs.len());
+        let mut rest = runs.as_mut_slice();
+        for &(c0, c1) in &slabs {
+            let (part, tail) = rest.split_at_mut((offsets[c1 * nb] - offsets[c0 * nb]) as usize);
+            parts.push(part);
+            rest = tail;
+        }
+        parts
+            .into_par_iter()
+            .zip(&slabs)
+            .for_each(|(part, &(c0, c1))| {
+                let first = offsets[c0 * nb];
+                let mut fill: Vec<u32> = offsets[c0 * nb..c1 * nb]
+                    .iter()
+                    .map(|o| o - first)
+                    .collect();
+                self.for_each_in_slab(c, c0..c1, |id, k| {
+                    if is_start(id, k) {
+                        let mut len = 1;
+                        while k[axis] + len < n && self.contains(id + len * stride) {
+                            len += 1;
+                        }
+                        let slot = &mut fill[row_of(k) - c0 * nb];
+                        part[*slot as usize] = Run {
+                            start: k[axis],
+                            len,
+                        };
+                        *slot += 1;
+                    }
+                });
+            });
         AxisRows { offsets, runs }
     }
 
-    /// Calls `f` with the id and coordinates of every significant voxel, in id order. The
-    /// bitmap is walked a word at a time: an empty word (64 voxels of air) costs one test, and
-    /// coordinates advance by addition rather than division. (Walking every voxel and testing
-    /// its bit made the run tables most of a 67M-voxel classification.)
-    fn for_each_significant(&self, mut f: impl FnMut(u32, [u32; 3])) {
+    /// [`SparseGrid::for_each_significant_in`] for the voxels whose coordinate along axis `c`
+    /// (1 or 2) lies in `range`, in id order.
+    fn for_each_in_slab(
+        &self,
+        c: usize,
+        range: std::ops::Range<usize>,
+        mut f: impl FnMut(u32, [u32; 3]),
+    ) {
+        let [nx, ny, nz] = self.dims.map(u64::from);
+        let (row, plane) = (nx, nx * ny);
+        let (c0, c1) = (range.start as u64, range.end as u64);
+        if c == 2 {
+            self.for_each_significant_in(c0 * plane..c1 * plane, f);
+        } else {
+            for z in 0..nz {
+                self.for_each_significant_in(z * plane + c0 * row..z * plane + c1 * row, &mut f);
+            }
+        }
+    }
+
+    /// Calls `f` with the id and coordinates of every significant voxel whose id lies in
+    /// `ids`, in id order. The bitmap is walked a word at a time: an empty word (64 voxels of
+    /// air) costs one test, and coordinates advance by addition rather than division.
+    /// (Walking every voxel and testing its bit made the run tables most of a 67M-voxel
+    /// classification.)
+    fn for_each_significant_in(&self, ids: std::ops::Range<u64>, mut f: impl FnMut(u32, [u32; 3])) {
         let [nx, ny, _] = self.dims;
+        if ids.start >= ids.end {
+            return;
+        }
+        let (w0, w1) = (ids.start / 64, ids.end.div_ceil(64));
         // Coordinates of the first voxel of the current word.
-        let (mut x0, mut y0, mut z0) = (0u32, 0u32, 0u32);
+        let first = w0 * 64;
+        let (plane, row) = (u64::from(nx) * u64::from(ny), u64::from(nx));
+        let (mut x0, mut y0, mut z0) = (
+            (first % row) as u32,
+            (first % plane / row) as u32,
+            (first / plane) as u32,
+        );
         let advance = |x: &mut u32, y: &mut u32, z: &mut u32, by: u32| {
             *x += by;
             while *x >= nx {
@@ -256,8 +316,18 @@ impl SparseGrid {
                 }
             }
         };
-        for (w, &word) in self.bits.iter().enumerate() {
-            let mut bits = word;
+        let words = self
+            .bits
+            .get(w0 as usize..(w1 as usize).min(self.bits.len()))
+            .unwrap_or(&[]);
+        for (i, &word) in words.iter().enumerate() {
+            let w = w0 + i as u64;
+            // Bits of the word inside `ids`.
+            // (`lo` < 64 and `hi` >= 1: the word holds at least one id of the range.)
+            let lo = ids.start.saturating_sub(w * 64) as u32;
+            let hi = (ids.end - w * 64).min(64) as u32;
+            let below_hi = if hi == 64 { u64::MAX } else { (1 << hi) - 1 };
+            let mut bits = word & below_hi & (u64::MAX << lo);
             let (mut x, mut y, mut z, mut at) = (x0, y0, z0, 0u32);
             while bits != 0 {
                 let bit = bits.trailing_zeros();
