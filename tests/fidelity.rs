@@ -316,6 +316,53 @@ fn a_grid_seen_along_an_axis_is_halved_along_it_with_the_same_picture() {
 }
 
 #[test]
+fn a_level_made_before_its_own_grid_is_drawn_is_the_same_level() {
+    // A level along the view is made from the texels of the grid below it; where that grid
+    // was never drawn, its texels are made from the volume as the level asks for them rather
+    // than held. The level, and the picture, must be the same either way.
+    let thin = sampled([0.6; 3]);
+    let along = camera(DVec3::new(0.0, 0.05, -1.0), DVec3::Y);
+    let oblique = camera(DVec3::new(0.6, 0.5, -0.6), DVec3::Y);
+    let mut scene = Scene::new();
+    let node = VolumeNode {
+        volume: Arc::new(thin),
+        transfer: Arc::new(transfer()),
+        splats: SplatSettings {
+            shading: SHADING,
+            ..Default::default()
+        },
+    };
+    scene
+        .add("phantom", DMat4::IDENTITY, None, NodeContent::Volume(node))
+        .unwrap();
+    let options = FrameOptions {
+        background: None,
+        ..Default::default()
+    };
+    let mut first = Renderer::new();
+    let direct = first
+        .screenshot_without_gpu(&scene, &along, SIZE, &options)
+        .unwrap();
+    let mut later = Renderer::new();
+    let own = later
+        .screenshot_without_gpu(&scene, &oblique, SIZE, &options)
+        .unwrap();
+    let from_below = later
+        .screenshot_without_gpu(&scene, &along, SIZE, &options)
+        .unwrap();
+    assert_eq!(own.report.levels, [0; 3], "{:?}", own.report);
+    for shot in [&direct, &from_below] {
+        assert_eq!(shot.report.levels, [0, 0, 1], "{:?}", shot.report);
+        assert_eq!(shot.report.levels_made, 1, "{:?}", shot.report);
+    }
+    assert!(
+        direct.frame.pixels == from_below.frame.pixels,
+        "{:?}",
+        compare(&direct.frame, &from_below.frame).unwrap()
+    );
+}
+
+#[test]
 fn a_real_ct_halved_along_the_view_keeps_its_shading() {
     // The LIDC2 chest CT (1.4 x 1.4 x 2.5 mm) from the front at 160x160: its voxels about
     // half a pixel apart across the view, so the own grid across it and y, the view, halved.

@@ -235,10 +235,11 @@ fn lay_over(frame: &mut [[f32; 4]], layer: &[[f32; 4]], rect: PixelRect, width: 
 /// The level above `below` made by halving its grid along `axes` (its levels then `levels`;
 /// `front` where the one axis halved runs along the view):
 /// its classification combined ([`Classified::halved_along`]) and its texels made from the
-/// level below's ([`SplatTexels::halved`]; the level below's are made first where they are
-/// not yet). `None` where the level would have no splat.
+/// level below's ([`SplatTexels::halved`]; where the level below has none yet, from its
+/// texels made one by one from the volume and not held, [`SplatTexels::halved_from`]).
+/// `None` where the level would have no splat.
 fn make_level(
-    below: &mut VolumeState,
+    below: &VolumeState,
     axes: [bool; 3],
     front: Option<Front>,
     levels: [u8; 3],
@@ -247,11 +248,24 @@ fn make_level(
     if classified.grid.is_empty() {
         return Ok(None);
     }
-    let texels = below
-        .texels
-        .get_or_insert_with(|| SplatTexels::new(&below.classified, &below.volume, below.factors));
     let step = axes.map(|h| if h { 2 } else { 1 });
-    let texels = texels.halved(&classified, step, front);
+    // From the level below's texels where it has them; else each made as it is asked for,
+    // from the volume, none held (the level below's are made once it is drawn itself).
+    let texels = match &below.texels {
+        Some(fine) => fine.halved(&classified, step, front),
+        None => {
+            let grid = &below.classified.grid;
+            let [nx, ny, nz] = grid.dims();
+            let fine = |x: u32, y: u32, z: u32| {
+                if x >= nx || y >= ny || z >= nz {
+                    return None;
+                }
+                let rank = grid.rank(x + nx * (y + ny * z))?;
+                Some(below.texel([x, y, z], rank as usize))
+            };
+            SplatTexels::halved_from(fine, &classified, step, front)
+        }
+    };
     let mut state = VolumeState::new(
         below.key,
         Arc::clone(&below.volume),

@@ -135,6 +135,17 @@ impl SplatTexels {
     /// again: the block's surface, with no volume resampled for it. No normal where the
     /// block's cancel.
     pub fn halved(&self, above: &Classified, step: [u32; 3], front: Option<Front>) -> Self {
+        Self::halved_from(|x, y, z| self.get(x, y, z).copied(), above, step, front)
+    }
+
+    /// [`SplatTexels::halved`] from the texels `fine(x, y, z)` of the level below (`None`
+    /// where a voxel is not significant), made as they are asked for rather than held.
+    pub fn halved_from(
+        fine: impl Fn(u32, u32, u32) -> Option<[u8; 8]> + Sync,
+        above: &Classified,
+        step: [u32; 3],
+        front: Option<Front>,
+    ) -> Self {
         let scale = glam::Vec3::from(step.map(|s| s as f32));
         // As in the colours: a front along the one axis halved, else none.
         let front = front.filter(|f| f.axis < 3 && (0..3).all(|a| (step[a] == 2) == (a == f.axis)));
@@ -161,7 +172,7 @@ impl SplatTexels {
             let c = above.colors.get(rank).copied().unwrap_or_default();
             let fine = |d: [u32; 3]| {
                 let [x, y, z] = std::array::from_fn(|a| k[a] * step[a] + d[a]);
-                self.get(x, y, z)
+                fine(x, y, z)
             };
             let sum = match front {
                 Some(front) => {
@@ -169,12 +180,12 @@ impl SplatTexels {
                     let mut ends = [[0; 3]; 2];
                     ends[usize::from(!front.larger_nearer)][front.axis] = 1;
                     let [near, far] = ends.map(&fine);
-                    let near_alpha = near.map_or(0.0, alpha);
+                    let near_alpha = near.as_ref().map_or(0.0, alpha);
                     let mut normals = [(0.0, glam::Vec3::ZERO); 2];
-                    if let Some(t) = near {
+                    if let Some(t) = &near {
                         normals[0] = (near_alpha, normal(t));
                     }
-                    if let Some(t) = far {
+                    if let Some(t) = &far {
                         normals[1] = ((1.0 - near_alpha) * alpha(t), normal(t));
                     }
                     shading_normal(&normals, front.axis)
@@ -185,7 +196,7 @@ impl SplatTexels {
                         for dy in 0..step[1] {
                             for dx in 0..step[0] {
                                 if let Some(t) = fine([dx, dy, dz]) {
-                                    sum += density(bits(t)) * normal(t);
+                                    sum += density(bits(&t)) * normal(&t);
                                 }
                             }
                         }
