@@ -118,6 +118,18 @@ fn splats_of(
     level_of_detail: bool,
     refinement: bool,
 ) -> (Frame, splatscene::render::FrameReport) {
+    let scene = phantom_scene(volume, transfer);
+    let mut renderer = Renderer::new();
+    renderer.set_level_of_detail(level_of_detail);
+    renderer.set_refinement(refinement);
+    let shot = renderer
+        .screenshot_without_gpu(&scene, camera, size, &NO_BACKGROUND)
+        .unwrap();
+    (shot.frame, shot.report)
+}
+
+/// A scene of `volume` alone (node "phantom", shaded by [`SHADING`]).
+fn phantom_scene(volume: CpuVolume, transfer: TransferFunction) -> Scene {
     let mut scene = Scene::new();
     let node = VolumeNode {
         volume: Arc::new(volume),
@@ -130,18 +142,16 @@ fn splats_of(
     scene
         .add("phantom", DMat4::IDENTITY, None, NodeContent::Volume(node))
         .unwrap();
-    let options = FrameOptions {
-        background: None,
-        ..Default::default()
-    };
-    let mut renderer = Renderer::new();
-    renderer.set_level_of_detail(level_of_detail);
-    renderer.set_refinement(refinement);
-    let shot = renderer
-        .screenshot_without_gpu(&scene, camera, size, &options)
-        .unwrap();
-    (shot.frame, shot.report)
+    scene
 }
+
+/// Frames on a transparent background (the other options the defaults).
+const NO_BACKGROUND: FrameOptions = FrameOptions {
+    ordering: None,
+    background: None,
+    measure: true,
+    preview: false,
+};
 
 fn marched(camera: &SceneCamera) -> Frame {
     marched_at(camera, SIZE)
@@ -323,22 +333,8 @@ fn a_level_made_before_its_own_grid_is_drawn_is_the_same_level() {
     let thin = sampled([0.6; 3]);
     let along = camera(DVec3::new(0.0, 0.05, -1.0), DVec3::Y);
     let oblique = camera(DVec3::new(0.6, 0.5, -0.6), DVec3::Y);
-    let mut scene = Scene::new();
-    let node = VolumeNode {
-        volume: Arc::new(thin),
-        transfer: Arc::new(transfer()),
-        splats: SplatSettings {
-            shading: SHADING,
-            ..Default::default()
-        },
-    };
-    scene
-        .add("phantom", DMat4::IDENTITY, None, NodeContent::Volume(node))
-        .unwrap();
-    let options = FrameOptions {
-        background: None,
-        ..Default::default()
-    };
+    let scene = phantom_scene(thin, transfer());
+    let options = NO_BACKGROUND;
     let mut first = Renderer::new();
     let direct = first
         .screenshot_without_gpu(&scene, &along, SIZE, &options)
