@@ -105,10 +105,12 @@ fn vs_main(@builtin(vertex_index) corner: u32, @location(0) id: u32) -> VsOut {
     let centre = fp.centre;
     let a = fp.cov.x;
     let c = fp.cov.z;
-    // The ellipse q = cut-off spans exactly +-radius*sqrt(a) by +-radius*sqrt(c) pixels.
+    // The ellipse q = cut-off spans exactly +-radius*sqrt(a) by +-radius*sqrt(c) pixels: the
+    // quad is its bounding box and a hair (`RECT_MARGIN` in src/splat/tiled/project.rs), so
+    // that it rasterises the pixels whose centres the ellipse may hold and no more.
     let radius = sqrt(u.size.z);
     let corner_sign = vec2<f32>(f32(corner & 1u) * 2.0 - 1.0, f32((corner >> 1u) & 1u) * 2.0 - 1.0);
-    let offset = corner_sign * (radius * sqrt(vec2<f32>(a, c)) + 0.5);
+    let offset = corner_sign * (radius * sqrt(vec2<f32>(a, c)) + 0.01);
     let pixel = centre + offset;
     var out: VsOut;
     out.clip = vec4<f32>(pixel.x / u.size.x * 2.0 - 1.0, 1.0 - pixel.y / u.size.y * 2.0, z, 1.0);

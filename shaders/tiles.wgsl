@@ -84,8 +84,10 @@ fn project_splat(id: u32) -> Projected {
         return left_out();
     }
     let radius = sqrt(u.size.z);
-    let ex = radius * sqrt(fp.cov.x) + 0.5;
-    let ey = radius * sqrt(fp.cov.z) + 0.5;
+    // The cut-off ellipse's bounding box and a hair (`RECT_MARGIN` in
+    // src/splat/tiled/project.rs): the pixel loop tests the cut-off at each pixel.
+    let ex = radius * sqrt(fp.cov.x) + 0.01;
+    let ey = radius * sqrt(fp.cov.z) + 0.01;
     let w = f32(batch.width);
     let h = f32(batch.height);
     let x0 = max(i32(ceil(clamp(fp.centre.x - ex - 0.5, -1.0, w + 1.0))), 0);

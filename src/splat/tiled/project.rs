@@ -177,8 +177,8 @@ impl Group<'_> {
 ///
 /// The rectangle: the voxels' box projected (its corners' centres bound every centre in it,
 /// and its corners' slopes `x / z` and `y / z` every slope, a linear-fractional function
-/// taking its extremes at a convex set's vertices), grown by the largest quad half extent
-/// `radius sqrt(a) + 1/2` of a splat in the box. The screen variance
+/// taking its extremes at a convex set's vertices), grown by the largest half extent
+/// `radius sqrt(a)` of a splat's rectangle in the box ([`place`]). The screen variance
 /// `a = (f / z)^2 (S00 - 2 S02 s + S22 s^2) + pixel variance` is largest at the nearest depth
 /// and, convex in the slope `s`, at one of the slope's bounds (likewise `c` with `S11`, `S12`
 /// and the slope `y / z`; orthographic, both are constant).
@@ -236,7 +236,7 @@ pub(super) fn group_rect(u: &SplatProjection, ids: &[u32], s: &Screen) -> Option
     };
     let radius = u.cutoff.sqrt();
     // A hundredth of a pixel more, against rounding that differs from `place`'s.
-    let reach = |v: f32| radius * v.sqrt() * 1.0001 + 0.51;
+    let reach = |v: f32| radius * v.sqrt() * 1.0001 + RECT_MARGIN + 0.01;
     let (ex, ey) = (
         reach(variance(u.cov[0][0], u.cov[0][2], sx)),
         reach(variance(u.cov[1][1], u.cov[1][2], sy)),
@@ -252,6 +252,12 @@ pub(super) fn group_rect(u: &SplatProjection, ids: &[u32], s: &Screen) -> Option
     let y1 = floor(lim(bottom + ey - 0.5, h)).min(h - 1);
     Some([x0, y0, x1, y1])
 }
+
+/// How far, in pixels, a splat's pixel rectangle reaches past its cut-off ellipse's bounding
+/// box: against rounding, so that no pixel centre the ellipse holds is left out of it. (A
+/// pixel just past the ellipse that it takes in anyway gets nothing: the pixel loop tests
+/// the cut-off at each pixel.)
+pub(super) const RECT_MARGIN: f32 = 0.01;
 
 /// The camera-space centre of voxel `k`.
 #[inline(always)]
@@ -273,7 +279,7 @@ pub(super) struct Placement {
 
 /// The placement of a splat centred at `p` (camera space) on a `w` by `h` image; `None` where
 /// the splat pass leaves it out: behind the near cut, a footprint that is not an ellipse, or
-/// no pixel centre inside its quad.
+/// no pixel centre inside its cut-off ellipse's bounding box.
 pub(super) fn place(u: &SplatProjection, p: Vec3, w: i32, h: i32) -> Option<Placement> {
     let depth = if u.orthographic {
         if p.z <= u.near {
@@ -295,11 +301,16 @@ pub(super) fn place(u: &SplatProjection, p: Vec3, w: i32, h: i32) -> Option<Plac
     let cov = u.cov.map(|row| row.to_array());
     let footprint = footprint(p.to_array(), &cov, &lens)?;
     let ([a, _, c], centre) = (footprint.cov, footprint.centre);
-    // The quad of the vertex shader: +-(radius sqrt(a) + 0.5) by +-(radius sqrt(c) + 0.5);
-    // the pixels whose centres it holds.
+    // The cut-off ellipse's bounding box, `+-radius sqrt(a)` by `+-radius sqrt(c)` (a hair
+    // wider, [`RECT_MARGIN`]), as the splat pass's quad: the pixels whose centres it holds.
+    // (Half a pixel wider each way, as the quad was, the rectangle took in a band of pixels
+    // past the cut-off, which take nothing: a fifth more rows and tiles walked.)
     let radius = u.cutoff.sqrt();
-    let (ex, ey) = (radius * a.sqrt() + 0.5, radius * c.sqrt() + 0.5);
-    // The first and last pixel centres inside the quad, clamped to the image.
+    let (ex, ey) = (
+        radius * a.sqrt() + RECT_MARGIN,
+        radius * c.sqrt() + RECT_MARGIN,
+    );
+    // The first and last pixel centres inside the box, clamped to the image.
     let lim = |v: f32, hi: i32| v.clamp(-1.0, hi as f32 + 1.0);
     let x0 = ceil(lim(centre[0] - ex - 0.5, w)).max(0);
     let x1 = floor(lim(centre[0] + ex - 0.5, w)).min(w - 1);

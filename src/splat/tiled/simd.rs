@@ -85,7 +85,7 @@ pub(super) mod avx2 {
     use std::arch::x86_64::*;
 
     use crate::splat::tiled::TILE;
-    use crate::splat::tiled::project::{Group, Projected, voxel};
+    use crate::splat::tiled::project::{Group, Projected, RECT_MARGIN, voxel};
     use crate::splat::tiled::tile::{
         Batch, LANES, Lanes, TilePixels, TileRect, composite_tile_lanes,
     };
@@ -288,8 +288,9 @@ pub(super) mod avx2 {
         let mut placed = _mm256_and_ps(front, _mm256_cmp_ps::<_CMP_GT_OQ>(det, splat(0.0)));
         let radius = splat(u.cutoff.sqrt());
         let half = splat(0.5);
-        let ex = _mm256_fmadd_ps(radius, _mm256_sqrt_ps(a), half);
-        let ey = _mm256_fmadd_ps(radius, _mm256_sqrt_ps(c), half);
+        let margin = splat(RECT_MARGIN);
+        let ex = _mm256_fmadd_ps(radius, _mm256_sqrt_ps(a), margin);
+        let ey = _mm256_fmadd_ps(radius, _mm256_sqrt_ps(c), margin);
         let (w, h) = (group.screen.w as f32, group.screen.h as f32);
         let lim =
             |v: __m256, hi: f32| _mm256_min_ps(_mm256_max_ps(v, splat(-1.0)), splat(hi + 1.0));

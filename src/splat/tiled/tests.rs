@@ -368,3 +368,62 @@ fn the_avx2_projection_places_splats_as_the_scalar_one_does() {
         }
     }
 }
+
+/// A splat's pixel rectangle is its cut-off ellipse's bounding box: it holds every pixel
+/// centre the ellipse holds (found by testing each pixel of the image, with the footprint
+/// in f64), and no row or column of it lies farther from the centre than the ellipse reaches.
+#[test]
+fn a_splat_rectangle_is_the_bounding_box_of_its_cut_off_ellipse() {
+    use crate::splat::footprint::{Lens, footprint};
+    for orthographic in [false, true] {
+        let (u, _) = grid_and_view(orthographic);
+        let (w, h) = (64, 48);
+        let lens = Lens {
+            focal: f64::from(u.focal),
+            centre: u.centre.map(f64::from),
+            pixel_variance: f64::from(u.pixel_variance),
+            orthographic,
+        };
+        let cov = u.cov.map(|r| r.to_array().map(f64::from));
+        let radius = f64::from(u.cutoff).sqrt();
+        let (mut checked, mut edge) = (0, 0);
+        for id in 0..u.dims.iter().product::<u32>() {
+            let p = camera_centre(&u, voxel(&u, id));
+            let Some(at) = place(&u, p, w, h) else {
+                continue;
+            };
+            let fp = footprint(p.to_array().map(f64::from), &cov, &lens).unwrap();
+            let [a, b, c] = fp.cov;
+            let det = a * c - b * b;
+            let [x0, y0, x1, y1] = at.rect;
+            for y in 0..h {
+                for x in 0..w {
+                    let (dx, dy) = (
+                        f64::from(x) + 0.5 - fp.centre[0],
+                        f64::from(y) + 0.5 - fp.centre[1],
+                    );
+                    let q = (c * dx * dx - 2.0 * b * dx * dy + a * dy * dy) / det;
+                    let inside = (x0..=x1).contains(&x) && (y0..=y1).contains(&y);
+                    // Pixels within rounding of the cut-off may go either way.
+                    if q <= f64::from(u.cutoff) * (1.0 - 1e-4) {
+                        assert!(inside, "pixel ({x}, {y}), q {q}, outside {:?}", at.rect);
+                        edge += usize::from(q > f64::from(u.cutoff) * 0.8);
+                    }
+                    if inside {
+                        assert!(
+                            dx.abs() <= radius * a.sqrt() + 0.02
+                                && dy.abs() <= radius * c.sqrt() + 0.02,
+                            "pixel ({x}, {y}) past the ellipse's box, in {:?}",
+                            at.rect
+                        );
+                    }
+                }
+            }
+            checked += 1;
+        }
+        assert!(
+            checked > 1000 && edge > 1000,
+            "{checked} splats, {edge} edge pixels"
+        );
+    }
+}

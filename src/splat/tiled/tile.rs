@@ -186,8 +186,8 @@ pub(super) fn splat_rect(origin: (usize, usize), p: &Projected) -> Option<TileRe
 /// with the x86-64 baseline (SSE2). Where the processor has AVX2 and FMA, [`avx2`] does the
 /// same in 8 lanes (chosen at run time, see [`TilePixels::composite`]). Rows and groups whose pixels are all opaque are
 /// skipped from the tile's row masks. Within a group a pixel is left alone where it is opaque,
-/// the meshes are in front, or it lies past the footprint's cut-off; the footprint's quad
-/// always holds its cut-off ellipse, so the quad's rectangle only chooses the rows and groups
+/// the meshes are in front, or it lies past the footprint's cut-off; the footprint's rectangle
+/// always holds its cut-off ellipse, so the rectangle only chooses the rows and groups
 /// walked.
 pub(super) fn composite_splat_lanes(
     tile: &mut TilePixels,
