@@ -120,16 +120,17 @@ impl RenderTarget {
 
     /// Reads the depth target back: reversed depth per pixel, 0 where nothing was drawn.
     pub fn read_depth(&self, ctx: &GpuContext) -> Result<Vec<f32>, RenderError> {
-        let mut depth = Vec::with_capacity(self.size.0 as usize * self.size.1 as usize);
+        let w = self.size.0 as usize;
+        let mut depth = vec![0.0f32; w * self.size.1 as usize];
         let whole = PixelRect::whole(self.size);
+        let mut rows = depth.chunks_exact_mut(w);
         read_regions(
             ctx,
             &[(&self.depth, wgpu::TextureAspect::DepthOnly, 4, whole)],
             |_, row| {
-                depth.extend(
-                    row.chunks_exact(4)
-                        .map(|p| f32::from_le_bytes([p[0], p[1], p[2], p[3]])),
-                );
+                if let Some(out) = rows.next() {
+                    depth_row(row, out);
+                }
             },
         )?;
         Ok(depth)
@@ -180,12 +181,7 @@ impl RenderTarget {
                 let r = rows[i];
                 rows[i] += 1;
                 if textures[i].1 == wgpu::TextureAspect::DepthOnly {
-                    for (d, p) in depth[r * w..(r + 1) * w]
-                        .iter_mut()
-                        .zip(row.chunks_exact(4))
-                    {
-                        *d = f32::from_le_bytes([p[0], p[1], p[2], p[3]]);
-                    }
+                    depth_row(row, &mut depth[r * w..(r + 1) * w]);
                 } else {
                     let span = match fill {
                         Some(_) => (ry0 + r) * w + rx0..(ry0 + r) * w + rx1,
@@ -203,6 +199,13 @@ impl RenderTarget {
             },
             depth,
         ))
+    }
+}
+
+/// One row of a depth texture read back (32-bit floats, little-endian) into `out`.
+fn depth_row(row: &[u8], out: &mut [f32]) {
+    for (d, p) in out.iter_mut().zip(row.chunks_exact(4)) {
+        *d = f32::from_le_bytes([p[0], p[1], p[2], p[3]]);
     }
 }
 
