@@ -123,7 +123,7 @@ fn splats_of(
     renderer.set_level_of_detail(level_of_detail);
     renderer.set_refinement(refinement);
     let shot = renderer
-        .screenshot_without_gpu(&scene, camera, size, &NO_BACKGROUND)
+        .screenshot_without_gpu(&scene, camera, size, &no_background())
         .unwrap();
     (shot.frame, shot.report)
 }
@@ -146,12 +146,12 @@ fn phantom_scene(volume: CpuVolume, transfer: TransferFunction) -> Scene {
 }
 
 /// Frames on a transparent background (the other options the defaults).
-const NO_BACKGROUND: FrameOptions = FrameOptions {
-    ordering: None,
-    background: None,
-    measure: true,
-    preview: false,
-};
+fn no_background() -> FrameOptions {
+    FrameOptions {
+        background: None,
+        ..Default::default()
+    }
+}
 
 fn marched(camera: &SceneCamera) -> Frame {
     marched_at(camera, SIZE)
@@ -334,7 +334,7 @@ fn a_level_made_before_its_own_grid_is_drawn_is_the_same_level() {
     let along = camera(DVec3::new(0.0, 0.05, -1.0), DVec3::Y);
     let oblique = camera(DVec3::new(0.6, 0.5, -0.6), DVec3::Y);
     let scene = phantom_scene(thin, transfer());
-    let options = NO_BACKGROUND;
+    let options = no_background();
     let mut first = Renderer::new();
     let direct = first
         .screenshot_without_gpu(&scene, &along, SIZE, &options)
