@@ -18,7 +18,9 @@
 //! stretches of the order whose box of voxels is hidden are left out before each splat's
 //! centre is. Projection is the part of a frame that early termination alone does not shrink.
 //!
-//! The pixel loop works on rows of 8 pixels held as planes. It is written twice: in plain
+//! The pixel loop works on rows of 8 pixels held as planes (in the AVX2 loop, a footprint at
+//! most 4 pixels wide, as a voxel under a pixel across makes, takes two rows a vector, four
+//! pixels of each, rather than half-empty vectors row by row). It is written twice: in plain
 //! loops the compiler vectorises for the x86-64 baseline (SSE2) and any other processor, and
 //! in AVX2 and FMA intrinsics, chosen at run time where the processor has them, since the
 //! compiler neither fuses multiply-adds nor gathers lane masks well on its own (no `wide`: it

@@ -86,9 +86,7 @@ pub(super) mod avx2 {
 
     use crate::splat::tiled::TILE;
     use crate::splat::tiled::project::{Group, Projected, RECT_MARGIN, voxel};
-    use crate::splat::tiled::tile::{
-        Batch, LANES, Lanes, TilePixels, TileRect, composite_tile_lanes,
-    };
+    use crate::splat::tiled::tile::{Batch, LANES, TilePixels, TileRect, composite_tile_lanes};
 
     /// [`composite_tile_lanes`] with [`composite_splat`].
     ///
@@ -108,7 +106,10 @@ pub(super) mod avx2 {
         });
     }
 
-    /// [`super::composite_splat_lanes`] in AVX2 vectors.
+    /// [`super::composite_splat_lanes`] in AVX2 vectors. A footprint at most [`HALF`] pixels
+    /// wide (a splat of a voxel under a pixel across, with the screen's low-pass filter) takes
+    /// two rows a vector, one in each half; a wider one a row at a time, [`LANES`] pixels a
+    /// vector.
     #[target_feature(enable = "avx2,fma,popcnt")]
     #[inline]
     fn composite_splat(
@@ -119,70 +120,156 @@ pub(super) mod avx2 {
         opaque: f32,
     ) -> u32 {
         let dx0 = origin.0 as f32 + 0.5 - p.centre[0];
-        let [ca, cb, cc] = p.conic;
-        let conic_a = _mm256_set1_ps(ca);
-        let cutoff = _mm256_set1_ps(p.cutoff);
-        let depth = _mm256_set1_ps(p.depth);
-        let [cr, cg, cbl, calpha] = p.color.map(|c| _mm256_set1_ps(c));
-        let opaque = _mm256_set1_ps(opaque);
-        let one = _mm256_set1_ps(1.0);
-        let iota = _mm256_setr_ps(0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0);
-        let bits = lane_bits();
+        let [_, cb, cc] = p.conic;
+        let splat = Broadcast::new(p, opaque);
+        // The terms of the footprint's exponent that rows `dy` share (`2 b dy`, `c dy^2`).
+        let row_terms = |ly: usize| {
+            let dy = (origin.1 + ly) as f32 + 0.5 - p.centre[1];
+            (2.0 * cb * dy, cc * dy * dy)
+        };
         let mut turned = 0;
-        for ly in ly0..=ly1 {
-            let open = tile.rows[ly] & span;
-            if open == 0 {
+        let mut ly = ly0;
+        while ly <= ly1 {
+            if lx1 - lx0 < HALF && ly < ly1 {
+                // This row's columns in the low half, the next row's in the high half.
+                let rows = [tile.rows[ly] & span, tile.rows[ly + 1] & span];
+                let lanes_open = ((u32::from(rows[0]) >> lx0) & 0xf)
+                    | ((u32::from(rows[1]) >> lx0) & 0xf) << HALF;
+                if lanes_open != 0 {
+                    let [(by0, qy0), (by1, qy1)] = [row_terms(ly), row_terms(ly + 1)];
+                    let halves =
+                        |lo: f32, hi: f32| _mm256_set_m128(_mm_set1_ps(hi), _mm_set1_ps(lo));
+                    let iota = _mm256_setr_ps(0.0, 1.0, 2.0, 3.0, 0.0, 1.0, 2.0, 3.0);
+                    let dx = _mm256_add_ps(_mm256_set1_ps(dx0 + lx0 as f32), iota);
+                    let at = ly * TILE + lx0;
+                    let terms = (dx, halves(by0, by1), halves(qy0, qy1));
+                    let done = splat.under::<TILE>(tile, at, terms, lanes_open);
+                    // Lanes past a row's end were never open.
+                    tile.rows[ly] &= !(((done & 0xf) << lx0) as u16);
+                    tile.rows[ly + 1] &= !(((done >> HALF) << lx0) as u16);
+                    turned += done.count_ones();
+                }
+                ly += 2;
                 continue;
             }
-            let dy = (origin.1 + ly) as f32 + 0.5 - p.centre[1];
-            let (by, qy) = (_mm256_set1_ps(2.0 * cb * dy), _mm256_set1_ps(cc * dy * dy));
+            let open = tile.rows[ly] & span;
+            let (by, qy) = row_terms(ly);
+            let (by, qy) = (_mm256_set1_ps(by), _mm256_set1_ps(qy));
+            let iota = _mm256_setr_ps(0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0);
             let mut closing = 0u32;
+            // Groups start at the rectangle's left edge: most rows of a footprint fit in one.
             for start in (lx0..=lx1).step_by(LANES) {
                 let lanes_open = (u32::from(open) >> start) & 0xff;
                 if lanes_open == 0 {
                     continue;
                 }
-                let Some(Lanes {
-                    r,
-                    g,
-                    b,
-                    a,
-                    depth: d,
-                }) = tile.lanes(ly * TILE + start)
-                else {
-                    continue;
-                };
                 let dx = _mm256_add_ps(_mm256_set1_ps(dx0 + start as f32), iota);
-                let q = _mm256_fmadd_ps(_mm256_fmadd_ps(conic_a, dx, by), dx, qy);
-                let falloff = exp_neg_half(q);
-                let mask = _mm256_and_si256(_mm256_set1_epi32(lanes_open as i32), bits);
-                let open = _mm256_castsi256_ps(_mm256_cmpeq_epi32(mask, bits));
-                #[allow(unsafe_code)]
-                // SAFETY: each plane's group is an array of LANES floats.
-                unsafe {
-                    let d = _mm256_loadu_ps(d.as_ptr());
-                    let live = _mm256_and_ps(
-                        _mm256_and_ps(open, _mm256_cmp_ps::<_CMP_LE_OQ>(q, cutoff)),
-                        _mm256_cmp_ps::<_CMP_GE_OQ>(depth, d),
-                    );
-                    let alpha = _mm256_loadu_ps(a.as_ptr());
-                    let weight =
-                        _mm256_and_ps(live, _mm256_mul_ps(_mm256_sub_ps(one, alpha), falloff));
-                    for (plane, c) in [(r, cr), (g, cg), (b, cbl)] {
-                        let v = _mm256_fmadd_ps(weight, c, _mm256_loadu_ps(plane.as_ptr()));
-                        _mm256_storeu_ps(plane.as_mut_ptr(), v);
-                    }
-                    let after = _mm256_fmadd_ps(weight, calpha, alpha);
-                    _mm256_storeu_ps(a.as_mut_ptr(), after);
-                    let done = _mm256_and_ps(live, _mm256_cmp_ps::<_CMP_GE_OQ>(after, opaque));
-                    closing |= (_mm256_movemask_ps(done) as u32) << start;
-                }
+                let at = ly * TILE + start;
+                closing |= splat.under::<HALF>(tile, at, (dx, by, qy), lanes_open) << start;
             }
             // Lanes past the row's end were never open: `closing` has no bit there.
             tile.rows[ly] &= !(closing as u16);
             turned += closing.count_ones();
+            ly += 1;
         }
         turned
+    }
+
+    /// Columns a footprint spans at most for [`composite_splat`] to take two of its rows a
+    /// vector: half its lanes.
+    const HALF: usize = LANES / 2;
+
+    /// A splat's values in every lane, for [`Broadcast::under`].
+    struct Broadcast {
+        conic_a: __m256,
+        cutoff: __m256,
+        depth: __m256,
+        color: [__m256; 4],
+        opaque: __m256,
+    }
+
+    impl Broadcast {
+        #[target_feature(enable = "avx2")]
+        #[inline]
+        fn new(p: &Projected, opaque: f32) -> Self {
+            Self {
+                conic_a: _mm256_set1_ps(p.conic[0]),
+                cutoff: _mm256_set1_ps(p.cutoff),
+                depth: _mm256_set1_ps(p.depth),
+                color: p.color.map(|c| _mm256_set1_ps(c)),
+                opaque: _mm256_set1_ps(opaque),
+            }
+        }
+
+        /// Composites the splat under eight pixels of the tile: lanes 0-3 from pixel `at`
+        /// of the planes on, lanes 4-7 from pixel `at + HI` on (`HI` [`HALF`]: eight pixels
+        /// along a row; [`TILE`]: four of a row and the four below them). `dx` is each
+        /// lane's offset from the centre along x, `by` and `qy` its row's terms of the
+        /// exponent, and bit `l` of `lanes_open` says whether lane `l`'s pixel is open.
+        /// Returns the lanes that turned opaque, a bit each.
+        #[target_feature(enable = "avx2,fma")]
+        #[inline]
+        fn under<const HI: usize>(
+            &self,
+            tile: &mut TilePixels,
+            at: usize,
+            (dx, by, qy): (__m256, __m256, __m256),
+            lanes_open: u32,
+        ) -> u32 {
+            let stretch = at..at + HI + HALF;
+            let (Some(r), Some(g), Some(b), Some(a), Some(d)) = (
+                tile.r.get_mut(stretch.clone()),
+                tile.g.get_mut(stretch.clone()),
+                tile.b.get_mut(stretch.clone()),
+                tile.a.get_mut(stretch.clone()),
+                tile.depth.get(stretch),
+            ) else {
+                return 0;
+            };
+            let q = _mm256_fmadd_ps(_mm256_fmadd_ps(self.conic_a, dx, by), dx, qy);
+            let falloff = exp_neg_half(q);
+            let bits = lane_bits();
+            let mask = _mm256_and_si256(_mm256_set1_epi32(lanes_open as i32), bits);
+            let open = _mm256_castsi256_ps(_mm256_cmpeq_epi32(mask, bits));
+            let [cr, cg, cb, calpha] = self.color;
+            #[allow(unsafe_code)]
+            // SAFETY: each stretch holds HI + HALF floats, so a half at 0 and one at HI.
+            unsafe {
+                let load = |v: *const f32| {
+                    if HI == HALF {
+                        _mm256_loadu_ps(v)
+                    } else {
+                        _mm256_loadu2_m128(v.add(HI), v)
+                    }
+                };
+                let store = |v: *mut f32, x: __m256| {
+                    if HI == HALF {
+                        _mm256_storeu_ps(v, x)
+                    } else {
+                        _mm256_storeu2_m128(v.add(HI), v, x)
+                    }
+                };
+                let live = _mm256_and_ps(
+                    _mm256_and_ps(open, _mm256_cmp_ps::<_CMP_LE_OQ>(q, self.cutoff)),
+                    _mm256_cmp_ps::<_CMP_GE_OQ>(self.depth, load(d.as_ptr())),
+                );
+                let alpha = load(a.as_ptr());
+                let weight = _mm256_and_ps(
+                    live,
+                    _mm256_mul_ps(_mm256_sub_ps(_mm256_set1_ps(1.0), alpha), falloff),
+                );
+                for (plane, c) in [(r, cr), (g, cg), (b, cb)] {
+                    store(
+                        plane.as_mut_ptr(),
+                        _mm256_fmadd_ps(weight, c, load(plane.as_ptr())),
+                    );
+                }
+                let after = _mm256_fmadd_ps(weight, calpha, alpha);
+                store(a.as_mut_ptr(), after);
+                let done = _mm256_and_ps(live, _mm256_cmp_ps::<_CMP_GE_OQ>(after, self.opaque));
+                _mm256_movemask_ps(done) as u32
+            }
+        }
     }
 
     /// [`super::Group::project`] for up to [`LANES`] splats: [`super::project`] with the
