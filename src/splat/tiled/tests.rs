@@ -104,17 +104,45 @@ fn fresh_tile(depth: &[f32]) -> TilePixels {
 #[test]
 fn the_lanes_composite_as_a_pixel_by_pixel_loop_does() {
     let depth: Vec<f32> = (0..40 * 40).map(|i| (i % 7) as f32 * 0.1).collect();
-    let mut tile = fresh_tile(&depth);
+    lanes_composite_as_a_pixel_by_pixel_loop_does(&splats(), &depth, OPAQUE);
+}
+
+/// The portable loop's groups of half the lanes, for footprints at most 4 pixels wide.
+#[test]
+fn narrow_footprints_composite_as_a_pixel_by_pixel_loop_does() {
+    let splats = splats_of(0x9e37_79b9, 2000, (0.05, 0.35));
+    lanes_composite_as_a_pixel_by_pixel_loop_does(&splats, &narrow_depth(), 0.9);
+}
+
+/// The meshes in front of some splats in the left half of the 40x40 image, none in its right.
+fn narrow_depth() -> Vec<f32> {
+    (0..40 * 40)
+        .map(|i| {
+            if i % 40 < 24 {
+                (i % 3) as f32 * 0.3
+            } else {
+                0.0
+            }
+        })
+        .collect()
+}
+
+/// The portable loop (whatever the processor) against a scalar loop over every pixel.
+fn lanes_composite_as_a_pixel_by_pixel_loop_does(splats: &[Projected], depth: &[f32], opaque: f32) {
+    let mut tile = fresh_tile(depth);
     let mut reference = vec![[0.0f32; 4]; PIXELS];
-    let splats = splats();
     let bins = [one_list(splats.len())];
-    composite_tile(&mut tile, 0, (16, 32), batch(&splats, &bins));
-    for &p in &splats {
+    let batch = Batch {
+        opaque,
+        ..batch(splats, &bins)
+    };
+    composite_tile_lanes(&mut tile, 0, (16, 32), batch, composite_splat_lanes);
+    for &p in splats {
         // The old scalar loop, pixel by pixel over the quad's rectangle, with libm's exp.
         for y in p.y0.max(32)..=p.y1.min(32 + 15).min(39) {
             for x in p.x0.max(16)..=p.x1.min(16 + 15).min(39) {
                 let px = &mut reference[(y as usize - 32) * TILE + x as usize - 16];
-                if px[3] >= OPAQUE || p.depth < depth[y as usize * 40 + x as usize] {
+                if px[3] >= opaque || p.depth < depth[y as usize * 40 + x as usize] {
                     continue;
                 }
                 let (dx, dy) = (x as f32 + 0.5 - p.centre[0], y as f32 + 0.5 - p.centre[1]);
@@ -146,10 +174,7 @@ fn the_lanes_composite_as_a_pixel_by_pixel_loop_does() {
             assert_eq!(got, [0.0; 4]);
         }
     }
-    assert!(
-        covered > 100,
-        "the splats cover the tile ({covered} pixels)"
-    );
+    assert!(covered > 80, "the splats cover the tile ({covered} pixels)");
     assert!(worst < 1e-5, "largest difference {worst}");
 }
 
@@ -178,18 +203,8 @@ fn the_avx2_kernel_gives_the_baseline_pixels_for_narrow_footprints() {
         at_right > 20,
         "{at_right} footprints start in the tile's last columns"
     );
-    // The meshes in front of some splats in the image's left half, none in its right.
-    let depth: Vec<f32> = (0..40 * 40)
-        .map(|i| {
-            if i % 40 < 24 {
-                (i % 3) as f32 * 0.3
-            } else {
-                0.0
-            }
-        })
-        .collect();
     // Pixels stop at 0.9, so that many turn opaque in a vector's either half.
-    avx2_kernel_gives_the_pixels_of_the_baseline_kernel(&splats, &depth, 0.9);
+    avx2_kernel_gives_the_pixels_of_the_baseline_kernel(&splats, &narrow_depth(), 0.9);
 }
 
 fn avx2_kernel_gives_the_pixels_of_the_baseline_kernel(

@@ -71,10 +71,10 @@ impl TilePixels {
         }
     }
 
-    /// The planes' [`LANES`] values from pixel `at` on (`None` past the planes' ends).
+    /// The planes' `N` values from pixel `at` on (`None` past the planes' ends).
     #[inline(always)]
-    pub(super) fn lanes(&mut self, at: usize) -> Option<Lanes<'_>> {
-        let end = at.checked_add(LANES)?;
+    pub(super) fn lanes<const N: usize>(&mut self, at: usize) -> Option<Lanes<'_, N>> {
+        let end = at.checked_add(N)?;
         Some(Lanes {
             r: self.r.get_mut(at..end)?.try_into().ok()?,
             g: self.g.get_mut(at..end)?.try_into().ok()?,
@@ -85,13 +85,13 @@ impl TilePixels {
     }
 }
 
-/// A group of [`LANES`] pixels of a tile, plane by plane.
-pub(super) struct Lanes<'a> {
-    pub(super) r: &'a mut [f32; LANES],
-    pub(super) g: &'a mut [f32; LANES],
-    pub(super) b: &'a mut [f32; LANES],
-    pub(super) a: &'a mut [f32; LANES],
-    pub(super) depth: &'a [f32; LANES],
+/// A group of `N` pixels of a tile, plane by plane.
+pub(super) struct Lanes<'a, const N: usize> {
+    pub(super) r: &'a mut [f32; N],
+    pub(super) g: &'a mut [f32; N],
+    pub(super) b: &'a mut [f32; N],
+    pub(super) a: &'a mut [f32; N],
+    pub(super) depth: &'a [f32; N],
 }
 
 /// What every tile takes from a batch: its projected splats, their tile lists and the
@@ -181,10 +181,11 @@ pub(super) fn splat_rect(origin: (usize, usize), p: &Projected) -> Option<TileRe
 
 /// Composites one splat under the tile's pixels; returns how many pixels turned opaque.
 ///
-/// Plain loops over groups of [`LANES`] pixels, with no branch and no library call inside
-/// (`exp` is [`exp_neg`]), which the compiler turns into vector instructions, 4 lanes wide
-/// with the x86-64 baseline (SSE2). Where the processor has AVX2 and FMA, [`avx2`] does the
-/// same in 8 lanes (chosen at run time, see [`TilePixels::composite`]). Rows and groups whose pixels are all opaque are
+/// Plain loops over groups of [`LANES`] pixels of a row (half as many where the footprint is
+/// at most that wide), with no branch and no library call inside (`exp` is [`exp_neg`]),
+/// which the compiler turns into vector instructions, 4 lanes wide with the x86-64 baseline
+/// (SSE2) and on AArch64 (NEON). Where the processor has AVX2 and FMA, `simd::avx2` does the
+/// same in 8 lanes (chosen at run time). Rows and groups whose pixels are all opaque are
 /// skipped from the tile's row masks. Within a group a pixel is left alone where it is opaque,
 /// the meshes are in front, or it lies past the footprint's cut-off; the footprint's rectangle
 /// always holds its cut-off ellipse, so the rectangle only chooses the rows and groups
@@ -196,10 +197,6 @@ pub(super) fn composite_splat_lanes(
     (lx0, lx1, ly0, ly1, span): TileRect,
     opaque: f32,
 ) -> u32 {
-    let dx0 = origin.0 as f32 + 0.5 - p.centre[0];
-    let [ca, cb, cc] = p.conic;
-    let (cutoff, depth) = (p.cutoff, p.depth);
-    let [cr, cg, cbl, calpha] = p.color;
     let mut turned = 0u32;
     for ly in ly0..=ly1 {
         let open = tile.rows[ly] & span;
@@ -207,56 +204,96 @@ pub(super) fn composite_splat_lanes(
             continue;
         }
         let dy = (origin.1 + ly) as f32 + 0.5 - p.centre[1];
-        let (by, qy) = (2.0 * cb * dy, cc * dy * dy);
+        let row = Row {
+            ly,
+            dx0: origin.0 as f32 + 0.5 - p.centre[0],
+            by: 2.0 * p.conic[1] * dy,
+            qy: p.conic[2] * dy * dy,
+            opaque,
+        };
+        // A footprint at most half a group wide (as a voxel under a pixel across makes) takes
+        // groups of half the lanes, rather than vectors half empty.
+        if lx1 - lx0 < LANES / 2 {
+            turned += row.under::<{ LANES / 2 }>(tile, p, lx0, u32::from(open));
+            continue;
+        }
         // Groups start at the rectangle's left edge: most rows of a footprint fit in one.
         for start in (lx0..=lx1).step_by(LANES) {
-            let lanes_open = (u32::from(open) >> start) & 0xff;
-            if lanes_open == 0 {
-                continue;
-            }
-            let Some(Lanes {
-                r,
-                g,
-                b,
-                a,
-                depth: d,
-            }) = tile.lanes(ly * TILE + start)
-            else {
-                continue;
-            };
-            let first = dx0 + start as f32;
-            // Every lane computed, then masked: no branch, so the loops vectorise. (Plain
-            // loops: `array::map` and `from_fn` are calls that are not built for AVX2.)
-            let mut q = [0.0f32; LANES];
-            for (l, q) in q.iter_mut().enumerate() {
-                let dx = first + l as f32;
-                *q = (ca * dx + by) * dx + qy;
-            }
-            let mut falloff = [0.0f32; LANES];
-            for (e, &q) in falloff.iter_mut().zip(&q) {
-                *e = exp_neg(0.5 * q);
-            }
-            let mut closing = 0u32;
-            for l in 0..LANES {
-                let alpha = a[l];
-                let live = ((lanes_open >> l) & 1 != 0) & (q[l] <= cutoff) & (depth >= d[l]);
-                let weight = if live {
-                    (1.0 - alpha) * falloff[l]
-                } else {
-                    0.0
-                };
-                r[l] += weight * cr;
-                g[l] += weight * cg;
-                b[l] += weight * cbl;
-                let after = alpha + weight * calpha;
-                a[l] = after;
-                closing |= u32::from(live & (after >= opaque)) << l;
-            }
-            tile.rows[ly] &= !((closing << start) as u16);
-            turned += closing.count_ones();
+            turned += row.under::<LANES>(tile, p, start, u32::from(open));
         }
     }
     turned
+}
+
+/// One row of a footprint in a tile, for [`composite_splat_lanes`]: the row, the offset of
+/// the tile's first pixel centre from the footprint's centre along x, the terms of the
+/// exponent the row's pixels share (`2 b dy`, `c dy^2`), and the opacity that stops a pixel.
+struct Row {
+    ly: usize,
+    dx0: f32,
+    by: f32,
+    qy: f32,
+    opaque: f32,
+}
+
+impl Row {
+    /// Composites splat `p` under the `N` pixels of the row from column `start` on (those of
+    /// `open`, the row's open pixels, alone); returns how many turned opaque.
+    #[inline(always)]
+    fn under<const N: usize>(
+        &self,
+        tile: &mut TilePixels,
+        p: &Projected,
+        start: usize,
+        open: u32,
+    ) -> u32 {
+        let lanes_open = (open >> start) & ((1 << N) - 1);
+        if lanes_open == 0 {
+            return 0;
+        }
+        let Some(Lanes {
+            r,
+            g,
+            b,
+            a,
+            depth: d,
+        }) = tile.lanes::<N>(self.ly * TILE + start)
+        else {
+            return 0;
+        };
+        let [ca, _, _] = p.conic;
+        let [cr, cg, cbl, calpha] = p.color;
+        let first = self.dx0 + start as f32;
+        // Every lane computed, then masked: no branch, so the loops vectorise. (Plain
+        // loops: `array::map` and `from_fn` are calls that are not built for AVX2.)
+        let mut q = [0.0f32; N];
+        for (l, q) in q.iter_mut().enumerate() {
+            let dx = first + l as f32;
+            *q = (ca * dx + self.by) * dx + self.qy;
+        }
+        let mut falloff = [0.0f32; N];
+        for (e, &q) in falloff.iter_mut().zip(&q) {
+            *e = exp_neg(0.5 * q);
+        }
+        let mut closing = 0u32;
+        for l in 0..N {
+            let alpha = a[l];
+            let live = ((lanes_open >> l) & 1 != 0) & (q[l] <= p.cutoff) & (p.depth >= d[l]);
+            let weight = if live {
+                (1.0 - alpha) * falloff[l]
+            } else {
+                0.0
+            };
+            r[l] += weight * cr;
+            g[l] += weight * cg;
+            b[l] += weight * cbl;
+            let after = alpha + weight * calpha;
+            a[l] = after;
+            closing |= u32::from(live & (after >= self.opaque)) << l;
+        }
+        tile.rows[self.ly] &= !((closing << start) as u16);
+        closing.count_ones()
+    }
 }
 
 /// `exp(-x)` for `x >= 0`, without a library call so that it vectorises: `2^n 2^f` with `n`
