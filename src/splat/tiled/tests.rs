@@ -505,3 +505,72 @@ fn a_splat_rectangle_is_the_bounding_box_of_its_cut_off_ellipse() {
         );
     }
 }
+
+/// The opaque-pixel test of a rectangle against a pixel-by-pixel look, on masks with runs of
+/// opaque pixels across word boundaries and rectangles of every shape.
+#[test]
+fn a_rectangle_is_covered_as_its_pixels_say() {
+    let (w, h) = (150usize, 40usize);
+    let mut state = 0x1234_5677u32;
+    let mut next = move |n: usize| {
+        state ^= state << 13;
+        state ^= state >> 17;
+        state ^= state << 5;
+        state as usize % n
+    };
+    let (mut covered, mut open) = (0, 0);
+    for round in 0..40 {
+        // Opaque blocks of varied size; early rounds sparse, later ones dense.
+        let mut opaque = vec![false; w * h];
+        for _ in 0..(round * 3) {
+            let (x, y, bw, bh) = (next(w), next(h), 1 + next(70), 1 + next(12));
+            for yy in y..(y + bh).min(h) {
+                for xx in x..(x + bw).min(w) {
+                    opaque[yy * w + xx] = true;
+                }
+            }
+        }
+        let mut mask = OpaqueMask::default();
+        mask.reset(w, h);
+        for ty in 0..h.div_ceil(TILE) {
+            for tx in 0..w.div_ceil(TILE) {
+                let mut rows = [0u16; TILE];
+                for (ly, row) in rows.iter_mut().enumerate() {
+                    for lx in 0..TILE {
+                        let (x, y) = (tx * TILE + lx, ty * TILE + ly);
+                        if x < w && y < h && !opaque[y * w + x] {
+                            *row |= 1 << lx;
+                        }
+                    }
+                }
+                mask.set_tile(tx * TILE, ty * TILE, &rows);
+            }
+        }
+        for _ in 0..200 {
+            let (x0, y0) = (next(w), next(h));
+            let (x1, y1) = ((x0 + next(90)).min(w - 1), (y0 + next(9)).min(h - 1));
+            let pixels: Vec<bool> = (y0..=y1)
+                .flat_map(|y| (x0..=x1).map(move |x| (x, y)))
+                .map(|(x, y)| opaque[y * w + x])
+                .collect();
+            let rect = [x0, y0, x1, y1].map(|v| v as i32);
+            assert_eq!(
+                mask.covers_rect(rect),
+                pixels.iter().all(|&o| o),
+                "{rect:?}"
+            );
+            covered += usize::from(mask.covers_rect(rect));
+            open += usize::from(!pixels.iter().any(|&o| o));
+        }
+    }
+    assert!(
+        covered > 100 && open > 100,
+        "covered {covered}, all open {open}"
+    );
+    // Rectangles empty or not on the image are not covered.
+    let mut mask = OpaqueMask::default();
+    mask.reset(w, h);
+    mask.bits.fill(u64::MAX);
+    assert!(mask.covers_rect([0, 0, 5, 5]));
+    assert!(!mask.covers_rect([-1, 0, 5, 5]) && !mask.covers_rect([5, 0, 4, 5]));
+}
