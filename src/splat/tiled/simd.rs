@@ -153,6 +153,10 @@ pub(super) mod avx2 {
                 continue;
             }
             let open = tile.rows[ly] & span;
+            if open == 0 {
+                ly += 1;
+                continue;
+            }
             let (by, qy) = row_terms(ly);
             let (by, qy) = (_mm256_set1_ps(by), _mm256_set1_ps(qy));
             let iota = _mm256_setr_ps(0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0);

@@ -186,7 +186,8 @@ fn the_avx2_kernel_gives_the_pixels_of_the_baseline_kernel() {
 
 /// Footprints at most 4 pixels wide, which the AVX2 kernel takes two rows a vector: among
 /// them footprints that start in the tile's last columns (their lanes run past the row's
-/// end), end on its last row, or straddle its edges.
+/// end), reach past the image's bottom edge (a pair's second row off the image) or straddle
+/// the tile's edges, partly behind meshes.
 #[test]
 fn the_avx2_kernel_gives_the_baseline_pixels_for_narrow_footprints() {
     let splats = splats_of(0x9e37_79b9, 2000, (0.05, 0.35));
