@@ -793,6 +793,8 @@ pub fn classify_refined(
         options,
         samples: factors.map(|f| Samples::new(f as usize)),
         fine: fine.map(|n| n as usize),
+        least_mean: least_mean(options.min_opacity),
+        scale: options.opacity.scale() as f32,
     };
     let slabs: Vec<(Vec<u32>, Vec<SplatColor>)> = dispatch!(&volume.values, values => {
         (0..nz.div_ceil(SLAB))
@@ -975,6 +977,10 @@ struct Cells<'a> {
     samples: [Samples; 3],
     /// The fine grid's size.
     fine: [usize; 3],
+    /// The mean extinction at or below which a cell is left out: the minimum opacity's.
+    least_mean: f32,
+    /// Extinction to density ([`Opacity::scale`]).
+    scale: f32,
 }
 
 /// Where the cells of the `f` fine voxels that split one coarse voxel along an axis are
@@ -1192,6 +1198,49 @@ impl ExtinctionTable {
         );
         std::array::from_fn(|c| a[c] + f * (b[c] - a[c]))
     }
+
+    /// The extinction-weighted sums of [`ExtinctionTable::sample`] over eight values: the
+    /// sums of extinction times red, green and blue, and of extinction (a transparent value
+    /// adds nothing). A function of two points (a ramp, the usual case) has one segment, and
+    /// its lookups need no search: a value's bin follows from one multiply, clamped to the
+    /// segment (its ends are the function's values below and above it; NaN takes the lower).
+    /// Each value's entry is four lanes (colour and extinction), weighted in one vector.
+    #[inline]
+    fn weighted_sums(&self, values: [f32; 8]) -> [f32; 4] {
+        let mut sums = [0.0f32; 4];
+        if let [v0, v1] = self.knots[..] {
+            let scale = BINS as f32 / (v1 - v0);
+            for value in values {
+                // `max` first: NaN becomes 0, the lower end. In [0, BINS], so the conversion
+                // through i32 is exact.
+                let x = ((value - v0) * scale).max(0.0).min(BINS as f32);
+                let i = (x as i32 as usize).min(BINS - 1);
+                let f = x - i as f32;
+                let (a, b) = (self.entries[i], self.entries[i + 1]);
+                let e: [f32; 4] = std::array::from_fn(|c| a[c] + f * (b[c] - a[c]));
+                sums = std::array::from_fn(|c| sums[c] + e[3] * if c < 3 { e[c] } else { 1.0 });
+            }
+        } else {
+            for value in values {
+                let e = self.sample(value);
+                sums = std::array::from_fn(|c| sums[c] + e[3] * if c < 3 { e[c] } else { 1.0 });
+            }
+        }
+        sums
+    }
+}
+
+/// The mean extinction at or below which a cell's opacity `1 - exp(-mean)` is at or below
+/// `min_opacity` (infinite from an opacity of 1 on, below zero for a negative one; a NaN
+/// minimum leaves nothing out, as a comparison with it would).
+fn least_mean(min_opacity: f32) -> f32 {
+    if min_opacity.is_nan() {
+        f32::NEG_INFINITY
+    } else if min_opacity >= 1.0 {
+        f32::INFINITY
+    } else {
+        (-(-f64::from(min_opacity)).ln_1p()) as f32
+    }
 }
 
 impl Cells<'_> {
@@ -1210,27 +1259,14 @@ impl Cells<'_> {
     fn color(&self, block: &Block, j: [usize; 3]) -> Option<SplatColor> {
         let [sx, sy, sz] = [0, 1, 2].map(|a| &self.samples[a].at[j[a]]);
         let values = block.lerp_2x2x2([sx, sy, sz]);
-        let mut depth = 0.0f64;
-        let mut rgb = [0.0f64; 3];
-        for value in values {
-            let [r, g, b, d] = self.table.sample(value);
-            if d <= 0.0 {
-                continue;
-            }
-            let d = f64::from(d);
-            depth += d;
-            rgb[0] += d * f64::from(r);
-            rgb[1] += d * f64::from(g);
-            rgb[2] += d * f64::from(b);
-        }
-        if depth <= 0.0 {
-            return None;
-        }
+        let [r, g, b, depth] = self.table.weighted_sums(values);
         let mean = depth / 8.0;
-        let alpha = -(-mean).exp_m1();
-        if alpha <= f64::from(self.options.min_opacity) {
+        // `1 - exp(-mean) <= min_opacity`, with no exponential: the opacity grows with the
+        // mean extinction.
+        if mean <= self.least_mean {
             return None;
         }
+        let rgb = [r, g, b];
         if let Some(high) = self.options.shell {
             let k = block.voxel.unwrap_or_default();
             let factors = self.samples.each_ref().map(|s| s.centres.len());
@@ -1249,10 +1285,13 @@ impl Cells<'_> {
                 return None;
             }
         }
-        let q = |v: f64| ((v / depth).clamp(0.0, 1.0) * 255.0).round() as u8;
+        // Rounded as `+ 0.5` and a truncation: the value is never negative, and `round`
+        // is a library call on the x86-64 baseline.
+        let inverse = 1.0 / depth;
+        let q = |v: f32| ((v * inverse).clamp(0.0, 1.0) * 255.0 + 0.5) as u8;
         Some(SplatColor {
             rgb: rgb.map(q),
-            density: half::f16::from_f32((mean * self.options.opacity.scale()) as f32),
+            density: half::f16::from_f32(mean * self.scale),
         })
     }
 }

@@ -713,3 +713,78 @@ fn a_block_slid_along_x_is_the_block_loaded_afresh() {
     }
     assert!(loaded > 100);
 }
+
+#[test]
+fn the_least_mean_extinction_is_the_minimum_opacitys() {
+    // A cell is left out where its mean extinction is at or below the threshold: exactly
+    // where the opacity `1 - exp(-mean)` is at or below the minimum.
+    for min in [0.0f32, 1.0 / 255.0, 0.01, 0.3, 0.9, 0.999] {
+        let t = f64::from(least_mean(min));
+        for mean in [t * (1.0 - 1e-4), t * (1.0 + 1e-4) + 1e-9] {
+            let alpha = -(-mean).exp_m1();
+            assert_eq!(
+                mean <= t,
+                alpha <= f64::from(min),
+                "min {min}, mean {mean}: opacity {alpha}"
+            );
+        }
+    }
+    // Every opacity is at or below 1; none is at or below a negative minimum; NaN leaves
+    // nothing out.
+    assert_eq!(least_mean(1.0), f32::INFINITY);
+    assert_eq!(least_mean(2.0), f32::INFINITY);
+    assert!(least_mean(-0.1) < 0.0);
+    assert_eq!(least_mean(f32::NAN), f32::NEG_INFINITY);
+}
+
+#[test]
+fn weighted_sums_are_the_sums_of_single_samples() {
+    // The one-segment path (a ramp) and the searching path (three points) against the sums
+    // of the table's single lookups, over values below, inside and above the function, and
+    // NaN.
+    let ramp = TransferFunction::ramp(60.0, 190.0, [1.0, 0.93, 0.85, 0.6]);
+    let three = TransferFunction::new(vec![
+        (10.0, [1.0, 0.0, 0.0, 0.0]),
+        (90.0, [0.0, 1.0, 0.0, 0.5]),
+        (200.0, [0.0, 0.0, 1.0, 1.0]),
+    ]);
+    let values = [
+        -5.0,
+        60.0,
+        60.3,
+        97.25,
+        150.0,
+        189.99,
+        190.0,
+        f32::NAN,
+        12.5,
+        90.0,
+        199.0,
+        400.0,
+        0.0,
+        75.5,
+        130.0,
+        255.0,
+    ];
+    for tf in [&ramp, &three] {
+        let table = ExtinctionTable::new(tf);
+        for eight in values.chunks_exact(8) {
+            let eight: [f32; 8] = eight.try_into().unwrap();
+            let got = table.weighted_sums(eight);
+            let mut want = [0.0f64; 4];
+            for &v in &eight {
+                let [r, g, b, d] = table.sample(v).map(f64::from);
+                want[0] += d * r;
+                want[1] += d * g;
+                want[2] += d * b;
+                want[3] += d;
+            }
+            for c in 0..4 {
+                assert!(
+                    (f64::from(got[c]) - want[c]).abs() <= 1e-5 * want[c].max(1.0),
+                    "{eight:?}: {got:?} against {want:?}"
+                );
+            }
+        }
+    }
+}
