@@ -669,19 +669,45 @@ pub fn refined_gradient_snorm8(
 }
 
 /// A direction as snorm8 once made unit length; `None` for a zero or non-finite one.
-fn snorm8(v: glam::Vec3) -> Option<[u8; 3]> {
+pub(crate) fn snorm8(v: glam::Vec3) -> Option<[u8; 3]> {
     let n = v.try_normalize()?;
-    let q = |v: f32| (v * 127.0).round() as i8 as u8;
+    // Rounded half away from zero as `round` does, without its library call on the x86-64
+    // baseline: every component lies in [-1, 1].
+    let q = |v: f32| {
+        let r = v * 127.0;
+        (r + 0.5f32.copysign(r)) as i8 as u8
+    };
     Some([q(n.x), q(n.y), q(n.z)])
 }
 
 /// The index-space gradient of `volume` at voxel `k` by central differences (one-sided at the
-/// faces; 0 along an axis of one voxel).
+/// faces; 0 along an axis of one voxel; 0 for a voxel past the values).
 fn differences(volume: &CpuVolume, k: [u32; 3]) -> glam::Vec3 {
-    let [nx, ny, nz] = volume.dims.map(|n| n as usize);
+    dispatch!(&volume.values, values => differences_in(values, volume.dims, k))
+}
+
+/// [`differences`] in values of one type (the type matched once a voxel, not once a value).
+#[inline]
+fn differences_in<T: Voxel>(values: &[T], dims: [u32; 3], k: [u32; 3]) -> glam::Vec3 {
+    let [nx, ny, nz] = dims.map(|n| n as usize);
     let [x, y, z] = k.map(|c| c as usize);
-    let value =
-        |x: usize, y: usize, z: usize| volume.values.get(x + nx * (y + ny * z)).unwrap_or(0.0);
+    let (row, plane) = (nx, nx * ny);
+    let centre = x + row * y + plane * z;
+    if (1..nx.saturating_sub(1)).contains(&x)
+        && (1..ny.saturating_sub(1)).contains(&y)
+        && (1..nz.saturating_sub(1)).contains(&z)
+        && centre + plane < values.len()
+    {
+        // Inside: both neighbours along every axis, no clamping.
+        let d =
+            |step: usize| (values[centre + step].to_f32() - values[centre - step].to_f32()) / 2.0;
+        return glam::Vec3::new(d(1), d(row), d(plane));
+    }
+    let value = |x: usize, y: usize, z: usize| {
+        values
+            .get(x + nx * (y + ny * z))
+            .map_or(0.0, |v| v.to_f32())
+    };
     let diff = |k: usize, n: usize, at: &dyn Fn(usize) -> f32| {
         let (lo, hi) = (k.saturating_sub(1), (k + 1).min(n.max(1) - 1));
         if hi <= lo {

@@ -2,7 +2,7 @@
 
 use rayon::prelude::*;
 
-use crate::classify::{Classified, Front, refined_gradient_snorm8};
+use crate::classify::{Classified, Front, refined_gradient_snorm8, snorm8};
 use crate::grid::SparseGrid;
 use crate::volume::CpuVolume;
 
@@ -204,9 +204,7 @@ impl SplatTexels {
                     sum
                 }
             };
-            let n = (sum * scale).try_normalize().map_or([0; 3], |n| {
-                n.to_array().map(|v| (v * 127.0).round() as i8 as u8)
-            });
+            let n = snorm8(sum * scale).unwrap_or([0; 3]);
             let d = c.density.to_bits().to_le_bytes();
             [c.rgb[0], c.rgb[1], c.rgb[2], n[0], n[1], n[2], d[0], d[1]]
         })
