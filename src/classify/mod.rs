@@ -1288,8 +1288,8 @@ impl Cells<'_> {
         let [r, g, b, depth] = self.table.weighted_sums(values);
         let mean = depth / 8.0;
         // `1 - exp(-mean) <= min_opacity`, with no exponential: the opacity grows with the
-        // mean extinction.
-        if mean <= self.least_mean {
+        // mean extinction. A cell with none is no splat, whatever the minimum.
+        if depth <= 0.0 || mean <= self.least_mean {
             return None;
         }
         let rgb = [r, g, b];

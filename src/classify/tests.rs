@@ -617,6 +617,16 @@ fn a_uniform_field_gives_its_own_opacity_and_clear_space_no_splat() {
     assert!((c.density.to_f32() / Opacity::default().density(0.1) - 1.0).abs() < 1e-3);
     let [r, _, _, a] = c.premultiplied(1.0);
     assert!((r - a).abs() < 1e-6, "premultiplied");
+    // A cell with no opacity is no splat, even where the minimum leaves nothing out: the
+    // first layer's cells reach 23.75 at most, below the ramp.
+    for min in [-1.0, f32::NAN] {
+        let tf = TransferFunction::ramp(100.0, 200.0, [1.0; 4]);
+        let classified = classify(&volume, &tf, min).unwrap();
+        for id in 0..6 {
+            assert_eq!(classified.grid.rank(id), None, "minimum {min}, voxel {id}");
+        }
+        assert!(classified.grid.rank(23).is_some());
+    }
     let all_clear = CpuVolume {
         values: vec![-5.0; 24].into(),
         ..volume
