@@ -1233,6 +1233,10 @@ impl ExtinctionTable {
     /// Each value's entry is four lanes (colour and extinction), weighted in one vector.
     #[inline]
     fn weighted_sums(&self, values: [f32; 8]) -> [f32; 4] {
+        // An entry's colour weighted by its extinction, and the extinction, added to the sums.
+        let add = |sums: [f32; 4], e: [f32; 4]| -> [f32; 4] {
+            std::array::from_fn(|c| sums[c] + e[3] * if c < 3 { e[c] } else { 1.0 })
+        };
         let mut sums = [0.0f32; 4];
         if let [v0, v1] = self.knots[..] {
             let scale = BINS as f32 / (v1 - v0);
@@ -1243,13 +1247,11 @@ impl ExtinctionTable {
                 let i = (x as i32 as usize).min(BINS - 1);
                 let f = x - i as f32;
                 let (a, b) = (self.entries[i], self.entries[i + 1]);
-                let e: [f32; 4] = std::array::from_fn(|c| a[c] + f * (b[c] - a[c]));
-                sums = std::array::from_fn(|c| sums[c] + e[3] * if c < 3 { e[c] } else { 1.0 });
+                sums = add(sums, std::array::from_fn(|c| a[c] + f * (b[c] - a[c])));
             }
         } else {
             for value in values {
-                let e = self.sample(value);
-                sums = std::array::from_fn(|c| sums[c] + e[3] * if c < 3 { e[c] } else { 1.0 });
+                sums = add(sums, self.sample(value));
             }
         }
         sums
