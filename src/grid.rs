@@ -392,12 +392,35 @@ impl SparseGrid {
         [id % nx, (id / nx) % ny, id / nx / ny]
     }
 
+    /// The rows along `axis`, built on first use.
+    ///
+    /// They are built outside the lock. [`SparseGrid::build_rows`] runs on rayon, and a rayon
+    /// thread that waits inside `OnceLock::get_or_init` for that parallel build may meanwhile
+    /// take another task that asks for the same rows, and then wait on itself for ever (seen
+    /// with 16 threads, drawing from a parallel loop over bricks). Two threads that find the
+    /// rows missing at once each build them and one result is kept; parallel loops that read
+    /// rows build them first ([`SparseGrid::prepare_rows`]) so that this does not happen.
+    #[inline]
+    fn rows_along(&self, axis: usize) -> &AxisRows {
+        if let Some(rows) = self.rows[axis].get() {
+            return rows;
+        }
+        let built = self.build_rows(axis);
+        self.rows[axis].get_or_init(|| built)
+    }
+
+    /// Builds the rows along `axis` if they are not built yet: for a caller about to read
+    /// them from many tasks at once.
+    pub fn prepare_rows(&self, axis: usize) {
+        self.rows_along(axis);
+    }
+
     /// The runs of the row along `axis` whose other two coordinates are `k_b` and `k_c` (the
     /// other axes in increasing order, see [`other_axes`]).
     #[inline]
     pub fn row(&self, axis: usize, k_b: u32, k_c: u32) -> &[Run] {
         let (b, _) = other_axes(axis);
-        let rows = self.rows[axis].get_or_init(|| self.build_rows(axis));
+        let rows = self.rows_along(axis);
         let r = k_b as usize + self.dims[b] as usize * k_c as usize;
         &rows.runs[rows.offsets[r] as usize..rows.offsets[r + 1] as usize]
     }
@@ -472,6 +495,59 @@ mod tests {
         for (rank, id) in grid.ids().enumerate() {
             assert_eq!(grid.rank(id), Some(rank as u32));
         }
+    }
+
+    /// Rows first asked for from many rayon tasks at once, as the texel build asks for them
+    /// from a parallel loop over bricks, are built and read without a deadlock. Asked for
+    /// inside the lock, a task waiting on their parallel build could take another task that
+    /// asks for the same rows and wait on itself. Each round is a fresh grid (rows not built);
+    /// the count is checked against the bitmap.
+    #[test]
+    fn rows_first_asked_for_from_many_tasks_at_once_are_built_without_a_deadlock() {
+        use rayon::prelude::*;
+        // A small grid drawn in layers of four slices, as the texel build reads it: fewer
+        // outer tasks than threads, so that idle threads take parts of the build, and the
+        // thread that builds, waiting for them, looks for work among the outer tasks.
+        let dims = [12u32, 12, 12];
+        let keep = |id: u32| !(id / 3 + id / 41).is_multiple_of(4);
+        let expected = (0..dims.iter().product::<u32>())
+            .filter(|&id| keep(id))
+            .count();
+        let (sender, receiver) = std::sync::mpsc::channel();
+        std::thread::spawn(move || {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(16)
+                .build()
+                .unwrap();
+            let counts: Vec<usize> = (0..2000)
+                .map(|_| {
+                    let grid = SparseGrid::from_mask(dims, keep).unwrap();
+                    let mut per_layer = vec![0usize; 3];
+                    pool.install(|| {
+                        per_layer.par_iter_mut().enumerate().for_each(|(layer, n)| {
+                            for z in 4 * layer as u32..4 * (layer as u32 + 1) {
+                                for y in 0..dims[1] {
+                                    *n += grid
+                                        .row(0, y, z)
+                                        .iter()
+                                        .map(|r| r.len as usize)
+                                        .sum::<usize>();
+                                }
+                            }
+                        })
+                    });
+                    per_layer.iter().sum()
+                })
+                .collect();
+            let _ = sender.send(counts);
+        });
+        let counts = receiver
+            .recv_timeout(std::time::Duration::from_secs(60))
+            .expect("the rows were not built within a minute: a deadlock");
+        assert!(
+            counts.iter().all(|&n| n == expected),
+            "{counts:?} != {expected}"
+        );
     }
 
     #[test]

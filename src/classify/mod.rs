@@ -416,6 +416,8 @@ impl Classified {
             None => Vec::new(),
         };
         let alpha = |d: half::f16| alphas.get(usize::from(d.to_bits())).copied().unwrap_or(0.0);
+        // The x rows are read from every task below: made first, not by the first task.
+        self.grid.prepare_rows(0);
         let slices: Vec<(Vec<u32>, Vec<SplatColor>)> = (0..oz)
             .into_par_iter()
             .map(|k| {

@@ -119,6 +119,8 @@ fn splat_texels(
     let grid = &classified.grid;
     let [nx, ny, nz] = grid.dims().map(|n| n as usize);
     let mut texels = vec![0u8; nx * ny * nz * 8];
+    // The x rows are read from every task below: made first, not by the first task.
+    grid.prepare_rows(0);
     texels
         .par_chunks_mut((nx * ny * 8).max(1))
         .enumerate()

@@ -63,6 +63,8 @@ impl SplatTexels {
         // Which voxels are significant, a layer of bricks (four z-slices) a task, from the
         // grid's x rows.
         let mut table = vec![Brick::default(); layer * layers];
+        // The x rows are read from every task below: made first, not by the first task.
+        grid.prepare_rows(0);
         table
             .par_chunks_mut(layer)
             .enumerate()
