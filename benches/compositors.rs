@@ -13,13 +13,24 @@
 //! `-- quick` runs 3 frames a case instead of 9; `-- peers` only the first table; `-- cpu` only
 //! the CPU compositor's frames of the first table (for profiling it alone); `-- growth` all but
 //! the first table.
+//!
+//! `-- gpu [SCENE.toml ...]` times the two GPU compositors instead, the splat pass and the tile
+//! compositor's compute passes (`--compositor gpu-tiles`), alternating frame by frame: the
+//! engine and the CT head above, then each scene file given (its camera and size, 512 x 512
+//! where it names none). For each case it prints the tile pass's picture against the CPU
+//! tiles' (RMSE), whole frames read back (`screenshot`), the viewer's frames (drawn into a kept
+//! target, waited for, nothing read back) and the tile pass's stages. Meant for a machine with
+//! a GPU; on lavapipe the compute passes run on the CPU (`files-only` leaves the engine and
+//! the head out). `full-grid` draws every volume from its own grid (`--lod off`).
 
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use glam::{DMat4, DVec3};
 use splatscene::classify::TransferFunction;
-use splatscene::render::{Compositor, FrameOptions, GpuContext, Renderer};
+use splatscene::render::{
+    Compositor, FrameOptions, FrameTimings, GpuContext, RenderTarget, Renderer, ViewSetup,
+};
 use splatscene::scene::{NodeContent, Scene, SceneCamera, SplatSettings, VolumeNode};
 use splatscene::volume::CpuVolume;
 
@@ -141,6 +152,10 @@ fn main() {
         rayon::current_num_threads()
     );
     let engine = common::engine();
+    if std::env::args().any(|a| a == "gpu") {
+        gpu(&ctx, &engine, frames);
+        return;
+    }
     let cases = [
         (
             "engine",
@@ -263,4 +278,146 @@ fn skipping(ctx: &GpuContext, base: &Scene) {
             t.splats, t.drew, t.culled, t.composited, t.skipped_opaque
         );
     }
+}
+
+/// The two GPU compositors on the engine, the CT head and the scene files named on the command
+/// line: pictures, whole frames, viewer frames and the tile pass's stages.
+fn gpu(ctx: &GpuContext, engine: &CpuVolume, frames: usize) {
+    let mut cases = vec![];
+    // `files-only`: the scene files alone (a quick check of this mode on lavapipe).
+    let builtin = !std::env::args().any(|a| a == "files-only");
+    cases.extend(
+        [
+            (
+                "engine".to_string(),
+                scene(
+                    engine.clone(),
+                    TransferFunction::ramp(100.0, 200.0, [0.85, 0.8, 0.75, 0.5]),
+                ),
+                (512, 512),
+            ),
+            (
+                "cthead".to_string(),
+                scene(
+                    common::ct_head(),
+                    TransferFunction::ramp(1200.0, 1800.0, [1.0, 0.93, 0.85, 0.6]),
+                ),
+                (512, 512),
+            ),
+        ]
+        .into_iter()
+        .filter(|_| builtin),
+    );
+    for path in std::env::args().filter(|a| a.ends_with(".toml")) {
+        let loaded = splatscene::scene::file::load_scene_file(std::path::Path::new(&path))
+            .unwrap_or_else(|e| panic!("{path}: {e}"));
+        cases.push((path, loaded.scene, loaded.size.unwrap_or((512, 512))));
+    }
+    println!(
+        "\n| case | splats | GPU tiles vs CPU tiles, RMSE | screenshot: splat pass / GPU tiles | viewer frame: splat pass / GPU tiles | GPU tiles: order, upload, splat stage |\n|---|---|---|---|---|---|"
+    );
+    // `full-grid`: every volume drawn from its own grid (`--lod off`).
+    let lod = !std::env::args().any(|a| a == "full-grid");
+    let started = Instant::now();
+    let progress = |what: &str| eprintln!("{:8.1} s  {what}", started.elapsed().as_secs_f64());
+    for (name, scene, size) in &cases {
+        let camera = scene.camera.unwrap();
+        let renderer = |compositor| {
+            let mut r = Renderer::with_compositor(compositor);
+            r.set_level_of_detail(lod);
+            r
+        };
+        progress(&format!("{name}: the CPU tiles' picture"));
+        let mut cpu = renderer(Compositor::Cpu);
+        let reference = cpu
+            .screenshot(ctx, scene, &camera, *size, &OPTIONS)
+            .unwrap();
+        let mut renderers = [
+            ("gpu", renderer(Compositor::Gpu)),
+            ("gpu-tiles", renderer(Compositor::GpuTiles)),
+        ];
+        progress(&format!("{name}: the GPU tiles' picture"));
+        let tiles = renderers[1]
+            .1
+            .screenshot(ctx, scene, &camera, *size, &OPTIONS)
+            .unwrap();
+        let difference =
+            splatscene::splat::reference::compare(&reference.frame, &tiles.frame).unwrap();
+        progress(&format!("{name}: screenshots"));
+        let shots = alternate(ctx, scene, *size, &mut renderers, frames);
+        progress(&format!("{name}: viewer frames"));
+        let views = viewer_frames(ctx, scene, *size, &mut renderers, frames);
+        progress(&format!("{name}: stages"));
+        let measured = FrameOptions {
+            measure: true,
+            ..OPTIONS
+        };
+        let up = scene.up_axis();
+        let timings: Vec<FrameTimings> = (0..7)
+            .map(|i| {
+                let turned = camera.orbit_about(up, 11.0 * f64::from(i), 0.0);
+                renderers[1]
+                    .1
+                    .screenshot(ctx, scene, &turned, *size, &measured)
+                    .unwrap()
+                    .report
+                    .timings
+            })
+            .collect();
+        let stage = |f: fn(&FrameTimings) -> Duration| median(timings.iter().map(f).collect());
+        println!(
+            "| {name}, {}x{} | {} | {:.5} (largest {:.3}) | {:.2} / {:.2} ms | {:.2} / {:.2} ms | {:.2}, {:.2}, {:.2} ms |",
+            size.0,
+            size.1,
+            tiles.report.splats,
+            difference.rmse,
+            difference.max_abs,
+            shots[0],
+            shots[1],
+            views[0],
+            views[1],
+            stage(|t| t.order),
+            stage(|t| t.upload),
+            stage(|t| t.splat_pass),
+        );
+    }
+}
+
+/// Median viewer frames of each renderer: drawn into a kept target and waited for, nothing
+/// read back, the camera turning 7 degrees a frame, renderers alternating, after one warm-up
+/// frame each.
+fn viewer_frames(
+    ctx: &GpuContext,
+    scene: &Scene,
+    size: (u32, u32),
+    renderers: &mut [(&str, Renderer)],
+    frames: usize,
+) -> Vec<f64> {
+    let target = RenderTarget::new(ctx, size.0, size.1).unwrap();
+    let base = scene.camera.unwrap();
+    let up = scene.up_axis();
+    let mut times = vec![Vec::new(); renderers.len()];
+    // Three times the screenshots' frames: a GPU frame is short and the timer's noise is not.
+    for i in 0..=3 * frames {
+        let camera = base.orbit_about(up, 7.0 * i as f64, 0.0);
+        let view = ViewSetup::new(&camera, size, scene.bounds()).unwrap();
+        for (k, (_, renderer)) in renderers.iter_mut().enumerate() {
+            let started = Instant::now();
+            renderer
+                .render(
+                    ctx,
+                    scene,
+                    &view,
+                    &target.color_view,
+                    &target.depth_view,
+                    &OPTIONS,
+                )
+                .unwrap();
+            ctx.wait().unwrap();
+            if i > 0 {
+                times[k].push(started.elapsed());
+            }
+        }
+    }
+    times.into_iter().map(median).collect()
 }
