@@ -1020,19 +1020,22 @@ struct Samples {
     /// Per fine voxel, its two samples a quarter of its width either side of its centre, each
     /// as the lower of the two block values it lies between and the weight of the upper.
     at: Vec<[(usize, f32); 2]>,
+    /// The same two samples as block coordinates.
+    positions: Vec<[f32; 2]>,
 }
 
 impl Samples {
     fn new(f: usize) -> Self {
         let width = 1.0 / f as f64;
         let centres: Vec<f64> = (0..f).map(|j| 0.5 + (j as f64 + 0.5) * width).collect();
-        let at = centres
+        let positions: Vec<[f64; 2]> = centres
             .iter()
-            .map(|&c| [c - 0.25 * width, c + 0.25 * width].map(Self::between))
+            .map(|&c| [c - 0.25 * width, c + 0.25 * width])
             .collect();
         Self {
             centres: centres.into_iter().map(|c| c as f32).collect(),
-            at,
+            at: positions.iter().map(|p| p.map(Self::between)).collect(),
+            positions: positions.iter().map(|p| p.map(|v| v as f32)).collect(),
         }
     }
 
@@ -1258,6 +1261,27 @@ impl ExtinctionTable {
         }
         sums
     }
+
+    /// [`ExtinctionTable::weighted_sums`] over the values whose bit is set in `mask` alone
+    /// (bit `c` for `values[c]`): for cells some of whose samples lie outside the grid.
+    fn weighted_sums_of(&self, values: [f32; 8], mask: u8) -> [f32; 4] {
+        let mut sums = [0.0f32; 4];
+        for (c, value) in values.into_iter().enumerate() {
+            if mask >> c & 1 == 1 {
+                let e = self.sample(value);
+                sums = std::array::from_fn(|i| sums[i] + e[3] * if i < 3 { e[i] } else { 1.0 });
+            }
+        }
+        sums
+    }
+}
+
+/// The corners of a cell's 2x2x2 samples (bit 0 the x sample, bit 1 y, bit 2 z; a set bit the
+/// upper sample) whose bit `axis_bit` is `value`, as a mask of the eight.
+fn corners_where(axis_bit: usize, value: usize) -> u8 {
+    (0..8)
+        .filter(|c| c & axis_bit == value)
+        .fold(0u8, |mask, c| mask | 1 << c)
 }
 
 /// The mean extinction at or below which a cell's opacity `1 - exp(-mean)` is at or below
@@ -1289,7 +1313,29 @@ impl Cells<'_> {
     fn color(&self, block: &Block, j: [usize; 3]) -> Option<SplatColor> {
         let [sx, sy, sz] = [0, 1, 2].map(|a| &self.samples[a].at[j[a]]);
         let values = block.lerp_2x2x2([sx, sy, sz]);
-        let [r, g, b, depth] = self.table.weighted_sums(values);
+        // The cell's samples that lie past the grid's outer voxel centres carry no tissue: the
+        // data ends there, as the ray caster's box does, and a face cut through dense tissue
+        // would otherwise draw half a voxel more of it (more on a coarse grid than on a fine
+        // one). An axis of one voxel keeps its whole cell: a single slice is not empty.
+        let k = block.voxel.unwrap_or_default();
+        let mut inside = u8::MAX;
+        for (a, samples) in self.samples.iter().enumerate() {
+            let voxels = self.fine[a] / samples.centres.len();
+            if voxels < 2 || (k[a] > 0 && k[a] + 1 < voxels) {
+                continue;
+            }
+            for (side, &p) in samples.positions[j[a]].iter().enumerate() {
+                // 1 is the voxel's centre in block coordinates.
+                if (k[a] == 0 && p < 1.0) || (k[a] + 1 == voxels && p > 1.0) {
+                    inside &= !corners_where(1 << a, side << a);
+                }
+            }
+        }
+        let [r, g, b, depth] = if inside == u8::MAX {
+            self.table.weighted_sums(values)
+        } else {
+            self.table.weighted_sums_of(values, inside)
+        };
         let mean = depth / 8.0;
         // `1 - exp(-mean) <= min_opacity`, with no exponential: the opacity grows with the
         // mean extinction. A cell with none is no splat, whatever the minimum.
@@ -1298,7 +1344,6 @@ impl Cells<'_> {
         }
         let rgb = [r, g, b];
         if let Some(high) = self.options.shell {
-            let k = block.voxel.unwrap_or_default();
             let factors = self.samples.each_ref().map(|s| s.centres.len());
             let at_face = (0..3).any(|a| {
                 let f = k[a] * factors[a] + j[a];

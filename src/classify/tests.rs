@@ -167,7 +167,8 @@ fn the_view_step_follows_the_spacing_along_the_view() {
 
 /// The definition of a voxel's splat, computed the plain way: the trilinear field (its
 /// own interpolation, the grid clamped at its faces) classified at the eight points a
-/// quarter voxel from the centre, `-ln(1 - a)` averaged, colours weighted by it.
+/// quarter voxel from the centre, `-ln(1 - a)` averaged, colours weighted by it; a point past
+/// the outer voxel centres along an axis of more than one voxel adds nothing.
 /// Every voxel of `classified`, the classification of `volume` on the grid `factors` times
 /// finer, against [`fine_cell_oracle`]: a splat where the cell has opacity, with its
 /// density and colour; returns how many voxels were kept and left out.
@@ -249,6 +250,11 @@ fn fine_cell_oracle(
             let f = f64::from(factors[a]);
             (k[a] as f64 + 0.5 + if corner >> a & 1 == 1 { 0.25 } else { -0.25 }) / f - 0.5
         });
+        // Past the outer voxel centres there is no tissue (an axis of one voxel aside).
+        let outside = (0..3).any(|a| n[a] > 1.0 && (p[a] < 0.0 || p[a] > n[a] - 1.0));
+        if outside {
+            continue;
+        }
         let c = tf.sample(at(p) as f32).map(f64::from);
         let d = -(1.0 - c[3].min(1.0)).ln();
         depth += d / 8.0;
@@ -593,6 +599,61 @@ fn the_shell_keeps_the_surface_of_an_opaque_block() {
     assert_eq!(shell_at(1.0).grid.len(), full.grid.len());
 }
 
+/// A uniform volume holds its tissue from its first voxel centre to its last, as a ray caster
+/// bounds it: along a column of `n` voxels the splats' extinctions add up to `n - 1` voxels of
+/// it (the end voxels' cells are half inside), on an axis of one voxel to the whole voxel.
+#[test]
+fn a_volume_holds_tissue_from_its_first_voxel_centre_to_its_last() {
+    for dims in [[4u32, 4, 5], [4, 4, 2], [4, 4, 1]] {
+        let volume = CpuVolume {
+            dims,
+            spacing: [1.0; 3],
+            origin: [0.0; 3],
+            direction: DMat3::IDENTITY,
+            values: vec![150.0f32; dims.iter().product::<u32>() as usize].into(),
+        };
+        let tf = TransferFunction::ramp(100.0, 200.0, [1.0; 4]);
+        let classified = classify(&volume, &tf, 0.0).unwrap();
+        let per_voxel = Opacity::default().density(0.5);
+        // An interior column along z, and one along x through interior y and z where z has
+        // room for one.
+        let column: f32 = (0..dims[2])
+            .map(|z| {
+                let id = 1 + dims[0] * (1 + dims[1] * z);
+                classified.colors[classified.grid.rank(id).unwrap() as usize]
+                    .density
+                    .to_f32()
+            })
+            .sum();
+        let want = (dims[2].max(2) - 1) as f32;
+        assert!(
+            (column / per_voxel - want).abs() < 2e-3 * want,
+            "{dims:?}: {} voxels of tissue along z, not {want}",
+            column / per_voxel
+        );
+        let z = dims[2] / 2;
+        let row: f32 = (0..dims[0])
+            .map(|x| {
+                let id = x + dims[0] * (1 + dims[1] * z);
+                classified.colors[classified.grid.rank(id).unwrap() as usize]
+                    .density
+                    .to_f32()
+            })
+            .sum();
+        // Along x: three voxels; the column's z end halves its voxels where z has several.
+        let edge = if dims[2] > 1 && (z == 0 || z + 1 == dims[2]) {
+            0.5
+        } else {
+            1.0
+        };
+        assert!(
+            (row / per_voxel - 3.0 * edge).abs() < 6e-3,
+            "{dims:?}: {} voxels of tissue along x",
+            row / per_voxel
+        );
+    }
+}
+
 #[test]
 fn a_uniform_field_gives_its_own_opacity_and_clear_space_no_splat() {
     let mut values = vec![110.0f32; 24];
@@ -610,11 +671,12 @@ fn a_uniform_field_gives_its_own_opacity_and_clear_space_no_splat() {
         0.0,
     )
     .unwrap();
-    // The last voxel's cell lies wholly in the value 110.
+    // The last voxel's cell lies wholly in the value 110; it is a corner of the grid, and
+    // of its eight samples only the one inside the box of voxel centres holds tissue.
     let c = classified.colors[classified.grid.rank(23).unwrap() as usize];
-    // Value 110 throughout the cell: opacity 0.1 per millimetre, white.
+    // Value 110 there: opacity 0.1 per millimetre over an eighth of the cell, white.
     assert_eq!(c.rgb, [255; 3]);
-    assert!((c.density.to_f32() / Opacity::default().density(0.1) - 1.0).abs() < 1e-3);
+    assert!((c.density.to_f32() * 8.0 / Opacity::default().density(0.1) - 1.0).abs() < 1e-3);
     let [r, _, _, a] = c.premultiplied(1.0);
     assert!((r - a).abs() < 1e-6, "premultiplied");
     // A cell with no opacity is no splat, even where the minimum leaves nothing out: the
