@@ -821,6 +821,7 @@ pub fn classify_refined(
         options,
         samples: factors.map(|f| Samples::new(f as usize)),
         fine: fine.map(|n| n as usize),
+        dims: volume.dims.map(|n| n as usize),
         least_mean: least_mean(options.min_opacity),
         scale: options.opacity.scale() as f32,
     };
@@ -1005,6 +1006,8 @@ struct Cells<'a> {
     samples: [Samples; 3],
     /// The fine grid's size.
     fine: [usize; 3],
+    /// The volume's own grid's size.
+    dims: [usize; 3],
     /// The mean extinction at or below which a cell is left out: the minimum opacity's.
     least_mean: f32,
     /// Extinction to density ([`Opacity::scale`]).
@@ -1238,10 +1241,7 @@ impl ExtinctionTable {
     /// Each value's entry is four lanes (colour and extinction), weighted in one vector.
     #[inline]
     fn weighted_sums(&self, values: [f32; 8]) -> [f32; 4] {
-        // An entry's colour weighted by its extinction, and the extinction, added to the sums.
-        let add = |sums: [f32; 4], e: [f32; 4]| -> [f32; 4] {
-            std::array::from_fn(|c| sums[c] + e[3] * if c < 3 { e[c] } else { 1.0 })
-        };
+        let add = add_weighted;
         let mut sums = [0.0f32; 4];
         if let [v0, v1] = self.knots[..] {
             let scale = BINS as f32 / (v1 - v0);
@@ -1268,12 +1268,17 @@ impl ExtinctionTable {
         let mut sums = [0.0f32; 4];
         for (c, value) in values.into_iter().enumerate() {
             if mask >> c & 1 == 1 {
-                let e = self.sample(value);
-                sums = std::array::from_fn(|i| sums[i] + e[3] * if i < 3 { e[i] } else { 1.0 });
+                sums = add_weighted(sums, self.sample(value));
             }
         }
         sums
     }
+}
+
+/// `sums` with an entry's colour weighted by its extinction, and the extinction, added.
+#[inline]
+fn add_weighted(sums: [f32; 4], e: [f32; 4]) -> [f32; 4] {
+    std::array::from_fn(|c| sums[c] + e[3] * if c < 3 { e[c] } else { 1.0 })
 }
 
 /// The corners of a cell's 2x2x2 samples (bit 0 the x sample, bit 1 y, bit 2 z; a set bit the
@@ -1320,7 +1325,7 @@ impl Cells<'_> {
         let k = block.voxel.unwrap_or_default();
         let mut inside = u8::MAX;
         for (a, samples) in self.samples.iter().enumerate() {
-            let voxels = self.fine[a] / samples.centres.len();
+            let voxels = self.dims[a];
             if voxels < 2 || (k[a] > 0 && k[a] + 1 < voxels) {
                 continue;
             }
