@@ -132,7 +132,8 @@ impl SplatTexels {
     /// [`Classified::halved_along`] made from theirs, halving the axes whose `step` is 2, with
     /// the same `front`. Each splat takes its colour and density from `above`, and as its
     /// normal the mean of its block's normals with the weights its colour had (the densities,
-    /// or along a `front` the opacities as a ray composites them), taken into the coarser
+    /// each normal turned to one side first, as the two-sided headlight sees them; along a
+    /// `front`, the opacities as a ray composites them), taken into the coarser
     /// grid's index space (a gradient's component along an axis halved doubles) and made unit
     /// again: the block's surface, with no volume resampled for it. No normal where the
     /// block's cancel.
@@ -193,17 +194,19 @@ impl SplatTexels {
                     shading_normal(&normals, front.axis)
                 }
                 None => {
-                    let mut sum = glam::Vec3::ZERO;
+                    let mut weighted = [(0.0, glam::Vec3::ZERO); 8];
+                    let mut n = 0;
                     for dz in 0..step[2] {
                         for dy in 0..step[1] {
                             for dx in 0..step[0] {
                                 if let Some(t) = fine([dx, dy, dz]) {
-                                    sum += density(bits(&t)) * normal(&t);
+                                    weighted[n] = (density(bits(&t)), normal(&t));
+                                    n += 1;
                                 }
                             }
                         }
                     }
-                    sum
+                    one_sided_sum(&weighted[..n])
                 }
             };
             let n = snorm8(sum * scale).unwrap_or([0; 3]);
@@ -285,6 +288,23 @@ fn shading_normal(normals: &[(f32, glam::Vec3)], axis: usize) -> glam::Vec3 {
     lit * along + (1.0 - lit * lit).max(0.0).sqrt() * across
 }
 
+/// The weighted sum of `normals` each turned to the side of the heaviest (largest weight
+/// times length): shading is two-sided, so a normal and its opposite shade alike, and the two
+/// faces of a structure thinner than a block (a rib, a vessel wall) have opposite gradients
+/// whose plain sum cancels to whatever is left across the structure and shades it dark.
+fn one_sided_sum(normals: &[(f32, glam::Vec3)]) -> glam::Vec3 {
+    let Some(&(_, heaviest)) = normals
+        .iter()
+        .max_by(|a, b| (a.0 * a.1.length()).total_cmp(&(b.0 * b.1.length())))
+    else {
+        return glam::Vec3::ZERO;
+    };
+    normals
+        .iter()
+        .map(|&(w, n)| if n.dot(heaviest) < 0.0 { -w * n } else { w * n })
+        .sum()
+}
+
 /// The bit of voxel `(x, y, z)` in its brick's mask.
 #[inline(always)]
 pub(super) fn within_brick(x: usize, y: usize, z: usize) -> usize {
@@ -301,6 +321,29 @@ mod tests {
     /// The shading a normal gets from a headlight along `axis`, as the compositors shade.
     fn lit(n: Vec3, axis: usize) -> f32 {
         n.try_normalize().map_or(1.0, |n| n[axis].abs())
+    }
+
+    #[test]
+    fn a_blocks_opposite_normals_across_the_view_keep_their_direction() {
+        // A wall one voxel thin across z, its two faces' gradients opposite along z and
+        // tilted alike across it: their plain sum is mostly the tilt, a normal along the wall
+        // (z 0.55 of it); turned to one side, the wall's own normal.
+        let (top, bottom) = (Vec3::new(0.3, 0.1, 0.95), Vec3::new(0.3, 0.1, -0.95));
+        let sum = one_sided_sum(&[(0.6, top), (0.4, bottom)]);
+        assert!(sum.normalize().z > 0.99, "{sum}");
+        assert!((0.6 * top + 0.4 * bottom).normalize().z < 0.6);
+        // Normals on one side add as they are.
+        let tilted = Vec3::new(0.6, 0.0, 0.8);
+        let sum = one_sided_sum(&[(1.0, Vec3::Z), (1.0, tilted)]);
+        assert!((sum - (Vec3::Z + tilted)).length() < 1e-6, "{sum}");
+        // The heaviest sets the side: the lighter turns to it.
+        let sum = one_sided_sum(&[(0.2, Vec3::Z), (0.8, -tilted)]);
+        assert!(
+            (sum - (-0.2 * Vec3::Z - 0.8 * tilted)).length() < 1e-6,
+            "{sum}"
+        );
+        // No normals: none.
+        assert_eq!(one_sided_sum(&[]), Vec3::ZERO);
     }
 
     #[test]
