@@ -61,7 +61,10 @@ pub const REFINE_TO: f64 = 1.5;
 /// the front at 384 x 384, went from level 0 to level 1 and from RMSE 0.027-0.028 to 0.038
 /// against the reference ray marcher (soft tissue and bone), though a 512^3 textured ball at
 /// 512 x 512 drawn at level 1 stayed within 0.025 of it (0.018 at level 0) for a sixth of
-/// the frame.
+/// the frame. Measured again once levels halved across the view kept their shading, 1.4 drew
+/// the ball and LIDC2's turning path 1.5-3.5 times faster, but the CT head at 160 x 160 (1 mm,
+/// oblique, bone) went from 0.032 to 0.039 against the marcher (BENCHMARKS.md, "Levels halved
+/// across the view").
 pub(super) const COARSEN_TO: f64 = 1.0;
 
 /// The most levels an axis is halved beyond the axis halved least ([`detail_for`]). An axis
