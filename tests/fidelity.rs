@@ -534,21 +534,10 @@ fn a_grid_coarser_than_the_pixels_is_drawn_refined_nearer_the_marcher() {
     }
 }
 
-#[test]
-fn a_second_ct_at_two_grids_draws_the_ray_marchers_picture() {
-    // The Stanford CT head (University of North Carolina), every other voxel across the
-    // slices (a 2 mm grid, 128 x 128 x 113, the whole head with air around it), and the same
-    // values interpolated trilinearly onto a 1 mm grid here (255 x 255 x 225), at 160 x 160
-    // from the front and obliquely, the soft-tissue and bone windows: a CT the
-    // settings were not tuned on. The thick grid's voxels fall about 1.3 pixels apart (drawn
-    // refined), the thin one's about 0.65. The two grids within 0.03 of each other (measured
-    // 0.012-0.016). Against the marcher on the thick grid's field, taken 2 x 2 rays a pixel
-    // (the pixel's mean, as a splat's low-pass is), the soft window is within 0.03
-    // (0.021-0.023) and the bone window at its edge (0.030-0.033): held here to 0.035, the
-    // issue's 0.03 not met at this size on this CT.
-    let Some(data) = common::files::data_dir() else {
-        return;
-    };
+/// The Stanford CT head every other voxel across the slices (128 x 128 x 113 at 2 mm, in the
+/// file's units) and the same values interpolated trilinearly onto a 1 mm grid (255 x 255 x
+/// 225): the two grids' sizes and values, thick first.
+fn head_grids(data: &std::path::Path) -> ([u32; 3], Vec<f32>, [u32; 3], Vec<f32>) {
     let spec = RawSpec::new([256, 256, 113], ScalarType::U16, ByteOrder::Big);
     let slices = slice_stack(&data.join("volumes/stanford_cthead/CThead.1")).unwrap();
     let head = load_raw_slices(&slices, &spec).unwrap();
@@ -583,6 +572,129 @@ fn a_second_ct_at_two_grids_draws_the_ray_marchers_picture() {
             }
         }
     }
+    (dims, thick_values, fine.map(|n| n as u32), thin_values)
+}
+
+/// The marcher's picture of `volume` from `camera` at [`SIZE`], 2 x 2 rays a pixel averaged
+/// (the pixel's mean, as a splat's low-pass takes it), at 0.1 mm steps.
+fn marched_2x2(volume: &raymarch::Volume<'_>, camera: &SceneCamera) -> Frame {
+    let pinhole = Pinhole {
+        eye: camera.eye,
+        target: camera.target,
+        up: camera.up,
+        fov_y_degrees: 35.0,
+        size: (2 * SIZE.0, 2 * SIZE.1),
+    };
+    let fine_pixels = raymarch::march(volume, &pinhole, 0.1);
+    let w = 2 * SIZE.0 as usize;
+    Frame {
+        width: SIZE.0,
+        height: SIZE.1,
+        pixels: (0..(SIZE.0 * SIZE.1) as usize)
+            .map(|i| {
+                let (x, y) = (i % SIZE.0 as usize, i / SIZE.0 as usize);
+                let q = [
+                    fine_pixels[2 * y * w + 2 * x],
+                    fine_pixels[2 * y * w + 2 * x + 1],
+                    fine_pixels[(2 * y + 1) * w + 2 * x],
+                    fine_pixels[(2 * y + 1) * w + 2 * x + 1],
+                ];
+                std::array::from_fn(|c| q.iter().map(|p| p[c]).sum::<f32>() / 4.0)
+            })
+            .collect(),
+    }
+}
+
+#[test]
+fn an_integer_valued_thin_ct_is_shaded_as_its_field() {
+    // The 1 mm head stored as a u8 CT stores it (the file's units are 16 times u8's: every
+    // value rounded to a multiple of 16), soft-tissue window, obliquely, against the marcher
+    // on the same stored values. Many of its translucent voxels have six neighbours pairwise
+    // equal though the field around them slopes; drawn unshaded, fully lit, they made the
+    // picture brighter than the marcher's, whose samples between the voxels meet a slope.
+    // Measured here, with central differences alone and with the neighbourhood's
+    // differences where those are zero: brighter than the marcher by 0.0062 and by 0.0003
+    // (the mean over pixels and channels), RMSE 0.0227 and 0.0198.
+    let Some(data) = common::files::data_dir() else {
+        return;
+    };
+    let (_, _, fine, thin_values) = head_grids(&data);
+    let stored: Vec<f32> = thin_values
+        .iter()
+        .map(|v| (v / 16.0).round() * 16.0)
+        .collect();
+    let thin = CpuVolume {
+        dims: fine,
+        spacing: [1.0; 3],
+        origin: [0.0; 3],
+        direction: DMat3::IDENTITY,
+        values: stored.clone().into(),
+    };
+    let grid = raymarch::Grid {
+        dims: fine,
+        spacing: [1.0; 3],
+        origin: [0.0; 3],
+        values: &stored,
+    };
+    let far = DVec3::from(fine.map(|n| f64::from(n - 1)));
+    let target = 0.5 * far;
+    let camera = SceneCamera {
+        eye: target - DVec3::new(0.7, 1.0, -0.5).normalize() * 400.0,
+        target,
+        up: DVec3::Z,
+        projection: Projection::Perspective {
+            fov_y_degrees: 35.0,
+        },
+        near: None,
+    };
+    let tf = TransferFunction::ramp(960.0, 3040.0, [1.0, 0.93, 0.85, 0.6]);
+    let field = |p: DVec3| grid.sample(p);
+    let marcher = raymarch::Volume {
+        field: &field,
+        bounds: (DVec3::ZERO, far),
+        transfer: tf.points(),
+        reference_mm: 1.0,
+        shading: f64::from(SHADING),
+        gradient_mm: 0.5,
+    };
+    let reference = marched_2x2(&marcher, &camera);
+    let (frame, report) = splats_of(thin, tf, &camera, SIZE, true, true);
+    // The mean of the colour channels' differences: how much brighter the splats are.
+    let brighter = frame
+        .pixels
+        .iter()
+        .zip(&reference.pixels)
+        .map(|(a, b)| (0..3).map(|c| f64::from(a[c] - b[c])).sum::<f64>() / 3.0)
+        .sum::<f64>()
+        / frame.pixels.len() as f64;
+    eprintln!("levels {:?}, brighter by {brighter:.4}", report.levels);
+    assert!(
+        brighter.abs() < 0.003,
+        "brighter than the marcher by {brighter}"
+    );
+    check(
+        "the 1 mm head stored as integers, soft, oblique, against the marcher",
+        &compare(&frame, &reference).unwrap(),
+        0.022,
+    );
+}
+
+#[test]
+fn a_second_ct_at_two_grids_draws_the_ray_marchers_picture() {
+    // The Stanford CT head (University of North Carolina), every other voxel across the
+    // slices (a 2 mm grid, 128 x 128 x 113, the whole head with air around it), and the same
+    // values interpolated trilinearly onto a 1 mm grid here (255 x 255 x 225), at 160 x 160
+    // from the front and obliquely, the soft-tissue and bone windows: a CT the
+    // settings were not tuned on. The thick grid's voxels fall about 1.3 pixels apart (drawn
+    // refined), the thin one's about 0.65. The two grids within 0.03 of each other (measured
+    // 0.012-0.016). Against the marcher on the thick grid's field, taken 2 x 2 rays a pixel
+    // (the pixel's mean, as a splat's low-pass is), the soft window is within 0.03
+    // (0.021-0.023) and the bone window at its edge (0.030-0.033): held here to 0.035, the
+    // issue's 0.03 not met at this size on this CT.
+    let Some(data) = common::files::data_dir() else {
+        return;
+    };
+    let (dims, thick_values, fine, thin_values) = head_grids(&data);
     let volume = |dims: [u32; 3], spacing: [f64; 3], values: Vec<f32>| CpuVolume {
         dims,
         spacing,
@@ -590,7 +702,7 @@ fn a_second_ct_at_two_grids_draws_the_ray_marchers_picture() {
         direction: DMat3::IDENTITY,
         values: values.into(),
     };
-    let thin = volume(fine.map(|n| n as u32), [1.0; 3], thin_values);
+    let thin = volume(fine, [1.0; 3], thin_values);
     let grid = raymarch::Grid {
         dims,
         spacing: [2.0; 3],
@@ -622,38 +734,7 @@ fn a_second_ct_at_two_grids_draws_the_ray_marchers_picture() {
                 shading: f64::from(SHADING),
                 gradient_mm: 1.0,
             };
-            let pinhole = Pinhole {
-                eye: camera.eye,
-                target,
-                up: camera.up,
-                fov_y_degrees: 35.0,
-                size: SIZE,
-            };
-            let fine_pixels = raymarch::march(
-                &marcher,
-                &Pinhole {
-                    size: (2 * SIZE.0, 2 * SIZE.1),
-                    ..pinhole
-                },
-                0.1,
-            );
-            let reference = Frame {
-                width: SIZE.0,
-                height: SIZE.1,
-                pixels: (0..(SIZE.0 * SIZE.1) as usize)
-                    .map(|i| {
-                        let (x, y) = (i % SIZE.0 as usize, i / SIZE.0 as usize);
-                        let w = 2 * SIZE.0 as usize;
-                        let q = [
-                            fine_pixels[2 * y * w + 2 * x],
-                            fine_pixels[2 * y * w + 2 * x + 1],
-                            fine_pixels[(2 * y + 1) * w + 2 * x],
-                            fine_pixels[(2 * y + 1) * w + 2 * x + 1],
-                        ];
-                        std::array::from_fn(|c| q.iter().map(|p| p[c]).sum::<f32>() / 4.0)
-                    })
-                    .collect(),
-            };
+            let reference = marched_2x2(&marcher, &camera);
             let coverage = reference.pixels.iter().filter(|p| p[3] > 0.5).count();
             assert!(
                 coverage > 3000,

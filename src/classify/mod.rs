@@ -639,11 +639,26 @@ pub fn view_step_mm(index_to_world: glam::DMat3, forward: glam::DVec3) -> Option
 }
 
 /// The unit index-space gradient of `volume` at voxel `k`, pointing from dense to less dense
-/// (outward on bone surfaces), by central differences (one-sided at the faces), as snorm8;
-/// `None` where it is zero. Never all three zero otherwise: a unit vector has a component of
+/// (outward on bone surfaces), by central differences (one-sided at the faces), as snorm8.
+/// Where those are all zero inside the grid, the differences summed over the 3 x 3 rows of
+/// the voxel's neighbourhood along each axis instead ([`neighbourhood_differences`]); `None`
+/// where these are zero too. Never all three zero otherwise: a unit vector has a component of
 /// at least 1/sqrt(3).
+///
+/// The splat stands for the field over its footprint, about its 3 x 3 x 3 neighbourhood.
+/// Integer-valued CT has many voxels whose six neighbours are pairwise equal though the
+/// field around them slopes: 26% of the significant voxels of the Stanford CT head resampled
+/// to 0.5 mm and stored as u8, in its soft-tissue window (60-190), against 16% of a ray
+/// caster's samples of its trilinear field there. A voxel with no gradient is drawn unshaded,
+/// fully lit, so the translucent picture came out brighter than the ray caster's. The
+/// neighbourhood's differences leave 15% of the voxels without one (of its middle 200
+/// slices).
 pub fn gradient_snorm8(volume: &CpuVolume, k: [u32; 3]) -> Option<[u8; 3]> {
-    snorm8(-differences(volume, k))
+    let g = differences(volume, k);
+    if g == glam::Vec3::ZERO {
+        return snorm8(-neighbourhood_differences(volume, k));
+    }
+    snorm8(-g)
 }
 
 /// The unit index-space gradient at voxel `k` of the grid `factors` times finer than
@@ -686,6 +701,41 @@ pub(crate) fn snorm8(v: glam::Vec3) -> Option<[u8; 3]> {
 /// faces; 0 along an axis of one voxel; 0 for a voxel past the values).
 fn differences(volume: &CpuVolume, k: [u32; 3]) -> glam::Vec3 {
     dispatch!(&volume.values, values => differences_in(values, volume.dims, k))
+}
+
+/// The index-space gradient of `volume` at voxel `k` from its 3 x 3 x 3 neighbourhood: along
+/// each axis, the central differences of the nine rows through the neighbourhood summed, over
+/// 18 (the mean, halved as a central difference is). Zero at the grid's faces, where the
+/// neighbourhood is not whole.
+fn neighbourhood_differences(volume: &CpuVolume, k: [u32; 3]) -> glam::Vec3 {
+    dispatch!(&volume.values, values => neighbourhood_differences_in(values, volume.dims, k))
+}
+
+/// [`neighbourhood_differences`] in values of one type.
+fn neighbourhood_differences_in<T: Voxel>(values: &[T], dims: [u32; 3], k: [u32; 3]) -> glam::Vec3 {
+    let [nx, ny, nz] = dims.map(|n| n as usize);
+    let [x, y, z] = k.map(|c| c as usize);
+    let (row, plane) = (nx, nx * ny);
+    let centre = x + row * y + plane * z;
+    if !((1..nx.saturating_sub(1)).contains(&x)
+        && (1..ny.saturating_sub(1)).contains(&y)
+        && (1..nz.saturating_sub(1)).contains(&z)
+        && centre + plane + row + 1 < values.len())
+    {
+        return glam::Vec3::ZERO;
+    }
+    let steps = [1, row, plane];
+    let g: [f32; 3] = std::array::from_fn(|a| {
+        let [u, v] = [steps[(a + 1) % 3], steps[(a + 2) % 3]];
+        let mut sum = 0.0;
+        for i in [centre - u, centre, centre + u] {
+            for j in [i - v, i, i + v] {
+                sum += values[j + steps[a]].to_f32() - values[j - steps[a]].to_f32();
+            }
+        }
+        sum / 18.0
+    });
+    glam::Vec3::from(g)
 }
 
 /// [`differences`] in values of one type (the type matched once a voxel, not once a value).

@@ -910,3 +910,39 @@ fn a_gradient_is_the_central_differences_at_every_voxel() {
         }
     }
 }
+
+#[test]
+fn a_voxel_whose_neighbours_are_pairwise_equal_takes_its_neighbourhoods_gradient() {
+    // A 3 x 3 x 3 grid rising along x in every row but the middle row along y, which is flat:
+    // the centre's six neighbours are pairwise equal, but the field around it rises along x.
+    let bytes: Vec<u8> = (0..27u32)
+        .map(|i| {
+            let [x, y] = [i % 3, i / 3 % 3];
+            if y == 1 { 50 } else { (x * 10) as u8 }
+        })
+        .collect();
+    let volume = CpuVolume {
+        dims: [3; 3],
+        spacing: [1.0; 3],
+        origin: [0.0; 3],
+        direction: DMat3::IDENTITY,
+        values: Voxels::from(bytes),
+    };
+    // Rising along x: the normal points down it (from dense to less dense).
+    let down_x = Some([(-127i8) as u8, 0, 0]);
+    assert_eq!(gradient_snorm8(&volume, [1, 1, 1]), down_x);
+    // A face voxel has no whole neighbourhood: no gradient where its differences are zero.
+    assert_eq!(gradient_snorm8(&volume, [0, 1, 1]), None);
+    // A flat neighbourhood: none either.
+    let flat = CpuVolume {
+        values: Voxels::from(vec![7u8; 27]),
+        ..volume.clone()
+    };
+    assert_eq!(gradient_snorm8(&flat, [1, 1, 1]), None);
+    // Where the central differences are not zero they are kept: at (1, 0, 1), 10 along x
+    // and 40 along y (one-sided at the face), the normal -(10, 40, 0) / 41.2.
+    assert_eq!(
+        gradient_snorm8(&volume, [1, 0, 1]),
+        Some([(-31i8) as u8, (-123i8) as u8, 0])
+    );
+}
