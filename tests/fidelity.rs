@@ -408,16 +408,10 @@ fn a_level_made_before_its_own_grid_is_drawn_is_the_same_level() {
     );
 }
 
-#[test]
-fn a_real_ct_halved_along_the_view_keeps_its_shading() {
-    // The LIDC2 chest CT (1.4 x 1.4 x 2.5 mm) from the front at 160x160: its voxels about
-    // half a pixel apart across the view, so the own grid across it and y, the view, halved.
-    // Real tissue has noisy gradients, and thin structures two faces one voxel apart along
-    // the view: the mean of a pair's normals shades it 0.019-0.024 (RMSE) from the full grid,
-    // the shading of its normals kept 0.005.
-    let Some(data) = common::files::data_dir() else {
-        return;
-    };
+/// The LIDC2 chest CT (1.4 x 1.4 x 2.5 mm) placed in RAS and the camera of "One picture at any
+/// grid" in BENCHMARKS.md, looking at it from the front; `None` without the data.
+fn lidc2_from_the_front() -> Option<(CpuVolume, SceneCamera)> {
+    let data = common::files::data_dir()?;
     let path = data.join("volumes/lidc2/lidc2_256x256x133_uint8.raw");
     let spec = RawSpec::new([256, 256, 133], ScalarType::U8, ByteOrder::Little);
     let mut volume = load_raw(&path, &spec).unwrap();
@@ -432,6 +426,19 @@ fn a_real_ct_halved_along_the_view_keeps_its_shading() {
             fov_y_degrees: 35.0,
         },
         near: None,
+    };
+    Some((volume, camera))
+}
+
+#[test]
+fn a_real_ct_halved_along_the_view_keeps_its_shading() {
+    // The LIDC2 chest CT (1.4 x 1.4 x 2.5 mm) from the front at 160x160: its voxels about
+    // half a pixel apart across the view, so the own grid across it and y, the view, halved.
+    // Real tissue has noisy gradients, and thin structures two faces one voxel apart along
+    // the view: the mean of a pair's normals shades it 0.019-0.024 (RMSE) from the full grid,
+    // the shading of its normals kept 0.005.
+    let Some((volume, camera)) = lidc2_from_the_front() else {
+        return;
     };
     for window in [(60.0, 235.0), (130.0, 235.0)] {
         let tf = TransferFunction::ramp(window.0, window.1, [1.0, 0.93, 0.85, 0.6]);
@@ -455,22 +462,8 @@ fn a_real_ct_halved_across_the_view_keeps_its_shading() {
     // sum cancels to what is left across the wall, and the two-sided headlight shades that
     // dark. Measured here: 0.018-0.023 (RMSE) from the full grid with the plain sum,
     // 0.0125-0.0126 with the block's normals turned to one side first.
-    let Some(data) = common::files::data_dir() else {
+    let Some((volume, camera)) = lidc2_from_the_front() else {
         return;
-    };
-    let path = data.join("volumes/lidc2/lidc2_256x256x133_uint8.raw");
-    let spec = RawSpec::new([256, 256, 133], ScalarType::U8, ByteOrder::Little);
-    let mut volume = load_raw(&path, &spec).unwrap();
-    volume.spacing = [1.40625, 1.40625, 2.5];
-    volume.direction = DMat3::from_diagonal(DVec3::new(-1.0, 1.0, -1.0));
-    let camera = SceneCamera {
-        eye: DVec3::new(-179.3, 879.3, -165.0),
-        target: DVec3::new(-179.3, 179.3, -165.0),
-        up: DVec3::Z,
-        projection: Projection::Perspective {
-            fov_y_degrees: 35.0,
-        },
-        near: None,
     };
     let mut differences = Vec::new();
     for window in [(60.0, 235.0), (130.0, 235.0)] {
