@@ -641,9 +641,8 @@ pub fn view_step_mm(index_to_world: glam::DMat3, forward: glam::DVec3) -> Option
 /// The unit index-space gradient of `volume` at voxel `k`, pointing from dense to less dense
 /// (outward on bone surfaces), by central differences (one-sided at the faces), as snorm8.
 /// Where those are all zero inside the grid, the differences summed over the 3 x 3 rows of
-/// the voxel's neighbourhood along each axis instead; `None`
-/// where these are zero too. Never all three zero otherwise: a unit vector has a component of
-/// at least 1/sqrt(3).
+/// the voxel's neighbourhood along each axis instead; `None` where these are zero too. Never
+/// all three zero otherwise: a unit vector has a component of at least 1/sqrt(3).
 ///
 /// The splat stands for the field over its footprint, about its 3 x 3 x 3 neighbourhood.
 /// Integer-valued CT has many voxels whose six neighbours are pairwise equal though the
