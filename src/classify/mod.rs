@@ -909,19 +909,17 @@ fn classify_slab<T: Voxel>(
     let first = z0.saturating_sub(1);
     let (fine_row, fine_plane) = (nx * fx, nx * fx * ny * fy);
     let mut block = Block::default();
+    let mut open = vec![0u8; plane];
     for z in z0..z1 {
         let below = &labels[z.saturating_sub(1) - first];
         let here = &labels[z - first];
         let above = &labels[(z + 1).min(nz - 1) - first];
+        open_in_slice(below, here, above, &mut open);
         for jz in 0..fz {
             for y in 0..ny {
+                let open = &open[nx * y..][..nx];
                 for jy in 0..fy {
-                    for x in 0..nx {
-                        let i = x + nx * y;
-                        let label = here[i];
-                        if label != 0 && below[i] == label && above[i] == label {
-                            continue;
-                        }
+                    for_each_open(open, |x| {
                         block.load(values, dims, [x, y, z]);
                         for jx in 0..fx {
                             if let Some(c) = cells.color(&block, [jx, jy, jz]) {
@@ -930,12 +928,47 @@ fn classify_slab<T: Voxel>(
                                 colors.push(c);
                             }
                         }
-                    }
+                    });
                 }
             }
         }
     }
     (ids, colors)
+}
+
+/// Per voxel of a slice: 1 where its 3x3x3 neighbourhood is not all in one clear interval
+/// (`here`'s 3x3 label, as [`uniform_in_plane`] gives it, is 0 or differs from the slices'
+/// below and above), so that its cell must be classified; else 0. One comparison of whole
+/// slices, which the compiler vectorises: a test voxel by voxel, with its three loads and a
+/// branch the processor cannot predict at the edges of the tissue, was a fifth of the
+/// classification of a 139M-voxel CT.
+fn open_in_slice(below: &[u8], here: &[u8], above: &[u8], open: &mut [u8]) {
+    for (((o, &h), &b), &a) in open.iter_mut().zip(here).zip(below).zip(above) {
+        *o = u8::from((h == 0) | (h != b) | (h != a));
+    }
+}
+
+/// Calls `f` with each index of `open` (a row of [`open_in_slice`]) that holds a 1, in
+/// increasing order, eight bytes at a time: a word of zeros (clear voxels, most of a CT's
+/// air and fat) is passed over in one step.
+#[inline(always)]
+fn for_each_open(open: &[u8], mut f: impl FnMut(usize)) {
+    let mut words = open.chunks_exact(8);
+    let mut x = 0;
+    for word in words.by_ref() {
+        // Byte k of `bits` is 0 or 1, so bit 8k is set where index `x + k` is open.
+        let mut bits = u64::from_le_bytes(word.try_into().unwrap_or([0; 8]));
+        while bits != 0 {
+            f(x + (bits.trailing_zeros() / 8) as usize);
+            bits &= bits - 1;
+        }
+        x += 8;
+    }
+    for (k, &o) in words.remainder().iter().enumerate() {
+        if o != 0 {
+            f(x + k);
+        }
+    }
 }
 
 /// Z-slices a classification task takes.

@@ -172,6 +172,69 @@ fn the_view_step_follows_the_spacing_along_the_view() {
 /// Every voxel of `classified`, the classification of `volume` on the grid `factors` times
 /// finer, against [`fine_cell_oracle`]: a splat where the cell has opacity, with its
 /// density and colour; returns how many voxels were kept and left out.
+#[test]
+fn open_voxels_are_found_word_by_word_as_one_by_one() {
+    // Rows of every length around the 8-byte words, open voxels from a fixed hash (runs of
+    // both kinds and lone ones), against a plain filter; and the slice test against its
+    // definition.
+    for n in [0usize, 1, 7, 8, 9, 16, 23, 40] {
+        for seed in 0..16u32 {
+            let mix = |i: usize, k: u32| {
+                (i as u32 ^ seed.wrapping_mul(2654435761) ^ k).wrapping_mul(40503) >> 9
+            };
+            let [below, here, above]: [Vec<u8>; 3] = std::array::from_fn(|k| {
+                (0..n)
+                    .map(|i| if mix(i / 3, k as u32) % 4 == 0 { 0 } else { 1 })
+                    .collect()
+            });
+            let mut open = vec![9u8; n];
+            open_in_slice(&below, &here, &above, &mut open);
+            for i in 0..n {
+                let want = here[i] == 0 || here[i] != below[i] || here[i] != above[i];
+                assert_eq!(open[i], u8::from(want), "{n} seed {seed} at {i}");
+            }
+            let mut got = Vec::new();
+            for_each_open(&open, |x| got.push(x));
+            let want: Vec<usize> = (0..n).filter(|&i| open[i] == 1).collect();
+            assert_eq!(got, want, "{n} seed {seed}");
+        }
+    }
+}
+
+#[test]
+fn cells_in_clear_air_are_left_out_and_all_others_kept_on_a_wide_grid() {
+    // Rows longer than the 8-voxel words, with tissue in patches and single voxels amid
+    // clear air: every voxel whose cell reaches tissue is a splat with its cell's values (the
+    // oracle classifies every voxel), whether it lies in a word of air or not.
+    let dims = [37u32, 6, 5];
+    let values: Vec<f32> = (0..37 * 6 * 5u32)
+        .map(|id| {
+            let k = [id % 37, id / 37 % 6, id / (37 * 6)];
+            let h = (k[0] / 5 + 7 * k[1] + 13 * k[2]).wrapping_mul(2654435761) >> 27;
+            let lone = (id.wrapping_mul(40503) >> 5) % 29 == 0;
+            if h % 3 == 0 || lone {
+                (90 + (id * 7) % 80) as f32
+            } else {
+                (id % 40) as f32
+            }
+        })
+        .collect();
+    let volume = CpuVolume {
+        dims,
+        spacing: [1.0; 3],
+        origin: [0.0; 3],
+        direction: DMat3::IDENTITY,
+        values: values.into(),
+    };
+    let tf = TransferFunction::new(vec![
+        (60.0, [1.0, 0.8, 0.6, 0.0]),
+        (160.0, [1.0, 1.0, 1.0, 0.8]),
+    ]);
+    let classified = classify(&volume, &tf, 0.0).unwrap();
+    let (kept, left) = check_cells(&volume, &tf, [1; 3], &classified);
+    assert!(kept > 100 && left > 100, "{kept} kept, {left} left out");
+}
+
 fn check_cells(
     volume: &CpuVolume,
     tf: &TransferFunction,
