@@ -235,6 +235,68 @@ fn cells_in_clear_air_are_left_out_and_all_others_kept_on_a_wide_grid() {
     assert!(kept > 100 && left > 100, "{kept} kept, {left} left out");
 }
 
+#[test]
+fn rows_sampled_whole_classify_as_voxels_one_at_a_time() {
+    // Grids of tissue patches, ramps and lone voxels in clear air, narrow and wide, of three
+    // voxel types, through a ramp and a function of several segments: the cells of each row
+    // sampled whole give the same splats, bit for bit, as each voxel's block (which the
+    // faces and refined grids still take).
+    let ramp = TransferFunction::ramp(60.0, 190.0, [1.0, 0.93, 0.85, 0.6]);
+    let three = TransferFunction::new(vec![
+        (10.0, [1.0, 0.0, 0.0, 0.0]),
+        (90.0, [0.0, 1.0, 0.0, 0.5]),
+        (200.0, [0.0, 0.0, 1.0, 1.0]),
+    ]);
+    for dims in [[3u32, 3, 3], [4, 5, 3], [37, 6, 5], [70, 9, 20]] {
+        let n = dims.iter().product::<u32>();
+        let value = |id: u32| {
+            let k = [
+                id % dims[0],
+                id / dims[0] % dims[1],
+                id / (dims[0] * dims[1]),
+            ];
+            let patch = (k[0] / 6 + 5 * k[1] + 11 * k[2]).wrapping_mul(2654435761) >> 28;
+            let lone = (id.wrapping_mul(40503) >> 4).is_multiple_of(31);
+            if patch.is_multiple_of(3) || lone {
+                (50 + (id * 37) % 180) as f32
+            } else {
+                (k[0] * 3 % 50) as f32
+            }
+        };
+        let f32s: Vec<f32> = (0..n).map(value).collect();
+        let u8s: Vec<u8> = f32s.iter().map(|&v| v as u8).collect();
+        let i16s: Vec<i16> = f32s.iter().map(|&v| v as i16 - 40).collect();
+        let values: [crate::volume::Voxels; 3] = [f32s.into(), u8s.into(), i16s.into()];
+        for values in values {
+            let volume = CpuVolume {
+                dims,
+                spacing: [0.7, 0.7, 1.2],
+                origin: [0.0; 3],
+                direction: DMat3::IDENTITY,
+                values,
+            };
+            for tf in [&ramp, &three] {
+                let options = ClassifyOptions::default();
+                let whole = classify_cells(&volume, tf, &options, [1; 3], true).unwrap();
+                let blocks = classify_cells(&volume, tf, &options, [1; 3], false).unwrap();
+                assert!(!whole.grid.is_empty(), "{dims:?}: no splat");
+                assert_eq!(
+                    whole.grid.ids().collect::<Vec<_>>(),
+                    blocks.grid.ids().collect::<Vec<_>>(),
+                    "{dims:?}"
+                );
+                for (a, b) in whole.colors.iter().zip(&blocks.colors) {
+                    assert_eq!(
+                        (a.rgb, a.density.to_bits()),
+                        (b.rgb, b.density.to_bits()),
+                        "{dims:?}"
+                    );
+                }
+            }
+        }
+    }
+}
+
 fn check_cells(
     volume: &CpuVolume,
     tf: &TransferFunction,
