@@ -169,16 +169,61 @@ impl SparseGrid {
 
     /// The voxels listed in `ids`, which must be strictly increasing and inside the grid.
     pub fn from_sorted_ids(dims: [u32; 3], ids: &[u32]) -> Result<Self, GridError> {
+        Self::from_sorted_parts(dims, &[ids])
+    }
+
+    /// The voxels listed in `parts` one after the other, which together must be strictly
+    /// increasing and inside the grid (the per-slab lists of a classification), with no
+    /// copy of them joined: stretches of them are checked and set in parallel, each into the
+    /// words its ids span, which are then laid into the bitmap (a word two stretches share
+    /// takes both).
+    pub fn from_sorted_parts(dims: [u32; 3], parts: &[&[u32]]) -> Result<Self, GridError> {
+        use rayon::prelude::*;
         let count = voxel_count(dims)?;
+        // Each stretch with the index of its first id in the parts joined.
+        let mut stretches: Vec<(usize, &[u32])> = Vec::new();
+        let mut at = 0;
+        for stretch in parts.iter().flat_map(|p| p.chunks(1 << 20)) {
+            stretches.push((at, stretch));
+            at += stretch.len();
+        }
+        // Where two stretches meet, the second must start past the first's end.
+        for pair in stretches.windows(2) {
+            if let (Some(&last), Some(&first)) = (pair[0].1.last(), pair[1].1.first())
+                && first <= last
+            {
+                return Err(GridError::Unsorted(pair[1].0));
+            }
+        }
+        let words = stretches
+            .par_iter()
+            .map(|&(at, ids)| {
+                let (Some(&first), Some(&last)) = (ids.first(), ids.last()) else {
+                    return Ok((0, Vec::new()));
+                };
+                if u64::from(last) >= count {
+                    let id = ids.iter().copied().find(|&id| u64::from(id) >= count);
+                    return Err(GridError::IdOutOfRange {
+                        id: id.unwrap_or(last),
+                        dims,
+                    });
+                }
+                let base = (first / 64) as usize;
+                let mut words = vec![0u64; (last / 64) as usize + 1 - base];
+                for (i, &id) in ids.iter().enumerate() {
+                    if i > 0 && ids[i - 1] >= id {
+                        return Err(GridError::Unsorted(at + i));
+                    }
+                    words[(id / 64) as usize - base] |= 1 << (id % 64);
+                }
+                Ok((base, words))
+            })
+            .collect::<Result<Vec<_>, GridError>>()?;
         let mut bits = vec![0u64; count.div_ceil(64) as usize];
-        for (i, &id) in ids.iter().enumerate() {
-            if u64::from(id) >= count {
-                return Err(GridError::IdOutOfRange { id, dims });
+        for (base, words) in words {
+            for (b, w) in bits[base..].iter_mut().zip(words) {
+                *b |= w;
             }
-            if i > 0 && ids[i - 1] >= id {
-                return Err(GridError::Unsorted(i));
-            }
-            bits[(id / 64) as usize] |= 1 << (id % 64);
         }
         Ok(Self::from_bits(dims, bits))
     }
@@ -584,6 +629,56 @@ mod tests {
         assert_eq!(
             SparseGrid::from_sorted_ids([2, 2, 2], &[3, 3]).unwrap_err(),
             GridError::Unsorted(1)
+        );
+    }
+
+    #[test]
+    fn a_grid_from_parts_is_the_grid_of_its_ids_joined() {
+        // Parts of every size around the 64-bit words and the stretches of 2^20 ids, empty
+        // ones among them, sharing words where they meet: the same bitmap as a plain set of
+        // bits, and the joined list's errors.
+        let dims = [300u32, 200, 40];
+        let ids: Vec<u32> = (0..dims.iter().product::<u32>())
+            .filter(|&id| (id.wrapping_mul(2654435761) >> 29) != 0 || id % 64 == 63)
+            .collect();
+        assert!(ids.len() > 1 << 21);
+        let cuts = [
+            0,
+            0,
+            1,
+            63,
+            64,
+            65,
+            5000,
+            1 << 20,
+            (1 << 20) + 7,
+            2_000_000,
+            ids.len(),
+        ];
+        let parts: Vec<&[u32]> = cuts.windows(2).map(|c| &ids[c[0]..c[1]]).collect();
+        let grid = SparseGrid::from_sorted_parts(dims, &parts).unwrap();
+        let mut bits = vec![0u64; (dims.iter().product::<u32>() as usize).div_ceil(64)];
+        for &id in &ids {
+            bits[id as usize / 64] |= 1 << (id % 64);
+        }
+        assert_eq!(grid.bits, bits);
+        assert_eq!(grid.len(), ids.len());
+        assert_eq!(grid.rank(ids[1 << 20]), Some(1 << 20));
+        // An id repeated where two parts meet, past an empty part; one out of the grid in the
+        // last part.
+        let (a, b) = (&ids[..100], &ids[99..200]);
+        assert_eq!(
+            SparseGrid::from_sorted_parts(dims, &[a, &[], b]).unwrap_err(),
+            GridError::Unsorted(100)
+        );
+        let far = [ids[0], dims.iter().product::<u32>()];
+        assert!(matches!(
+            SparseGrid::from_sorted_parts(dims, &[&ids[..5], &[], &far[1..]]).unwrap_err(),
+            GridError::IdOutOfRange { .. }
+        ));
+        assert_eq!(
+            SparseGrid::from_sorted_parts(dims, &[&ids[..5], &ids[7..9], &ids[8..9]]).unwrap_err(),
+            GridError::Unsorted(7)
         );
     }
 }

@@ -360,16 +360,22 @@ impl Classified {
     /// The significant voxels of a `dims` grid and their colours from per-slice lists, the
     /// slices in increasing id order.
     fn joined(dims: [u32; 3], parts: Vec<(Vec<u32>, Vec<SplatColor>)>) -> Result<Self, GridError> {
-        let total = parts.iter().map(|(ids, _)| ids.len()).sum();
-        let (mut ids, mut colors) = (Vec::with_capacity(total), Vec::with_capacity(total));
-        for (i, c) in parts {
-            ids.extend(i);
-            colors.extend(c);
+        let ids: Vec<&[u32]> = parts.iter().map(|(ids, _)| &ids[..]).collect();
+        let grid = SparseGrid::from_sorted_parts(dims, &ids)?;
+        // The colours laid end to end, the slices' copies in parallel.
+        let mut colors = vec![SplatColor::default(); parts.iter().map(|(_, c)| c.len()).sum()];
+        let mut rest = &mut colors[..];
+        let mut places = Vec::with_capacity(parts.len());
+        for (_, c) in &parts {
+            let (place, after) = rest.split_at_mut(c.len());
+            places.push(place);
+            rest = after;
         }
-        Ok(Self {
-            grid: SparseGrid::from_sorted_ids(dims, &ids)?,
-            colors,
-        })
+        places
+            .into_par_iter()
+            .zip(&parts)
+            .for_each(|(place, (_, c))| place.copy_from_slice(c));
+        Ok(Self { grid, colors })
     }
 
     /// The next level of detail: each block of 2 x 2 x 2 voxels (fewer at an odd grid's far
