@@ -74,6 +74,19 @@ struct AxisRows {
     runs: Vec<Run>,
 }
 
+/// Calls `f` with the index of each set bit of `words` (bit `i % 64` of word `i / 64`), in
+/// increasing order.
+#[inline(always)]
+fn for_each_bit(words: &[u64], mut f: impl FnMut(usize)) {
+    for (i, &w) in words.iter().enumerate() {
+        let mut bits = w;
+        while bits != 0 {
+            f(i * 64 + bits.trailing_zeros() as usize);
+            bits &= bits - 1;
+        }
+    }
+}
+
 /// The significant voxels of a grid, with run-length rows along each axis.
 #[derive(Debug, Clone)]
 pub struct SparseGrid {
@@ -245,31 +258,43 @@ impl SparseGrid {
     }
 
     /// Builds the run-length rows along `axis` in two passes over the bitmap: count the runs that
-    /// start in each row, then fill them in.
+    /// start in each row, then fill them in. Both go a bitmap row (the voxels along x) a word
+    /// at a time: the voxels that start a run along `axis` are those whose neighbour before
+    /// them along it is empty, and those that end one those whose neighbour after it is, a few
+    /// word operations for 64 voxels ([`SparseGrid::slab_edges`]); only these are visited one
+    /// by one. (Visiting every significant voxel and testing its neighbour's bit took 0.2 s
+    /// an axis on a 118M-voxel CT with 28M significant voxels.)
     fn build_rows(&self, axis: usize) -> AxisRows {
         use rayon::prelude::*;
         let (b, c) = other_axes(axis);
         let (nb, nc) = (self.dims[b] as usize, self.dims[c] as usize);
         let n_rows = nb * nc;
-        let stride = self.strides()[axis];
-        let n = self.dims[axis];
-        let is_start = |id: u32, k: [u32; 3]| k[axis] == 0 || !self.contains(id - stride);
+        let nx = self.dims[0] as usize;
         // Slabs of the rows' slowest coordinate `c`, a task each: a slab's rows are a stretch
-        // of the table, and its voxels a few stretches of ids (one, or one a z-slice).
+        // of the table.
         let per = nc.div_ceil(4 * rayon::current_num_threads()).max(1);
         let slabs: Vec<(usize, usize)> = (0..nc)
             .step_by(per)
             .map(|c0| (c0, (c0 + per).min(nc)))
             .collect();
-        let row_of = |k: [u32; 3]| k[b] as usize + nb * k[c] as usize;
+        // The row (within its slab's stretch of the table) of the run through voxel `x` of
+        // bitmap row `(y, z)`, for the slab starting at `c0`.
+        let row_in_slab = |x: usize, y: usize, z: usize, c0: usize| match axis {
+            0 => y + nb * (z - c0),
+            1 => x + nb * (z - c0),
+            _ => x + nb * (y - c0),
+        };
         let mut offsets = vec![0u32; n_rows + 1];
         offsets[1..]
             .par_chunks_mut(per * nb)
             .zip(&slabs)
             .for_each(|(counts, &(c0, c1))| {
-                self.for_each_in_slab(c, c0..c1, |id, k| {
-                    if is_start(id, k) {
-                        counts[row_of(k) - c0 * nb] += 1;
+                self.slab_edges(axis, c0..c1, |y, z, starts, _| {
+                    if axis == 0 {
+                        counts[row_in_slab(0, y, z, c0)] +=
+                            starts.iter().map(|w| w.count_ones()).sum::<u32>();
+                    } else {
+                        for_each_bit(starts, |x| counts[row_in_slab(x, y, z, c0)] += 1);
                     }
                 });
             });
@@ -293,95 +318,142 @@ impl SparseGrid {
                     .iter()
                     .map(|o| o - first)
                     .collect();
-                self.for_each_in_slab(c, c0..c1, |id, k| {
-                    if is_start(id, k) {
-                        let mut len = 1;
-                        while k[axis] + len < n && self.contains(id + len * stride) {
-                            len += 1;
-                        }
-                        let slot = &mut fill[row_of(k) - c0 * nb];
-                        part[*slot as usize] = Run {
-                            start: k[axis],
-                            len,
-                        };
-                        *slot += 1;
+                let mut put = |row: usize, run: Run| {
+                    let slot = &mut fill[row];
+                    part[*slot as usize] = run;
+                    *slot += 1;
+                };
+                // Along y and z, where the run that a voxel ends began: per voxel of a
+                // bitmap row (along y, per plane), or of the slab's rows (along z).
+                let mut open = vec![0u32; if axis == 2 { nx * (c1 - c0) } else { nx }];
+                let mut begun = Vec::new();
+                self.slab_edges(axis, c0..c1, |y, z, starts, ends| {
+                    if axis == 0 {
+                        // Along x a run's start and end lie in the same bitmap row, in turn.
+                        let row = row_in_slab(0, y, z, c0);
+                        begun.clear();
+                        for_each_bit(starts, |x| begun.push(x as u32));
+                        let mut next = begun.iter();
+                        for_each_bit(ends, |x| {
+                            if let Some(&start) = next.next() {
+                                put(
+                                    row,
+                                    Run {
+                                        start,
+                                        len: x as u32 + 1 - start,
+                                    },
+                                );
+                            }
+                        });
+                        return;
                     }
+                    let (at, base) = if axis == 1 {
+                        (y, 0)
+                    } else {
+                        (z, nx * (y - c0))
+                    };
+                    for_each_bit(starts, |x| open[base + x] = at as u32);
+                    for_each_bit(ends, |x| {
+                        let start = open[base + x];
+                        put(
+                            row_in_slab(x, y, z, c0),
+                            Run {
+                                start,
+                                len: at as u32 + 1 - start,
+                            },
+                        );
+                    });
                 });
             });
         AxisRows { offsets, runs }
     }
 
-    /// [`SparseGrid::for_each_significant_in`] for the voxels whose coordinate along axis `c`
-    /// (1 or 2) lies in `range`, in id order.
-    fn for_each_in_slab(
+    /// Calls `f(y, z, starts, ends)` for each bitmap row (the voxels along x at `(y, z)`) of
+    /// the rows along `axis` whose coordinate along the slowest of the other two axes lies in
+    /// `range` (z for axes x and y, y for z), in the order each row along `axis` meets them
+    /// (z then y for axes x and y; z, then y within the range, for z). `starts` has bit `x`
+    /// set where voxel `x` of the bitmap row starts a run along `axis` (significant, and its
+    /// neighbour before it along `axis` is not or lies off the grid), `ends` where it ends
+    /// one, as words of 64 voxels.
+    fn slab_edges(
         &self,
-        c: usize,
+        axis: usize,
         range: std::ops::Range<usize>,
-        mut f: impl FnMut(u32, [u32; 3]),
+        mut f: impl FnMut(usize, usize, &[u64], &[u64]),
     ) {
-        let [nx, ny, nz] = self.dims.map(u64::from);
-        let (row, plane) = (nx, nx * ny);
-        let (c0, c1) = (range.start as u64, range.end as u64);
-        if c == 2 {
-            self.for_each_significant_in(c0 * plane..c1 * plane, f);
-        } else {
+        let [nx, ny, nz] = self.dims.map(|n| n as usize);
+        let words = nx.div_ceil(64);
+        // The row itself, the ones before and after it along `axis` (y and z; empty off the
+        // grid), and the edges.
+        let [mut here, mut before, mut after, mut starts, mut ends] =
+            std::array::from_fn(|_| vec![0u64; words]);
+        let mut visit = |y: usize, z: usize| {
+            self.bitmap_row(y, z, &mut here);
+            if axis == 0 {
+                for i in 0..words {
+                    // The bit before each voxel's (the previous word's last for bit 0) and the
+                    // one after it; past the row's end the row's words are 0.
+                    let carry = if i > 0 { here[i - 1] >> 63 } else { 0 };
+                    let next = here.get(i + 1).map_or(0, |w| w << 63);
+                    starts[i] = here[i] & !(here[i] << 1 | carry);
+                    ends[i] = here[i] & !(here[i] >> 1 | next);
+                }
+            } else {
+                let neighbour = |d: isize, out: &mut Vec<u64>| {
+                    let (y, z) = if axis == 1 {
+                        (y as isize + d, z as isize)
+                    } else {
+                        (y as isize, z as isize + d)
+                    };
+                    if y < 0 || z < 0 || y as usize >= ny || z as usize >= nz {
+                        out.fill(0);
+                    } else {
+                        self.bitmap_row(y as usize, z as usize, out);
+                    }
+                };
+                neighbour(-1, &mut before);
+                neighbour(1, &mut after);
+                for i in 0..words {
+                    starts[i] = here[i] & !before[i];
+                    ends[i] = here[i] & !after[i];
+                }
+            }
+            f(y, z, &starts, &ends);
+        };
+        if axis == 2 {
             for z in 0..nz {
-                self.for_each_significant_in(z * plane + c0 * row..z * plane + c1 * row, &mut f);
+                for y in range.clone() {
+                    visit(y, z);
+                }
+            }
+        } else {
+            for z in range {
+                for y in 0..ny {
+                    visit(y, z);
+                }
             }
         }
     }
 
-    /// Calls `f` with the id and coordinates of every significant voxel whose id lies in
-    /// `ids`, in id order. The bitmap is walked a word at a time: an empty word (64 voxels of
-    /// air) costs one test, and coordinates advance by addition rather than division.
-    /// (Walking every voxel and testing its bit made the run tables most of a 67M-voxel
-    /// classification.)
-    fn for_each_significant_in(&self, ids: std::ops::Range<u64>, mut f: impl FnMut(u32, [u32; 3])) {
-        let [nx, ny, _] = self.dims;
-        if ids.start >= ids.end {
-            return;
+    /// The bits of the voxels along x at `(y, z)` into `out` (its length: the row's words),
+    /// bit `x % 64` of word `x / 64` for voxel `x`, 0 past the row's end.
+    fn bitmap_row(&self, y: usize, z: usize, out: &mut [u64]) {
+        let [nx, ny, _] = self.dims.map(|n| n as usize);
+        let start = nx * (y + ny * z);
+        let (w0, shift) = (start / 64, (start % 64) as u32);
+        for (i, o) in out.iter_mut().enumerate() {
+            let lo = self.bits.get(w0 + i).copied().unwrap_or(0);
+            *o = if shift == 0 {
+                lo
+            } else {
+                let hi = self.bits.get(w0 + i + 1).copied().unwrap_or(0);
+                lo >> shift | hi << (64 - shift)
+            };
         }
-        let (w0, w1) = (ids.start / 64, ids.end.div_ceil(64));
-        // Coordinates of the first voxel of the current word.
-        let first = w0 * 64;
-        let (plane, row) = (u64::from(nx) * u64::from(ny), u64::from(nx));
-        let (mut x0, mut y0, mut z0) = (
-            (first % row) as u32,
-            (first % plane / row) as u32,
-            (first / plane) as u32,
-        );
-        let advance = |x: &mut u32, y: &mut u32, z: &mut u32, by: u32| {
-            *x += by;
-            while *x >= nx {
-                *x -= nx;
-                *y += 1;
-                if *y == ny {
-                    *y = 0;
-                    *z += 1;
-                }
-            }
-        };
-        let words = self
-            .bits
-            .get(w0 as usize..(w1 as usize).min(self.bits.len()))
-            .unwrap_or(&[]);
-        for (i, &word) in words.iter().enumerate() {
-            let w = w0 + i as u64;
-            // Bits of the word inside `ids`.
-            // (`lo` < 64 and `hi` >= 1: the word holds at least one id of the range.)
-            let lo = ids.start.saturating_sub(w * 64) as u32;
-            let hi = (ids.end - w * 64).min(64) as u32;
-            let below_hi = if hi == 64 { u64::MAX } else { (1 << hi) - 1 };
-            let mut bits = word & below_hi & (u64::MAX << lo);
-            let (mut x, mut y, mut z, mut at) = (x0, y0, z0, 0u32);
-            while bits != 0 {
-                let bit = bits.trailing_zeros();
-                bits &= bits - 1;
-                advance(&mut x, &mut y, &mut z, bit - at);
-                at = bit;
-                f((w as u32).wrapping_mul(64).wrapping_add(bit), [x, y, z]);
-            }
-            advance(&mut x0, &mut y0, &mut z0, 64);
+        if nx % 64 != 0
+            && let Some(last) = out.last_mut()
+        {
+            *last &= (1u64 << (nx % 64)) - 1;
         }
     }
 
@@ -500,6 +572,17 @@ mod tests {
             ([130, 1, 3], 5),
             ([64, 2, 2], 2),
             ([3, 65, 2], 7),
+            // Rows either side of the 64-bit words and of two, runs along every axis
+            // crossing the words the bitmap rows share, rows of one voxel, more slabs than
+            // tasks, and grids all but full.
+            ([63, 5, 9], 3),
+            ([129, 4, 17], 2),
+            ([128, 3, 40], 6),
+            ([1, 1, 50], 3),
+            ([200, 1, 1], 2),
+            ([65, 33, 1], 3),
+            ([70, 6, 12], 1000),
+            ([64, 64, 3], 1000),
         ] {
             rows_match_the_bitmap(dims, keep);
         }
