@@ -208,11 +208,36 @@ impl SparseGrid {
                 return Err(GridError::Unsorted(pair[1].0));
             }
         }
-        let words = stretches
+        // Each stretch's ids span the words `first / 64 ..= last / 64`; the words strictly
+        // between those two are its own, set in place. Its first and last words may be
+        // shared with the stretches beside it, so they are set apart and laid in afterwards.
+        let mut bits = vec![0u64; count.div_ceil(64) as usize];
+        let mut owned = Vec::with_capacity(stretches.len());
+        let mut rest: &mut [u64] = &mut bits;
+        let mut taken = 0;
+        for &(_, ids) in &stretches {
+            let (Some(&first), Some(&last)) = (ids.first(), ids.last()) else {
+                owned.push(&mut [][..]);
+                continue;
+            };
+            let (lo, hi) = ((first / 64) as usize + 1, (last / 64) as usize);
+            if lo >= hi || lo < taken || hi > taken + rest.len() {
+                // No word of its own (or ids out of order or of range: refused below).
+                owned.push(&mut [][..]);
+                continue;
+            }
+            let (_, tail) = std::mem::take(&mut rest).split_at_mut(lo - taken);
+            let (own, tail) = tail.split_at_mut(hi - lo);
+            owned.push(own);
+            rest = tail;
+            taken = hi;
+        }
+        let ends = stretches
             .par_iter()
-            .map(|&(at, ids)| {
+            .zip(owned)
+            .map(|(&(at, ids), own)| {
                 let (Some(&first), Some(&last)) = (ids.first(), ids.last()) else {
-                    return Ok((0, Vec::new()));
+                    return Ok([(0, 0); 2]);
                 };
                 if u64::from(last) >= count {
                     let id = ids.iter().copied().find(|&id| u64::from(id) >= count);
@@ -221,20 +246,26 @@ impl SparseGrid {
                         dims,
                     });
                 }
-                let base = (first / 64) as usize;
-                let mut words = vec![0u64; (last / 64) as usize + 1 - base];
+                let (lo, hi) = ((first / 64) as usize, (last / 64) as usize);
+                let mut edge = [(lo, 0u64), (hi, 0u64)];
                 for (i, &id) in ids.iter().enumerate() {
                     if i > 0 && ids[i - 1] >= id {
                         return Err(GridError::Unsorted(at + i));
                     }
-                    words[(id / 64) as usize - base] |= 1 << (id % 64);
+                    let (word, bit) = ((id / 64) as usize, 1u64 << (id % 64));
+                    if word == lo {
+                        edge[0].1 |= bit;
+                    } else if word == hi {
+                        edge[1].1 |= bit;
+                    } else if let Some(w) = own.get_mut(word - lo - 1) {
+                        *w |= bit;
+                    }
                 }
-                Ok((base, words))
+                Ok(edge)
             })
             .collect::<Result<Vec<_>, GridError>>()?;
-        let mut bits = vec![0u64; count.div_ceil(64) as usize];
-        for (base, words) in words {
-            for (b, w) in bits[base..].iter_mut().zip(words) {
+        for (word, w) in ends.into_iter().flatten() {
+            if let Some(b) = bits.get_mut(word) {
                 *b |= w;
             }
         }

@@ -362,19 +362,13 @@ impl Classified {
     fn joined(dims: [u32; 3], parts: Vec<(Vec<u32>, Vec<SplatColor>)>) -> Result<Self, GridError> {
         let ids: Vec<&[u32]> = parts.iter().map(|(ids, _)| &ids[..]).collect();
         let grid = SparseGrid::from_sorted_parts(dims, &ids)?;
-        // The colours laid end to end, the slices' copies in parallel.
-        let mut colors = vec![SplatColor::default(); parts.iter().map(|(_, c)| c.len()).sum()];
-        let mut rest = &mut colors[..];
-        let mut places = Vec::with_capacity(parts.len());
-        for (_, c) in &parts {
-            let (place, after) = rest.split_at_mut(c.len());
-            places.push(place);
-            rest = after;
+        // The colours laid end to end, each slice's lists freed as they are taken, so that
+        // no more than one slice's lists are held twice.
+        let mut colors = Vec::with_capacity(parts.iter().map(|(_, c)| c.len()).sum());
+        for (ids, c) in parts {
+            drop(ids);
+            colors.extend_from_slice(&c);
         }
-        places
-            .into_par_iter()
-            .zip(&parts)
-            .for_each(|(place, (_, c))| place.copy_from_slice(c));
         Ok(Self { grid, colors })
     }
 
