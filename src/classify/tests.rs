@@ -235,18 +235,26 @@ fn cells_in_clear_air_are_left_out_and_all_others_kept_on_a_wide_grid() {
     assert!(kept > 100 && left > 100, "{kept} kept, {left} left out");
 }
 
+/// A ramp (one segment, the tables' path without a search) and a function of three points
+/// (two segments, searched).
+fn ramp_and_three() -> [TransferFunction; 2] {
+    [
+        TransferFunction::ramp(60.0, 190.0, [1.0, 0.93, 0.85, 0.6]),
+        TransferFunction::new(vec![
+            (10.0, [1.0, 0.0, 0.0, 0.0]),
+            (90.0, [0.0, 1.0, 0.0, 0.5]),
+            (200.0, [0.0, 0.0, 1.0, 1.0]),
+        ]),
+    ]
+}
+
 #[test]
 fn rows_sampled_whole_classify_as_voxels_one_at_a_time() {
     // Grids of tissue patches, ramps and lone voxels in clear air, narrow and wide, of three
     // voxel types, through a ramp and a function of several segments: the cells of each row
     // sampled whole give the same splats, bit for bit, as each voxel's block (which the
     // faces and refined grids still take).
-    let ramp = TransferFunction::ramp(60.0, 190.0, [1.0, 0.93, 0.85, 0.6]);
-    let three = TransferFunction::new(vec![
-        (10.0, [1.0, 0.0, 0.0, 0.0]),
-        (90.0, [0.0, 1.0, 0.0, 0.5]),
-        (200.0, [0.0, 0.0, 1.0, 1.0]),
-    ]);
+    let [ramp, three] = ramp_and_three();
     for dims in [[3u32, 3, 3], [4, 5, 3], [37, 6, 5], [70, 9, 20]] {
         let n = dims.iter().product::<u32>();
         let value = |id: u32| {
@@ -939,12 +947,7 @@ fn weighted_sums_are_the_sums_of_single_samples() {
     // The one-segment path (a ramp) and the searching path (three points) against the sums
     // of the table's single lookups, over values below, inside and above the function, and
     // NaN.
-    let ramp = TransferFunction::ramp(60.0, 190.0, [1.0, 0.93, 0.85, 0.6]);
-    let three = TransferFunction::new(vec![
-        (10.0, [1.0, 0.0, 0.0, 0.0]),
-        (90.0, [0.0, 1.0, 0.0, 0.5]),
-        (200.0, [0.0, 0.0, 1.0, 1.0]),
-    ]);
+    let [ramp, three] = ramp_and_three();
     let values = [
         -5.0,
         60.0,
