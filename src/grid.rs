@@ -188,8 +188,8 @@ impl SparseGrid {
     /// The voxels listed in `parts` one after the other, which together must be strictly
     /// increasing and inside the grid (the per-slab lists of a classification), with no
     /// copy of them joined: stretches of them are checked and set in parallel, each into the
-    /// words its ids span, which are then laid into the bitmap (a word two stretches share
-    /// takes both).
+    /// words of the bitmap that it alone spans, and its first and last words (which the
+    /// stretches beside it may share) laid in afterwards.
     pub fn from_sorted_parts(dims: [u32; 3], parts: &[&[u32]]) -> Result<Self, GridError> {
         use rayon::prelude::*;
         let count = voxel_count(dims)?;

@@ -169,9 +169,6 @@ fn the_view_step_follows_the_spacing_along_the_view() {
 /// own interpolation, the grid clamped at its faces) classified at the eight points a
 /// quarter voxel from the centre, `-ln(1 - a)` averaged, colours weighted by it; a point past
 /// the outer voxel centres along an axis of more than one voxel adds nothing.
-/// Every voxel of `classified`, the classification of `volume` on the grid `factors` times
-/// finer, against [`fine_cell_oracle`]: a splat where the cell has opacity, with its
-/// density and colour; returns how many voxels were kept and left out.
 #[test]
 fn open_voxels_are_found_word_by_word_as_one_by_one() {
     // Rows of every length around the 8-byte words, open voxels from a fixed hash (runs of
@@ -305,6 +302,9 @@ fn rows_sampled_whole_classify_as_voxels_one_at_a_time() {
     }
 }
 
+/// Every voxel of `classified`, the classification of `volume` on the grid `factors` times
+/// finer, against [`fine_cell_oracle`]: a splat where the cell has opacity, with its
+/// density and colour; returns how many voxels were kept and left out.
 fn check_cells(
     volume: &CpuVolume,
     tf: &TransferFunction,
