@@ -220,25 +220,37 @@ impl TiledCompositor {
                         // The chunk's splats on the image, in order, packed at the front of
                         // its share of the buffer.
                         let mut kept = 0;
-                        for ids in ids.chunks(GROUP) {
-                            // The group's rectangle: off the image, or on opaque pixels alone,
-                            // the group is left out whole. (Its bounds cost less than a splat's
-                            // own test; the order's rows make most groups short segments.)
-                            match cull.then(|| group_rect(projection, ids, &screen)).flatten() {
-                                Some([x0, y0, x1, y1]) if x0 > x1 || y0 > y1 => {
-                                    off_image += ids.len();
-                                    continue;
+                        // Each group is decoded and its fate settled one group ahead, so that
+                        // the texels of the next group to be projected are asked for while
+                        // this one is. (The opaque pixels do not change within a batch's
+                        // projection.)
+                        let mut groups = ids
+                            .chunks(GROUP)
+                            .map(|ids| Decoded::new(projection, ids, cull, &screen, mask));
+                        let mut next = groups.next();
+                        while let Some(this) = next {
+                            next = groups.next();
+                            if let Some(ahead) = &next
+                                && ahead.fate == Fate::Project
+                            {
+                                for &[x, y, z] in ahead.voxels() {
+                                    texels.prefetch(x, y, z);
                                 }
-                                Some(rect) if mask.is_some_and(|m| m.covers_rect(rect)) => {
-                                    culled += ids.len();
-                                    continue;
-                                }
-                                _ => {}
                             }
-                            let (hidden, placed) =
-                                simd::project_group(&group, ids, &mut out[kept..]);
-                            culled += hidden;
-                            kept += placed;
+                            let n = this.voxels().len();
+                            match this.fate {
+                                Fate::OffImage => off_image += n,
+                                Fate::Hidden => culled += n,
+                                Fate::Project => {
+                                    let (hidden, placed) = simd::project_group(
+                                        &group,
+                                        this.voxels(),
+                                        &mut out[kept..],
+                                    );
+                                    culled += hidden;
+                                    kept += placed;
+                                }
+                            }
                         }
                         let projected = started.elapsed();
                         bin_chunk(&out[..kept], (c * chunk) as u32, tx, ty, bins);
@@ -313,6 +325,58 @@ impl TiledCompositor {
         });
         stats.tiles += started.elapsed();
         stats
+    }
+}
+
+/// What becomes of a group of splats (consecutive in the order) in a batch.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Fate {
+    /// The pixel rectangle that holds every footprint of the group lies off the image.
+    OffImage,
+    /// That rectangle holds opaque pixels alone.
+    Hidden,
+    /// Projected splat by splat.
+    Project,
+}
+
+/// A group of splats' voxels, decoded once from their ids for the group's test, the
+/// prefetch of its texels and its projection, and its [`Fate`].
+struct Decoded {
+    voxels: [[u32; 3]; GROUP],
+    len: usize,
+    fate: Fate,
+}
+
+impl Decoded {
+    /// Group `ids` (at most [`GROUP`]) decoded, its rectangle tested when `cull` is on (its
+    /// bounds cost less than a splat's own test; the order's rows make most groups short
+    /// segments).
+    #[inline]
+    fn new(
+        u: &SplatProjection,
+        ids: &[u32],
+        cull: bool,
+        screen: &Screen,
+        mask: Option<&OpaqueMask>,
+    ) -> Self {
+        let mut voxels = [[0; 3]; GROUP];
+        let len = ids.len().min(GROUP);
+        for (v, &id) in voxels.iter_mut().zip(ids) {
+            *v = project::voxel(u, id);
+        }
+        let fate = match cull
+            .then(|| group_rect(u, &voxels[..len], screen))
+            .flatten()
+        {
+            Some([x0, y0, x1, y1]) if x0 > x1 || y0 > y1 => Fate::OffImage,
+            Some(rect) if mask.is_some_and(|m| m.covers_rect(rect)) => Fate::Hidden,
+            _ => Fate::Project,
+        };
+        Self { voxels, len, fate }
+    }
+
+    fn voxels(&self) -> &[[u32; 3]] {
+        &self.voxels[..self.len]
     }
 }
 

@@ -145,11 +145,14 @@ pub(super) struct Group<'a> {
 
 impl Group<'_> {
     /// [`super::simd::project_group`] a splat at a time, in plain code.
-    pub(super) fn project_each(&self, ids: &[u32], out: &mut [Projected]) -> (usize, usize) {
+    pub(super) fn project_each(
+        &self,
+        voxels: &[[u32; 3]],
+        out: &mut [Projected],
+    ) -> (usize, usize) {
         let (w, h) = (self.screen.w as i32, self.screen.h as i32);
         let (mut culled, mut kept) = (0, 0);
-        for &id in ids {
-            let [x, y, z] = voxel(self.u, id);
+        for &[x, y, z] in voxels {
             let centre = camera_centre(self.u, [x, y, z]);
             let Some(at) = place(self.u, centre, w, h) else {
                 continue;
@@ -182,14 +185,13 @@ impl Group<'_> {
 /// `a = (f / z)^2 (S00 - 2 S02 s + S22 s^2) + pixel variance` is largest at the nearest depth
 /// and, convex in the slope `s`, at one of the slope's bounds (likewise `c` with `S11`, `S12`
 /// and the slope `y / z`; orthographic, both are constant).
-pub(super) fn group_rect(u: &SplatProjection, ids: &[u32], s: &Screen) -> Option<[i32; 4]> {
+pub(super) fn group_rect(u: &SplatProjection, voxels: &[[u32; 3]], s: &Screen) -> Option<[i32; 4]> {
     let (mut lo, mut hi) = ([u32::MAX; 3], [0u32; 3]);
-    for &id in ids {
-        let [x, y, z] = voxel(u, id);
+    for &[x, y, z] in voxels {
         lo = [lo[0].min(x), lo[1].min(y), lo[2].min(z)];
         hi = [hi[0].max(x), hi[1].max(y), hi[2].max(z)];
     }
-    if ids.is_empty() {
+    if voxels.is_empty() {
         return None;
     }
     let (mut left, mut right, mut top, mut bottom) = (f32::MAX, f32::MIN, f32::MAX, f32::MIN);

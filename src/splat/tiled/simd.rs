@@ -7,29 +7,29 @@ use super::project::{Group, Projected};
 use super::tile::LANES;
 use super::tile::{Batch, TilePixels, composite_splat_lanes, composite_tile_lanes};
 
-/// Projects the splats `ids` of a group, writing those that land on the image, in order, to
-/// the front of `out` (at least as long as `ids`): neither the splats left out nor their
+/// Projects the splats of a group, its voxels given, writing those that land on the image, in order, to
+/// the front of `out` (at least as long as `voxels`): neither the splats left out nor their
 /// places are written, read or binned. Returns how many were left out as hidden behind opaque
 /// pixels, and how many were written. Eight at a time in AVX2 vectors where the processor has
 /// them, else [`Group::project_each`].
 pub(super) fn project_group(
     group: &Group<'_>,
-    ids: &[u32],
+    voxels: &[[u32; 3]],
     out: &mut [Projected],
 ) -> (usize, usize) {
     #[cfg(target_arch = "x86_64")]
     if has_avx2() {
         let (mut culled, mut kept) = (0, 0);
-        for ids in ids.chunks(LANES) {
+        for voxels in voxels.chunks(LANES) {
             #[allow(unsafe_code)]
             // SAFETY: the processor has the features the function is built for, checked above.
-            let (hidden, placed) = unsafe { avx2::project(group, ids, &mut out[kept..]) };
+            let (hidden, placed) = unsafe { avx2::project(group, voxels, &mut out[kept..]) };
             culled += hidden;
             kept += placed;
         }
         return (culled, kept);
     }
-    group.project_each(ids, out)
+    group.project_each(voxels, out)
 }
 
 /// Composites a batch's splats touching tile `t` (its top-left pixel at `origin`), nearest
@@ -85,7 +85,7 @@ pub(super) mod avx2 {
     use std::arch::x86_64::*;
 
     use crate::splat::tiled::TILE;
-    use crate::splat::tiled::project::{Group, Projected, RECT_MARGIN, voxel};
+    use crate::splat::tiled::project::{Group, Projected, RECT_MARGIN};
     use crate::splat::tiled::tile::{Batch, LANES, TilePixels, TileRect, composite_tile_lanes};
 
     /// [`composite_tile_lanes`] with [`composite_splat`].
@@ -277,7 +277,7 @@ pub(super) mod avx2 {
     }
 
     /// [`super::Group::project`] for up to [`LANES`] splats: [`super::project`] with the
-    /// splats' arithmetic in vectors. Reading the voxels' ids and texels, testing the opaque pixels
+    /// splats' arithmetic in vectors. Reading the voxels' texels, testing the opaque pixels
     /// and writing the results stay a lane at a time.
     ///
     /// # Safety
@@ -287,21 +287,19 @@ pub(super) mod avx2 {
     #[allow(unsafe_code)]
     pub(in crate::splat::tiled) unsafe fn project(
         group: &Group<'_>,
-        ids: &[u32],
+        voxels: &[[u32; 3]],
         out: &mut [Projected],
     ) -> (usize, usize) {
-        let n = ids.len().min(out.len()).min(LANES);
+        let n = voxels.len().min(out.len()).min(LANES);
         if n == 0 {
             return (0, 0);
         }
         let u = group.u;
-        let mut voxels = [[0u32; 3]; LANES];
         let mut k = [[0.0f32; LANES]; 3];
         for l in 0..LANES {
             // Lanes past the end repeat the last splat; their results are dropped.
-            voxels[l] = voxel(u, ids[l.min(n - 1)]);
             for axis in 0..3 {
-                k[axis][l] = voxels[l][axis] as f32;
+                k[axis][l] = voxels[l.min(n - 1)][axis] as f32;
             }
         }
         let splat = |v: f32| _mm256_set1_ps(v);

@@ -351,7 +351,8 @@ fn a_group_rectangle_holds_every_footprint_of_its_splats_and_no_more() {
                     place(&u, camera_centre(&u, voxel(&u, id)), 64, 48).map(|at| at.rect)
                 })
                 .collect();
-            let Some(group) = group_rect(&u, ids, &s) else {
+            let voxels: Vec<[u32; 3]> = ids.iter().map(|&id| voxel(&u, id)).collect();
+            let Some(group) = group_rect(&u, &voxels, &s) else {
                 continue;
             };
             for r in &rects {
@@ -398,19 +399,20 @@ fn the_avx2_projection_places_splats_as_the_scalar_one_does() {
                     screen: &screen,
                     mask,
                 };
-                let ids: Vec<u32> = (0..20 * 18 * 16).rev().collect();
-                let mut wide = vec![Projected::default(); ids.len()];
+                let voxels: Vec<[u32; 3]> =
+                    (0..20 * 18 * 16).rev().map(|id| voxel(&u, id)).collect();
+                let mut wide = vec![Projected::default(); voxels.len()];
                 let mut each = wide.clone();
                 let (mut culled, mut kept) = ([0; 2], [0; 2]);
-                for ids in ids.chunks(GROUP) {
-                    for ids in ids.chunks(5) {
+                for voxels in voxels.chunks(GROUP) {
+                    for voxels in voxels.chunks(5) {
                         #[allow(unsafe_code)]
                         // SAFETY: the features were checked above.
-                        let (c, k) = unsafe { avx2::project(&group, ids, &mut wide[kept[0]..]) };
+                        let (c, k) = unsafe { avx2::project(&group, voxels, &mut wide[kept[0]..]) };
                         culled[0] += c;
                         kept[0] += k;
                     }
-                    let (c, k) = group.project_each(ids, &mut each[kept[1]..]);
+                    let (c, k) = group.project_each(voxels, &mut each[kept[1]..]);
                     culled[1] += c;
                     kept[1] += k;
                 }
