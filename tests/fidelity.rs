@@ -396,11 +396,31 @@ fn a_level_made_before_its_own_grid_is_drawn_is_the_same_level() {
     let from_below = later
         .screenshot_without_gpu(&scene, &along, SIZE, &options)
         .unwrap();
+    let again = later
+        .screenshot_without_gpu(&scene, &along, SIZE, &options)
+        .unwrap();
     assert_eq!(own.report.levels, [0; 3], "{:?}", own.report);
     for shot in [&direct, &from_below] {
         assert_eq!(shot.report.levels, [0, 0, 1], "{:?}", shot.report);
         assert_eq!(shot.report.levels_made, 1, "{:?}", shot.report);
     }
+    // The own grid's texels are made on the frame that first draws it, and counted there;
+    // the level's are made with the level, counted in its time; a frame that makes neither
+    // counts neither.
+    assert!(!own.report.timings.texels.is_zero(), "{:?}", own.report);
+    assert!(
+        from_below.report.timings.texels.is_zero(),
+        "{:?}",
+        from_below.report
+    );
+    assert!(
+        !from_below.report.timings.levels.is_zero(),
+        "{:?}",
+        from_below.report
+    );
+    assert_eq!(again.report.levels_made, 0, "{:?}", again.report);
+    assert!(again.report.timings.texels.is_zero() && again.report.timings.levels.is_zero());
+    assert!(again.frame.pixels == from_below.frame.pixels);
     assert!(
         direct.frame.pixels == from_below.frame.pixels,
         "{:?}",

@@ -102,6 +102,7 @@ def main():
                 "frames_ms": [round(t, 1) for t in times],
                 "levels": [r.get("levels") for r in reports],
                 "levels_ms": [r.get("levels_ms") for r in reports],
+                "texels_ms": [r.get("texels_ms") for r in reports],
                 "splats_per_frame": [r["splats"] for r in reports],
                 "median_ms": statistics.median(times) if times else None,
                 "min_ms": min(times) if times else None,

@@ -679,6 +679,7 @@ impl Scene {
                 "tiles": tiles,
                 "classify_ms": ms(t.classify),
                 "levels_ms": ms(t.levels),
+                "texels_ms": ms(t.texels),
                 "order_ms": ms(t.order),
                 "upload_ms": ms(t.upload),
                 "mesh_pass_ms": ms(t.mesh_pass),

@@ -607,7 +607,7 @@ pub(crate) fn describe(r: &FrameReport) -> String {
         None => format!("splat pass {:.1} ms", ms(r.timings.splat_pass)),
     };
     format!(
-        "{} meshes ({} triangles), {} splats{}; classify {:.0} ms{}, order {:.1} ms, upload {:.1} ms, mesh pass {:.1} ms, {splats}, readback {:.1} ms{}",
+        "{} meshes ({} triangles), {} splats{}; classify {:.0} ms{}{}, order {:.1} ms, upload {:.1} ms, mesh pass {:.1} ms, {splats}, readback {:.1} ms{}",
         r.meshes,
         r.triangles,
         r.splats,
@@ -631,6 +631,11 @@ pub(crate) fn describe(r: &FrameReport) -> String {
             String::new()
         } else {
             format!(", levels {:.0} ms", ms(r.timings.levels))
+        },
+        if r.timings.texels.is_zero() {
+            String::new()
+        } else {
+            format!(", texels {:.0} ms", ms(r.timings.texels))
         },
         ms(r.timings.order),
         ms(r.timings.upload),

@@ -69,6 +69,9 @@ pub struct FrameTimings {
     /// Making levels of detail from the classification (only on frames that draw a level
     /// not made yet).
     pub levels: Duration,
+    /// Making the splats' texels for the CPU tile compositor (only on frames that draw a grid
+    /// whose texels are not made yet).
+    pub texels: Duration,
     /// Computing the draw orders on the CPU.
     pub order: Duration,
     /// Writing the draw orders and uniforms to the GPU.
@@ -568,7 +571,9 @@ impl Renderer {
             }
         };
         let started = Instant::now();
-        report.tiles = Some(self.composite_tiles(scene, &view, &ordered, &depth, &mut frame));
+        let (tiles, texels) = self.composite_tiles(scene, &view, &ordered, &depth, &mut frame);
+        report.tiles = Some(tiles);
+        report.timings.texels = texels;
         report.timings.splat_pass = started.elapsed();
         let translucent: Vec<_> = scene
             .meshes()
@@ -624,7 +629,8 @@ impl Renderer {
         })
     }
 
-    /// The ordered volumes' splats composited by the tile compositor over `frame`.
+    /// The ordered volumes' splats composited by the tile compositor over `frame`, and the
+    /// time taken making texels that were not made yet.
     fn composite_tiles(
         &mut self,
         scene: &Scene,
@@ -632,7 +638,7 @@ impl Renderer {
         ordered: &[(NodeId, VolumeGeometry)],
         depth: &[f32],
         frame: &mut Frame,
-    ) -> TileStats {
+    ) -> (TileStats, Duration) {
         let Self {
             volumes,
             levels,
@@ -640,15 +646,18 @@ impl Renderer {
             ..
         } = self;
         let level = |id: &NodeId| levels.get(id).copied().unwrap_or_default();
+        let mut texels = Duration::ZERO;
         for (id, _) in ordered {
             if let Some(state) = volumes.get_mut(&(*id, level(id)))
                 && state.texels.is_none()
             {
+                let started = Instant::now();
                 state.texels = Some(SplatTexels::new(
                     &state.classified,
                     &state.volume,
                     state.factors,
                 ));
+                texels += started.elapsed();
             }
         }
         let mut inputs = Vec::with_capacity(ordered.len());
@@ -665,7 +674,8 @@ impl Renderer {
             let projection = projection(geometry, view, &node.splats, &scene.clipping);
             inputs.push((projection, texels, state.ids.as_slice()));
         }
-        tiles.composite(view.size, &inputs, depth, &mut frame.pixels)
+        let stats = tiles.composite(view.size, &inputs, depth, &mut frame.pixels);
+        (stats, texels)
     }
 
     /// Draws the overlay meshes alone into cleared targets (transparent, far depth).
