@@ -17,6 +17,9 @@
 //! only pixels opaque by then (a bit per pixel) is left out before its texel is even read;
 //! stretches of the order whose box of voxels is hidden are left out before each splat's
 //! centre is. Projection is the part of a frame that early termination alone does not shrink.
+//! It takes the order in groups of 32 splats, each group's fate settled one group ahead, so that
+//! the texels of the next group to be projected are fetched while this one is: they miss the
+//! caches where the order's rows cross the texels' bricks.
 //!
 //! The pixel loop works on rows of 8 pixels held as planes (in the AVX2 loop, a footprint at
 //! most 4 pixels wide, as a voxel under a pixel across makes, takes two rows a vector, four
