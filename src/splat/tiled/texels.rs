@@ -219,6 +219,14 @@ impl SplatTexels {
     /// f16 bits (little-endian); `None` off the grid or where the voxel is not significant.
     #[inline]
     pub fn get(&self, x: u32, y: u32, z: u32) -> Option<&[u8; 8]> {
+        self.texels.get(self.index(x, y, z)?)
+    }
+
+    /// Where the texel of voxel `(x, y, z)` lies in `texels`: its brick's first texel plus the
+    /// brick's significant voxels before it; `None` off the grid or where the voxel is not
+    /// significant.
+    #[inline(always)]
+    fn index(&self, x: u32, y: u32, z: u32) -> Option<usize> {
         let [nx, ny, nz] = self.dims;
         if x >= nx || y >= ny || z >= nz {
             return None;
@@ -231,7 +239,7 @@ impl SplatTexels {
             return None;
         }
         let before = (brick.present & ((1u64 << bit) - 1)).count_ones();
-        self.texels.get((brick.first + before) as usize)
+        Some((brick.first + before) as usize)
     }
 
     /// Asks the processor to bring the texel of voxel `(x, y, z)` into its caches, without
@@ -241,27 +249,14 @@ impl SplatTexels {
     #[inline]
     pub(super) fn prefetch(&self, x: u32, y: u32, z: u32) {
         #[cfg(target_arch = "x86_64")]
-        {
-            let [nx, ny, nz] = self.dims;
-            if x >= nx || y >= ny || z >= nz {
-                return;
-            }
-            let [x, y, z] = [x, y, z].map(|v| v as usize);
-            let brick = ((z / BRICK) * self.bricks[1] + y / BRICK) * self.bricks[0] + x / BRICK;
-            let Some(brick) = self.table.get(brick) else {
-                return;
+        if let Some(texel) = self.index(x, y, z).and_then(|i| self.texels.get(i)) {
+            use std::arch::x86_64::{_MM_HINT_T0, _mm_prefetch};
+            #[allow(unsafe_code)]
+            // SAFETY: SSE is part of every x86-64 processor; a prefetch is a hint that reads
+            // nothing and faults on no address.
+            unsafe {
+                _mm_prefetch::<_MM_HINT_T0>(texel.as_ptr().cast())
             };
-            let bit = within_brick(x, y, z);
-            let before = (brick.present & ((1u64 << bit) - 1)).count_ones();
-            if let Some(texel) = self.texels.get((brick.first + before) as usize) {
-                use std::arch::x86_64::{_MM_HINT_T0, _mm_prefetch};
-                #[allow(unsafe_code)]
-                // SAFETY: SSE is part of every x86-64 processor; a prefetch is a hint that
-                // reads nothing and faults on no address.
-                unsafe {
-                    _mm_prefetch::<_MM_HINT_T0>(texel.as_ptr().cast())
-                };
-            }
         }
         #[cfg(not(target_arch = "x86_64"))]
         let _ = (x, y, z);
