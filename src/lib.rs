@@ -49,6 +49,7 @@ pub mod render;
 #[cfg(feature = "report")]
 pub mod report;
 pub mod scene;
+pub mod simd;
 pub mod slice;
 pub mod splat;
 #[cfg(feature = "viewer")]

@@ -1074,3 +1074,85 @@ fn a_voxel_whose_neighbours_are_pairwise_equal_takes_its_neighbourhoods_gradient
         Some([(-31i8) as u8, (-123i8) as u8, 0])
     );
 }
+
+#[test]
+fn a_ramps_row_sums_are_each_voxels_own_bit_for_bit() {
+    // Stretches of every length around the vector's eight voxels, with samples below, inside
+    // and above the ramp, exactly on its ends and bins, NaN, infinities and negative zero,
+    // and open voxels scattered, in runs, or in no block of eight: the sums taken a row at a
+    // time (AVX2 where the processor has it) against each voxel's own `weighted_sums`.
+    let ramps = [
+        TransferFunction::ramp(60.0, 190.0, [1.0, 0.93, 0.85, 0.6]),
+        TransferFunction::ramp(-1000.0, 3000.0, [0.2, 0.5, 1.0, 0.999]),
+        TransferFunction::ramp(0.0, 1e-3, [1.0, 0.0, 0.5, 1.0]),
+        TransferFunction::ramp(100.0, 100.0, [1.0, 1.0, 1.0, 0.5]),
+    ];
+    let special = [
+        f32::NAN,
+        f32::INFINITY,
+        f32::NEG_INFINITY,
+        -0.0,
+        0.0,
+        60.0,
+        190.0,
+        100.0,
+        3000.0,
+        -1000.0,
+        1e-3,
+        60.0 + 130.0 / 256.0,
+    ];
+    let mut hash = 0x2545_f491u32;
+    let mut next = || {
+        hash ^= hash << 13;
+        hash ^= hash >> 17;
+        hash ^= hash << 5;
+        hash
+    };
+    let mut rows = RowSamples::default();
+    let mut checked = 0;
+    for tf in &ramps {
+        let table = ExtinctionTable::new(tf);
+        assert!(table.ramp().is_some());
+        for n in [1usize, 7, 8, 9, 15, 16, 17, 40, 67] {
+            for pattern in 0..4 {
+                for corner in &mut rows.corners {
+                    corner.clear();
+                    corner.extend((0..n).map(|_| {
+                        let h = next();
+                        if h % 5 == 0 {
+                            special[(h >> 8) as usize % special.len()]
+                        } else {
+                            (h >> 8) as f32 / (1u32 << 24) as f32 * 4400.0 - 1200.0
+                        }
+                    }));
+                }
+                let open: Vec<u8> = (0..n)
+                    .map(|j| match pattern {
+                        0 => 1,
+                        1 => u8::from(next() % 3 == 0),
+                        2 => u8::from(j % 16 >= 8),
+                        _ => u8::from(j + 1 == n),
+                    })
+                    .collect();
+                if !rows.ramp_sums(&table, &open) {
+                    // No AVX2 here (or turned off): the row path takes each voxel's own.
+                    continue;
+                }
+                for j in (0..n).filter(|&j| open[j] != 0) {
+                    let want = table.weighted_sums(rows.at(j));
+                    let got = rows.sums_at(j);
+                    assert_eq!(
+                        got.map(f32::to_bits),
+                        want.map(f32::to_bits),
+                        "{n} voxels, pattern {pattern}, voxel {j}: {got:?} against {want:?}"
+                    );
+                    checked += 1;
+                }
+            }
+        }
+    }
+    #[cfg(target_arch = "x86_64")]
+    assert_eq!(checked > 0, crate::simd::has_avx2());
+    #[cfg(not(target_arch = "x86_64"))]
+    assert_eq!(checked, 0);
+}

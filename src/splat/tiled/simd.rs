@@ -6,6 +6,9 @@ use super::project::{Group, Projected};
 #[cfg(target_arch = "x86_64")]
 use super::tile::LANES;
 use super::tile::{Batch, TilePixels, composite_splat_lanes, composite_tile_lanes};
+pub use crate::simd::SIMD_VAR;
+#[cfg(target_arch = "x86_64")]
+pub(super) use crate::simd::has_avx2;
 
 /// Projects the splats of a group, its voxels given, writing those that land on the image, in order, to
 /// the front of `out` (at least as long as `voxels`): neither the splats left out nor their
@@ -48,31 +51,6 @@ pub(super) fn composite_tile(
         return unsafe { avx2::composite_tile(tile, t, origin, batch) };
     }
     composite_tile_lanes(tile, t, origin, batch, composite_splat_lanes);
-}
-
-/// The environment variable that, set to `off`, keeps the tile compositor on its portable
-/// loops on any processor, so that they are tested where AVX2 is there too (CI runs the image
-/// tests both ways). Read once a process.
-pub const SIMD_VAR: &str = "SPLATSCENE_SIMD";
-
-/// Whether [`avx2`]'s code runs: the processor has it and [`SIMD_VAR`] does not turn it off.
-#[cfg(target_arch = "x86_64")]
-pub(super) fn has_avx2() -> bool {
-    static USE: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
-    *USE.get_or_init(|| {
-        let wanted = match std::env::var(SIMD_VAR).as_deref() {
-            Ok("off") => false,
-            Ok("on") | Err(_) => true,
-            Ok(other) => {
-                eprintln!("warning: {SIMD_VAR}={other:?} has no effect: give off or on");
-                true
-            }
-        };
-        wanted
-            && std::arch::is_x86_feature_detected!("avx2")
-            && std::arch::is_x86_feature_detected!("fma")
-            && std::arch::is_x86_feature_detected!("popcnt")
-    })
 }
 
 /// The pixel loop written with AVX2 and FMA intrinsics, for processors that have them (see
