@@ -1650,12 +1650,12 @@ impl RowSamples {
     }
 
     /// Takes [`ExtinctionTable::weighted_sums`] of the voxels of the stretch last sampled that
-    /// are open (`open[j] != 0`, one byte a voxel of the stretch), eight voxels a vector, where the function is a ramp and the processor has AVX2
-    /// ([`crate::simd::has_avx2`]): each lane does a voxel's operations in the same order as
-    /// `weighted_sums`, so the sums are the same, bit for bit. (One voxel at a time, the eight
-    /// samples' sums are a chain of dependent additions, and the table's lookups were two thirds
-    /// of a dense CT's classification.) Returns whether it did; read them with
-    /// [`RowSamples::sums_at`].
+    /// are open (`open[j] != 0`, one byte a voxel of the stretch), eight voxels a vector,
+    /// where the function is a ramp and the processor has AVX2 ([`crate::simd::has_avx2`]):
+    /// each lane does a voxel's operations in the same order as `weighted_sums`, so the sums
+    /// are the same, bit for bit. (One voxel at a time, the eight samples' sums are a chain of
+    /// dependent additions, and the table's lookups were two thirds of a dense CT's
+    /// classification.) Returns whether it did; read them with [`RowSamples::sums_at`].
     fn ramp_sums(&mut self, table: &ExtinctionTable, open: &[u8]) -> bool {
         #[cfg(target_arch = "x86_64")]
         if let Some(ramp) = table.ramp()

@@ -92,7 +92,7 @@ pub(super) unsafe fn ramp_sums(
     }
 }
 
-/// The 8 x 8 transposition of `rows`: element `l` of vector `k` is element `k` of `rows[l]`.
+/// The 8 x 8 transposition of `r`: element `l` of vector `k` is element `k` of `r[l]`.
 #[target_feature(enable = "avx2")]
 #[inline]
 fn transpose(r: [__m256; LANES]) -> [__m256; LANES] {
