@@ -180,20 +180,24 @@ fn marched_in(camera: &SceneCamera, size: (u32, u32), bounds: (DVec3, DVec3)) ->
         shading: f64::from(SHADING),
         gradient_mm: 0.3,
     };
+    Frame {
+        width: size.0,
+        height: size.1,
+        pixels: raymarch::march(&volume, &pinhole(camera, size), 0.1),
+    }
+}
+
+/// The marcher's camera for the perspective `camera`, its pictures `size` pixels.
+fn pinhole(camera: &SceneCamera, size: (u32, u32)) -> Pinhole {
     let Projection::Perspective { fov_y_degrees } = camera.projection else {
         panic!("a perspective camera");
     };
-    let pinhole = Pinhole {
+    Pinhole {
         eye: camera.eye,
         target: camera.target,
         up: camera.up,
         fov_y_degrees,
         size,
-    };
-    Frame {
-        width: size.0,
-        height: size.1,
-        pixels: raymarch::march(&volume, &pinhole, 0.1),
     }
 }
 
@@ -590,14 +594,7 @@ fn head_grids(data: &std::path::Path) -> ([u32; 3], Vec<f32>, [u32; 3], Vec<f32>
 /// The marcher's picture of `volume` from `camera` at [`SIZE`], 2 x 2 rays a pixel averaged
 /// (the pixel's mean, as a splat's low-pass takes it), at 0.1 mm steps.
 fn marched_2x2(volume: &raymarch::Volume<'_>, camera: &SceneCamera) -> Frame {
-    let pinhole = Pinhole {
-        eye: camera.eye,
-        target: camera.target,
-        up: camera.up,
-        fov_y_degrees: 35.0,
-        size: (2 * SIZE.0, 2 * SIZE.1),
-    };
-    let fine_pixels = raymarch::march(volume, &pinhole, 0.1);
+    let fine_pixels = raymarch::march(volume, &pinhole(camera, (2 * SIZE.0, 2 * SIZE.1)), 0.1);
     let w = 2 * SIZE.0 as usize;
     Frame {
         width: SIZE.0,
@@ -621,18 +618,11 @@ fn marched_2x2(volume: &raymarch::Volume<'_>, camera: &SceneCamera) -> Frame {
 /// rays a pixel weighted by a Gaussian of the splats' screen variance
 /// (`SplatStyle::pixel_variance`), at 0.1 mm steps.
 fn marched_low_pass(volume: &raymarch::Volume<'_>, camera: &SceneCamera) -> Frame {
-    let pinhole = Pinhole {
-        eye: camera.eye,
-        target: camera.target,
-        up: camera.up,
-        fov_y_degrees: 35.0,
-        size: SIZE,
-    };
     let variance = SplatStyle::default().pixel_variance;
     Frame {
         width: SIZE.0,
         height: SIZE.1,
-        pixels: raymarch::march_low_pass(volume, &pinhole, 0.1, 3, variance),
+        pixels: raymarch::march_low_pass(volume, &pinhole(camera, SIZE), 0.1, 3, variance),
     }
 }
 
