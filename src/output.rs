@@ -82,22 +82,49 @@ pub fn check_not_input(path: &Path) -> io::Result<()> {
     }
 }
 
+/// How long a write into a named pipe waits for a process to open it for reading: long enough
+/// for a reader started beside the run (`splatscene ... --out p & viewer p`) to get there,
+/// short enough that a pipe nobody reads is an error, not a hang.
+const PIPE_READER_WAIT: std::time::Duration = std::time::Duration::from_secs(5);
+
 /// Writes into a device, pipe or socket as it is. A named pipe that no process reads would
 /// block the write for ever: it is opened without blocking, which fails at once with no reader,
-/// and then written to as usual.
+/// and retried for up to [`PIPE_READER_WAIT`] before that is an error; then it is written to
+/// as usual.
 #[allow(unsafe_code)]
 fn write_special(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
     use std::io::Write;
     use std::os::unix::fs::OpenOptionsExt;
     use std::os::unix::io::AsRawFd;
-    let mut file = std::fs::OpenOptions::new()
-        .write(true)
-        .custom_flags(libc::O_NONBLOCK)
-        .open(path)
-        .map_err(|e| match e.raw_os_error() {
-            Some(libc::ENXIO) => std::io::Error::other("no process is reading this named pipe"),
-            _ => e,
-        })?;
+    let started = std::time::Instant::now();
+    let mut said = false;
+    let mut file = loop {
+        match std::fs::OpenOptions::new()
+            .write(true)
+            .custom_flags(libc::O_NONBLOCK)
+            .open(path)
+        {
+            Ok(file) => break file,
+            Err(e) if e.raw_os_error() == Some(libc::ENXIO) => {
+                if started.elapsed() >= PIPE_READER_WAIT {
+                    return Err(std::io::Error::other(format!(
+                        "no process is reading this named pipe (waited {} s for one)",
+                        PIPE_READER_WAIT.as_secs()
+                    )));
+                }
+                if !said && started.elapsed() >= std::time::Duration::from_millis(200) {
+                    eprintln!(
+                        "waiting up to {} s for a process to read {}",
+                        PIPE_READER_WAIT.as_secs(),
+                        path.display()
+                    );
+                    said = true;
+                }
+                std::thread::sleep(std::time::Duration::from_millis(10));
+            }
+            Err(e) => return Err(e),
+        }
+    };
     // Back to blocking writes, so that a pipe whose reader is slower than us is waited for.
     // SAFETY: fcntl on a descriptor this function owns, with flags it read from it.
     unsafe {

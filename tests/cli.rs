@@ -560,6 +560,17 @@ fn out_follows_links_and_writes_into_pipes_without_replacing_them() {
         assert_eq!(reader.join().unwrap().len(), 32);
         use std::os::unix::fs::FileTypeExt;
         assert!(std::fs::metadata(&fifo).unwrap().file_type().is_fifo());
+        // A reader that comes a moment after the run wants to write is waited for.
+        let late = {
+            let fifo = fifo.clone();
+            std::thread::spawn(move || {
+                std::thread::sleep(std::time::Duration::from_millis(1500));
+                std::fs::read(fifo).unwrap()
+            })
+        };
+        let said = order(&fifo);
+        assert_eq!(late.join().unwrap().len(), 32);
+        assert!(said.contains("waiting up to"), "{said}");
     }
 }
 
