@@ -3,13 +3,20 @@
 //!
 //! ```text
 //! cargo run --release --example raymarch -- VOLUME.raw NX,NY,NZ SX,SY,SZ ORIENT LO,HI \
-//!     EYE_X,EYE_Y,EYE_Z TARGET_X,TARGET_Y,TARGET_Z WxH STEP_MM OUT.png [RAYS]
+//!     EYE_X,EYE_Y,EYE_Z TARGET_X,TARGET_Y,TARGET_Z WxH STEP_MM OUT.png [RAYS [GRADIENT_MM]]
 //! ```
 //!
 //! One ray a pixel, through its centre; with `RAYS`, `RAYS` x `RAYS` rays a pixel weighted as
 //! the splats' screen low-pass weights them (a Gaussian of `SplatStyle::pixel_variance` square
 //! pixels), the pixel a splat draws: one ray a pixel aliases fine structures that the
 //! low-pass blurs, and on such pictures that difference alone nears the fidelity bar.
+//!
+//! Shading takes the field's gradient by central differences `GRADIENT_MM` either side of a
+//! sample (default 0.25 mm). The distance is the same on every grid, so the reference is one
+//! picture of the anatomy whatever grid it is stored on: a distance tied to the grid (half a
+//! voxel) shades a 1.5 mm grid as if smoothed three times more than its 0.5 mm resampling,
+//! and those two references differ by 0.05 RMSE where the 0.25 mm ones differ by 0.01
+//! (BENCHMARKS.md, "The reference's gradient at one distance on every grid").
 //!
 //! The volume is u8, x fastest, placed as `splatscene render` places a raw file at origin 0
 //! with orientation ORIENT (three letters, each axis's positive direction: RAS, LAI...); the
@@ -33,13 +40,18 @@ fn numbers<const N: usize>(text: &str) -> [f64; N] {
 
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    if !(10..=11).contains(&args.len()) {
+    if !(10..=12).contains(&args.len()) {
         eprintln!(
-            "usage: raymarch VOLUME NX,NY,NZ SX,SY,SZ ORIENT LO,HI EYE TARGET WxH STEP OUT [RAYS]"
+            "usage: raymarch VOLUME NX,NY,NZ SX,SY,SZ ORIENT LO,HI EYE TARGET WxH STEP OUT [RAYS [GRADIENT_MM]]"
         );
         std::process::exit(2);
     }
     let rays = args.get(10).map(|r| numbers::<1>(r)[0] as usize);
+    let gradient_mm = args.get(11).map_or(0.25, |g| numbers::<1>(g)[0]);
+    assert!(
+        gradient_mm.is_finite() && gradient_mm > 0.0,
+        "GRADIENT_MM is a positive distance"
+    );
     let dims = numbers::<3>(&args[1]).map(|v| v as u32);
     let spacing = numbers::<3>(&args[2]);
     let sign: Vec<f64> = args[3]
@@ -78,7 +90,7 @@ fn main() {
         transfer: &points,
         reference_mm: 1.0,
         shading: 0.8,
-        gradient_mm: 0.5 * spacing.iter().copied().fold(f64::INFINITY, f64::min),
+        gradient_mm,
     };
     let camera = raymarch::Pinhole {
         eye,

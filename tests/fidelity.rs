@@ -708,10 +708,11 @@ fn a_second_ct_at_two_grids_draws_the_ray_marchers_picture() {
     // from the front and obliquely, the soft-tissue and bone windows: a CT the
     // settings were not tuned on. The thick grid's voxels fall about 1.3 pixels apart (drawn
     // refined), the thin one's about 0.65. The two grids within 0.03 of each other (measured
-    // 0.011-0.016). Against the marcher on the thick grid's field, its pixels filtered as the
-    // splats' are (`marched_low_pass`), within 0.03: soft 0.012-0.017, bone 0.021-0.024. (With
-    // a plain mean of 2 x 2 rays a pixel instead, soft was 0.019-0.022 and bone 0.030-0.033:
-    // at 160 x 160 the bone's edges alias.)
+    // 0.014-0.022). Against the marcher on the thick grid's field, its pixels filtered as the
+    // splats' are (`marched_low_pass`), its gradient 0.25 mm either side of a sample on both
+    // grids' behalf, within 0.03: the thick grid soft 0.013-0.014, bone 0.020-0.023, the thin
+    // soft 0.015-0.018, bone 0.023-0.027. (With a plain mean of 2 x 2 rays a pixel instead,
+    // soft was 0.019-0.022 and bone 0.030-0.033: at 160 x 160 the bone's edges alias.)
     let Some(data) = common::files::data_dir() else {
         return;
     };
@@ -753,7 +754,7 @@ fn a_second_ct_at_two_grids_draws_the_ray_marchers_picture() {
                 transfer: tf.points(),
                 reference_mm: 1.0,
                 shading: f64::from(SHADING),
-                gradient_mm: 1.0,
+                gradient_mm: 0.25,
             };
             let reference = marched_low_pass(&marcher, &camera);
             let coverage = reference.pixels.iter().filter(|p| p[3] > 0.5).count();

@@ -666,9 +666,14 @@ pub fn gradient_snorm8(volume: &CpuVolume, k: [u32; 3]) -> Option<[u8; 3]> {
 
 /// The unit index-space gradient at voxel `k` of the grid `factors` times finer than
 /// `volume`'s ([`classify_refined`]), as [`gradient_snorm8`] in the fine grid's index space:
-/// central differences of the volume's trilinear field one fine voxel either side of the fine
-/// voxel's centre, as they would be taken on the fine grid resampled. The volume's own
-/// gradient where every factor is 1.
+/// the gradient of the volume's trilinear field at the fine voxel's centre, by central
+/// differences half a fine voxel either side. Within one cell of the volume the field is
+/// linear along each axis, so these are its exact slope there; where the fine centre is a
+/// voxel of the volume (odd factors) they are the mean of the slopes either side, the
+/// volume's own central difference. One fine voxel either side would reach into the next
+/// cell on even factors and blend its slope in, shading the refined grid as a smoother field
+/// than the one drawn (BENCHMARKS.md, "The reference's gradient at one distance on every
+/// grid"). The volume's own gradient where every factor is 1.
 pub fn refined_gradient_snorm8(
     volume: &CpuVolume,
     factors: [u32; 3],
@@ -681,9 +686,9 @@ pub fn refined_gradient_snorm8(
     let centre: [f64; 3] = std::array::from_fn(|a| (f64::from(k[a]) + 0.5) / f[a] - 0.5);
     let g: [f32; 3] = std::array::from_fn(|a| {
         let (mut lo, mut hi) = (centre, centre);
-        lo[a] -= 1.0 / f[a];
-        hi[a] += 1.0 / f[a];
-        (volume.trilinear(hi) - volume.trilinear(lo)) / 2.0
+        lo[a] -= 0.5 / f[a];
+        hi[a] += 0.5 / f[a];
+        volume.trilinear(hi) - volume.trilinear(lo)
     });
     snorm8(-glam::Vec3::from(g))
 }

@@ -515,6 +515,53 @@ fn a_refined_gradient_is_the_fields_along_the_fine_axes() {
 }
 
 #[test]
+fn a_refined_normal_is_the_slope_of_its_own_cell() {
+    // Along x the field is flat up to voxel 2 and climbs 4 a voxel after it; along y it climbs
+    // 1 a voxel everywhere. Refined 2 x 1 x 1, fine voxel 4's centre is coarse x = 1.75, inside
+    // the flat cell: its gradient has no x part. Fine voxel 5's centre, 2.25, is in the
+    // climbing cell: x slope 4 per coarse voxel, 2 per fine one, against y's 1.
+    let dims = [6u32, 3, 3];
+    let kink = [0.0f32, 0.0, 0.0, 4.0, 8.0, 12.0];
+    let values: Vec<f32> = (0..6 * 3 * 3)
+        .map(|id| kink[(id % 6) as usize] + (id / 6 % 3) as f32)
+        .collect();
+    let volume = CpuVolume {
+        dims,
+        spacing: [1.0; 3],
+        origin: [0.0; 3],
+        direction: DMat3::IDENTITY,
+        values: values.into(),
+    };
+    let unit = |k: [u32; 3]| {
+        refined_gradient_snorm8(&volume, [2, 1, 1], k)
+            .unwrap()
+            .map(|v| f32::from(v as i8) / 127.0)
+    };
+    let flat = unit([4, 1, 1]);
+    assert!(flat[0].abs() < 0.01 && flat[1] < -0.99, "{flat:?}");
+    let climbing = unit([5, 1, 1]);
+    let want = -glam::Vec3::new(2.0, 1.0, 0.0).normalize();
+    for a in 0..3 {
+        assert!(
+            (climbing[a] - want[a]).abs() < 0.02,
+            "{climbing:?} against {want}"
+        );
+    }
+    // An odd factor's middle fine voxel is the coarse voxel 2, where the slope changes: its
+    // own central difference, (4 - 0) / 2 along x, a third of that per fine voxel.
+    let middle = refined_gradient_snorm8(&volume, [3, 1, 1], [7, 1, 1])
+        .unwrap()
+        .map(|v| f32::from(v as i8) / 127.0);
+    let want = -glam::Vec3::new(2.0 / 3.0, 1.0, 0.0).normalize();
+    for a in 0..3 {
+        assert!(
+            (middle[a] - want[a]).abs() < 0.02,
+            "{middle:?} against {want}"
+        );
+    }
+}
+
+#[test]
 fn a_coarser_level_keeps_each_blocks_optical_depth_and_emission() {
     // A 5 x 4 x 3 grid (odd along x and z) of varied splats, some left out: each block's
     // splat, computed plainly from its children.
