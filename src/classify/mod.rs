@@ -682,15 +682,73 @@ pub fn refined_gradient_snorm8(
     if factors == [1, 1, 1] {
         return gradient_snorm8(volume, k);
     }
-    let f = factors.map(|f| f64::from(f.max(1)));
-    let centre: [f64; 3] = std::array::from_fn(|a| (f64::from(k[a]) + 0.5) / f[a] - 0.5);
-    let g: [f32; 3] = std::array::from_fn(|a| {
-        let (mut lo, mut hi) = (centre, centre);
-        lo[a] -= 0.5 / f[a];
-        hi[a] += 0.5 / f[a];
-        volume.trilinear(hi) - volume.trilinear(lo)
+    let g = dispatch!(&volume.values, values => {
+        refined_differences_in(values, volume.dims, factors, k)
     });
-    snorm8(-glam::Vec3::from(g))
+    snorm8(-g)
+}
+
+/// The trilinear field of `values` (a `dims` grid, x fastest) across fine voxel `k` of the
+/// grid `factors` times finer, along each axis: its value at the fine voxel's upper face less
+/// its value at the lower, at the fine centre across the other two axes, the field clamped
+/// at the grid's outer voxel centres as [`CpuVolume::trilinear`] clamps it. Taken as the
+/// slopes of the cells the fine voxel's extent overlaps (at most two), each the bilinear mean
+/// across the other axes of its four edges' differences, weighted by the overlap: the same
+/// number as two trilinear samples' difference, from a quarter of their loads and with the
+/// value type matched once, not once a load. Zero where `values` is shorter than `dims`.
+fn refined_differences_in<T: Voxel>(
+    values: &[T],
+    dims: [u32; 3],
+    factors: [u32; 3],
+    k: [u32; 3],
+) -> glam::Vec3 {
+    let n = dims.map(|d| d.max(1) as usize);
+    if values.len() < n[0] * n[1] * n[2] {
+        return glam::Vec3::ZERO;
+    }
+    let f = factors.map(|f| f64::from(f.max(1)));
+    let last = n.map(|n| (n - 1) as f64);
+    // The fine centre's cell and weight along each axis (non-negative once clamped, so the
+    // truncation is the floor).
+    let centre: [(usize, usize, f32); 3] = std::array::from_fn(|a| {
+        let c = ((f64::from(k[a]) + 0.5) / f[a] - 0.5).clamp(0.0, last[a]);
+        let lower = (c as usize).min(n[a] - 1);
+        (lower, (lower + 1).min(n[a] - 1), (c - lower as f64) as f32)
+    });
+    let strides = [1, n[0], n[0] * n[1]];
+    let g: [f32; 3] = std::array::from_fn(|a| {
+        if n[a] < 2 {
+            return 0.0;
+        }
+        let (b, c) = ((a + 1) % 3, (a + 2) % 3);
+        let ((bl, bu, bt), (cl, cu, ct)) = (centre[b], centre[c]);
+        // Cell `j`'s slope (voxel j to j + 1 along `a`) at the centre across b and c.
+        let slope = |j: usize| {
+            let (lo, hi) = (j * strides[a], (j + 1) * strides[a]);
+            let edge = |ib: usize, ic: usize| {
+                let base = ib * strides[b] + ic * strides[c];
+                values[base + hi].to_f32() - values[base + lo].to_f32()
+            };
+            let near = edge(bl, cl) + bt * (edge(bu, cl) - edge(bl, cl));
+            let far = edge(bl, cu) + bt * (edge(bu, cu) - edge(bl, cu));
+            near + ct * (far - near)
+        };
+        let lo = (f64::from(k[a]) / f[a] - 0.5).clamp(0.0, last[a]);
+        let hi = ((f64::from(k[a]) + 1.0) / f[a] - 0.5).clamp(0.0, last[a]);
+        // The extent is at most a voxel long: two cells at most (a third for rounding).
+        let (mut sum, mut from) = (0.0f32, lo);
+        for _ in 0..3 {
+            if from >= hi {
+                break;
+            }
+            let j = (from as usize).min(n[a] - 2);
+            let to = hi.min((j + 1) as f64);
+            sum += (to - from) as f32 * slope(j);
+            from = to;
+        }
+        sum
+    });
+    glam::Vec3::from(g)
 }
 
 /// A direction as snorm8 once made unit length; `None` for a zero or non-finite one.
@@ -862,9 +920,9 @@ pub fn classify_refined(
     options: &ClassifyOptions,
     factors: [u32; 3],
 ) -> Result<Classified, GridError> {
-    // The own grid's rows are sampled whole where the shell (which samples each cell's
-    // neighbours) is not asked for.
-    let by_rows = factors == [1, 1, 1] && options.shell.is_none();
+    // Rows are sampled whole where the shell (which samples each cell's neighbours) is not
+    // asked for.
+    let by_rows = options.shell.is_none();
     classify_cells(volume, tf, options, factors, by_rows)
 }
 
@@ -910,9 +968,9 @@ fn classify_cells(
 }
 
 /// The splats of z-slices `slab * SLAB ..` of a grid of `dims` holding `values`, refined by
-/// `factors`: their fine ids and colours, in id order. With `by_rows` (the own grid, factors
-/// all 1, no shell), each row inside the grid has its cells' samples interpolated for all its
-/// open voxels at once ([`RowSamples`]); the result is the same, bit for bit.
+/// `factors`: their fine ids and colours, in id order. With `by_rows` (no shell), each row
+/// inside the grid has its cells' samples interpolated for all its open voxels at once
+/// ([`RowSamples`]), once for each fine voxel along x; the result is the same, bit for bit.
 fn classify_slab<T: Voxel>(
     values: &[T],
     dims: [u32; 3],
@@ -938,7 +996,11 @@ fn classify_slab<T: Voxel>(
     let first = z0.saturating_sub(1);
     let (fine_row, fine_plane) = (nx * fx, nx * fx * ny * fy);
     let mut block = Block::default();
-    let mut rows = RowSamples::default();
+    // One row's samples for each fine voxel along x, and whether their sums were taken.
+    let mut rows: Vec<RowSamples> = std::iter::repeat_with(RowSamples::default)
+        .take(fx)
+        .collect();
+    let mut summed = vec![false; fx];
     let mut open = vec![0u8; plane];
     for z in z0..z1 {
         let below = &labels[z.saturating_sub(1) - first];
@@ -980,18 +1042,22 @@ fn classify_slab<T: Voxel>(
                         between.iter().rposition(|&o| o != 0),
                     ) {
                         let (lo, hi) = (first + 1, last + 1);
-                        rows.sample(values, dims, [y, z], lo..=hi, &cells.samples);
-                        let summed = rows.ramp_sums(cells.table, &open[lo..=hi]);
-                        let at = nx * y + plane * z;
+                        for (jx, (row, summed)) in rows.iter_mut().zip(&mut summed).enumerate() {
+                            row.sample(values, dims, [y, z], lo..=hi, &cells.samples, [jx, jy, jz]);
+                            *summed = row.ramp_sums(cells.table, &open[lo..=hi]);
+                        }
+                        let at = fine_row * (y * fy + jy) + fine_plane * (z * fz + jz);
                         for_each_open(&open[lo..=hi], |j| {
-                            let sums = if summed {
-                                rows.sums_at(j)
-                            } else {
-                                cells.table.weighted_sums(rows.at(j))
-                            };
-                            if let Some(c) = cells.of_sums(sums) {
-                                ids.push((at + lo + j) as u32);
-                                colors.push(c);
+                            for (jx, (row, &summed)) in rows.iter().zip(&summed).enumerate() {
+                                let sums = if summed {
+                                    row.sums_at(j)
+                                } else {
+                                    cells.table.weighted_sums(row.at(j))
+                                };
+                                if let Some(c) = cells.of_sums(sums) {
+                                    ids.push((at + (lo + j) * fx + jx) as u32);
+                                    colors.push(c);
+                                }
                             }
                         });
                     }
@@ -1593,9 +1659,10 @@ struct RowSamples {
 }
 
 impl RowSamples {
-    /// Samples voxels `xs` of row `(y, z)` of a grid of `dims` holding `values`, with the
-    /// own grid's sample positions `samples` (one fine voxel per axis). The row and its
-    /// neighbours must lie inside the grid: `1 <= xs`, `xs <= nx - 2`, likewise `y` and `z`.
+    /// Samples the cells of fine voxel `j` (per axis, of the `samples`' fine voxels a coarse
+    /// voxel splits into) of each of voxels `xs` of row `(y, z)` of a grid of `dims` holding
+    /// `values`. The row and its neighbours must lie inside the grid: `1 <= xs`,
+    /// `xs <= nx - 2`, likewise `y` and `z`.
     fn sample<T: Voxel>(
         &mut self,
         values: &[T],
@@ -1603,6 +1670,7 @@ impl RowSamples {
         [y, z]: [usize; 2],
         xs: std::ops::RangeInclusive<usize>,
         samples: &[Samples; 3],
+        j: [usize; 3],
     ) {
         let [nx, ny, _] = dims.map(|n| n as usize);
         let (lo, hi) = (*xs.start(), *xs.end());
@@ -1615,7 +1683,7 @@ impl RowSamples {
                 row.extend(values[start..start + n + 2].iter().map(|v| v.to_f32()));
             }
         }
-        let [sx, sy, sz] = [0, 1, 2].map(|a| &samples[a].at[0]);
+        let [sx, sy, sz] = [0, 1, 2].map(|a| &samples[a].at[j[a]]);
         for (dz, layer) in self.lines.iter_mut().enumerate() {
             for (dy, line) in layer.iter_mut().enumerate() {
                 let l = &self.source[dz][dy];

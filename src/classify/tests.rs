@@ -250,7 +250,7 @@ fn rows_sampled_whole_classify_as_voxels_one_at_a_time() {
     // Grids of tissue patches, ramps and lone voxels in clear air, narrow and wide, of three
     // voxel types, through a ramp and a function of several segments: the cells of each row
     // sampled whole give the same splats, bit for bit, as each voxel's block (which the
-    // faces and refined grids still take).
+    // faces still take), on the own grid and refined.
     let [ramp, three] = ramp_and_three();
     for dims in [[3u32, 3, 3], [4, 5, 3], [37, 6, 5], [70, 9, 20]] {
         let n = dims.iter().product::<u32>();
@@ -280,21 +280,27 @@ fn rows_sampled_whole_classify_as_voxels_one_at_a_time() {
                 direction: DMat3::IDENTITY,
                 values,
             };
-            for tf in [&ramp, &three] {
+            for (tf, factors) in [
+                (&ramp, [1; 3]),
+                (&three, [1; 3]),
+                (&ramp, [3, 2, 1]),
+                (&three, [2, 1, 3]),
+            ] {
                 let options = ClassifyOptions::default();
-                let whole = classify_cells(&volume, tf, &options, [1; 3], true).unwrap();
-                let blocks = classify_cells(&volume, tf, &options, [1; 3], false).unwrap();
+                let whole = classify_cells(&volume, tf, &options, factors, true).unwrap();
+                let blocks = classify_cells(&volume, tf, &options, factors, false).unwrap();
                 assert!(!whole.grid.is_empty(), "{dims:?}: no splat");
                 assert_eq!(
                     whole.grid.ids().collect::<Vec<_>>(),
                     blocks.grid.ids().collect::<Vec<_>>(),
-                    "{dims:?}"
+                    "{dims:?}, {factors:?}"
                 );
+                assert_eq!(whole.colors.len(), blocks.colors.len());
                 for (a, b) in whole.colors.iter().zip(&blocks.colors) {
                     assert_eq!(
                         (a.rgb, a.density.to_bits()),
                         (b.rgb, b.density.to_bits()),
-                        "{dims:?}"
+                        "{dims:?}, {factors:?}"
                     );
                 }
             }
@@ -512,6 +518,57 @@ fn a_refined_gradient_is_the_fields_along_the_fine_axes() {
         refined_gradient_snorm8(&volume, [1; 3], [2, 2, 2]),
         gradient_snorm8(&volume, [2, 2, 2])
     );
+}
+
+#[test]
+fn refined_differences_are_two_trilinear_samples_apart() {
+    // The oracle: the trilinear field sampled at the fine voxel's two faces, along each axis.
+    let mut seed = 0x9e37_79b9_7f4a_7c15u64;
+    let mut next = move || {
+        seed ^= seed << 13;
+        seed ^= seed >> 7;
+        seed ^= seed << 17;
+        seed
+    };
+    for case in 0..40 {
+        let dims: [u32; 3] = std::array::from_fn(|_| 1 + (next() % 6) as u32);
+        let factors: [u32; 3] = std::array::from_fn(|_| 1 + (next() % 5) as u32);
+        let count = dims.iter().product::<u32>() as usize;
+        let values: Vec<f32> = (0..count)
+            .map(|_| (next() % 4001) as f32 - 2000.0)
+            .collect();
+        let volume = CpuVolume {
+            dims,
+            spacing: [1.0; 3],
+            origin: [0.0; 3],
+            direction: DMat3::IDENTITY,
+            values: values.clone().into(),
+        };
+        let f = factors.map(f64::from);
+        for z in 0..dims[2] * factors[2] {
+            for y in 0..dims[1] * factors[1] {
+                for x in 0..dims[0] * factors[0] {
+                    let k = [x, y, z];
+                    let centre: [f64; 3] =
+                        std::array::from_fn(|a| (f64::from(k[a]) + 0.5) / f[a] - 0.5);
+                    let want: [f32; 3] = std::array::from_fn(|a| {
+                        let (mut lo, mut hi) = (centre, centre);
+                        lo[a] -= 0.5 / f[a];
+                        hi[a] += 0.5 / f[a];
+                        volume.trilinear(hi) - volume.trilinear(lo)
+                    });
+                    let got = super::refined_differences_in(&values, dims, factors, k);
+                    for a in 0..3 {
+                        assert!(
+                            (got[a] - want[a]).abs() <= 1e-3 * (1.0 + want[a].abs()),
+                            "case {case}: dims {dims:?}, factors {factors:?}, voxel {k:?}: \
+                             {got} against {want:?}"
+                        );
+                    }
+                }
+            }
+        }
+    }
 }
 
 #[test]
