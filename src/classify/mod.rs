@@ -682,69 +682,139 @@ pub fn refined_gradient_snorm8(
     if factors == [1, 1, 1] {
         return gradient_snorm8(volume, k);
     }
-    let g = dispatch!(&volume.values, values => {
-        refined_differences_in(values, volume.dims, factors, k)
-    });
+    let n = volume.dims.map(|d| d.max(1) as usize);
+    let places = std::array::from_fn(|a| FinePlace::new(n[a], factors[a], k[a]));
+    let g = dispatch!(&volume.values, values => refined_differences_in(values, n, &places));
     snorm8(-g)
 }
 
-/// The trilinear field of `values` (a `dims` grid, x fastest) across fine voxel `k` of the
-/// grid `factors` times finer, along each axis: its value at the fine voxel's upper face less
-/// its value at the lower, at the fine centre across the other two axes, the field clamped
-/// at the grid's outer voxel centres as [`CpuVolume::trilinear`] clamps it. Taken as the
-/// slopes of the cells the fine voxel's extent overlaps (at most two), each the bilinear mean
-/// across the other axes of its four edges' differences, weighted by the overlap: the same
-/// number as two trilinear samples' difference, from a quarter of their loads and with the
-/// value type matched once, not once a load. Zero where `values` is shorter than `dims`.
+/// [`refined_gradient_snorm8`] for every voxel of one refined grid, with where each fine
+/// index lies along each axis worked out once (a frame's texels ask for tens of millions).
+#[derive(Debug)]
+pub struct RefinedGradients<'a> {
+    volume: &'a CpuVolume,
+    factors: [u32; 3],
+    /// Per axis, per fine index along it.
+    places: [Vec<FinePlace>; 3],
+}
+
+impl<'a> RefinedGradients<'a> {
+    /// The gradients of `volume`'s field on its grid refined by `factors`.
+    pub fn new(volume: &'a CpuVolume, factors: [u32; 3]) -> Self {
+        let n = volume.dims.map(|d| d.max(1) as usize);
+        let places = std::array::from_fn(|a| {
+            if factors == [1, 1, 1] {
+                return Vec::new();
+            }
+            (0..volume.dims[a].saturating_mul(factors[a]))
+                .map(|k| FinePlace::new(n[a], factors[a], k))
+                .collect()
+        });
+        Self {
+            volume,
+            factors,
+            places,
+        }
+    }
+
+    /// [`refined_gradient_snorm8`] at fine voxel `k`.
+    pub fn snorm8(&self, k: [u32; 3]) -> Option<[u8; 3]> {
+        if self.factors == [1, 1, 1] {
+            return gradient_snorm8(self.volume, k);
+        }
+        let places = [0, 1, 2].map(|a| self.places[a].get(k[a] as usize));
+        let [Some(x), Some(y), Some(z)] = places else {
+            return None;
+        };
+        let n = self.volume.dims.map(|d| d.max(1) as usize);
+        let places = [*x, *y, *z];
+        let g =
+            dispatch!(&self.volume.values, values => refined_differences_in(values, n, &places));
+        snorm8(-g)
+    }
+}
+
+/// Where one fine voxel lies along one axis of the coarse grid it refines: the coarse cell
+/// its centre falls in and the weight of the cell's upper voxel there, and the cells its
+/// extent overlaps (at most two) with the length of each overlap, in coarse voxels; all
+/// clamped to the grid's outer voxel centres as [`CpuVolume::trilinear`] clamps.
+#[derive(Debug, Clone, Copy)]
+struct FinePlace {
+    lower: u32,
+    upper: u32,
+    t: f32,
+    spans: [(u32, f32); 2],
+}
+
+impl FinePlace {
+    /// Fine voxel `k` of the `f` a coarse voxel splits into along an axis of `n` voxels.
+    fn new(n: usize, f: u32, k: u32) -> Self {
+        let f = f64::from(f.max(1));
+        let last = (n.max(1) - 1) as f64;
+        // Non-negative once clamped, so the truncation is the floor.
+        let c = ((f64::from(k) + 0.5) / f - 0.5).clamp(0.0, last);
+        let lower = (c as usize).min(n.max(1) - 1);
+        let upper = (lower + 1).min(n.max(1) - 1);
+        let mut spans = [(0u32, 0.0f32); 2];
+        if n >= 2 {
+            let lo = (f64::from(k) / f - 0.5).clamp(0.0, last);
+            let hi = ((f64::from(k) + 1.0) / f - 0.5).clamp(0.0, last);
+            // The extent is at most a voxel long: two cells at most.
+            let mut from = lo;
+            for span in &mut spans {
+                if from >= hi {
+                    break;
+                }
+                let j = (from as usize).min(n - 2);
+                let to = hi.min((j + 1) as f64);
+                *span = (j as u32, (to - from) as f32);
+                from = to;
+            }
+        }
+        Self {
+            lower: lower as u32,
+            upper: upper as u32,
+            t: (c - lower as f64) as f32,
+            spans,
+        }
+    }
+}
+
+/// The trilinear field of `values` (a grid of `n` voxels a side, x fastest) across a fine
+/// voxel placed along each axis as `places` says: its value at the fine voxel's upper face
+/// less its value at the lower, at the fine centre across the other two axes, the field
+/// clamped at the grid's outer voxel centres as [`CpuVolume::trilinear`] clamps it. Taken as
+/// the slopes of the cells the fine voxel's extent overlaps, each the bilinear mean across the
+/// other axes of its four edges' differences, weighted by the overlap: the same number as two
+/// trilinear samples' difference, from fewer loads and with the value type matched once, not
+/// once a load. Zero where `values` is shorter than the grid.
 fn refined_differences_in<T: Voxel>(
     values: &[T],
-    dims: [u32; 3],
-    factors: [u32; 3],
-    k: [u32; 3],
+    n: [usize; 3],
+    places: &[FinePlace; 3],
 ) -> glam::Vec3 {
-    let n = dims.map(|d| d.max(1) as usize);
     if values.len() < n[0] * n[1] * n[2] {
         return glam::Vec3::ZERO;
     }
-    let f = factors.map(|f| f64::from(f.max(1)));
-    let last = n.map(|n| (n - 1) as f64);
-    // The fine centre's cell and weight along each axis (non-negative once clamped, so the
-    // truncation is the floor).
-    let centre: [(usize, usize, f32); 3] = std::array::from_fn(|a| {
-        let c = ((f64::from(k[a]) + 0.5) / f[a] - 0.5).clamp(0.0, last[a]);
-        let lower = (c as usize).min(n[a] - 1);
-        (lower, (lower + 1).min(n[a] - 1), (c - lower as f64) as f32)
-    });
     let strides = [1, n[0], n[0] * n[1]];
     let g: [f32; 3] = std::array::from_fn(|a| {
-        if n[a] < 2 {
-            return 0.0;
-        }
         let (b, c) = ((a + 1) % 3, (a + 2) % 3);
-        let ((bl, bu, bt), (cl, cu, ct)) = (centre[b], centre[c]);
-        // Cell `j`'s slope (voxel j to j + 1 along `a`) at the centre across b and c.
-        let slope = |j: usize| {
-            let (lo, hi) = (j * strides[a], (j + 1) * strides[a]);
+        let (pb, pc) = (&places[b], &places[c]);
+        let [bl, bu, cl, cu] = [pb.lower, pb.upper, pc.lower, pc.upper].map(|v| v as usize);
+        let mut sum = 0.0f32;
+        for &(j, length) in &places[a].spans {
+            if length == 0.0 {
+                continue;
+            }
+            // Cell `j`'s slope (voxel j to j + 1 along `a`) at the centre across b and c.
+            let (lo, hi) = (j as usize * strides[a], (j as usize + 1) * strides[a]);
             let edge = |ib: usize, ic: usize| {
                 let base = ib * strides[b] + ic * strides[c];
                 values[base + hi].to_f32() - values[base + lo].to_f32()
             };
-            let near = edge(bl, cl) + bt * (edge(bu, cl) - edge(bl, cl));
-            let far = edge(bl, cu) + bt * (edge(bu, cu) - edge(bl, cu));
-            near + ct * (far - near)
-        };
-        let lo = (f64::from(k[a]) / f[a] - 0.5).clamp(0.0, last[a]);
-        let hi = ((f64::from(k[a]) + 1.0) / f[a] - 0.5).clamp(0.0, last[a]);
-        // The extent is at most a voxel long: two cells at most (a third for rounding).
-        let (mut sum, mut from) = (0.0f32, lo);
-        for _ in 0..3 {
-            if from >= hi {
-                break;
-            }
-            let j = (from as usize).min(n[a] - 2);
-            let to = hi.min((j + 1) as f64);
-            sum += (to - from) as f32 * slope(j);
-            from = to;
+            let near = edge(bl, cl) + pb.t * (edge(bu, cl) - edge(bl, cl));
+            let far = edge(bl, cu) + pb.t * (edge(bu, cu) - edge(bl, cu));
+            sum += length * (near + pc.t * (far - near));
         }
         sum
     });

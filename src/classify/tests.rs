@@ -557,7 +557,17 @@ fn refined_differences_are_two_trilinear_samples_apart() {
                         hi[a] += 0.5 / f[a];
                         volume.trilinear(hi) - volume.trilinear(lo)
                     });
-                    let got = super::refined_differences_in(&values, dims, factors, k);
+                    let n = dims.map(|d| d as usize);
+                    let places =
+                        std::array::from_fn(|a| super::FinePlace::new(n[a], factors[a], k[a]));
+                    let got = super::refined_differences_in(&values, n, &places);
+                    let table = super::RefinedGradients::new(&volume, factors);
+                    if factors != [1; 3] {
+                        assert_eq!(
+                            table.snorm8(k),
+                            super::refined_gradient_snorm8(&volume, factors, k)
+                        );
+                    }
                     for a in 0..3 {
                         assert!(
                             (got[a] - want[a]).abs() <= 1e-3 * (1.0 + want[a].abs()),

@@ -2,7 +2,7 @@
 
 use rayon::prelude::*;
 
-use crate::classify::{Classified, Front, refined_gradient_snorm8, snorm8};
+use crate::classify::{Classified, Front, RefinedGradients, refined_gradient_snorm8, snorm8};
 use crate::grid::SparseGrid;
 use crate::volume::CpuVolume;
 
@@ -45,8 +45,10 @@ impl SplatTexels {
     /// ([`crate::classify::classify_refined`]; `[1, 1, 1]` for its own). Built brick by brick
     /// from the significant voxels; no buffer the size of the whole grid.
     pub fn new(classified: &Classified, volume: &CpuVolume, factors: [u32; 3]) -> Self {
+        let gradients = RefinedGradients::new(volume, factors);
         Self::build(&classified.grid, |k, rank| {
-            texel(volume, factors, classified, k, rank)
+            let c = classified.colors.get(rank).copied().unwrap_or_default();
+            packed(c, gradients.snorm8(k))
         })
     }
 
@@ -275,7 +277,12 @@ pub fn texel(
     rank: usize,
 ) -> [u8; 8] {
     let c = classified.colors.get(rank).copied().unwrap_or_default();
-    let n = refined_gradient_snorm8(volume, factors, k).unwrap_or([0; 3]);
+    packed(c, refined_gradient_snorm8(volume, factors, k))
+}
+
+/// A splat's colour and gradient (zero where undefined) as [`texel`]'s 8 bytes.
+fn packed(c: crate::classify::SplatColor, n: Option<[u8; 3]>) -> [u8; 8] {
+    let n = n.unwrap_or([0; 3]);
     let d = c.density.to_bits().to_le_bytes();
     [c.rgb[0], c.rgb[1], c.rgb[2], n[0], n[1], n[2], d[0], d[1]]
 }
