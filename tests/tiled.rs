@@ -256,6 +256,114 @@ fn groups_of_splats_off_the_image_are_left_out_and_change_nothing() {
 }
 
 #[test]
+fn a_close_up_refines_only_what_lies_on_the_image_with_the_same_picture() {
+    // Close up on a rotated, anisotropic grid: its voxels several pixels apart, so the grid is
+    // drawn refined, part of it off the image. Refined within the bricks on the image, the
+    // picture is the one refined whole, pixel for pixel; perspective and orthographic,
+    // shaded; the shells, and a faint fog that fills the grid, so that splats just past the
+    // image's edges reach into it everywhere (it fails with the bricks' boxes not grown).
+    let ctx = context();
+    let fog = |mut volume: splatscene::volume::CpuVolume| {
+        let n = volume.dims[0];
+        let values: Vec<f32> = (0..volume.dims.iter().product::<u32>())
+            .map(|id| 180.0 + ((id % n) * 7 + (id / n % n) * 3 + (id / n / n) * 5) as f32 % 40.0)
+            .collect();
+        volume.values = values.into();
+        volume
+    };
+    let shells = {
+        let mut volume = common::shells(32, [0.7, 0.7, 1.5]);
+        volume.direction = glam::DMat3::from_rotation_z(0.5) * glam::DMat3::from_rotation_x(0.35);
+        volume.origin = [100.0, -50.0, 30.0];
+        volume
+    };
+    // The fog square to the world axes, so that a brick's box is no larger than the brick.
+    let square = splatscene::volume::CpuVolume {
+        direction: glam::DMat3::IDENTITY,
+        ..shells.clone()
+    };
+    for volume in [shells, fog(square)] {
+        let mut scene = Scene::new();
+        let node = splatscene::scene::VolumeNode {
+            volume: std::sync::Arc::new(volume),
+            transfer: std::sync::Arc::new(TransferFunction::ct_bone()),
+            splats: splatscene::scene::SplatSettings {
+                shading: 0.8,
+                ..Default::default()
+            },
+        };
+        scene
+            .add(
+                "volume",
+                glam::DMat4::IDENTITY,
+                None,
+                NodeContent::Volume(node),
+            )
+            .unwrap();
+        let whole = camera_of(&scene);
+        let corner = whole.target + glam::DVec3::new(2.0, 1.0, 12.0);
+        let near = SceneCamera {
+            eye: corner + (whole.eye - whole.target).normalize() * 45.0,
+            target: corner,
+            projection: Projection::Perspective {
+                fov_y_degrees: 12.0,
+            },
+            ..whole
+        };
+        let flat = SceneCamera {
+            projection: Projection::Orthographic { height: 9.0 },
+            ..near
+        };
+        for (camera, size) in [(&near, (64, 48)), (&flat, (60, 47))] {
+            let mut cropped = Renderer::with_compositor(Compositor::Cpu);
+            let mut whole_grid = Renderer::with_compositor(Compositor::Cpu);
+            whole_grid.set_refinement_on_image_only(false);
+            let a = cropped
+                .screenshot(&ctx, &scene, camera, size, &OPTIONS)
+                .unwrap();
+            let b = whole_grid
+                .screenshot(&ctx, &scene, camera, size, &OPTIONS)
+                .unwrap();
+            assert!(a.report.refined.is_some(), "{:?}", a.report);
+            assert_eq!(a.report.refined, b.report.refined);
+            assert!(
+                a.report.splats * 10 < b.report.splats * 9,
+                "the refined grid off the image is left out: {} of {}",
+                a.report.splats,
+                b.report.splats
+            );
+            assert!(a.report.tiles.unwrap().drew > 100);
+            let differ = |x: &Frame, y: &Frame| {
+                x.pixels
+                    .iter()
+                    .zip(&y.pixels)
+                    .filter(|(p, q)| p != q)
+                    .count()
+            };
+            assert_eq!(differ(&a.frame, &b.frame), 0, "pixels that differ");
+            // Turned to show bricks the first view left out, the same renderer draws them
+            // too: its picture is a fresh renderer's.
+            let turned = SceneCamera {
+                eye: camera.target
+                    + glam::DQuat::from_rotation_z(0.6) * (camera.eye - camera.target),
+                ..*camera
+            };
+            let again = cropped
+                .screenshot(&ctx, &scene, &turned, size, &OPTIONS)
+                .unwrap();
+            let fresh = Renderer::with_compositor(Compositor::Cpu)
+                .screenshot(&ctx, &scene, &turned, size, &OPTIONS)
+                .unwrap();
+            assert_eq!(
+                differ(&again.frame, &fresh.frame),
+                0,
+                "pixels that differ, turned"
+            );
+        }
+    }
+}
+
+#[test]
 fn the_built_in_scene_looks_the_same_on_either_compositor() {
     let scene = splatscene::scene::shoulder::shoulder_scene().unwrap();
     let camera = scene.camera.unwrap();

@@ -990,20 +990,121 @@ pub fn classify_refined(
     options: &ClassifyOptions,
     factors: [u32; 3],
 ) -> Result<Classified, GridError> {
+    classify_refined_in(volume, tf, options, factors, None)
+}
+
+/// [`classify_refined`], within `region` alone where one is given: the fine voxels of the
+/// volume's voxels outside it are left out, never classified (a close-up's refinement
+/// classifies only what lies on the image).
+pub fn classify_refined_in(
+    volume: &CpuVolume,
+    tf: &TransferFunction,
+    options: &ClassifyOptions,
+    factors: [u32; 3],
+    region: Option<&Region>,
+) -> Result<Classified, GridError> {
     // Rows are sampled whole where the shell (which samples each cell's neighbours) is not
     // asked for.
     let by_rows = options.shell.is_none();
-    classify_cells(volume, tf, options, factors, by_rows)
+    classify_cells(volume, tf, options, factors, by_rows, region)
+}
+
+/// Which voxels of a grid a classification covers, by bricks of `side`^3 voxels.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Region {
+    side: u32,
+    /// Bricks along each axis.
+    bricks: [u32; 3],
+    /// Per brick, x fastest: whether its voxels are covered.
+    covered: Vec<bool>,
+}
+
+impl Region {
+    /// The bricks of `side`^3 voxels (fewer at the far ends) of a `dims` grid for which
+    /// `covered(brick)` holds, `brick` its brick coordinates (voxel index / `side`). `None`
+    /// for a side of 0.
+    pub fn new(dims: [u32; 3], side: u32, covered: impl Fn([u32; 3]) -> bool) -> Option<Self> {
+        if side == 0 {
+            return None;
+        }
+        let bricks = dims.map(|n| n.div_ceil(side));
+        let mut marks = Vec::with_capacity(bricks.iter().map(|&b| b as usize).product());
+        for z in 0..bricks[2] {
+            for y in 0..bricks[1] {
+                for x in 0..bricks[0] {
+                    marks.push(covered([x, y, z]));
+                }
+            }
+        }
+        Some(Self {
+            side,
+            bricks,
+            covered: marks,
+        })
+    }
+
+    /// Whether the brick at brick coordinates `b` is covered (no brick past the grid is).
+    pub fn covers_brick(&self, b: [u32; 3]) -> bool {
+        (0..3).all(|a| b[a] < self.bricks[a])
+            && self.covered[(b[0] + self.bricks[0] * (b[1] + self.bricks[1] * b[2])) as usize]
+    }
+
+    /// Whether voxel `k` is covered.
+    pub fn covers(&self, k: [u32; 3]) -> bool {
+        self.covers_brick(k.map(|c| c / self.side))
+    }
+
+    /// Whether every brick `other` covers, this one covers too (the same bricks of the same
+    /// grid).
+    pub fn contains(&self, other: &Region) -> bool {
+        self.side == other.side
+            && self.bricks == other.bricks
+            && self
+                .covered
+                .iter()
+                .zip(&other.covered)
+                .all(|(&a, &b)| a || !b)
+    }
+
+    /// The bricks either region covers; `None` for regions of different bricks.
+    pub fn union(&self, other: &Region) -> Option<Region> {
+        (self.side == other.side && self.bricks == other.bricks).then(|| Region {
+            covered: self
+                .covered
+                .iter()
+                .zip(&other.covered)
+                .map(|(&a, &b)| a || b)
+                .collect(),
+            ..self.clone()
+        })
+    }
+
+    /// Whether every brick is covered.
+    pub fn is_whole(&self) -> bool {
+        self.covered.iter().all(|&c| c)
+    }
+
+    /// Clears `open` (one byte a voxel of row `y` of slice `z`) outside the region.
+    fn clear_outside(&self, open: &mut [u8], y: usize, z: usize) {
+        let side = self.side as usize;
+        let (by, bz) = ((y / side) as u32, (z / side) as u32);
+        for (bx, run) in open.chunks_mut(side).enumerate() {
+            if !self.covers_brick([bx as u32, by, bz]) {
+                run.fill(0);
+            }
+        }
+    }
 }
 
 /// [`classify_refined`], each row's cells sampled whole or not (`by_rows`, see
-/// [`classify_slab`]).
+/// [`classify_slab`]), within `region` where one is given.
 fn classify_cells(
     volume: &CpuVolume,
     tf: &TransferFunction,
     options: &ClassifyOptions,
     factors: [u32; 3],
     by_rows: bool,
+    region: Option<&Region>,
 ) -> Result<Classified, GridError> {
     let count = crate::grid::voxel_count(volume.dims)? as usize;
     if volume.values.len() < count {
@@ -1030,7 +1131,9 @@ fn classify_cells(
         (0..nz.div_ceil(SLAB))
             .into_par_iter()
             .map(|slab| {
-                classify_slab(values, volume.dims, factors, slab, &clear, &cells, by_rows)
+                classify_slab(
+                    values, volume.dims, factors, slab, &clear, &cells, by_rows, region,
+                )
             })
             .collect()
     });
@@ -1041,6 +1144,7 @@ fn classify_cells(
 /// `factors`: their fine ids and colours, in id order. With `by_rows` (no shell), each row
 /// inside the grid has its cells' samples interpolated for all its open voxels at once
 /// ([`RowSamples`]), once for each fine voxel along x; the result is the same, bit for bit.
+#[allow(clippy::too_many_arguments)]
 fn classify_slab<T: Voxel>(
     values: &[T],
     dims: [u32; 3],
@@ -1049,6 +1153,7 @@ fn classify_slab<T: Voxel>(
     clear: &ClearIntervals,
     cells: &Cells,
     by_rows: bool,
+    region: Option<&Region>,
 ) -> (Vec<u32>, Vec<SplatColor>) {
     let [nx, ny, nz] = dims.map(|n| n as usize);
     let [fx, fy, fz] = factors.map(|f| f as usize);
@@ -1077,6 +1182,11 @@ fn classify_slab<T: Voxel>(
         let here = &labels[z - first];
         let above = &labels[(z + 1).min(nz - 1) - first];
         open_in_slice(below, here, above, &mut open);
+        if let Some(region) = region {
+            for (y, row) in open.chunks_mut(nx).enumerate() {
+                region.clear_outside(row, y, z);
+            }
+        }
         for jz in 0..fz {
             for y in 0..ny {
                 let open = &open[nx * y..][..nx];

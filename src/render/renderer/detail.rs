@@ -3,7 +3,7 @@
 
 use super::*;
 
-/// Fine voxel indices to coarse ones for a grid `factors` times finer ([`classify_refined`]):
+/// Fine voxel indices to coarse ones for a grid `factors` times finer ([`crate::classify::classify_refined`]):
 /// fine voxel `j` of coarse voxel `k` sits at `k - 1/2 + (j + 1/2) / f`.
 pub(super) fn refinement(factors: [u32; 3]) -> DMat4 {
     let f = DVec3::from(factors.map(|f| f64::from(f.max(1))));
@@ -36,7 +36,7 @@ pub enum Detail {
     /// meets the voxels of each pair along it in that order ([`crate::classify::Front`]).
     Level([u8; 3], [i8; 3]),
     /// Its trilinear field classified on a grid `factors[a]` times finer along each axis `a`
-    /// ([`classify_refined`]), for a grid whose voxels are more than [`REFINE_TO`] pixels
+    /// ([`crate::classify::classify_refined`]), for a grid whose voxels are more than [`REFINE_TO`] pixels
     /// apart.
     Refined([u32; 3]),
 }
@@ -395,6 +395,43 @@ pub(super) fn apart_near(
             worst(&mut std::iter::once((0.5 * (lo + hi), 0.5 * (hi - lo))))
         }
     }
+}
+
+/// Side, in voxels, of the bricks a refinement is classified within or left out by
+/// ([`on_image`]).
+pub(super) const REGION_BRICK: u32 = 8;
+
+/// The bricks of [`REGION_BRICK`]^3 voxels of a grid placed as `geometry` whose splats,
+/// refined or not, can land on `view`'s image; `None` where every brick's can. A brick's box is grown by
+/// two of its voxels each way (a splat's footprint reaches past its voxel, and a fine voxel's
+/// cell samples the field a voxel around it) and by three pixels at its far side (the
+/// screen's low-pass), then tested against the image's edges ([`off_image`]).
+pub(super) fn on_image(geometry: &VolumeGeometry, view: &ViewSetup) -> Option<Region> {
+    let to_world = geometry.index_to_world();
+    let m = to_world.matrix3;
+    let abs = glam::DMat3::from_cols(m.x_axis.abs(), m.y_axis.abs(), m.z_axis.abs());
+    let dims = geometry.dims();
+    let eye = view.camera.eye;
+    let region = Region::new(dims, REGION_BRICK, |b| {
+        let lo = DVec3::from(std::array::from_fn::<f64, 3, _>(|a| {
+            f64::from(b[a] * REGION_BRICK) - 2.5
+        }));
+        let hi = DVec3::from(std::array::from_fn::<f64, 3, _>(|a| {
+            f64::from(((b[a] + 1) * REGION_BRICK).min(dims[a])) + 1.5
+        }));
+        let centre = to_world.transform_point3(0.5 * (lo + hi));
+        let half = abs * (0.5 * (hi - lo));
+        let pixel = if view.is_orthographic() {
+            1.0 / view.focal
+        } else {
+            ((centre - eye).length() + half.length()) / view.focal
+        };
+        let grown = half + DVec3::splat(3.0 * pixel);
+        // A box that is not finite (a degenerate placement) is kept: nothing is left out
+        // that cannot be shown to be off the image.
+        !(centre.is_finite() && grown.is_finite() && off_image(view, (centre, grown)))
+    })?;
+    (!region.is_whole()).then_some(region)
 }
 
 /// Whether the world box `(centre, half size)` lies wholly outside what `view` sees: beyond

@@ -14,7 +14,7 @@ use super::tile_pass::TilePass;
 use super::view::ViewSetup;
 use super::{GpuContext, RenderError};
 use crate::classify::{
-    Classified, ClassifyOptions, Front, Opacity, classify_refined, classify_with,
+    Classified, ClassifyOptions, Front, Opacity, Region, classify_refined_in, classify_with,
 };
 use crate::geometry::{GeometryError, VolumeGeometry};
 use crate::order::{OrderOptions, Orderer, Ordering, ViewCase};
@@ -167,6 +167,8 @@ struct VolumeState {
     ids: Vec<u32>,
     /// Where its splats lie, by bricks (the volume's own grid only).
     occupied: Option<Occupied>,
+    /// The own grid's bricks a refinement was classified within (`None`: all of them).
+    region: Option<Region>,
 }
 
 impl VolumeState {
@@ -190,6 +192,7 @@ impl VolumeState {
             orderer,
             ids,
             occupied: None,
+            region: None,
         }
     }
 }
@@ -335,6 +338,9 @@ pub struct Renderer {
     full_grid: bool,
     /// No volume drawn refined ([`Renderer::set_refinement`]).
     no_refinement: bool,
+    /// Refinements classified over the whole grid, not only where the image shows it
+    /// ([`Renderer::set_refinement_on_image_only`]).
+    refine_whole: bool,
     /// Who composites the splats of screenshots.
     compositor: Compositor,
     /// The CPU tile compositor's buffers.
@@ -393,6 +399,14 @@ impl Renderer {
     /// while the camera moves and on once it rests.
     pub fn set_refinement(&mut self, on: bool) {
         self.no_refinement = !on;
+    }
+
+    /// Whether a refinement is classified only within the own grid's bricks whose splats can
+    /// land on the image (on by default): a close-up refines what it shows, not
+    /// the whole grid. A view that shows a brick the refinement left out classifies it anew.
+    /// Off, the whole grid is refined, the same picture at a higher cost.
+    pub fn set_refinement_on_image_only(&mut self, on: bool) {
+        self.refine_whole = !on;
     }
 
     /// The CPU tile compositor, to set its opacity threshold.
@@ -943,27 +957,55 @@ impl Renderer {
                 }
                 Detail::Refined(factors) => {
                     let refined = (id, wanted);
-                    if !self.volumes.contains_key(&refined) {
+                    let region = if self.refine_whole {
+                        None
+                    } else {
+                        let geometry = placed_geometry(&node.volume, world)
+                            .map_err(|e| fail(e.to_string()))?;
+                        on_image(&geometry, view)
+                    };
+                    // A refinement made within fewer bricks than this view shows is made anew.
+                    let covered = |made: &VolumeState| match (&made.region, &region) {
+                        (None, _) => true,
+                        (Some(made), Some(wanted)) => made.contains(wanted),
+                        (Some(made), None) => made.is_whole(),
+                    };
+                    if !self.volumes.get(&refined).is_some_and(covered) {
+                        // Made anew over the bricks the one it replaces covered too, so that a
+                        // camera turning about a close-up soon has what it shows.
+                        let region = match (self.volumes.get(&refined), region) {
+                            (
+                                Some(VolumeState {
+                                    region: Some(made), ..
+                                }),
+                                Some(wanted),
+                            ) => made.union(&wanted).filter(|r| !r.is_whole()),
+                            (_, region) => region,
+                        };
                         // One refinement a volume is kept: a view that wants another makes it
                         // anew.
                         self.volumes
                             .retain(|(v, d), _| *v != id || matches!(d, Detail::Level(..)));
-                        let result =
-                            classify_refined(&node.volume, &node.transfer, &options, factors)
-                                .map_err(|e| fail(e.to_string()))?;
+                        let result = classify_refined_in(
+                            &node.volume,
+                            &node.transfer,
+                            &options,
+                            factors,
+                            region.as_ref(),
+                        )
+                        .map_err(|e| fail(e.to_string()))?;
                         afford(&result)?;
                         made += 1;
-                        self.volumes.insert(
-                            refined,
-                            VolumeState::new(
-                                key,
-                                Arc::clone(&node.volume),
-                                factors,
-                                result,
-                                Orderer::new(),
-                                Vec::new(),
-                            ),
+                        let mut state = VolumeState::new(
+                            key,
+                            Arc::clone(&node.volume),
+                            factors,
+                            result,
+                            Orderer::new(),
+                            Vec::new(),
                         );
+                        state.region = region;
+                        self.volumes.insert(refined, state);
                     }
                     wanted
                 }
