@@ -67,6 +67,17 @@ fn the_automatic_transfer_function_follows_the_values() {
 }
 use glam::DMat3;
 
+/// A `dims` grid of 1 mm voxels at the origin, axis-aligned, holding `values`.
+fn unit_volume(dims: [u32; 3], values: impl Into<crate::volume::Voxels>) -> CpuVolume {
+    CpuVolume {
+        dims,
+        spacing: [1.0; 3],
+        origin: [0.0; 3],
+        direction: DMat3::IDENTITY,
+        values: values.into(),
+    }
+}
+
 #[test]
 fn sample_interpolates_and_clamps() {
     let tf = TransferFunction::ramp(100.0, 200.0, [1.0, 0.5, 0.0, 0.8]);
@@ -216,13 +227,7 @@ fn cells_in_clear_air_are_left_out_and_all_others_kept_on_a_wide_grid() {
             }
         })
         .collect();
-    let volume = CpuVolume {
-        dims,
-        spacing: [1.0; 3],
-        origin: [0.0; 3],
-        direction: DMat3::IDENTITY,
-        values: values.into(),
-    };
+    let volume = unit_volume(dims, values);
     let tf = TransferFunction::new(vec![
         (60.0, [1.0, 0.8, 0.6, 0.0]),
         (160.0, [1.0, 1.0, 1.0, 0.8]),
@@ -500,13 +505,7 @@ fn a_refined_gradient_is_the_fields_along_the_fine_axes() {
             (3 * k[0] + 4 * k[2]) as f32
         })
         .collect();
-    let volume = CpuVolume {
-        dims,
-        spacing: [1.0; 3],
-        origin: [0.0; 3],
-        direction: DMat3::IDENTITY,
-        values: values.into(),
-    };
+    let volume = unit_volume(dims, values);
     let factors = [2u32, 1, 4];
     let n = refined_gradient_snorm8(&volume, factors, [5, 2, 13]).unwrap();
     let n = n.map(|v| f32::from(v as i8) / 127.0);
@@ -533,13 +532,7 @@ fn a_region_leaves_out_the_fine_voxels_of_the_bricks_it_does_not_cover() {
             (k[0] * 7 + k[1] * 3 + k[2] * 5) as f32 % 200.0
         })
         .collect();
-    let volume = CpuVolume {
-        dims,
-        spacing: [1.0; 3],
-        origin: [0.0; 3],
-        direction: DMat3::IDENTITY,
-        values: values.into(),
-    };
+    let volume = unit_volume(dims, values);
     let tf = TransferFunction::ramp(40.0, 160.0, [1.0, 0.5, 0.25, 0.8]);
     let factors = [2u32, 3, 1];
     let region = Region::new(dims, 4, |b| (b[0] + b[1] + b[2]) % 2 == 0).unwrap();
@@ -578,9 +571,15 @@ fn a_region_leaves_out_the_fine_voxels_of_the_bricks_it_does_not_cover() {
     let fewer = Region::new(dims, 4, |b| b == [0, 0, 0]).unwrap();
     assert!(region.contains(&fewer) && region.contains(&region));
     assert!(!fewer.contains(&region));
-    let both = fewer.union(&Region::new(dims, 4, |b| b == [1, 0, 0]).unwrap()).unwrap();
+    let both = fewer
+        .union(&Region::new(dims, 4, |b| b == [1, 0, 0]).unwrap())
+        .unwrap();
     assert!(both.covers([0, 0, 0]) && both.covers([4, 3, 3]) && !both.covers([8, 0, 0]));
-    assert!(fewer.union(&Region::new(dims, 2, |_| true).unwrap()).is_none());
+    assert!(
+        fewer
+            .union(&Region::new(dims, 2, |_| true).unwrap())
+            .is_none()
+    );
 }
 
 #[test]
@@ -655,13 +654,7 @@ fn a_refined_normal_is_the_slope_of_its_own_cell() {
     let values: Vec<f32> = (0..6 * 3 * 3)
         .map(|id| kink[(id % 6) as usize] + (id / 6 % 3) as f32)
         .collect();
-    let volume = CpuVolume {
-        dims,
-        spacing: [1.0; 3],
-        origin: [0.0; 3],
-        direction: DMat3::IDENTITY,
-        values: values.into(),
-    };
+    let volume = unit_volume(dims, values);
     let unit = |k: [u32; 3]| {
         refined_gradient_snorm8(&volume, [2, 1, 1], k)
             .unwrap()
