@@ -48,6 +48,14 @@ pub enum GridError {
         /// Voxels of the grid.
         voxels: usize,
     },
+    /// A region of voxels made for a grid of another size.
+    #[error("a region made for a {region:?} grid was given for a {dims:?} grid")]
+    RegionMismatch {
+        /// The grid the region was made for.
+        region: [u32; 3],
+        /// The grid it was given for.
+        dims: [u32; 3],
+    },
 }
 
 /// A run of consecutive significant voxels along one axis: `start..start + len`.

@@ -995,7 +995,8 @@ pub fn classify_refined(
 
 /// [`classify_refined`], within `region` alone where one is given: the fine voxels of the
 /// volume's voxels outside it are left out, never classified (a close-up's refinement
-/// classifies only what lies on the image).
+/// classifies only what lies on the image). A region made for a grid of other dimensions is
+/// an error.
 pub fn classify_refined_in(
     volume: &CpuVolume,
     tf: &TransferFunction,
@@ -1003,6 +1004,14 @@ pub fn classify_refined_in(
     factors: [u32; 3],
     region: Option<&Region>,
 ) -> Result<Classified, GridError> {
+    if let Some(region) = region
+        && region.dims != volume.dims
+    {
+        return Err(GridError::RegionMismatch {
+            region: region.dims,
+            dims: volume.dims,
+        });
+    }
     // Rows are sampled whole where the shell (which samples each cell's neighbours) is not
     // asked for.
     let by_rows = options.shell.is_none();
@@ -1012,6 +1021,8 @@ pub fn classify_refined_in(
 /// Which voxels of a grid a classification covers, by bricks of `side`^3 voxels.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Region {
+    /// The grid's size.
+    dims: [u32; 3],
     side: u32,
     /// Bricks along each axis.
     bricks: [u32; 3],
@@ -1037,6 +1048,7 @@ impl Region {
             }
         }
         Some(Self {
+            dims,
             side,
             bricks,
             covered: marks,
@@ -1058,7 +1070,7 @@ impl Region {
     /// grid).
     pub fn contains(&self, other: &Region) -> bool {
         self.side == other.side
-            && self.bricks == other.bricks
+            && self.dims == other.dims
             && self
                 .covered
                 .iter()
@@ -1068,7 +1080,7 @@ impl Region {
 
     /// The bricks either region covers; `None` for regions of different bricks.
     pub fn union(&self, other: &Region) -> Option<Region> {
-        (self.side == other.side && self.bricks == other.bricks).then(|| Region {
+        (self.side == other.side && self.dims == other.dims).then(|| Region {
             covered: self
                 .covered
                 .iter()

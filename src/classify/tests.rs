@@ -568,6 +568,17 @@ fn a_region_leaves_out_the_fine_voxels_of_the_bricks_it_does_not_cover() {
         assert_eq!(got, want, "rows sampled whole: {by_rows}");
     }
     // Containment: a region contains itself and what it covers a part of.
+    let elsewhere = Region::new([19, 13, 12], 4, |_| true).unwrap();
+    assert!(matches!(
+        classify_refined_in(
+            &volume,
+            &tf,
+            &ClassifyOptions::default(),
+            factors,
+            Some(&elsewhere)
+        ),
+        Err(GridError::RegionMismatch { .. })
+    ));
     let fewer = Region::new(dims, 4, |b| b == [0, 0, 0]).unwrap();
     assert!(region.contains(&fewer) && region.contains(&region));
     assert!(!fewer.contains(&region));

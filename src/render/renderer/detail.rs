@@ -3,8 +3,9 @@
 
 use super::*;
 
-/// Fine voxel indices to coarse ones for a grid `factors` times finer ([`crate::classify::classify_refined`]):
-/// fine voxel `j` of coarse voxel `k` sits at `k - 1/2 + (j + 1/2) / f`.
+/// Fine voxel indices to coarse ones for a grid `factors` times finer
+/// ([`crate::classify::classify_refined`]): fine voxel `j` of coarse voxel `k` sits at
+/// `k - 1/2 + (j + 1/2) / f`.
 pub(super) fn refinement(factors: [u32; 3]) -> DMat4 {
     let f = DVec3::from(factors.map(|f| f64::from(f.max(1))));
     DMat4::from_scale_rotation_translation(
@@ -36,8 +37,8 @@ pub enum Detail {
     /// meets the voxels of each pair along it in that order ([`crate::classify::Front`]).
     Level([u8; 3], [i8; 3]),
     /// Its trilinear field classified on a grid `factors[a]` times finer along each axis `a`
-    /// ([`crate::classify::classify_refined`]), for a grid whose voxels are more than [`REFINE_TO`] pixels
-    /// apart.
+    /// ([`crate::classify::classify_refined`]), for a grid whose voxels are more than
+    /// [`REFINE_TO`] pixels apart.
     Refined([u32; 3]),
 }
 
@@ -402,10 +403,10 @@ pub(super) fn apart_near(
 pub(super) const REGION_BRICK: u32 = 8;
 
 /// The bricks of [`REGION_BRICK`]^3 voxels of a grid placed as `geometry` whose splats,
-/// refined or not, can land on `view`'s image; `None` where every brick's can. A brick's box is grown by
-/// two of its voxels each way (a splat's footprint reaches past its voxel, and a fine voxel's
-/// cell samples the field a voxel around it) and by three pixels at its far side (the
-/// screen's low-pass), then tested against the image's edges ([`off_image`]).
+/// refined or not, can land on `view`'s image; `None` where every brick's can. A brick's box
+/// is grown by two of its voxels each way (a splat's footprint reaches past its voxel, and a
+/// fine voxel's cell samples the field a voxel around it) and by three pixels at its far side
+/// (the screen's low-pass), then tested against the image's edges ([`off_image`]).
 pub(super) fn on_image(geometry: &VolumeGeometry, view: &ViewSetup) -> Option<Region> {
     let to_world = geometry.index_to_world();
     let m = to_world.matrix3;

@@ -402,9 +402,9 @@ impl Renderer {
     }
 
     /// Whether a refinement is classified only within the own grid's bricks whose splats can
-    /// land on the image (on by default): a close-up refines what it shows, not
-    /// the whole grid. A view that shows a brick the refinement left out classifies it anew.
-    /// Off, the whole grid is refined, the same picture at a higher cost.
+    /// land on the image (on by default): a close-up refines what it shows, not the whole
+    /// grid. A view that shows a brick the refinement left out classifies it anew. Off, the
+    /// whole grid is refined, the same picture at a higher cost.
     pub fn set_refinement_on_image_only(&mut self, on: bool) {
         self.refine_whole = !on;
     }
