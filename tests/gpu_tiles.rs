@@ -40,6 +40,8 @@ fn shoot(
 ) -> Frame {
     let mut renderer = Renderer::with_compositor(compositor);
     renderer.tile_compositor_mut().opaque = opaque;
+    // The GPU tiles draw a volume at one level; so does the CPU here, to draw the same splats.
+    renderer.set_levels_by_brick(false);
     renderer
         .screenshot(ctx, scene, camera, size, options)
         .unwrap()

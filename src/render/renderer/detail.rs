@@ -284,11 +284,13 @@ pub(super) struct Apart {
     pub(super) facing: [i8; 3],
 }
 
-/// [`pixels_apart_near`], with which end of each axis faces the eye.
-pub(super) fn apart_near(
+/// How many pixels apart the voxels of a grid placed as `geometry` fall on the screen along
+/// each of its axes in `view` at the world box `(centre, half size)` of some of its voxels
+/// (see [`apart_near`]); `None` when the eye is in the box.
+fn apart_in_box(
     geometry: &VolumeGeometry,
     view: &ViewSetup,
-    occupied: Option<&Occupied>,
+    (centre, half): (DVec3, DVec3),
 ) -> Option<Apart> {
     let m = geometry.index_to_world().matrix3;
     let spacing = geometry.spacing();
@@ -316,50 +318,57 @@ pub(super) fn apart_near(
             (1.0 - least * least).sqrt()
         }
     };
-    let of_box = |(centre, half): (DVec3, DVec3)| -> Option<Apart> {
-        let pixel = if view.is_orthographic() {
-            1.0 / view.focal
-        } else {
-            let nearest = (eye.clamp(centre - half, centre + half) - eye).length();
-            if nearest.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
-                return None;
-            }
-            nearest / view.focal
-        };
-        // The sight lines to the box's corners (one, the view direction, orthographic).
-        let sights: [DVec3; 8] = std::array::from_fn(|corner| {
-            if view.is_orthographic() {
-                return forward;
-            }
-            let sign = DVec3::from(std::array::from_fn::<f64, 3, _>(|k| {
-                if corner >> k & 1 == 1 { 1.0 } else { -1.0 }
-            }));
-            (centre + sign * half - eye).normalize_or_zero()
-        });
-        let cosines: [(f64, f64); 3] = std::array::from_fn(|a| {
-            sights
-                .iter()
-                .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), s| {
-                    let c = axes[a].dot(*s);
-                    (lo.min(c), hi.max(c))
-                })
-        });
-        let pixels: [f64; 3] = std::array::from_fn(|a| {
-            let (lo, hi) = cosines[a];
-            spacing[a] * across(lo, hi) / pixel
-        });
-        let full: [f64; 3] = std::array::from_fn(|a| spacing[a] / pixel);
-        let facing = cosines.map(|(lo, hi)| facing_of(lo, hi));
-        pixels
-            .iter()
-            .chain(&full)
-            .all(|v| v.is_finite())
-            .then_some(Apart {
-                pixels,
-                full,
-                facing,
-            })
+    let pixel = if view.is_orthographic() {
+        1.0 / view.focal
+    } else {
+        let nearest = (eye.clamp(centre - half, centre + half) - eye).length();
+        if nearest.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
+            return None;
+        }
+        nearest / view.focal
     };
+    // The sight lines to the box's corners (one, the view direction, orthographic).
+    let sights: [DVec3; 8] = std::array::from_fn(|corner| {
+        if view.is_orthographic() {
+            return forward;
+        }
+        let sign = DVec3::from(std::array::from_fn::<f64, 3, _>(|k| {
+            if corner >> k & 1 == 1 { 1.0 } else { -1.0 }
+        }));
+        (centre + sign * half - eye).normalize_or_zero()
+    });
+    let cosines: [(f64, f64); 3] = std::array::from_fn(|a| {
+        sights
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), s| {
+                let c = axes[a].dot(*s);
+                (lo.min(c), hi.max(c))
+            })
+    });
+    let pixels: [f64; 3] = std::array::from_fn(|a| {
+        let (lo, hi) = cosines[a];
+        spacing[a] * across(lo, hi) / pixel
+    });
+    let full: [f64; 3] = std::array::from_fn(|a| spacing[a] / pixel);
+    let facing = cosines.map(|(lo, hi)| facing_of(lo, hi));
+    pixels
+        .iter()
+        .chain(&full)
+        .all(|v| v.is_finite())
+        .then_some(Apart {
+            pixels,
+            full,
+            facing,
+        })
+}
+
+/// [`pixels_apart_near`], with which end of each axis faces the eye.
+pub(super) fn apart_near(
+    geometry: &VolumeGeometry,
+    view: &ViewSetup,
+    occupied: Option<&Occupied>,
+) -> Option<Apart> {
+    let of_box = |b| apart_in_box(geometry, view, b);
     let worst = |boxes: &mut dyn Iterator<Item = (DVec3, DVec3)>| {
         let mut most: Option<Apart> = None;
         for b in boxes {
@@ -485,4 +494,94 @@ pub(super) fn refine_factors(dims: [u32; 3], apart: [f64; 3]) -> Option<[u32; 3]
         factors[a] -= 1;
     }
     (factors != [1; 3]).then_some(factors)
+}
+
+/// The detail each occupied brick of a volume's own grid (placed as `geometry`) is drawn at in
+/// `view` when its bricks are drawn each at its own level ([`Renderer::set_levels_by_brick`]),
+/// for the bricks whose splats can land on the image: [`detail_at`] the brick's own distance
+/// and sight lines, the rule a volume's level follows at its nearest brick: a level of its
+/// pyramid, or its grid refined where its voxels fall more than [`REFINE_TO`] pixels apart. A
+/// brick the eye is in draws the own grid; a `preview` draws every brick at least a level
+/// coarser. A brick is left out where its box, grown by two of its
+/// splats' voxels each way and by three pixels at its far side (the footprints' reach past
+/// their voxels and the screen's low-pass), lies off the image ([`off_image`]).
+pub(super) fn brick_details(
+    geometry: &VolumeGeometry,
+    view: &ViewSetup,
+    occupied: &Occupied,
+    preview: bool,
+) -> Vec<([u32; 3], Detail)> {
+    let dims = geometry.dims();
+    let m = geometry.index_to_world().matrix3;
+    let abs = glam::DMat3::from_cols(m.x_axis.abs(), m.y_axis.abs(), m.z_axis.abs());
+    let eye = view.camera.eye;
+    occupied
+        .bricks
+        .iter()
+        .zip(occupied.world_boxes(geometry))
+        .filter_map(|(&brick, (centre, half))| {
+            let wanted = apart_in_box(geometry, view, (centre, half))
+                .map(|apart| detail_at(dims, Some(apart)));
+            let (levels, facing) = match wanted {
+                Some(Detail::Level(levels, facing)) => (levels, facing),
+                _ => ([0; 3], [0; 3]),
+            };
+            let levels = if preview {
+                levels.map(|l| l.max(1))
+            } else {
+                levels
+            };
+            let reach = abs * DVec3::from(levels.map(|l| 2.0 * f64::from(1u32 << l)));
+            let pixel = if view.is_orthographic() {
+                1.0 / view.focal
+            } else {
+                ((centre - eye).length() + (half + reach).length()) / view.focal
+            };
+            let grown = half + reach + DVec3::splat(3.0 * pixel);
+            let shown =
+                !(centre.is_finite() && grown.is_finite() && off_image(view, (centre, grown)));
+            let detail = match wanted {
+                Some(Detail::Refined(factors)) if !preview => Detail::Refined(factors),
+                _ => level_facing(levels, facing),
+            };
+            shown.then_some((brick, detail))
+        })
+        .collect()
+}
+
+/// Sorts `bricks` (coordinates in bricks of [`BRICK`] voxels of a grid placed as `geometry`)
+/// into a visibility order for the eye `eye` looking at `target` (world), far to near: the
+/// IP-PBTF order of the grid of bricks (lexicographic by the bricks' distances from the eye in
+/// brick units along the axes of [`ViewCase::permutation`], descending; equal distances, lower
+/// coordinate first).
+///
+/// Any order lexicographic in the axes' distances puts, of two bricks that share a face, the
+/// one on the far side of that face's plane first, and in a grid of boxes those pairs are
+/// what hiding follows: a brick drawn later never lies behind one drawn earlier. It is the
+/// order the voxels' IP-PBTF keeps between voxels of different bricks, given to whole bricks;
+/// within a brick, its level's own order.
+pub(super) fn brick_order(
+    geometry: &VolumeGeometry,
+    eye: DVec3,
+    target: DVec3,
+    bricks: &mut [([u32; 3], Detail)],
+) -> Result<(), crate::order::OrderError> {
+    let dims = geometry.dims().map(|n| n.div_ceil(BRICK));
+    let side = f64::from(BRICK);
+    let to_own = glam::DAffine3::from_scale_rotation_translation(
+        DVec3::splat(side),
+        glam::DQuat::IDENTITY,
+        DVec3::splat(0.5 * (side - 1.0)),
+    );
+    let of_bricks = VolumeGeometry::new(dims, geometry.index_to_world() * to_own)?;
+    let case = ViewCase::new(&of_bricks, eye, target)?;
+    let key = |b: &[u32; 3], a: usize| (f64::from(b[a]) - case.eye[a]).abs();
+    bricks.sort_by(|(x, _), (y, _)| {
+        case.permutation
+            .iter()
+            .map(|&a| key(y, a).total_cmp(&key(x, a)).then(x[a].cmp(&y[a])))
+            .find(|o| o.is_ne())
+            .unwrap_or(std::cmp::Ordering::Equal)
+    });
+    Ok(())
 }

@@ -22,7 +22,7 @@ use crate::scene::{
     NodeId, Scene, SceneCamera, VolumeNode, placed_geometry, placed_grid, volume_placement,
 };
 use crate::splat::reference::Frame;
-use crate::splat::tiled::{SplatTexels, TileStats, TiledCompositor};
+use crate::splat::tiled::{Run, SplatTexels, TileStats, TiledCompositor};
 use crate::volume::CpuVolume;
 
 mod detail;
@@ -113,6 +113,8 @@ pub struct FrameReport {
     /// Whether a volume drawn from its own grid wanted it refined, with refinement off
     /// ([`Renderer::set_refinement`]).
     pub unrefined: bool,
+    /// Volumes drawn brick by brick at more than one level ([`Renderer::set_levels_by_brick`]).
+    pub bricks_by_level: usize,
     /// Volumes classified this frame (0 when nothing changed).
     pub classified: usize,
     /// Levels of detail made this frame from a classification (0 when every level drawn was
@@ -285,6 +287,124 @@ fn make_level(
     Ok(Some(state))
 }
 
+/// A volume drawn brick by brick at the levels its bricks want
+/// ([`Renderer::set_levels_by_brick`]).
+#[derive(Debug, Default)]
+struct Mix {
+    /// The occupied bricks of [`BRICK`]^3 own voxels on the image, in draw order (far to near
+    /// once ordered), each with the level it is drawn from.
+    bricks: Vec<([u32; 3], Detail)>,
+    /// Their splats: brick after brick, each brick's in its level's draw order.
+    ids: Vec<u32>,
+    /// Stretches of `ids` drawn from one level, far to near.
+    runs: Vec<(Detail, std::ops::Range<usize>)>,
+}
+
+/// Orders volume `id`'s splats drawn brick by brick as `mix` says, its node placed by
+/// `world`, for the eye and target `view`: each level the bricks use ordered whole by
+/// `ordering`, the bricks put far to near ([`brick_order`]), then each brick's splats taken
+/// from its level's order in that order (a counting sort by brick, which keeps the level's
+/// order within each brick) into `mix.ids`, cut into runs of one level.
+fn order_mix(
+    volumes: &mut HashMap<(NodeId, Detail), VolumeState>,
+    id: NodeId,
+    world: DMat4,
+    (eye, target): (DVec3, DVec3),
+    (ordering, options): (Ordering, &OrderOptions),
+    mix: &mut Mix,
+) -> Result<(), String> {
+    let own = volumes
+        .get(&(id, Detail::default()))
+        .ok_or("the volume's own grid is not classified")?;
+    let own_geometry = own.geometry(world).map_err(|e| e.to_string())?;
+    brick_order(&own_geometry, eye, target, &mut mix.bricks).map_err(|e| e.to_string())?;
+    let [bx, by, bz] = own_geometry.dims().map(|n| n.div_ceil(BRICK) as usize);
+    // Each brick's place in the draw order, by its index in the grid of bricks.
+    let mut slot = vec![u32::MAX; bx * by * bz];
+    for (i, (b, _)) in mix.bricks.iter().enumerate() {
+        slot[b[0] as usize + bx * (b[1] as usize + by * b[2] as usize)] = i as u32;
+    }
+    let mut details: Vec<Detail> = Vec::new();
+    for (_, d) in &mix.bricks {
+        if !details.contains(d) {
+            details.push(*d);
+        }
+    }
+    for &detail in &details {
+        let state = volumes
+            .get_mut(&(id, detail))
+            .ok_or("a level of detail a brick is drawn at is not made")?;
+        let geometry = state.geometry(world).map_err(|e| e.to_string())?;
+        let case = ViewCase::new(&geometry, eye, target).map_err(|e| e.to_string())?;
+        state
+            .orderer
+            .order(
+                &state.classified.grid,
+                &case,
+                ordering,
+                options,
+                &mut state.ids,
+            )
+            .map_err(|e| e.to_string())?;
+    }
+    // The brick of each splat of a level's order that the level draws (`None` for the
+    // others): its voxel's first own voxel, over the brick's side.
+    let brick_of = |state: &VolumeState, detail: Detail| {
+        let [nx, ny, _] = state.classified.grid.dims();
+        // A voxel's first own voxel: `k 2^l` on a level, `k / f` on a refinement.
+        let (halvings, factors) = match detail {
+            Detail::Level(l, _) => (l.map(u32::from), [1; 3]),
+            Detail::Refined(f) => ([0; 3], f.map(|f| f.max(1))),
+        };
+        let slot = &slot;
+        let bricks = &mix.bricks;
+        move |id: u32| {
+            let k = [id % nx, id / nx % ny, id / nx / ny];
+            let b: [usize; 3] =
+                std::array::from_fn(|a| ((k[a] << halvings[a]) / factors[a] / BRICK) as usize);
+            let s = *slot.get(b[0] + bx * (b[1] + by * b[2]))?;
+            (bricks.get(s as usize)?.1 == detail).then_some(s as usize)
+        }
+    };
+    let mut starts = vec![0usize; mix.bricks.len() + 1];
+    for &detail in &details {
+        if let Some(state) = volumes.get(&(id, detail)) {
+            let brick = brick_of(state, detail);
+            for &i in &state.ids {
+                if let Some(s) = brick(i) {
+                    starts[s + 1] += 1;
+                }
+            }
+        }
+    }
+    for s in 0..mix.bricks.len() {
+        starts[s + 1] += starts[s];
+    }
+    mix.ids.clear();
+    mix.ids.resize(starts[mix.bricks.len()], 0);
+    let mut next = starts.clone();
+    for &detail in &details {
+        if let Some(state) = volumes.get(&(id, detail)) {
+            let brick = brick_of(state, detail);
+            for &i in &state.ids {
+                if let Some(s) = brick(i) {
+                    mix.ids[next[s]] = i;
+                    next[s] += 1;
+                }
+            }
+        }
+    }
+    mix.runs.clear();
+    for (s, (_, detail)) in mix.bricks.iter().enumerate() {
+        let range = starts[s]..starts[s + 1];
+        match mix.runs.last_mut() {
+            Some((d, run)) if *d == *detail => run.end = range.end,
+            _ => mix.runs.push((*detail, range)),
+        }
+    }
+    Ok(())
+}
+
 /// The most levels of detail a volume keeps that are halved along some axes more than others
 /// (a camera orbiting a volume wants one for each axis its view runs along).
 const KEPT_UNEVEN_LEVELS: usize = 2;
@@ -334,6 +454,11 @@ pub struct Renderer {
     volumes: HashMap<(NodeId, Detail), VolumeState>,
     /// The detail each volume is drawn at in the current frame.
     levels: HashMap<NodeId, Detail>,
+    /// The volumes drawn brick by brick at more than one level in the current frame.
+    mixes: HashMap<NodeId, Mix>,
+    /// Every volume's bricks drawn at the volume's one level
+    /// ([`Renderer::set_levels_by_brick`]).
+    one_level: bool,
     /// Every volume drawn from its own grid (`--lod off`).
     full_grid: bool,
     /// No volume drawn refined ([`Renderer::set_refinement`]).
@@ -392,6 +517,18 @@ impl Renderer {
         self.full_grid = !on;
     }
 
+    /// Whether the CPU tile compositor draws each 16^3-voxel brick of a volume at the level its
+    /// own distance and sight lines call for (on by default, with the level of detail), rather
+    /// than the whole volume at the level its nearest brick on the image does. Bricks go far
+    /// to near in the IP-PBTF order of the grid of bricks and each brick's splats in its
+    /// level's draw order, so the order keeps every brick behind the bricks that can hide it;
+    /// bricks whose splats cannot land on the image are left out before their splats are
+    /// walked. A view whose bricks all want one level draws it as one grid, as before. The GPU
+    /// passes draw one level a volume.
+    pub fn set_levels_by_brick(&mut self, on: bool) {
+        self.one_level = !on;
+    }
+
     /// Whether volumes whose voxels are more than [`REFINE_TO`] pixels apart may be drawn
     /// from their grid refined ([`Detail::Refined`]; on by default, with the level of detail).
     /// Its classification takes time the first time a view wants it (0.35-0.86 s for the
@@ -443,7 +580,7 @@ impl Renderer {
         let mut report = FrameReport::default();
         self.sync_meshes(ctx, scene);
         let started = Instant::now();
-        report.classified = self.sync_volumes(scene, view, options.preview, &mut report)?;
+        report.classified = self.sync_volumes(scene, view, options.preview, false, &mut report)?;
         report.timings.classify = started.elapsed().saturating_sub(report.timings.levels);
         let ordered = self.order_volumes(scene, view, options, &mut report)?;
         let started = Instant::now();
@@ -539,7 +676,9 @@ impl Renderer {
         let view = ViewSetup::new(camera, size, scene.bounds())?;
         let mut report = FrameReport::default();
         let started = Instant::now();
-        report.classified = self.sync_volumes(scene, &view, options.preview, &mut report)?;
+        let by_brick = !self.one_level;
+        report.classified =
+            self.sync_volumes(scene, &view, options.preview, by_brick, &mut report)?;
         report.timings.classify = started.elapsed().saturating_sub(report.timings.levels);
         let ordered = self.order_volumes(scene, &view, options, &mut report)?;
         // What lies under the splats: the meshes on the GPU, or the background alone.
@@ -656,39 +795,82 @@ impl Renderer {
         let Self {
             volumes,
             levels,
+            mixes,
             tiles,
             ..
         } = self;
-        let level = |id: &NodeId| levels.get(id).copied().unwrap_or_default();
+        // The grids each volume draws: the levels of its bricks, or its one level.
+        let drawn = |id: &NodeId| -> Vec<Detail> {
+            match mixes.get(id) {
+                Some(mix) => {
+                    let mut details: Vec<Detail> = Vec::new();
+                    for (d, _) in &mix.runs {
+                        if !details.contains(d) {
+                            details.push(*d);
+                        }
+                    }
+                    details
+                }
+                None => vec![levels.get(id).copied().unwrap_or_default()],
+            }
+        };
         let mut texels = Duration::ZERO;
         for (id, _) in ordered {
-            if let Some(state) = volumes.get_mut(&(*id, level(id)))
-                && state.texels.is_none()
-            {
-                let started = Instant::now();
-                state.texels = Some(SplatTexels::new(
-                    &state.classified,
-                    &state.volume,
-                    state.factors,
-                ));
-                texels += started.elapsed();
+            for detail in drawn(id) {
+                if let Some(state) = volumes.get_mut(&(*id, detail))
+                    && state.texels.is_none()
+                {
+                    let started = Instant::now();
+                    state.texels = Some(SplatTexels::new(
+                        &state.classified,
+                        &state.volume,
+                        state.factors,
+                    ));
+                    texels += started.elapsed();
+                }
             }
         }
-        let mut inputs = Vec::with_capacity(ordered.len());
-        for (id, geometry) in ordered {
-            let (Some(state), Some((_, node, _))) = (
-                volumes.get(&(*id, level(id))),
-                scene.volumes().find(|(v, _, _)| v == id),
-            ) else {
+        // Sources (a grid's projection and texels) and runs of splats, far to near.
+        let mut sources = Vec::new();
+        let mut runs = Vec::new();
+        for (id, _) in ordered {
+            let Some((_, node, world)) = scene.volumes().find(|(v, _, _)| v == id) else {
                 continue;
             };
-            let Some(texels) = &state.texels else {
-                continue;
-            };
-            let projection = projection(geometry, view, &node.splats, &scene.clipping);
-            inputs.push((projection, texels, state.ids.as_slice()));
+            let first = sources.len();
+            let details = drawn(id);
+            for &detail in &details {
+                let Some(state) = volumes.get(&(*id, detail)) else {
+                    continue;
+                };
+                let (Some(texels), Ok(geometry)) = (&state.texels, state.geometry(world)) else {
+                    continue;
+                };
+                let projection = projection(&geometry, view, &node.splats, &scene.clipping);
+                sources.push((detail, projection, texels, state.ids.as_slice()));
+            }
+            let source = |d: &Detail| (first..sources.len()).find(|&s| sources[s].0 == *d);
+            match mixes.get(id) {
+                Some(mix) => {
+                    for (d, range) in &mix.runs {
+                        if let Some(source) = source(d) {
+                            runs.push((source, &mix.ids[range.clone()]));
+                        }
+                    }
+                }
+                None => {
+                    if let Some(source) = source(&details[0]) {
+                        runs.push((source, sources[source].3));
+                    }
+                }
+            }
         }
-        let stats = tiles.composite(view.size, &inputs, depth, &mut frame.pixels);
+        let projections: Vec<_> = sources.iter().map(|(_, p, t, _)| (p, *t)).collect();
+        let runs: Vec<_> = runs
+            .into_iter()
+            .map(|(source, ids)| Run { source, ids })
+            .collect();
+        let stats = tiles.composite_runs(view.size, &projections, &runs, depth, &mut frame.pixels);
         (stats, texels)
     }
 
@@ -777,20 +959,86 @@ impl Renderer {
         self.volumes.get_mut(&(id, level))
     }
 
+    /// Makes the levels of volume `id`'s pyramid up to `wanted` halvings along each axis (facing
+    /// the eye as `facing` says) that are missing, each from the one below by halving every
+    /// axis still below its level (the levels even across axes first, shared by other views;
+    /// then the axes along the view, their voxels weighted as the rays composite them), and
+    /// marks them used in the current frame. A level that would have no splat, or whose axes
+    /// cannot be halved further, is not made: returns the level reached. `spacing` is the own
+    /// grid's voxel size in the world (the opacities' step).
+    fn make_levels(
+        &mut self,
+        id: NodeId,
+        spacing: [f64; 3],
+        wanted: [u8; 3],
+        facing: [i8; 3],
+        report: &mut FrameReport,
+    ) -> Result<Detail, crate::grid::GridError> {
+        let frame = self.frame;
+        let mut level = [0u8; 3];
+        let mut key = Detail::default();
+        while let Some(state) = self.volumes.get_mut(&(id, key)) {
+            state.used = frame;
+            let dims = state.classified.grid.dims();
+            let axes: [bool; 3] = std::array::from_fn(|a| level[a] < wanted[a] && dims[a] > 1);
+            if axes == [false; 3] {
+                break;
+            }
+            let next: [u8; 3] = std::array::from_fn(|a| level[a] + u8::from(axes[a]));
+            let above = level_facing(next, facing);
+            if !self.volumes.contains_key(&(id, above)) {
+                // The one axis halved along the view, where this step halves it alone.
+                let Detail::Level(_, along) = above else {
+                    break;
+                };
+                let mut halved = (0..3).filter(|&a| axes[a]);
+                let front = match (halved.next(), halved.next()) {
+                    (Some(a), None) if along[a] != 0 => Some(Front {
+                        axis: a,
+                        larger_nearer: along[a] > 0,
+                        step_mm: (spacing[a] * f64::from(1u32 << level[a])) as f32,
+                    }),
+                    _ => None,
+                };
+                let Some(state) = self.volumes.get_mut(&(id, key)) else {
+                    break;
+                };
+                let started = Instant::now();
+                let made_level = make_level(state, axes, front, next)?;
+                report.timings.levels += started.elapsed();
+                let Some(made_level) = made_level else {
+                    break;
+                };
+                report.levels_made += 1;
+                self.volumes.insert((id, above), made_level);
+            }
+            level = next;
+            key = above;
+        }
+        if let Some(state) = self.volumes.get_mut(&(id, key)) {
+            state.used = frame;
+        }
+        Ok(key)
+    }
+
     /// Classifies volumes whose data, transfer function or threshold changed, chooses the
     /// level of detail each is drawn at in `view` (at least 1 for a preview frame) and makes
     /// the levels up to it that are missing (counted in `report.levels_made`); returns how
-    /// many classifications were made.
+    /// many classifications were made. With `by_brick`, a volume drawn at a level has its
+    /// bricks on the image drawn each at its own ([`Renderer::set_levels_by_brick`]) where
+    /// they want more than one.
     fn sync_volumes(
         &mut self,
         scene: &Scene,
         view: &ViewSetup,
         preview: bool,
+        by_brick: bool,
         report: &mut FrameReport,
     ) -> Result<usize, RenderError> {
         let mut live = Vec::new();
         let mut made = 0;
         self.levels.clear();
+        self.mixes.clear();
         for (id, node, world) in scene.volumes() {
             live.push(id);
             let key = class_key(node);
@@ -841,6 +1089,15 @@ impl Renderer {
             let Some(full) = self.volumes.get(&own) else {
                 continue;
             };
+            // What each brick on the image wants, where they may differ.
+            let brick_wants = match (&full.occupied, by_brick && !self.full_grid) {
+                (Some(occupied), true) => {
+                    let geometry =
+                        placed_geometry(&full.volume, world).map_err(|e| fail(e.to_string()))?;
+                    Some(brick_details(&geometry, view, occupied, preview))
+                }
+                _ => None,
+            };
             let wanted = if self.full_grid {
                 Detail::default()
             } else {
@@ -880,81 +1137,16 @@ impl Renderer {
                 }
                 wanted => wanted,
             };
+            // The own grid's voxel size in the world (the opacities' step).
+            let spacing = placed_geometry(&node.volume, world)
+                .map_err(|e| fail(e.to_string()))?
+                .spacing();
+            self.frame += 1;
+            let frame = self.frame;
             let drawn = match wanted {
-                Detail::Level(wanted, facing) => {
-                    // Make the levels up to the one wanted, each from the one below by halving
-                    // every axis still below its level (the levels even across axes first,
-                    // shared by other views; then the axes along the view, their voxels
-                    // weighted as the rays composite them); a level that would have no
-                    // splat, or whose axes cannot be halved further, is not made.
-                    // The own grid's voxel size in the world (the opacities' step).
-                    let spacing = placed_geometry(&node.volume, world)
-                        .map_err(|e| fail(e.to_string()))?
-                        .spacing();
-                    let mut level = [0u8; 3];
-                    self.frame += 1;
-                    let frame = self.frame;
-                    let mut key = Detail::default();
-                    while let Some(state) = self.volumes.get_mut(&(id, key)) {
-                        state.used = frame;
-                        let dims = state.classified.grid.dims();
-                        let axes: [bool; 3] =
-                            std::array::from_fn(|a| level[a] < wanted[a] && dims[a] > 1);
-                        if axes == [false; 3] {
-                            break;
-                        }
-                        let next: [u8; 3] = std::array::from_fn(|a| level[a] + u8::from(axes[a]));
-                        let above = level_facing(next, facing);
-                        if !self.volumes.contains_key(&(id, above)) {
-                            // The one axis halved along the view, where this step halves it
-                            // alone.
-                            let Detail::Level(_, along) = above else {
-                                break;
-                            };
-                            let mut halved = (0..3).filter(|&a| axes[a]);
-                            let front = match (halved.next(), halved.next()) {
-                                (Some(a), None) if along[a] != 0 => Some(Front {
-                                    axis: a,
-                                    larger_nearer: along[a] > 0,
-                                    step_mm: (spacing[a] * f64::from(1u32 << level[a])) as f32,
-                                }),
-                                _ => None,
-                            };
-                            let Some(state) = self.volumes.get_mut(&(id, key)) else {
-                                break;
-                            };
-                            let started = Instant::now();
-                            let made_level = make_level(state, axes, front, next)
-                                .map_err(|e| fail(e.to_string()))?;
-                            report.timings.levels += started.elapsed();
-                            let Some(made_level) = made_level else {
-                                break;
-                            };
-                            report.levels_made += 1;
-                            self.volumes.insert((id, above), made_level);
-                        }
-                        level = next;
-                        key = above;
-                    }
-                    // Uneven levels past the few kept go, least recently used first.
-                    let mut uneven: Vec<(Detail, u64)> = self
-                        .volumes
-                        .iter()
-                        .filter_map(|((v, d), state)| match d {
-                            Detail::Level(l, _) if *v == id && (l[0] != l[1] || l[1] != l[2]) => {
-                                Some((*d, state.used))
-                            }
-                            _ => None,
-                        })
-                        .collect();
-                    uneven.sort_by_key(|(_, used)| std::cmp::Reverse(*used));
-                    for (d, used) in uneven.into_iter().skip(KEPT_UNEVEN_LEVELS) {
-                        if used != frame {
-                            self.volumes.remove(&(id, d));
-                        }
-                    }
-                    key
-                }
+                Detail::Level(wanted, facing) => self
+                    .make_levels(id, spacing, wanted, facing, report)
+                    .map_err(|e| fail(e.to_string()))?,
                 Detail::Refined(factors) => {
                     let refined = (id, wanted);
                     let region = if self.refine_whole {
@@ -962,7 +1154,23 @@ impl Renderer {
                     } else {
                         let geometry = placed_geometry(&node.volume, world)
                             .map_err(|e| fail(e.to_string()))?;
-                        on_image(&geometry, view)
+                        let shown = on_image(&geometry, view);
+                        match &brick_wants {
+                            // Drawn brick by brick: only the bricks that want refining.
+                            Some(wants) => {
+                                let refined: std::collections::HashSet<[u32; 3]> = wants
+                                    .iter()
+                                    .filter(|(_, d)| matches!(d, Detail::Refined(_)))
+                                    .map(|(b, _)| *b)
+                                    .collect();
+                                Region::new(geometry.dims(), REGION_BRICK, |b| {
+                                    shown.as_ref().is_none_or(|r| r.covers_brick(b))
+                                        && refined.contains(&b.map(|c| c * REGION_BRICK / BRICK))
+                                })
+                                .filter(|r| !r.is_whole())
+                            }
+                            None => shown,
+                        }
                     };
                     // A refinement made within fewer bricks than this view shows is made anew.
                     let covered = |made: &VolumeState| match (&made.region, &region) {
@@ -1010,6 +1218,56 @@ impl Renderer {
                     wanted
                 }
             };
+            if let Some(wants) = brick_wants {
+                // Each level the bricks want, made once (a level that could not be made as
+                // wanted stands for the one reached on its way); the bricks that want refining
+                // take the refinement drawn, or the own grid without one.
+                let mut reached: HashMap<Detail, Detail> = HashMap::new();
+                let mut bricks = Vec::with_capacity(wants.len());
+                for (brick, want) in wants {
+                    let got = match (reached.get(&want), want) {
+                        (Some(got), _) => *got,
+                        (None, Detail::Level(levels, facing)) => {
+                            let got = self
+                                .make_levels(id, spacing, levels, facing, report)
+                                .map_err(|e| fail(e.to_string()))?;
+                            reached.insert(want, got);
+                            got
+                        }
+                        (None, Detail::Refined(_)) => match drawn {
+                            Detail::Refined(_) => drawn,
+                            Detail::Level(..) => Detail::default(),
+                        },
+                    };
+                    bricks.push((brick, got));
+                }
+                if bricks.iter().any(|(_, d)| *d != drawn) {
+                    self.mixes.insert(
+                        id,
+                        Mix {
+                            bricks,
+                            ..Mix::default()
+                        },
+                    );
+                }
+            }
+            // Uneven levels past the few kept go, least recently used first.
+            let mut uneven: Vec<(Detail, u64)> = self
+                .volumes
+                .iter()
+                .filter_map(|((v, d), state)| match d {
+                    Detail::Level(l, _) if *v == id && (l[0] != l[1] || l[1] != l[2]) => {
+                        Some((*d, state.used))
+                    }
+                    _ => None,
+                })
+                .collect();
+            uneven.sort_by_key(|(_, used)| std::cmp::Reverse(*used));
+            for (d, used) in uneven.into_iter().skip(KEPT_UNEVEN_LEVELS) {
+                if used != frame {
+                    self.volumes.remove(&(id, d));
+                }
+            }
             self.levels.insert(id, drawn);
         }
         self.volumes.retain(|(id, _), _| live.contains(id));
@@ -1028,34 +1286,60 @@ impl Renderer {
         let pinhole = view.pinhole()?;
         let mut ordered = Vec::new();
         for (id, node, world) in scene.volumes() {
-            let Some(state) = self.drawn_mut(id) else {
-                continue;
-            };
             let name = &scene.nodes()[id.0].name;
             let fail = |message: String| RenderError::Volume {
                 node: name.clone(),
                 message,
             };
-            let geometry = state.geometry(world).map_err(|e| fail(e.to_string()))?;
-            let case = ViewCase::new(&geometry, pinhole.eye, pinhole.target)
-                .map_err(|e| fail(e.to_string()))?;
             let ordering = options.ordering.unwrap_or(node.splats.ordering);
             let order_options = OrderOptions {
                 cull_behind_eye: true,
                 ..Default::default()
             };
-            state
-                .orderer
-                .order(
-                    &state.classified.grid,
-                    &case,
-                    ordering,
-                    &order_options,
-                    &mut state.ids,
+            if let Some(mix) = self.mixes.get_mut(&id) {
+                order_mix(
+                    &mut self.volumes,
+                    id,
+                    world,
+                    (pinhole.eye, pinhole.target),
+                    (ordering, &order_options),
+                    mix,
                 )
-                .map_err(|e| fail(e.to_string()))?;
-            report.splats += state.ids.len();
+                .map_err(fail)?;
+                report.splats += mix.ids.len();
+                report.bricks_by_level += 1;
+                for (d, _) in &mix.runs {
+                    if let Detail::Level(level, _) = d {
+                        for (most, l) in report.levels.iter_mut().zip(level) {
+                            *most = (*most).max(*l);
+                        }
+                    }
+                }
+            }
+            let mixed = self.mixes.contains_key(&id);
+            let Some(state) = self.drawn_mut(id) else {
+                continue;
+            };
+            let geometry = state.geometry(world).map_err(|e| fail(e.to_string()))?;
+            if !mixed {
+                let case = ViewCase::new(&geometry, pinhole.eye, pinhole.target)
+                    .map_err(|e| fail(e.to_string()))?;
+                state
+                    .orderer
+                    .order(
+                        &state.classified.grid,
+                        &case,
+                        ordering,
+                        &order_options,
+                        &mut state.ids,
+                    )
+                    .map_err(|e| fail(e.to_string()))?;
+                report.splats += state.ids.len();
+            }
             match self.levels.get(&id).copied().unwrap_or_default() {
+                Detail::Level(_, _) if mixed => {
+                    report.level = report.levels.into_iter().max().unwrap_or(0);
+                }
                 Detail::Level(level, _) => {
                     for (most, l) in report.levels.iter_mut().zip(level) {
                         *most = (*most).max(l);

@@ -243,3 +243,160 @@ fn content_off_the_image_does_not_set_the_detail() {
         1.0 / pixel
     );
 }
+
+#[test]
+fn bricks_are_ordered_so_that_none_lies_behind_a_later_one() {
+    // A 70 x 50 x 40 grid (bricks of 16: 5 x 4 x 3, partly filled at the far ends), sheared,
+    // turned and anisotropic, seen from outside along every octant, from inside and from
+    // planes between bricks.
+    let dims = [70u32, 50, 40];
+    let turn = glam::DMat3::from_euler(glam::EulerRot::XYZ, 0.3, -0.5, 0.8);
+    let linear = turn
+        * glam::DMat3::from_cols(
+            DVec3::new(0.7, 0.0, 0.0),
+            DVec3::new(0.1, 0.7, 0.0),
+            DVec3::new(0.0, 0.0, 1.3),
+        );
+    let geometry = VolumeGeometry::new(
+        dims,
+        glam::DAffine3::from_mat3_translation(linear, DVec3::new(5.0, -3.0, 2.0)),
+    )
+    .unwrap();
+    let counts = dims.map(|n| n.div_ceil(BRICK));
+    let all: Vec<([u32; 3], Detail)> = (0..counts[0] * counts[1] * counts[2])
+        .map(|i| {
+            (
+                [
+                    i % counts[0],
+                    i / counts[0] % counts[1],
+                    i / counts[0] / counts[1],
+                ],
+                Detail::default(),
+            )
+        })
+        .collect();
+    let mut eyes: Vec<DVec3> = Vec::new();
+    for corner in 0..27u32 {
+        // Each axis below, within and beyond the grid (in index coordinates).
+        let at = |a: u32, n: u32| match corner / 3u32.pow(a) % 3 {
+            0 => -60.0,
+            1 => 0.37 * f64::from(n),
+            _ => f64::from(n) + 45.0,
+        };
+        eyes.push(DVec3::new(at(0, dims[0]), at(1, dims[1]), at(2, dims[2])));
+    }
+    // On the plane between two bricks along x, and on a brick's centre plane.
+    eyes.push(DVec3::new(15.5, -30.0, 20.0));
+    eyes.push(DVec3::new(23.5, 80.0, 7.5));
+    for eye_index in eyes {
+        let eye = geometry.index_to_world_point(eye_index);
+        let target = geometry.index_to_world_point(DVec3::new(35.0, 25.0, 20.0));
+        let target = if (target - eye).length() < 1.0 {
+            target + DVec3::X * 10.0
+        } else {
+            target
+        };
+        let mut bricks = all.clone();
+        brick_order(&geometry, eye, target, &mut bricks).unwrap();
+        let place: HashMap<[u32; 3], usize> = bricks
+            .iter()
+            .enumerate()
+            .map(|(i, (b, _))| (*b, i))
+            .collect();
+        assert_eq!(place.len(), all.len());
+        // Of two bricks that share a face, the one on the eye's side of the face's plane (in
+        // the grid's own index coordinates: between voxels 16 b - 1 and 16 b) comes later.
+        for (b, _) in &all {
+            for a in 0..3 {
+                let mut next = *b;
+                next[a] += 1;
+                let Some(&later_if_near) = place.get(&next) else {
+                    continue;
+                };
+                let plane = f64::from(next[a] * BRICK) - 0.5;
+                let e = eye_index[a];
+                if e > plane {
+                    assert!(later_if_near > place[b], "{b:?} {next:?} eye {eye_index:?}");
+                } else if e < plane {
+                    assert!(later_if_near < place[b], "{b:?} {next:?} eye {eye_index:?}");
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn bricks_far_from_the_eye_draw_coarser_levels_and_those_off_the_image_none() {
+    // A 128^3 grid of 1 mm voxels filled but for a margin, seen from 30 mm before its face
+    // along z at 40 degrees, 96 x 96 pixels: the near face's voxels fall about 2.4 pixels apart
+    // (the own grid there), the far face's, 158 mm away, under half a pixel.
+    let n = 128u32;
+    let (_, occupied, geometry) = content_grid(n, |k| k.iter().all(|&c| (2..126).contains(&c)));
+    let camera = SceneCamera {
+        projection: crate::scene::Projection::Perspective {
+            fov_y_degrees: 40.0,
+        },
+        ..SceneCamera::look_at(DVec3::new(64.0, 64.0, -30.0), DVec3::new(64.0, 64.0, 64.0))
+    };
+    let view = ViewSetup::new(&camera, (96, 96), None).unwrap();
+    let bricks = brick_details(&geometry, &view, &occupied, false);
+    let level = |d: &Detail| match d {
+        Detail::Level(l, _) => l.iter().copied().max().unwrap_or(0),
+        Detail::Refined(_) => 0,
+    };
+    let at_z = |z: u32| {
+        bricks
+            .iter()
+            .filter(|(b, _)| b[2] == z)
+            .map(|(_, d)| level(d))
+            .collect::<Vec<_>>()
+    };
+    let (near, far) = (at_z(0), at_z(n / BRICK - 1));
+    assert!(near.iter().all(|&l| l == 0), "{near:?}");
+    assert!(!far.is_empty() && far.iter().all(|&l| l >= 1), "{far:?}");
+    // The near slab's bricks that lie off the image (its corners, outside the 40 degree cone
+    // 30 mm ahead) are left out; every brick of the far slab is on it.
+    assert!(
+        near.len() < (n / BRICK * n / BRICK) as usize,
+        "{}",
+        near.len()
+    );
+    assert_eq!(far.len(), (n / BRICK * n / BRICK) as usize);
+    // Each brick left out lies off the image, as a plain test of its voxel centres says: no
+    // centre of it projects within the image.
+    let kept: std::collections::HashSet<[u32; 3]> = bricks.iter().map(|(b, _)| *b).collect();
+    let [right, up, forward] = [view.axes.x_axis, view.axes.y_axis, view.axes.z_axis];
+    let project = |p: DVec3| {
+        let d = p - view.camera.eye;
+        let z = d.dot(forward);
+        (z > 0.0).then(|| {
+            glam::DVec2::new(
+                48.0 + view.focal * d.dot(right) / z,
+                48.0 - view.focal * d.dot(up) / z,
+            )
+        })
+    };
+    for z in 0..2 {
+        for y in 0..n / BRICK {
+            for x in 0..n / BRICK {
+                let b = [x, y, z];
+                if kept.contains(&b) {
+                    continue;
+                }
+                for k in 0..BRICK * BRICK * BRICK {
+                    let v = [k % BRICK, k / BRICK % BRICK, k / BRICK / BRICK];
+                    let p = DVec3::from(std::array::from_fn::<f64, 3, _>(|a| {
+                        f64::from(b[a] * BRICK + v[a])
+                    }));
+                    let Some(s) = project(p) else {
+                        continue;
+                    };
+                    assert!(
+                        !(-2.0..98.0).contains(&s.x) || !(-2.0..98.0).contains(&s.y),
+                        "brick {b:?} left out, voxel {v:?} at {s:?}"
+                    );
+                }
+            }
+        }
+    }
+}

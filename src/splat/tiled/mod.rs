@@ -158,10 +158,32 @@ impl TiledCompositor {
         depth: &[f32],
         under: &mut [[f32; 4]],
     ) -> TileStats {
+        let sources: Vec<_> = volumes.iter().map(|(p, t, _)| (p, *t)).collect();
+        let runs: Vec<_> = volumes
+            .iter()
+            .enumerate()
+            .map(|(source, (_, _, ids))| Run { source, ids })
+            .collect();
+        self.composite_runs(size, &sources, &runs, depth, under)
+    }
+
+    /// [`TiledCompositor::composite`] for a draw order made of `runs`, far to near, each a
+    /// stretch of the splats of one of `sources` (a grid's projection and texels): the bricks
+    /// of a volume drawn at several levels of detail, each level a source. Batches take
+    /// splats across runs as they take them within one, so the image is the one the runs'
+    /// splats give as one order, however it is cut into runs.
+    pub fn composite_runs(
+        &mut self,
+        size: (u32, u32),
+        sources: &[(&SplatProjection, &SplatTexels)],
+        runs: &[Run<'_>],
+        depth: &[f32],
+        under: &mut [[f32; 4]],
+    ) -> TileStats {
         let (w, h) = (size.0 as usize, size.1 as usize);
         let (tx, ty) = (w.div_ceil(TILE), h.div_ceil(TILE));
         let mut stats = TileStats {
-            splats: volumes.iter().map(|(_, _, ids)| ids.len()).sum(),
+            splats: runs.iter().map(|r| r.ids.len()).sum(),
             ..TileStats::default()
         };
         let started = std::time::Instant::now();
@@ -174,140 +196,176 @@ impl TiledCompositor {
         let mut open_pixels = w * h;
         stats.tiles += started.elapsed();
         let screen = Screen { w, h };
-        // Nearest first: the volumes near to far, each one's order from its end.
+        // Nearest first: the runs near to far, each one's splats from its end. `run` runs are
+        // left, the last of them up to `end`.
         let mut batch = FIRST_BATCH;
-        'volumes: for (v, (projection, texels, ids)) in volumes.iter().enumerate().rev() {
-            let mut end = ids.len();
-            while end > 0 {
-                let begin = end.saturating_sub(batch);
-                let ids = &ids[begin..end];
+        let mut run = runs.len();
+        let mut end = runs.last().map_or(0, |r| r.ids.len());
+        // A batch's stretches of runs in draw order (source, splats), and its chunks (source,
+        // splats, index of the first in the batch).
+        let mut pieces: Vec<(usize, &[u32])> = Vec::new();
+        let mut work: Vec<(usize, &[u32], usize)> = Vec::new();
+        loop {
+            pieces.clear();
+            let mut wanted = batch;
+            while wanted > 0 && run > 0 {
+                let begin = end.saturating_sub(wanted);
+                if begin < end {
+                    let r = &runs[run - 1];
+                    pieces.push((r.source, &r.ids[begin..end]));
+                    wanted -= end - begin;
+                }
                 end = begin;
-                batch = (batch * 2).min(MAX_BATCH);
-                if open_pixels == 0 && self.cull_hidden {
-                    // Every tile is opaque: nothing further can show.
-                    let farther: usize = volumes[..v].iter().map(|(_, _, ids)| ids.len()).sum();
-                    stats.culled += ids.len() + end + farther;
-                    break 'volumes;
+                if end == 0 {
+                    run -= 1;
+                    end = run.checked_sub(1).map_or(0, |r| runs[r].ids.len());
                 }
-                let chunk = (ids.len() / 4).clamp(2048, 1 << 15);
-                let chunks = ids.len().div_ceil(chunk);
-                // Project and bin each chunk (one task: no wait in between), keeping the order
-                // within each tile.
-                let started = std::time::Instant::now();
-                if self.projected.len() < ids.len() {
-                    self.projected.resize(ids.len(), Projected::default());
+            }
+            if pieces.is_empty() {
+                break;
+            }
+            pieces.reverse();
+            let count: usize = pieces.iter().map(|(_, ids)| ids.len()).sum();
+            batch = (batch * 2).min(MAX_BATCH);
+            if open_pixels == 0 && self.cull_hidden {
+                // Every tile is opaque: nothing further can show.
+                let farther: usize = runs[..run.saturating_sub(1)]
+                    .iter()
+                    .map(|r| r.ids.len())
+                    .sum();
+                stats.culled += count + end + farther;
+                break;
+            }
+            let chunk = (count / 4).clamp(2048, 1 << 15);
+            work.clear();
+            let mut first = 0;
+            for &(source, ids) in &pieces {
+                for ids in ids.chunks(chunk) {
+                    work.push((source, ids, first));
+                    first += ids.len();
                 }
-                if self.bins.len() < chunks {
-                    self.bins.resize_with(chunks, ChunkBins::default);
-                }
-                if self.drew.len() < ids.len() {
-                    self.drew.resize_with(ids.len(), AtomicBool::default);
-                }
-                // No test while no pixel is opaque.
-                let mask = (self.cull_hidden && open_pixels < w * h).then_some(&self.mask);
-                let cull = self.cull_hidden;
-                let (culled, off_image, project_time, bin_time) = self.projected[..ids.len()]
-                    .par_chunks_mut(chunk)
-                    .zip(ids.par_chunks(chunk))
-                    .zip(self.bins[..chunks].par_iter_mut())
-                    .enumerate()
-                    .map(|(c, ((out, ids), bins))| {
-                        let started = std::time::Instant::now();
-                        let (mut culled, mut off_image) = (0, 0);
-                        let group = Group {
-                            u: projection,
-                            texels,
-                            screen: &screen,
-                            mask,
-                        };
-                        // The chunk's splats on the image, in order, packed at the front of
-                        // its share of the buffer.
-                        let mut kept = 0;
-                        // Each group is decoded and its fate settled one group ahead, so that
-                        // the texels of the next group to be projected are asked for while
-                        // this one is. (The opaque pixels do not change within a batch's
-                        // projection.)
-                        let mut groups = ids
-                            .chunks(GROUP)
-                            .map(|ids| Decoded::new(projection, ids, cull, &screen, mask));
-                        let mut next = groups.next();
-                        while let Some(this) = next {
-                            next = groups.next();
-                            if let Some(ahead) = &next
-                                && ahead.fate == Fate::Project
-                            {
-                                for &[x, y, z] in ahead.voxels() {
-                                    texels.prefetch(x, y, z);
-                                }
-                            }
-                            let n = this.voxels().len();
-                            match this.fate {
-                                Fate::OffImage => off_image += n,
-                                Fate::Hidden => culled += n,
-                                Fate::Project => {
-                                    let (hidden, placed) = simd::project_group(
-                                        &group,
-                                        this.voxels(),
-                                        &mut out[kept..],
-                                    );
-                                    culled += hidden;
-                                    kept += placed;
-                                }
+            }
+            let chunks = work.len();
+            // Project and bin each chunk (one task: no wait in between), keeping the order
+            // within each tile.
+            let started = std::time::Instant::now();
+            if self.projected.len() < count {
+                self.projected.resize(count, Projected::default());
+            }
+            if self.bins.len() < chunks {
+                self.bins.resize_with(chunks, ChunkBins::default);
+            }
+            if self.drew.len() < count {
+                self.drew.resize_with(count, AtomicBool::default);
+            }
+            let mut outs: Vec<&mut [Projected]> = Vec::with_capacity(chunks);
+            let mut rest = &mut self.projected[..count];
+            for &(_, ids, _) in &work {
+                let (out, after) = rest.split_at_mut(ids.len());
+                outs.push(out);
+                rest = after;
+            }
+            // No test while no pixel is opaque.
+            let mask = (self.cull_hidden && open_pixels < w * h).then_some(&self.mask);
+            let cull = self.cull_hidden;
+            let (culled, off_image, project_time, bin_time) = outs
+                .par_iter_mut()
+                .zip(work.par_iter())
+                .zip(self.bins[..chunks].par_iter_mut())
+                .map(|((out, &(source, ids, first)), bins)| {
+                    let started = std::time::Instant::now();
+                    let (projection, texels) = sources[source];
+                    let (mut culled, mut off_image) = (0, 0);
+                    let group = Group {
+                        u: projection,
+                        texels,
+                        screen: &screen,
+                        mask,
+                    };
+                    // The chunk's splats on the image, in order, packed at the front of its
+                    // share of the buffer.
+                    let mut kept = 0;
+                    // Each group is decoded and its fate settled one group ahead, so that the
+                    // texels of the next group to be projected are asked for while this one
+                    // is. (The opaque pixels do not change within a batch's projection.)
+                    let mut groups = ids
+                        .chunks(GROUP)
+                        .map(|ids| Decoded::new(projection, ids, cull, &screen, mask));
+                    let mut next = groups.next();
+                    while let Some(this) = next {
+                        next = groups.next();
+                        if let Some(ahead) = &next
+                            && ahead.fate == Fate::Project
+                        {
+                            for &[x, y, z] in ahead.voxels() {
+                                texels.prefetch(x, y, z);
                             }
                         }
-                        let projected = started.elapsed();
-                        bin_chunk(&out[..kept], (c * chunk) as u32, tx, ty, bins);
-                        (culled, off_image, projected, started.elapsed() - projected)
-                    })
-                    .reduce(
-                        || (0, 0, Duration::ZERO, Duration::ZERO),
-                        |a, b| (a.0 + b.0, a.1 + b.1, a.2 + b.2, a.3 + b.3),
-                    );
-                // The phase's time, shared between its two stages as their processor time.
-                let wall = started.elapsed().as_secs_f64();
-                let share = project_time.as_secs_f64()
-                    / (project_time + bin_time)
-                        .as_secs_f64()
-                        .max(f64::MIN_POSITIVE);
-                stats.project += Duration::from_secs_f64(wall * share);
-                stats.bin += Duration::from_secs_f64(wall * (1.0 - share));
-                stats.culled += culled;
-                stats.off_image += off_image;
-                let projected = self.bins[..chunks]
-                    .iter()
-                    .map(|b| b.projected)
-                    .sum::<usize>();
-                stats.projected += projected;
-                if projected == 0 {
-                    // Nothing of this batch is on the image (a view zoomed in on part of the
-                    // volume passes many such): no tile changes.
-                    continue;
-                }
-                // Composite every tile, nearest splat first.
-                let started = std::time::Instant::now();
-                let batch = Batch {
-                    projected: &self.projected,
-                    bins: &self.bins[..chunks],
-                    opaque: self.opaque,
-                    drew: &self.drew,
-                };
-                self.tiles.par_iter_mut().enumerate().for_each(|(t, tile)| {
-                    let origin = ((t % tx) * TILE, (t / tx) * TILE);
-                    simd::composite_tile(tile, t, origin, batch);
-                });
-                for (t, tile) in self.tiles.iter().enumerate() {
-                    self.mask
-                        .set_tile((t % tx) * TILE, (t / tx) * TILE, &tile.rows);
-                }
-                // Counted and cleared through `&mut`: plain loads and stores, no locked
-                // instruction per splat.
-                stats.drew += self.drew[..ids.len()]
-                    .iter_mut()
-                    .map(|d| usize::from(std::mem::take(d.get_mut())))
-                    .sum::<usize>();
-                open_pixels = self.tiles.iter().map(|t| t.open as usize).sum();
-                stats.tiles += started.elapsed();
+                        let n = this.voxels().len();
+                        match this.fate {
+                            Fate::OffImage => off_image += n,
+                            Fate::Hidden => culled += n,
+                            Fate::Project => {
+                                let (hidden, placed) =
+                                    simd::project_group(&group, this.voxels(), &mut out[kept..]);
+                                culled += hidden;
+                                kept += placed;
+                            }
+                        }
+                    }
+                    let projected = started.elapsed();
+                    bin_chunk(&out[..kept], first as u32, tx, ty, bins);
+                    (culled, off_image, projected, started.elapsed() - projected)
+                })
+                .reduce(
+                    || (0, 0, Duration::ZERO, Duration::ZERO),
+                    |a, b| (a.0 + b.0, a.1 + b.1, a.2 + b.2, a.3 + b.3),
+                );
+            drop(outs);
+            // The phase's time, shared between its two stages as their processor time.
+            let wall = started.elapsed().as_secs_f64();
+            let share = project_time.as_secs_f64()
+                / (project_time + bin_time)
+                    .as_secs_f64()
+                    .max(f64::MIN_POSITIVE);
+            stats.project += Duration::from_secs_f64(wall * share);
+            stats.bin += Duration::from_secs_f64(wall * (1.0 - share));
+            stats.culled += culled;
+            stats.off_image += off_image;
+            let projected = self.bins[..chunks]
+                .iter()
+                .map(|b| b.projected)
+                .sum::<usize>();
+            stats.projected += projected;
+            if projected == 0 {
+                // Nothing of this batch is on the image (a view zoomed in on part of the
+                // volume passes many such): no tile changes.
+                continue;
             }
+            // Composite every tile, nearest splat first.
+            let started = std::time::Instant::now();
+            let batch = Batch {
+                projected: &self.projected,
+                bins: &self.bins[..chunks],
+                opaque: self.opaque,
+                drew: &self.drew,
+            };
+            self.tiles.par_iter_mut().enumerate().for_each(|(t, tile)| {
+                let origin = ((t % tx) * TILE, (t / tx) * TILE);
+                simd::composite_tile(tile, t, origin, batch);
+            });
+            for (t, tile) in self.tiles.iter().enumerate() {
+                self.mask
+                    .set_tile((t % tx) * TILE, (t / tx) * TILE, &tile.rows);
+            }
+            // Counted and cleared through `&mut`: plain loads and stores, no locked
+            // instruction per splat.
+            stats.drew += self.drew[..count]
+                .iter_mut()
+                .map(|d| usize::from(std::mem::take(d.get_mut())))
+                .sum::<usize>();
+            open_pixels = self.tiles.iter().map(|t| t.open as usize).sum();
+            stats.tiles += started.elapsed();
         }
         let started = std::time::Instant::now();
         for tile in &self.tiles {
@@ -329,6 +387,16 @@ impl TiledCompositor {
         stats.tiles += started.elapsed();
         stats
     }
+}
+
+/// A stretch of a draw order: splats `ids` of the grid `source` (an index into the sources
+/// given to [`TiledCompositor::composite_runs`]), back to front.
+#[derive(Debug, Clone, Copy)]
+pub struct Run<'a> {
+    /// The grid the splats' ids are voxels of.
+    pub source: usize,
+    /// The splats, back to front.
+    pub ids: &'a [u32],
 }
 
 /// What becomes of a group of splats (consecutive in the order) in a batch.

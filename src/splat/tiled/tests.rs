@@ -577,3 +577,52 @@ fn a_rectangle_is_covered_as_its_pixels_say() {
     assert!(mask.covers_rect([0, 0, 5, 5]));
     assert!(!mask.covers_rect([-1, 0, 5, 5]) && !mask.covers_rect([5, 0, 4, 5]));
 }
+
+#[test]
+fn a_draw_order_cut_into_runs_of_several_sources_composites_as_one_order() {
+    for orthographic in [false, true] {
+        let (u, texels) = grid_and_view(orthographic);
+        // Every significant voxel four times over (more splats than the first batch takes),
+        // far and near in turn.
+        let ids: Vec<u32> = (0..20 * 18 * 16)
+            .rev()
+            .filter(|&id| texels.get(id % 20, id / 20 % 18, id / 360).is_some())
+            .collect::<Vec<_>>()
+            .repeat(4);
+        let size = (64, 48);
+        let background = vec![[0.1, 0.2, 0.3, 1.0]; 64 * 48];
+        let depth = vec![0.0; 64 * 48];
+        let mut whole = background.clone();
+        let mut compositor = TiledCompositor::new();
+        let one = compositor.composite(size, &[(u.clone(), &texels, &ids)], &depth, &mut whole);
+        // The same splats as runs of 1 to 700 splats (and empty ones), from two sources that
+        // hold the same grid, taken in turn.
+        let (other, other_texels) = grid_and_view(orthographic);
+        let sources = [(&u, &texels), (&other, &other_texels)];
+        let mut runs = Vec::new();
+        let (mut at, mut cut) = (0, 1usize);
+        while at < ids.len() {
+            let end = (at + cut).min(ids.len());
+            runs.push(Run {
+                source: runs.len() % 2,
+                ids: &ids[at..end],
+            });
+            runs.push(Run {
+                source: 0,
+                ids: &ids[end..end],
+            });
+            at = end;
+            cut = cut * 7 % 701 + 1;
+        }
+        assert!(runs.len() > 20, "{} runs", runs.len());
+        let mut cut_image = background.clone();
+        let many =
+            TiledCompositor::new().composite_runs(size, &sources, &runs, &depth, &mut cut_image);
+        assert_eq!(whole, cut_image, "orthographic {orthographic}");
+        assert_eq!(
+            (one.splats, one.projected, one.drew, one.composited),
+            (many.splats, many.projected, many.drew, many.composited)
+        );
+        assert!(one.drew > 1000, "{} splats drew", one.drew);
+    }
+}
