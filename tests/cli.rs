@@ -198,9 +198,14 @@ fn a_small_picture_draws_a_coarser_level_unless_told_not_to() {
     };
     let (on, coarse) = run("on");
     let (off, full) = run("off");
+    let (one, one_level) = run("volume");
     assert!(on.contains("level of detail"), "{on}");
+    assert!(one.contains("level of detail"), "{one}");
     assert!(!off.contains("level of detail"), "{off}");
     assert!(coarse * 4 < full, "{coarse} splats against {full}");
+    assert!(one_level * 4 < full, "{one_level} splats against {full}");
+    // By brick, no brick is drawn finer than the volume's one level.
+    assert!(coarse <= one_level, "{coarse} splats against {one_level}");
     let bad = splatscene(&["render", "--out", out.to_str().unwrap(), "--lod", "maybe"]);
     assert!(!bad.status.success());
 }

@@ -726,8 +726,9 @@ fn bricks_drawn_at_their_own_levels_give_the_picture_of_the_whole_grid() {
 fn a_close_up_refines_only_its_near_bricks() {
     // From 12 mm before the grid's face at 50 degrees, 64 x 64 pixels: the near face's voxels
     // fall about 5 pixels apart (refined), the far face's, 140 mm away, under half a pixel.
-    // One level for the volume refines every brick on the image; by brick, only the near ones
-    // are refined and the far ones drawn coarser, for about the same picture.
+    // One level for the volume refines every brick on the image; by brick, only those whose
+    // voxels fall more than a pixel apart are refined and the far ones drawn coarser, for
+    // about the same picture (5.4M splats against 19.6M, RMSE 0.011 measured).
     let ctx = context();
     let scene = translucent_blobs();
     let camera = SceneCamera {

@@ -61,9 +61,11 @@ pub struct RenderArgs {
     /// Level of detail: `on` draws each volume from the level of its pyramid (2x2x2 voxels a
     /// splat a level; an axis along the view halved once more) whose voxels are about a pixel
     /// apart on the screen where it is drawn largest, or, where its voxels are more than 1.5
-    /// pixels apart, from its field on a grid refined until they are not; `off` from its own
-    /// grid, every voxel a splat
-    #[arg(long, default_value = "on", value_parser = ["on", "off"])]
+    /// pixels apart, from its field on a grid refined until they are not, each 16^3-voxel
+    /// brick at the detail its own distance calls for (the CPU tiles; the GPU passes draw a
+    /// volume at one); `volume` draws each volume at one detail, the one its nearest brick
+    /// calls for; `off` from its own grid, every voxel a splat
+    #[arg(long, default_value = "on", value_parser = ["on", "volume", "off"])]
     lod: String,
     /// Transparent background (the PNG's alpha is the coverage).
     #[arg(long)]
@@ -298,7 +300,8 @@ pub fn run_render(args: RenderArgs) -> Result<()> {
     let ctx = context_for(args.compositor, &drawn)?;
     // One renderer for every view: the volumes are classified once.
     let mut renderer = Renderer::with_compositor(args.compositor);
-    renderer.set_level_of_detail(args.lod == "on");
+    renderer.set_level_of_detail(args.lod != "off");
+    renderer.set_levels_by_brick(args.lod == "on");
     let device = ctx
         .as_ref()
         .map_or("no GPU adapter".into(), GpuContext::describe);
@@ -617,12 +620,17 @@ pub(crate) fn describe(r: &FrameReport) -> String {
                 [x, y, z] if x != y || y != z => format!("{x}/{y}/{z} along x/y/z"),
                 _ => r.level.to_string(),
             };
+            let by_brick = if r.bricks_by_level > 0 {
+                ", by brick"
+            } else {
+                ""
+            };
             match (r.level, r.refined) {
                 (0, None) => String::new(),
-                (0, Some([x, y, z])) => format!(" (the grid refined {x}x{y}x{z})"),
-                (_, None) => format!(" (level of detail {level})"),
+                (0, Some([x, y, z])) => format!(" (the grid refined {x}x{y}x{z}{by_brick})"),
+                (_, None) => format!(" (level of detail {level}{by_brick})"),
                 (_, Some([x, y, z])) => {
-                    format!(" (level of detail {level}; a grid refined {x}x{y}x{z})")
+                    format!(" (level of detail {level}; a grid refined {x}x{y}x{z}{by_brick})")
                 }
             }
         },

@@ -61,9 +61,10 @@ pub struct BatchArgs {
     #[arg(long, default_value = "auto")]
     compositor: Compositor,
     /// Level of detail: `on` draws each volume from the level of its pyramid whose voxels are
-    /// about a pixel apart where it comes nearest the eye; `off` from its own grid (a job's
-    /// pictures are redrawn when this changes)
-    #[arg(long, default_value = "on", value_parser = ["on", "off"])]
+    /// about a pixel apart, each 16^3-voxel brick by its own distance (the CPU tiles);
+    /// `volume` one level a volume, by where it comes nearest the eye; `off` from its own grid
+    /// (a job's pictures are redrawn when this changes)
+    #[arg(long, default_value = "on", value_parser = ["on", "volume", "off"])]
     lod: String,
 }
 
@@ -199,10 +200,11 @@ pub fn run_batch(args: BatchArgs) -> Result<()> {
 
     let pictures: usize = mine.iter().map(|j| j.items.len()).sum();
     let bar = progress_bar(pictures as u64);
-    let level_of_detail = args.lod == "on";
+    let level_of_detail = args.lod != "off";
     let fresh_renderer = || {
         let mut renderer = Renderer::with_compositor(args.compositor);
         renderer.set_level_of_detail(level_of_detail);
+        renderer.set_levels_by_brick(args.lod == "on");
         renderer
     };
     let mut renderer = fresh_renderer();
@@ -210,6 +212,7 @@ pub fn run_batch(args: BatchArgs) -> Result<()> {
         out,
         compositor: args.compositor,
         level_of_detail,
+        levels_by_brick: args.lod == "on",
         ctx: ctx.as_ref(),
     };
     for (slot, job) in mine.iter().enumerate() {
@@ -472,6 +475,8 @@ struct Settings<'a> {
     out: &'a Path,
     compositor: Compositor,
     level_of_detail: bool,
+    /// Each brick at its own level (`--lod on`), not one level a volume (`--lod volume`).
+    levels_by_brick: bool,
     ctx: Option<&'a GpuContext>,
 }
 
@@ -927,6 +932,7 @@ fn job_hash(
         "splatscene": env!("CARGO_PKG_VERSION"),
         "compositor": compositor_name(settings.compositor),
         "level_of_detail": settings.level_of_detail,
+        "levels_by_brick": settings.levels_by_brick,
         "job": job.spec,
         "scene": file,
         "inputs": inputs.iter().map(|i| &i.blake3).collect::<Vec<_>>(),

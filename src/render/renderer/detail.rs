@@ -179,6 +179,8 @@ pub(super) const BRICK: u32 = 16;
 pub(super) struct Occupied {
     /// Brick coordinates (voxel index / [`BRICK`]).
     bricks: Vec<[u32; 3]>,
+    /// The splats in each brick (0 for a brick added as a neighbour).
+    splats: Vec<u32>,
 }
 
 impl Occupied {
@@ -187,29 +189,65 @@ impl Occupied {
         let grid = &classified.grid;
         let [nx, ny, nz] = grid.dims();
         let [bx, by, bz] = [nx, ny, nz].map(|n| n.div_ceil(BRICK));
-        let mut marked = vec![false; bx as usize * by as usize * bz as usize];
+        let mut counts = vec![0u32; bx as usize * by as usize * bz as usize];
         for z in 0..nz {
             for y in 0..ny {
                 let row = (y / BRICK + by * (z / BRICK)) as usize * bx as usize;
                 for run in grid.row(0, y, z) {
                     if run.end() > run.start {
                         for x in run.start / BRICK..=(run.end() - 1) / BRICK {
-                            marked[row + x as usize] = true;
+                            let (from, to) =
+                                (run.start.max(x * BRICK), run.end().min((x + 1) * BRICK));
+                            counts[row + x as usize] += to - from;
                         }
                     }
                 }
             }
         }
-        let bricks = marked
+        let (bricks, splats) = counts
             .iter()
             .enumerate()
-            .filter(|(_, m)| **m)
-            .map(|(i, _)| {
+            .filter(|(_, c)| **c > 0)
+            .map(|(i, c)| {
                 let i = i as u32;
-                [i % bx, i / bx % by, i / bx / by]
+                ([i % bx, i / bx % by, i / bx / by], *c)
             })
-            .collect();
-        Self { bricks }
+            .unzip();
+        Self { bricks, splats }
+    }
+
+    /// These bricks and every brick next to one (across a face, an edge or a corner), within a
+    /// grid of `dims` voxels: where a refinement of the grid can hold splats, since a fine
+    /// voxel's cell samples the field of the coarse voxels around it.
+    pub(super) fn with_neighbours(&self, dims: [u32; 3]) -> Self {
+        let n = dims.map(|d| d.div_ceil(BRICK));
+        let index = |b: [u32; 3]| (b[0] + n[0] * (b[1] + n[1] * b[2])) as usize;
+        let mut marked = vec![None; n.iter().map(|&c| c as usize).product()];
+        for (b, &splats) in self.bricks.iter().zip(&self.splats) {
+            marked[index(*b)] = Some(splats);
+        }
+        for b in &self.bricks {
+            for dz in 0..3u32 {
+                for dy in 0..3u32 {
+                    for dx in 0..3u32 {
+                        let c = [b[0] + dx, b[1] + dy, b[2] + dz];
+                        if (0..3).all(|a| c[a] >= 1 && c[a] - 1 < n[a]) {
+                            let m = &mut marked[index(c.map(|v| v - 1))];
+                            *m = Some(m.unwrap_or(0));
+                        }
+                    }
+                }
+            }
+        }
+        let (bricks, splats) = marked
+            .iter()
+            .enumerate()
+            .filter_map(|(i, m)| {
+                let i = i as u32;
+                Some(([i % n[0], i / n[0] % n[1], i / n[0] / n[1]], (*m)?))
+            })
+            .unzip();
+        Self { bricks, splats }
     }
 
     /// The world boxes of the occupied bricks (each brick's voxels' box, half a voxel beyond
@@ -496,32 +534,47 @@ pub(super) fn refine_factors(dims: [u32; 3], apart: [f64; 3]) -> Option<[u32; 3]
     (factors != [1; 3]).then_some(factors)
 }
 
-/// The detail each occupied brick of a volume's own grid (placed as `geometry`) is drawn at in
+/// The detail each occupied brick of a volume's own grid (placed as `geometry`), and each brick
+/// next to one, is drawn at in
 /// `view` when its bricks are drawn each at its own level ([`Renderer::set_levels_by_brick`]),
 /// for the bricks whose splats can land on the image: [`detail_at`] the brick's own distance
 /// and sight lines, the rule a volume's level follows at its nearest brick: a level of its
 /// pyramid, or its grid refined where its voxels fall more than [`REFINE_TO`] pixels apart. A
 /// brick the eye is in draws the own grid; a `preview` draws every brick at least a level
-/// coarser. A brick is left out where its box, grown by two of its
+/// coarser. A brick whose voxels fall more than `refine_from` pixels apart (whole edges) wants
+/// refining whatever the rule says ([`REFINE_TO`] is the rule's own threshold). A brick is left out where its box, grown by two of its
 /// splats' voxels each way and by three pixels at its far side (the footprints' reach past
-/// their voxels and the screen's low-pass), lies off the image ([`off_image`]).
+/// their voxels and the screen's low-pass), lies off the image ([`off_image`]). Each brick
+/// comes with the own grid's splats in it.
 pub(super) fn brick_details(
     geometry: &VolumeGeometry,
     view: &ViewSetup,
     occupied: &Occupied,
     preview: bool,
-) -> Vec<([u32; 3], Detail)> {
+    refine_from: f64,
+) -> Vec<([u32; 3], Detail, u32)> {
     let dims = geometry.dims();
     let m = geometry.index_to_world().matrix3;
     let abs = glam::DMat3::from_cols(m.x_axis.abs(), m.y_axis.abs(), m.z_axis.abs());
     let eye = view.camera.eye;
-    occupied
+    // A brick with no splat of the own grid next to one that has can hold splats of a
+    // refinement.
+    let bricks = occupied.with_neighbours(dims);
+    bricks
         .bricks
         .iter()
-        .zip(occupied.world_boxes(geometry))
-        .filter_map(|(&brick, (centre, half))| {
-            let wanted = apart_in_box(geometry, view, (centre, half))
-                .map(|apart| detail_at(dims, Some(apart)));
+        .zip(&bricks.splats)
+        .zip(bricks.world_boxes(geometry))
+        .filter_map(|((&brick, &splats), (centre, half))| {
+            let wanted =
+                apart_in_box(geometry, view, (centre, half)).map(|apart| {
+                    match detail_at(dims, Some(apart)) {
+                        Detail::Level(..) if apart.full.iter().any(|&f| f > refine_from) => {
+                            Detail::Refined([1; 3])
+                        }
+                        wanted => wanted,
+                    }
+                });
             let (levels, facing) = match wanted {
                 Some(Detail::Level(levels, facing)) => (levels, facing),
                 _ => ([0; 3], [0; 3]),
@@ -544,7 +597,7 @@ pub(super) fn brick_details(
                 Some(Detail::Refined(factors)) if !preview => Detail::Refined(factors),
                 _ => level_facing(levels, facing),
             };
-            shown.then_some((brick, detail))
+            shown.then_some((brick, detail, splats))
         })
         .collect()
 }

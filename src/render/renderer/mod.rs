@@ -6,6 +6,7 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use glam::{DMat3, DMat4, DVec3};
+use rayon::prelude::*;
 
 use super::mesh_pass::{GpuMesh, MeshPass};
 use super::splat_pass::{GpuVolume, SplatPass, projection};
@@ -298,6 +299,9 @@ struct Mix {
     ids: Vec<u32>,
     /// Stretches of `ids` drawn from one level, far to near.
     runs: Vec<(Detail, std::ops::Range<usize>)>,
+    /// Per level drawn, the place in the draw order of each splat's brick (kept between
+    /// frames, as `ids` is, so that a frame does not allocate them anew).
+    places: Vec<Vec<u32>>,
 }
 
 /// Orders volume `id`'s splats drawn brick by brick as `mix` says, its node placed by
@@ -319,11 +323,6 @@ fn order_mix(
     let own_geometry = own.geometry(world).map_err(|e| e.to_string())?;
     brick_order(&own_geometry, eye, target, &mut mix.bricks).map_err(|e| e.to_string())?;
     let [bx, by, bz] = own_geometry.dims().map(|n| n.div_ceil(BRICK) as usize);
-    // Each brick's place in the draw order, by its index in the grid of bricks.
-    let mut slot = vec![u32::MAX; bx * by * bz];
-    for (i, (b, _)) in mix.bricks.iter().enumerate() {
-        slot[b[0] as usize + bx * (b[1] as usize + by * b[2] as usize)] = i as u32;
-    }
     let mut details: Vec<Detail> = Vec::new();
     for (_, d) in &mix.bricks {
         if !details.contains(d) {
@@ -347,53 +346,81 @@ fn order_mix(
             )
             .map_err(|e| e.to_string())?;
     }
-    // The brick of each splat of a level's order that the level draws (`None` for the
-    // others): its voxel's first own voxel, over the brick's side.
-    let brick_of = |state: &VolumeState, detail: Detail| {
+    // A brick a level does not draw.
+    const NONE: u32 = u32::MAX;
+    let mut starts = vec![0usize; mix.bricks.len() + 1];
+    // Per level, each splat's brick's place (a splat's brick: its voxel's first own voxel
+    // over the brick's side; `k 2^l` on a level, `k / f` on a refinement), found in parallel
+    // (the divisions by the grid's sizes are most of a mix's ordering).
+    let mut places = std::mem::take(&mut mix.places);
+    places.resize_with(details.len(), Vec::new);
+    for (&detail, place) in details.iter().zip(places.iter_mut()) {
+        // The place in the draw order of each brick the level draws, by the brick's index in
+        // the grid of bricks.
+        let mut slot = vec![NONE; bx * by * bz];
+        for (i, (b, d)) in mix.bricks.iter().enumerate() {
+            if *d == detail {
+                slot[b[0] as usize + bx * (b[1] as usize + by * b[2] as usize)] = i as u32;
+            }
+        }
+        place.clear();
+        let Some(state) = volumes.get(&(id, detail)) else {
+            continue;
+        };
         let [nx, ny, _] = state.classified.grid.dims();
-        // A voxel's first own voxel: `k 2^l` on a level, `k / f` on a refinement.
+        let (row, plane) = (
+            strength_reduce::StrengthReducedU32::new(nx.max(1)),
+            strength_reduce::StrengthReducedU32::new((nx * ny).max(1)),
+        );
         let (halvings, factors) = match detail {
             Detail::Level(l, _) => (l.map(u32::from), [1; 3]),
             Detail::Refined(f) => ([0; 3], f.map(|f| f.max(1))),
         };
+        // A refinement's bricks are `f` times the brick's side along each axis.
+        let sides = factors.map(|f| strength_reduce::StrengthReducedU32::new(f * BRICK));
         let slot = &slot;
-        let bricks = &mix.bricks;
-        move |id: u32| {
-            let k = [id % nx, id / nx % ny, id / nx / ny];
-            let b: [usize; 3] =
-                std::array::from_fn(|a| ((k[a] << halvings[a]) / factors[a] / BRICK) as usize);
-            let s = *slot.get(b[0] + bx * (b[1] + by * b[2]))?;
-            (bricks.get(s as usize)?.1 == detail).then_some(s as usize)
-        }
-    };
-    let mut starts = vec![0usize; mix.bricks.len() + 1];
-    for &detail in &details {
-        if let Some(state) = volumes.get(&(id, detail)) {
-            let brick = brick_of(state, detail);
-            for &i in &state.ids {
-                if let Some(s) = brick(i) {
-                    starts[s + 1] += 1;
-                }
+        state
+            .ids
+            .par_iter()
+            .map(|&i| {
+                let z = i / plane;
+                let rest = i - z * plane.get();
+                let y = rest / row;
+                let k = [rest - y * row.get(), y, z];
+                let b: [usize; 3] = std::array::from_fn(|a| {
+                    if factors[a] == 1 {
+                        (k[a] << halvings[a] >> BRICK.trailing_zeros()) as usize
+                    } else {
+                        (k[a] / sides[a]) as usize
+                    }
+                });
+                slot.get(b[0] + bx * (b[1] + by * b[2]))
+                    .copied()
+                    .unwrap_or(NONE)
+            })
+            .collect_into_vec(place);
+        for &s in place.iter() {
+            if s != NONE {
+                starts[s as usize + 1] += 1;
             }
         }
     }
     for s in 0..mix.bricks.len() {
         starts[s + 1] += starts[s];
     }
-    mix.ids.clear();
     mix.ids.resize(starts[mix.bricks.len()], 0);
     let mut next = starts.clone();
-    for &detail in &details {
+    for (&detail, place) in details.iter().zip(&places) {
         if let Some(state) = volumes.get(&(id, detail)) {
-            let brick = brick_of(state, detail);
-            for &i in &state.ids {
-                if let Some(s) = brick(i) {
-                    mix.ids[next[s]] = i;
-                    next[s] += 1;
+            for (&i, &s) in state.ids.iter().zip(place) {
+                if s != NONE {
+                    mix.ids[next[s as usize]] = i;
+                    next[s as usize] += 1;
                 }
             }
         }
     }
+    mix.places = places;
     mix.runs.clear();
     for (s, (_, detail)) in mix.bricks.iter().enumerate() {
         let range = starts[s]..starts[s + 1];
@@ -404,6 +431,23 @@ fn order_mix(
     }
     Ok(())
 }
+
+/// How many splats a grid drawn at `detail` has for each of its own grid's: `2^-l` a level,
+/// the product of the factors a refinement.
+fn splat_share(detail: Detail) -> f64 {
+    match detail {
+        Detail::Level(l, _) => 0.5f64.powi(l.iter().map(|&l| i32::from(l)).sum()),
+        Detail::Refined(f) => f.iter().map(|&f| f64::from(f)).product(),
+    }
+}
+
+/// A volume's bricks are drawn each at its own level where that draws at most a third of the
+/// splats its one level would (by the own grid's splats in each brick). A mix orders every
+/// level it draws from whole and sorts the splats into bricks, about 5 ns a splat of those
+/// levels on this project's 2-core machine: on the 0.7 mm LIDC2 CT seen from 240 mm (its far
+/// bricks halved along the view, 2.3M splats instead of 5.4M) that cost what the fewer splats
+/// saved (BENCHMARKS.md, "Bricks at their own levels").
+const MIX_SAVING: f64 = 3.0;
 
 /// The most levels of detail a volume keeps that are halved along some axes more than others
 /// (a camera orbiting a volume wants one for each axis its view runs along).
@@ -456,6 +500,8 @@ pub struct Renderer {
     levels: HashMap<NodeId, Detail>,
     /// The volumes drawn brick by brick at more than one level in the current frame.
     mixes: HashMap<NodeId, Mix>,
+    /// The buffers of the last frame's mixes, for this frame's.
+    spare_mixes: Vec<Mix>,
     /// Every volume's bricks drawn at the volume's one level
     /// ([`Renderer::set_levels_by_brick`]).
     one_level: bool,
@@ -1038,7 +1084,7 @@ impl Renderer {
         let mut live = Vec::new();
         let mut made = 0;
         self.levels.clear();
-        self.mixes.clear();
+        self.spare_mixes.extend(self.mixes.drain().map(|(_, m)| m));
         for (id, node, world) in scene.volumes() {
             live.push(id);
             let key = class_key(node);
@@ -1089,15 +1135,6 @@ impl Renderer {
             let Some(full) = self.volumes.get(&own) else {
                 continue;
             };
-            // What each brick on the image wants, where they may differ.
-            let brick_wants = match (&full.occupied, by_brick && !self.full_grid) {
-                (Some(occupied), true) => {
-                    let geometry =
-                        placed_geometry(&full.volume, world).map_err(|e| fail(e.to_string()))?;
-                    Some(brick_details(&geometry, view, occupied, preview))
-                }
-                _ => None,
-            };
             let wanted = if self.full_grid {
                 Detail::default()
             } else {
@@ -1137,6 +1174,28 @@ impl Renderer {
                 }
                 wanted => wanted,
             };
+            // What each brick on the image wants, where they may differ. In a volume drawn
+            // refined, a brick whose voxels fall more than a pixel apart is refined too:
+            // splats a coarse voxel wide are far softer than the field (BENCHMARKS.md,
+            // "Bricks at their own levels").
+            let brick_wants = match (&full.occupied, by_brick && !self.full_grid) {
+                (Some(occupied), true) => {
+                    let geometry =
+                        placed_geometry(&full.volume, world).map_err(|e| fail(e.to_string()))?;
+                    let refine_from = match wanted {
+                        Detail::Refined(_) => COARSEN_TO,
+                        Detail::Level(..) => REFINE_TO,
+                    };
+                    Some(brick_details(
+                        &geometry,
+                        view,
+                        occupied,
+                        preview,
+                        refine_from,
+                    ))
+                }
+                _ => None,
+            };
             // The own grid's voxel size in the world (the opacities' step).
             let spacing = placed_geometry(&node.volume, world)
                 .map_err(|e| fail(e.to_string()))?
@@ -1160,8 +1219,8 @@ impl Renderer {
                             Some(wants) => {
                                 let refined: std::collections::HashSet<[u32; 3]> = wants
                                     .iter()
-                                    .filter(|(_, d)| matches!(d, Detail::Refined(_)))
-                                    .map(|(b, _)| *b)
+                                    .filter(|(_, d, _)| matches!(d, Detail::Refined(_)))
+                                    .map(|(b, _, _)| *b)
                                     .collect();
                                 Region::new(geometry.dims(), REGION_BRICK, |b| {
                                     shown.as_ref().is_none_or(|r| r.covers_brick(b))
@@ -1224,7 +1283,10 @@ impl Renderer {
                 // take the refinement drawn, or the own grid without one.
                 let mut reached: HashMap<Detail, Detail> = HashMap::new();
                 let mut bricks = Vec::with_capacity(wants.len());
-                for (brick, want) in wants {
+                // The splats drawn, by the own grid's in each brick, brick by brick and at the
+                // one level.
+                let (mut by_brick, mut at_one) = (0.0, 0.0);
+                for (brick, want, splats) in wants {
                     let got = match (reached.get(&want), want) {
                         (Some(got), _) => *got,
                         (None, Detail::Level(levels, facing)) => {
@@ -1239,16 +1301,14 @@ impl Renderer {
                             Detail::Level(..) => Detail::default(),
                         },
                     };
+                    by_brick += f64::from(splats) * splat_share(got);
+                    at_one += f64::from(splats) * splat_share(drawn);
                     bricks.push((brick, got));
                 }
-                if bricks.iter().any(|(_, d)| *d != drawn) {
-                    self.mixes.insert(
-                        id,
-                        Mix {
-                            bricks,
-                            ..Mix::default()
-                        },
-                    );
+                if bricks.iter().any(|(_, d)| *d != drawn) && by_brick * MIX_SAVING <= at_one {
+                    let mut mix = self.spare_mixes.pop().unwrap_or_default();
+                    mix.bricks = bricks;
+                    self.mixes.insert(id, mix);
                 }
             }
             // Uneven levels past the few kept go, least recently used first.

@@ -339,7 +339,7 @@ fn bricks_far_from_the_eye_draw_coarser_levels_and_those_off_the_image_none() {
         ..SceneCamera::look_at(DVec3::new(64.0, 64.0, -30.0), DVec3::new(64.0, 64.0, 64.0))
     };
     let view = ViewSetup::new(&camera, (96, 96), None).unwrap();
-    let bricks = brick_details(&geometry, &view, &occupied, false);
+    let bricks = brick_details(&geometry, &view, &occupied, false, REFINE_TO);
     let level = |d: &Detail| match d {
         Detail::Level(l, _) => l.iter().copied().max().unwrap_or(0),
         Detail::Refined(_) => 0,
@@ -347,8 +347,8 @@ fn bricks_far_from_the_eye_draw_coarser_levels_and_those_off_the_image_none() {
     let at_z = |z: u32| {
         bricks
             .iter()
-            .filter(|(b, _)| b[2] == z)
-            .map(|(_, d)| level(d))
+            .filter(|(b, _, _)| b[2] == z)
+            .map(|(_, d, _)| level(d))
             .collect::<Vec<_>>()
     };
     let (near, far) = (at_z(0), at_z(n / BRICK - 1));
@@ -364,7 +364,7 @@ fn bricks_far_from_the_eye_draw_coarser_levels_and_those_off_the_image_none() {
     assert_eq!(far.len(), (n / BRICK * n / BRICK) as usize);
     // Each brick left out lies off the image, as a plain test of its voxel centres says: no
     // centre of it projects within the image.
-    let kept: std::collections::HashSet<[u32; 3]> = bricks.iter().map(|(b, _)| *b).collect();
+    let kept: std::collections::HashSet<[u32; 3]> = bricks.iter().map(|(b, _, _)| *b).collect();
     let [right, up, forward] = [view.axes.x_axis, view.axes.y_axis, view.axes.z_axis];
     let project = |p: DVec3| {
         let d = p - view.camera.eye;
