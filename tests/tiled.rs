@@ -669,6 +669,20 @@ fn translucent_blobs() -> Scene {
     scene
 }
 
+/// Looking along the z axis of [`translucent_blobs`] from `distance` mm before its face, at 50
+/// degrees.
+fn before_the_blobs(distance: f64) -> SceneCamera {
+    SceneCamera {
+        eye: glam::DVec3::new(63.5, 60.0, -distance),
+        target: glam::DVec3::new(63.5, 66.0, 64.0),
+        up: glam::DVec3::Y,
+        projection: Projection::Perspective {
+            fov_y_degrees: 50.0,
+        },
+        near: None,
+    }
+}
+
 #[test]
 fn bricks_drawn_at_their_own_levels_give_the_picture_of_the_whole_grid() {
     // From 40 mm before the grid's face, looking along it, at 50 degrees and 48 x 48 pixels:
@@ -677,15 +691,7 @@ fn bricks_drawn_at_their_own_levels_give_the_picture_of_the_whole_grid() {
     // draw the far ones coarser, fewer splats for the same picture.
     let ctx = context();
     let scene = translucent_blobs();
-    let camera = SceneCamera {
-        eye: glam::DVec3::new(63.5, 60.0, -40.0),
-        target: glam::DVec3::new(63.5, 66.0, 64.0),
-        up: glam::DVec3::Y,
-        projection: Projection::Perspective {
-            fov_y_degrees: 50.0,
-        },
-        near: None,
-    };
+    let camera = before_the_blobs(40.0);
     let size = (48, 48);
     let shot = |setup: &dyn Fn(&mut Renderer)| {
         let mut renderer = Renderer::with_compositor(Compositor::Cpu);
@@ -731,15 +737,7 @@ fn a_close_up_refines_only_its_near_bricks() {
     // about the same picture (5.4M splats against 19.6M, RMSE 0.011 measured).
     let ctx = context();
     let scene = translucent_blobs();
-    let camera = SceneCamera {
-        eye: glam::DVec3::new(63.5, 60.0, -12.0),
-        target: glam::DVec3::new(63.5, 66.0, 64.0),
-        up: glam::DVec3::Y,
-        projection: Projection::Perspective {
-            fov_y_degrees: 50.0,
-        },
-        near: None,
-    };
+    let camera = before_the_blobs(12.0);
     let size = (64, 64);
     let shot = |by_brick: bool| {
         let mut renderer = Renderer::with_compositor(Compositor::Cpu);

@@ -223,6 +223,27 @@ impl VolumeState {
             }
         }
     }
+
+    /// Orders this state's splats into `ids` for the eye and target given, its node placed by
+    /// `world`.
+    fn order(
+        &mut self,
+        world: DMat4,
+        (eye, target): (DVec3, DVec3),
+        (ordering, options): (Ordering, &OrderOptions),
+    ) -> Result<(), String> {
+        let geometry = self.geometry(world).map_err(|e| e.to_string())?;
+        let case = ViewCase::new(&geometry, eye, target).map_err(|e| e.to_string())?;
+        self.orderer
+            .order(
+                &self.classified.grid,
+                &case,
+                ordering,
+                options,
+                &mut self.ids,
+            )
+            .map_err(|e| e.to_string())
+    }
 }
 
 /// Lays the premultiplied `layer`, the pixels of `rect` row by row, over `frame` (`width`
@@ -330,21 +351,10 @@ fn order_mix(
         }
     }
     for &detail in &details {
-        let state = volumes
+        volumes
             .get_mut(&(id, detail))
-            .ok_or("a level of detail a brick is drawn at is not made")?;
-        let geometry = state.geometry(world).map_err(|e| e.to_string())?;
-        let case = ViewCase::new(&geometry, eye, target).map_err(|e| e.to_string())?;
-        state
-            .orderer
-            .order(
-                &state.classified.grid,
-                &case,
-                ordering,
-                options,
-                &mut state.ids,
-            )
-            .map_err(|e| e.to_string())?;
+            .ok_or("a level of detail a brick is drawn at is not made")?
+            .order(world, (eye, target), (ordering, options))?;
     }
     // A brick a level does not draw.
     const NONE: u32 = u32::MAX;
@@ -1382,18 +1392,13 @@ impl Renderer {
             };
             let geometry = state.geometry(world).map_err(|e| fail(e.to_string()))?;
             if !mixed {
-                let case = ViewCase::new(&geometry, pinhole.eye, pinhole.target)
-                    .map_err(|e| fail(e.to_string()))?;
                 state
-                    .orderer
                     .order(
-                        &state.classified.grid,
-                        &case,
-                        ordering,
-                        &order_options,
-                        &mut state.ids,
+                        world,
+                        (pinhole.eye, pinhole.target),
+                        (ordering, &order_options),
                     )
-                    .map_err(|e| fail(e.to_string()))?;
+                    .map_err(fail)?;
                 report.splats += state.ids.len();
             }
             match self.levels.get(&id).copied().unwrap_or_default() {
