@@ -1287,35 +1287,52 @@ impl Renderer {
                     wanted
                 }
             };
-            if let Some(wants) = brick_wants {
+            // The bricks that want refining take the refinement drawn, or the own grid
+            // without one.
+            let refined_or_own = match drawn {
+                Detail::Refined(_) => drawn,
+                Detail::Level(..) => Detail::default(),
+            };
+            let wants = brick_wants.map(|wants| {
+                wants
+                    .into_iter()
+                    .map(|(brick, want, splats)| match want {
+                        Detail::Refined(_) => (brick, refined_or_own, splats),
+                        Detail::Level(..) => (brick, want, splats),
+                    })
+                    .collect::<Vec<_>>()
+            });
+            // Drawn brick by brick where that draws at most a third of the splats of the one
+            // detail, by the own grid's splats in each brick (before any level is made).
+            let share = |wants: &[([u32; 3], Detail, u32)], one: Option<Detail>| -> f64 {
+                wants
+                    .iter()
+                    .map(|(_, d, splats)| f64::from(*splats) * splat_share(one.unwrap_or(*d)))
+                    .sum()
+            };
+            if let Some(wants) = wants.filter(|w| {
+                w.iter().any(|(_, d, _)| *d != drawn)
+                    && share(w, None) * MIX_SAVING <= share(w, Some(drawn))
+            }) {
                 // Each level the bricks want, made once (a level that could not be made as
-                // wanted stands for the one reached on its way); the bricks that want refining
-                // take the refinement drawn, or the own grid without one.
+                // wanted stands for the one reached on its way).
                 let mut reached: HashMap<Detail, Detail> = HashMap::new();
                 let mut bricks = Vec::with_capacity(wants.len());
-                // The splats drawn, by the own grid's in each brick, brick by brick and at the
-                // one level.
-                let (mut by_brick, mut at_one) = (0.0, 0.0);
-                for (brick, want, splats) in wants {
+                for (brick, want, _) in wants {
                     let got = match (reached.get(&want), want) {
                         (Some(got), _) => *got,
-                        (None, Detail::Level(levels, facing)) => {
+                        (None, Detail::Level(levels, facing)) if want != drawn => {
                             let got = self
                                 .make_levels(id, spacing, levels, facing, report)
                                 .map_err(|e| fail(e.to_string()))?;
                             reached.insert(want, got);
                             got
                         }
-                        (None, Detail::Refined(_)) => match drawn {
-                            Detail::Refined(_) => drawn,
-                            Detail::Level(..) => Detail::default(),
-                        },
+                        _ => want,
                     };
-                    by_brick += f64::from(splats) * splat_share(got);
-                    at_one += f64::from(splats) * splat_share(drawn);
                     bricks.push((brick, got));
                 }
-                if bricks.iter().any(|(_, d)| *d != drawn) && by_brick * MIX_SAVING <= at_one {
+                if bricks.iter().any(|(_, d)| *d != drawn) {
                     let mut mix = self.spare_mixes.pop().unwrap_or_default();
                     mix.bricks = bricks;
                     self.mixes.insert(id, mix);
@@ -1402,14 +1419,12 @@ impl Renderer {
                 report.splats += state.ids.len();
             }
             match self.levels.get(&id).copied().unwrap_or_default() {
-                Detail::Level(_, _) if mixed => {
-                    report.level = report.levels.into_iter().max().unwrap_or(0);
-                }
+                // A mix's levels are counted from its runs above.
+                Detail::Level(_, _) if mixed => {}
                 Detail::Level(level, _) => {
                     for (most, l) in report.levels.iter_mut().zip(level) {
                         *most = (*most).max(l);
                     }
-                    report.level = report.levels.into_iter().max().unwrap_or(0);
                 }
                 Detail::Refined(factors) => {
                     let most = report.refined.get_or_insert([1; 3]);
@@ -1418,6 +1433,7 @@ impl Renderer {
                     }
                 }
             }
+            report.level = report.levels.into_iter().max().unwrap_or(0);
             ordered.push((id, geometry));
         }
         // Between volumes: farthest centre first (volumes that interpenetrate are not sorted
