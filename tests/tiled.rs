@@ -766,3 +766,43 @@ fn a_close_up_refines_only_its_near_bricks() {
     );
     assert!(d.rmse < 0.02, "{d:?}");
 }
+
+#[test]
+fn a_volume_drawn_at_one_detail_by_brick_is_the_one_detail_picture() {
+    // From near and far before the blobs, at several sizes: wherever the bricks are not drawn each at
+    // its own level (they all want one, or a mix would save too little), the picture is the
+    // one-detail picture pixel for pixel, refined views included: a refinement made for a
+    // volume drawn whole covers every brick on the image.
+    let ctx = context();
+    let scene = translucent_blobs();
+    let (mut whole_refined, mut mixed) = (0, 0);
+    for (distance, size) in [
+        (12.0, 64),
+        (40.0, 96),
+        (110.0, 160),
+        (150.0, 160),
+        (200.0, 200),
+    ] {
+        let camera = before_the_blobs(distance);
+        let shot = |by_brick: bool| {
+            let mut renderer = Renderer::with_compositor(Compositor::Cpu);
+            renderer.set_levels_by_brick(by_brick);
+            renderer
+                .screenshot(&ctx, &scene, &camera, (size, size), &OPTIONS)
+                .unwrap()
+        };
+        let (a, b) = (shot(true), shot(false));
+        if a.report.bricks_by_level > 0 {
+            mixed += 1;
+            continue;
+        }
+        whole_refined += usize::from(a.report.refined.is_some());
+        assert_eq!(a.report.splats, b.report.splats, "{distance} mm");
+        assert!(a.frame.pixels == b.frame.pixels, "{distance} mm");
+    }
+    eprintln!("{mixed} views mixed, {whole_refined} refined whole");
+    assert!(
+        whole_refined > 0 && mixed > 0,
+        "{mixed} mixed, {whole_refined} refined whole"
+    );
+}

@@ -325,6 +325,19 @@ struct Mix {
     places: Vec<Vec<u32>>,
 }
 
+impl Mix {
+    /// The grids its bricks are drawn from, each once.
+    fn details(&self) -> Vec<Detail> {
+        let mut details: Vec<Detail> = Vec::new();
+        for (_, d) in &self.bricks {
+            if !details.contains(d) {
+                details.push(*d);
+            }
+        }
+        details
+    }
+}
+
 /// Orders volume `id`'s splats drawn brick by brick as `mix` says, its node placed by
 /// `world`, for the eye and target `view`: each level the bricks use ordered whole by
 /// `ordering`, the bricks put far to near ([`brick_order`]), then each brick's splats taken
@@ -344,12 +357,7 @@ fn order_mix(
     let own_geometry = own.geometry(world).map_err(|e| e.to_string())?;
     brick_order(&own_geometry, eye, target, &mut mix.bricks).map_err(|e| e.to_string())?;
     let [bx, by, bz] = own_geometry.dims().map(|n| n.div_ceil(BRICK) as usize);
-    let mut details: Vec<Detail> = Vec::new();
-    for (_, d) in &mix.bricks {
-        if !details.contains(d) {
-            details.push(*d);
-        }
-    }
+    let details = mix.details();
     for &detail in &details {
         volumes
             .get_mut(&(id, detail))
@@ -360,8 +368,7 @@ fn order_mix(
     const NONE: u32 = u32::MAX;
     let mut starts = vec![0usize; mix.bricks.len() + 1];
     // Per level, each splat's brick's place (a splat's brick: its voxel's first own voxel
-    // over the brick's side; `k 2^l` on a level, `k / f` on a refinement), found in parallel
-    // (the divisions by the grid's sizes are most of a mix's ordering).
+    // over the brick's side; `k 2^l` on a level, `k / f` on a refinement), found in parallel.
     let mut places = std::mem::take(&mut mix.places);
     places.resize_with(details.len(), Vec::new);
     for (&detail, place) in details.iter().zip(places.iter_mut()) {
@@ -579,8 +586,9 @@ impl Renderer {
     /// to near in the IP-PBTF order of the grid of bricks and each brick's splats in its
     /// level's draw order, so the order keeps every brick behind the bricks that can hide it;
     /// bricks whose splats cannot land on the image are left out before their splats are
-    /// walked. A view whose bricks all want one level draws it as one grid, as before. The GPU
-    /// passes draw one level a volume.
+    /// walked. A view whose bricks all want one level, or where the bricks' levels would draw
+    /// more than a third of the splats of the volume's one level (`MIX_SAVING`), draws that
+    /// one level as one grid, as before. The GPU passes draw one level a volume.
     pub fn set_levels_by_brick(&mut self, on: bool) {
         self.one_level = !on;
     }
@@ -858,15 +866,7 @@ impl Renderer {
         // The grids each volume draws: the levels of its bricks, or its one level.
         let drawn = |id: &NodeId| -> Vec<Detail> {
             match mixes.get(id) {
-                Some(mix) => {
-                    let mut details: Vec<Detail> = Vec::new();
-                    for (d, _) in &mix.runs {
-                        if !details.contains(d) {
-                            details.push(*d);
-                        }
-                    }
-                    details
-                }
+                Some(mix) => mix.details(),
                 None => vec![levels.get(id).copied().unwrap_or_default()],
             }
         };
@@ -1206,6 +1206,35 @@ impl Renderer {
                 }
                 _ => None,
             };
+            // The bricks that want refining take the refinement wanted, or the own grid
+            // without one. Drawn brick by brick where that draws at most a third of the splats
+            // of the one detail, by the own grid's splats in each brick; decided before
+            // anything is made, so that a refinement for a volume drawn whole covers every
+            // brick on the image.
+            let refined_or_own = match wanted {
+                Detail::Refined(_) => wanted,
+                Detail::Level(..) => Detail::default(),
+            };
+            let share = |wants: &[([u32; 3], Detail, u32)], one: Option<Detail>| -> f64 {
+                wants
+                    .iter()
+                    .map(|(_, d, splats)| f64::from(*splats) * splat_share(one.unwrap_or(*d)))
+                    .sum()
+            };
+            let brick_wants = brick_wants
+                .map(|wants| {
+                    wants
+                        .into_iter()
+                        .map(|(brick, want, splats)| match want {
+                            Detail::Refined(_) => (brick, refined_or_own, splats),
+                            Detail::Level(..) => (brick, want, splats),
+                        })
+                        .collect::<Vec<_>>()
+                })
+                .filter(|w| {
+                    w.iter().any(|(_, d, _)| *d != wanted)
+                        && share(w, None) * MIX_SAVING <= share(w, Some(wanted))
+                });
             // The own grid's voxel size in the world (the opacities' step).
             let spacing = placed_geometry(&node.volume, world)
                 .map_err(|e| fail(e.to_string()))?
@@ -1287,33 +1316,7 @@ impl Renderer {
                     wanted
                 }
             };
-            // The bricks that want refining take the refinement drawn, or the own grid
-            // without one.
-            let refined_or_own = match drawn {
-                Detail::Refined(_) => drawn,
-                Detail::Level(..) => Detail::default(),
-            };
-            let wants = brick_wants.map(|wants| {
-                wants
-                    .into_iter()
-                    .map(|(brick, want, splats)| match want {
-                        Detail::Refined(_) => (brick, refined_or_own, splats),
-                        Detail::Level(..) => (brick, want, splats),
-                    })
-                    .collect::<Vec<_>>()
-            });
-            // Drawn brick by brick where that draws at most a third of the splats of the one
-            // detail, by the own grid's splats in each brick (before any level is made).
-            let share = |wants: &[([u32; 3], Detail, u32)], one: Option<Detail>| -> f64 {
-                wants
-                    .iter()
-                    .map(|(_, d, splats)| f64::from(*splats) * splat_share(one.unwrap_or(*d)))
-                    .sum()
-            };
-            if let Some(wants) = wants.filter(|w| {
-                w.iter().any(|(_, d, _)| *d != drawn)
-                    && share(w, None) * MIX_SAVING <= share(w, Some(drawn))
-            }) {
+            if let Some(wants) = brick_wants {
                 // Each level the bricks want, made once (a level that could not be made as
                 // wanted stands for the one reached on its way).
                 let mut reached: HashMap<Detail, Detail> = HashMap::new();
