@@ -56,8 +56,10 @@ pub struct ViewerOptions {
     /// Background colour.
     pub background: [f32; 3],
     /// While the camera is dragged or zoomed and a full frame takes longer than 50 ms (20
-    /// frames a second), draw the volumes at half resolution ([`crate::render::FrameOptions::preview`]); the
-    /// full frame follows when the button is released, or a quarter second after the last
+    /// frames a second), draw the volumes at a coarser level of detail
+    /// ([`crate::render::FrameOptions::preview`]) into a smaller image scaled up to the window:
+    /// half its size, or a third or a quarter where previews take longer than 40 ms; the full
+    /// frame follows when the button is released, or a quarter second after the last
     /// wheel step.
     pub preview_while_moving: bool,
     /// The scene file the scene was loaded from, with absolute paths: the screenshot key
@@ -122,6 +124,33 @@ const PRESETS: [&str; 4] = TransferFunction::PRESETS;
 /// A drag or a zoom draws preview frames when a full frame took longer than this.
 const PREVIEW_ABOVE: Duration = Duration::from_millis(50);
 
+/// What a preview frame may take: past it, the next preview is drawn smaller
+/// ([`next_preview_divisor`]).
+const PREVIEW_BUDGET: Duration = Duration::from_millis(40);
+
+/// Previews are drawn at the window's size divided by 2 to this.
+const MOST_PREVIEW_DIVISOR: u32 = 4;
+
+/// The divisor of the window's size the next preview is drawn at, from the last preview's
+/// `divisor` and how long that frame took: one more where it took longer than
+/// [`PREVIEW_BUDGET`] (up to [`MOST_PREVIEW_DIVISOR`]), one less where the larger preview
+/// would still fit within the budget by its share of pixels (a frame's cost goes with its
+/// pixels at least: fewer pixels also draw a coarser level of detail), never under 2. The
+/// gap between the two rules keeps a preview near the budget from changing size every frame.
+fn next_preview_divisor(divisor: u32, took: Duration) -> u32 {
+    let divisor = divisor.clamp(2, MOST_PREVIEW_DIVISOR);
+    if took > PREVIEW_BUDGET {
+        return (divisor + 1).min(MOST_PREVIEW_DIVISOR);
+    }
+    let d = f64::from(divisor);
+    let larger = took.as_secs_f64() * (d / (d - 1.0)).powi(2);
+    if divisor > 2 && larger < 0.8 * PREVIEW_BUDGET.as_secs_f64() {
+        divisor - 1
+    } else {
+        divisor
+    }
+}
+
 /// After the last wheel step of a zoom drawn as a preview, the full frame follows this late.
 const SETTLE: Duration = Duration::from_millis(250);
 
@@ -171,6 +200,7 @@ pub fn run(scene: Scene, options: ViewerOptions) -> Result<(), ViewerError> {
         last: FrameReport::default(),
         full_frame: Duration::ZERO,
         this_frame: Duration::ZERO,
+        preview_divisor: 2,
         settle: None,
         sharpen: None,
         sharp_at: None,
@@ -263,6 +293,8 @@ struct App {
     full_frame: Duration,
     /// How long the frame on screen took to draw (what the on-screen text and title say).
     this_frame: Duration,
+    /// Previews are drawn at the window's size divided by this ([`next_preview_divisor`]).
+    preview_divisor: u32,
     /// When a zoom drawn as previews gets its full frame.
     settle: Option<Instant>,
     /// When a full frame drawn without refining a volume that wanted it gets its refined
@@ -852,6 +884,37 @@ impl ApplicationHandler for App {
                 Some(at) => event_loop.set_control_flow(ControlFlow::WaitUntil(at)),
                 None => event_loop.set_control_flow(ControlFlow::Wait),
             },
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn previews_shrink_while_over_their_budget_and_grow_back_with_room_to_spare() {
+        let ms = Duration::from_millis;
+        // Over 40 ms: a third, then a quarter, no smaller.
+        assert_eq!(next_preview_divisor(2, ms(55)), 3);
+        assert_eq!(next_preview_divisor(3, ms(41)), 4);
+        assert_eq!(next_preview_divisor(4, ms(90)), 4);
+        // Within it: one size larger where that would still take under 32 ms by its
+        // pixels, never larger than half the window.
+        assert_eq!(next_preview_divisor(2, ms(10)), 2);
+        assert_eq!(next_preview_divisor(3, ms(12)), 2); // 12 x (3/2)^2 = 27 ms
+        assert_eq!(next_preview_divisor(3, ms(20)), 3); // 20 x (3/2)^2 = 45 ms
+        assert_eq!(next_preview_divisor(4, ms(15)), 3); // 15 x (4/3)^2 = 26.7 ms
+        assert_eq!(next_preview_divisor(4, ms(20)), 4); // 20 x (4/3)^2 = 35.6 ms
+        assert_eq!(next_preview_divisor(1, ms(10)), 2);
+        // A preview that had to shrink because the larger one took over the budget does
+        // not grow back while the model holds: at the smaller size it takes over
+        // 40 x (2/3)^2 = 17.8 ms, which grows to over 40 ms, past the 32 ms the rule allows.
+        for over in [41, 50, 80] {
+            let shrunk = next_preview_divisor(2, ms(over));
+            let took = over as f64 * (2.0f64 / 3.0).powi(2);
+            let again = next_preview_divisor(shrunk, Duration::from_secs_f64(took / 1e3));
+            assert_eq!(again, shrunk, "{over} ms");
         }
     }
 }

@@ -8,7 +8,7 @@ use glam::DVec3;
 
 use super::action::{KEYS, STEP};
 use super::look::contact_ticks;
-use super::{App, PREVIEW_ABOVE, SETTLE, ViewerError};
+use super::{App, PREVIEW_ABOVE, SETTLE, ViewerError, next_preview_divisor};
 use crate::annotate::{Anchor, Label, Painter, Rect, annotate_image_clear_of, colour_bar};
 use crate::pick::measure::{MarkerStyle, Measurement, annotate, draw_scene_measurements};
 use crate::pick::paint::value_colour;
@@ -112,11 +112,13 @@ impl App {
         let mut overlay = image::RgbaImage::new(window_size.0, window_size.1);
         if on_cpu {
             // The tile compositor's frame, shown through the present pass like the GPU's. A
-            // preview in one pane is drawn at half the window's size and scaled up: a quarter
-            // of the pixels to composite, read back and convert, and coarser splats.
-            let half = preview && self.panes.is_none();
-            let size = if half {
-                (view.size.0.div_ceil(2), view.size.1.div_ceil(2))
+            // preview in one pane is drawn at half the window's size (or less, where previews
+            // are slow) and scaled up: a quarter of the pixels to composite, read back and
+            // convert, and coarser splats.
+            let small = preview && self.panes.is_none();
+            let size = if small {
+                let d = self.preview_divisor.max(1);
+                (view.size.0.div_ceil(d), view.size.1.div_ceil(d))
             } else {
                 view.size
             };
@@ -125,7 +127,7 @@ impl App {
                 .screenshot(&gpu.ctx, &drawn, &self.camera, size, &options)?;
             self.last = shot.report;
             let mut image = frame_to_rgba8(&shot.frame);
-            if half {
+            if small {
                 image = upscale(&image, view.size);
             }
             if self.panes.is_some() {
@@ -210,6 +212,17 @@ impl App {
         if !preview && !sharp {
             self.full_frame = started.elapsed();
         }
+        // The size this preview was drawn at (the title's), and the next one's.
+        let preview_divisor = self.preview_divisor;
+        if preview && on_cpu && self.panes.is_none() {
+            // By what a preview costs frame after frame: not what this one spent making a
+            // classification, a level or texels the next ones reuse.
+            let t = &self.last.timings;
+            let steady = started
+                .elapsed()
+                .saturating_sub(t.classify + t.levels + t.texels);
+            self.preview_divisor = next_preview_divisor(self.preview_divisor, steady);
+        }
         self.sharpen = (!preview && self.last.unrefined).then(|| Instant::now() + SETTLE);
         let preset = self.transfer_label();
         let Some(gpu) = &self.gpu else {
@@ -234,6 +247,8 @@ impl App {
             self.last.timings.order.as_secs_f64() * 1e3,
             self.last.splats,
             match (options.preview, self.last.refined, self.sharpen.is_some()) {
+                (true, _, _) if on_cpu && self.panes.is_none() =>
+                    format!(" (preview at 1/{} size)", preview_divisor),
                 (true, _, _) => " (preview)".to_string(),
                 (false, Some([x, y, z]), _) => format!(" (refined {x}x{y}x{z})"),
                 (false, None, true) => " (refining)".to_string(),
