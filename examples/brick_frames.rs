@@ -90,9 +90,15 @@ fn main() -> Result<()> {
             let ms = started.elapsed().as_secs_f64() * 1e3;
             let t = shot.report.timings;
             let made = (t.classify + t.levels + t.texels).as_secs_f64() * 1e3;
+            let stages = shot.report.tiles.unwrap_or_default();
+            let ms_of = |d: std::time::Duration| d.as_secs_f64() * 1e3;
             println!(
-                "frame {f} {}: {ms:.0} ms (making {made:.0}), {} splats, levels {:?}, refined {:?}, by brick {}",
+                "frame {f} {}: {ms:.0} ms (making {made:.0}; order {:.0}, project {:.0}, bin {:.0}, tiles {:.0}), {} splats, levels {:?}, refined {:?}, by brick {}",
                 names[m],
+                ms_of(t.order),
+                ms_of(stages.project),
+                ms_of(stages.bin),
+                ms_of(stages.tiles),
                 shot.report.splats,
                 shot.report.levels,
                 shot.report.refined,

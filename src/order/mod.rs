@@ -259,6 +259,110 @@ impl Orderer {
         Ok(())
     }
 
+    /// The draw order of `grid`'s significant voxels within each of `boxes` (per axis, the
+    /// voxel range `lo..hi`; bricks of a grid drawn brick by brick), box after box into `out`
+    /// (replacing its contents), with `ends[i]` one past the last of box `i`'s voxels in
+    /// `out`. Each box's voxels come in the order [`Orderer::order`] gives them within the
+    /// whole grid: IP-PBTF (either interleaving) is a nesting of per-axis far-to-near walks,
+    /// and a walk restricted to a range keeps the whole walk's order (the implicit merge
+    /// decides each pair of voxels by their two coordinates alone). The boxes are walked in
+    /// parallel, each only over its own rows, so the cost follows the boxes' voxels, not the
+    /// grid's. `Ok(false)`, with nothing written, for the other orderings.
+    pub fn order_boxes(
+        grid: &SparseGrid,
+        view: &ViewCase,
+        ordering: Ordering,
+        options: &OrderOptions,
+        boxes: &[[(u32, u32); 3]],
+        out: &mut Vec<u32>,
+        ends: &mut Vec<usize>,
+    ) -> Result<bool, OrderError> {
+        use rayon::prelude::*;
+        let explicit = match ordering {
+            Ordering::IpPbtfImplicit => false,
+            Ordering::IpPbtfExplicit => true,
+            _ => return Ok(false),
+        };
+        let view_dims = view.axes.map(|a| a.n);
+        if view_dims != grid.dims() {
+            return Err(OrderError::DimsMismatch {
+                view: view_dims,
+                grid: grid.dims(),
+            });
+        }
+        let cull = options.cull_behind_eye.then_some(view);
+        let perm = view.permutation;
+        let inner_axis = &view.axes[perm[2]];
+        // The inner axis's whole far-to-near order and its offsets, which the implicit merge
+        // slices whatever range it walks.
+        let mut sequence = Vec::new();
+        inner_axis.far_to_near(&mut sequence);
+        let stride = grid.strides()[perm[2]];
+        let offsets: Vec<u32> = sequence.iter().map(|&k| k * stride).collect();
+        let threshold = inner_axis.merge_threshold();
+        // The rows along the inner axis are read from every task: made first.
+        grid.prepare_rows(perm[2]);
+        const BOXES_A_TASK: usize = 64;
+        let parts: Vec<(Vec<u32>, Vec<usize>)> = boxes
+            .par_chunks(BOXES_A_TASK)
+            .map(|chunk| {
+                let (mut ids, mut chunk_ends) = (Vec::new(), Vec::with_capacity(chunk.len()));
+                let (mut s0, mut s1, mut s2) = (Vec::new(), Vec::new(), Vec::new());
+                for range in chunk {
+                    let within = |a: usize| {
+                        let (lo, hi) = range[a];
+                        (lo.min(grid.dims()[a]), hi.min(grid.dims()[a]))
+                    };
+                    for (seq, a) in [(&mut s0, perm[0]), (&mut s1, perm[1])] {
+                        seq.clear();
+                        let (lo, hi) = within(a);
+                        view.axes[a].far_to_near_within(lo, hi, seq);
+                    }
+                    let inner_range = within(perm[2]);
+                    let inner = if explicit {
+                        s2.clear();
+                        inner_axis.far_to_near_within(inner_range.0, inner_range.1, &mut s2);
+                        Inner::Explicit(&s2)
+                    } else {
+                        Inner::far_to_near(inner_axis, inner_range, threshold, &sequence, &offsets)
+                    };
+                    let ranges = [0, 1, 2].map(within);
+                    if ranges.iter().all(|(lo, hi)| lo < hi) {
+                        let plan = Plan {
+                            perm,
+                            outer: [&s0, &s1],
+                            inner,
+                        };
+                        // A box wholly in front of the eye plane (its corners are: the plane
+                        // is linear in the coordinates) needs no row tested against it.
+                        let in_front = cull.is_some_and(|view| {
+                            (0..8).all(|corner| {
+                                let k = std::array::from_fn(|a| {
+                                    let (lo, hi) = ranges[a];
+                                    if corner >> a & 1 == 0 { lo } else { hi - 1 }
+                                });
+                                view.eye_plane(k) > 0.0
+                            })
+                        });
+                        let cull = if in_front { None } else { cull };
+                        walk(grid, &plan, cull, &mut Collect(&mut ids));
+                    }
+                    chunk_ends.push(ids.len());
+                }
+                (ids, chunk_ends)
+            })
+            .collect();
+        out.clear();
+        ends.clear();
+        out.reserve(parts.iter().map(|(ids, _)| ids.len()).sum());
+        for (ids, chunk_ends) in parts {
+            let before = out.len();
+            out.extend_from_slice(&ids);
+            ends.extend(chunk_ends.into_iter().map(|e| before + e));
+        }
+        Ok(true)
+    }
+
     fn btf(
         &mut self,
         grid: &SparseGrid,
@@ -446,4 +550,99 @@ pub fn dense_order_bytes(dims: [u32; 3], ordering: Ordering) -> u64 {
         _ => 0,
     };
     n / 8 + 12 * rows + 8 * n + keys
+}
+
+#[cfg(test)]
+mod box_tests {
+    use super::*;
+    use crate::order::fixtures::{anisotropic_and_sheared, eye_at, sparse};
+
+    /// Each box's voxels come as the comparison-sort definition orders them within the whole
+    /// grid, for boxes that cut the grid in irregular pieces (some holding the eye's
+    /// coordinate on an axis, some empty, some reaching past the grid), eyes outside and
+    /// inside, with and without culling, both interleavings.
+    #[test]
+    fn boxes_keep_the_order_of_the_whole_grid() {
+        for geometry in &anisotropic_and_sheared() {
+            let dims = geometry.dims();
+            let grid = SparseGrid::from_mask(dims, sparse).unwrap();
+            // Cuts along each axis at irregular places, the last past the grid's end.
+            let cuts = |n: u32| -> Vec<(u32, u32)> {
+                let mut at = vec![0, 3, 4, n / 2 + 1, n - 2, n + 5];
+                at.dedup();
+                at.windows(2).map(|w| (w[0], w[1])).collect()
+            };
+            let mut boxes = Vec::new();
+            for &z in &cuts(dims[2]) {
+                for &y in &cuts(dims[1]) {
+                    for &x in &cuts(dims[0]) {
+                        boxes.push([x, y, z]);
+                    }
+                }
+            }
+            boxes.push([(2, 2), (0, dims[1]), (0, dims[2])]);
+            // Reversed so that the boxes do not come in id order.
+            boxes.reverse();
+            for f in [
+                [0.43, 0.56, -0.35],
+                [0.41, 0.37, 0.45],
+                [-0.6, -0.5, 1.45],
+                [1.8, 0.5, 0.52],
+            ] {
+                let eye = eye_at(geometry, f);
+                let view = ViewCase::new(geometry, eye, geometry.centre_world()).unwrap();
+                for ordering in [Ordering::IpPbtfImplicit, Ordering::IpPbtfExplicit] {
+                    for cull in [false, true] {
+                        let options = OrderOptions {
+                            cull_behind_eye: cull,
+                            ..OrderOptions::default()
+                        };
+                        let (mut out, mut ends) = (vec![7], vec![9]);
+                        let done = Orderer::order_boxes(
+                            &grid, &view, ordering, &options, &boxes, &mut out, &mut ends,
+                        )
+                        .unwrap();
+                        assert!(done);
+                        assert_eq!(ends.len(), boxes.len());
+                        let whole = reference::order(&grid, &view, ordering, cull);
+                        let mut start = 0;
+                        for (range, &end) in boxes.iter().zip(&ends) {
+                            let inside = |id: &u32| {
+                                let k = grid.coords(*id);
+                                (0..3).all(|a| k[a] >= range[a].0 && k[a] < range[a].1)
+                            };
+                            let expected: Vec<u32> = whole.iter().copied().filter(inside).collect();
+                            assert_eq!(
+                                out[start..end],
+                                expected[..],
+                                "{ordering:?} eye {f:?} cull {cull} box {range:?}"
+                            );
+                            start = end;
+                        }
+                        assert_eq!(start, out.len());
+                    }
+                }
+            }
+            // Other orderings are left to the whole grid's order.
+            let view = ViewCase::new(
+                geometry,
+                eye_at(geometry, [2.0; 3]),
+                geometry.centre_world(),
+            )
+            .unwrap();
+            let (mut out, mut ends) = (Vec::new(), Vec::new());
+            assert!(
+                !Orderer::order_boxes(
+                    &grid,
+                    &view,
+                    Ordering::Btf,
+                    &OrderOptions::default(),
+                    &boxes,
+                    &mut out,
+                    &mut ends
+                )
+                .unwrap()
+            );
+        }
+    }
 }

@@ -339,10 +339,11 @@ impl Mix {
 }
 
 /// Orders volume `id`'s splats drawn brick by brick as `mix` says, its node placed by
-/// `world`, for the eye and target `view`: each level the bricks use ordered whole by
-/// `ordering`, the bricks put far to near ([`brick_order`]), then each brick's splats taken
-/// from its level's order in that order (a counting sort by brick, which keeps the level's
-/// order within each brick) into `mix.ids`, cut into runs of one level.
+/// `world`, for the eye and target `view`: the bricks put far to near ([`brick_order`]), each
+/// brick's splats in its level's order, into `mix.ids`, cut into runs of one level. In the
+/// IP-PBTF orders each brick's splats are walked within the brick alone
+/// ([`Orderer::order_boxes`]), so the cost follows the splats drawn; in the others each level
+/// is ordered whole and its splats sorted into bricks ([`order_mix_from_whole_levels`]).
 fn order_mix(
     volumes: &mut HashMap<(NodeId, Detail), VolumeState>,
     id: NodeId,
@@ -356,6 +357,100 @@ fn order_mix(
         .ok_or("the volume's own grid is not classified")?;
     let own_geometry = own.geometry(world).map_err(|e| e.to_string())?;
     brick_order(&own_geometry, eye, target, &mut mix.bricks).map_err(|e| e.to_string())?;
+    let details = mix.details();
+    // Per level, its bricks' splats brick after brick in draw order, and where each ends.
+    let mut parts: Vec<(Vec<u32>, Vec<usize>)> = Vec::with_capacity(details.len());
+    for &detail in &details {
+        let state = volumes
+            .get(&(id, detail))
+            .ok_or("a level of detail a brick is drawn at is not made")?;
+        let geometry = state.geometry(world).map_err(|e| e.to_string())?;
+        let case = ViewCase::new(&geometry, eye, target).map_err(|e| e.to_string())?;
+        let (halvings, factors) = brick_scale(detail);
+        // A level's voxel `k` lies in brick `floor(k 2^l / BRICK)`, a refinement's in brick
+        // `floor(k / (f BRICK))`: the voxels of brick `b` are those from `ceil(b side / step)`.
+        let boxes: Vec<[(u32, u32); 3]> = mix
+            .bricks
+            .iter()
+            .filter(|(_, d)| *d == detail)
+            .map(|(b, _)| {
+                std::array::from_fn(|a| {
+                    let side = BRICK * factors[a];
+                    let step = 1u32 << halvings[a];
+                    (
+                        (b[a] * side).div_ceil(step),
+                        ((b[a] + 1) * side).div_ceil(step),
+                    )
+                })
+            })
+            .collect();
+        let (mut ids, mut ends) = (Vec::new(), Vec::new());
+        let walked = Orderer::order_boxes(
+            &state.classified.grid,
+            &case,
+            ordering,
+            options,
+            &boxes,
+            &mut ids,
+            &mut ends,
+        )
+        .map_err(|e| e.to_string())?;
+        if !walked {
+            return order_mix_from_whole_levels(
+                volumes,
+                id,
+                world,
+                (eye, target),
+                (ordering, options),
+                mix,
+            );
+        }
+        parts.push((ids, ends));
+    }
+    mix.ids.clear();
+    mix.runs.clear();
+    // Per level, the bricks of it taken so far and where the next one's splats start.
+    let mut next = vec![(0usize, 0usize); details.len()];
+    for (_, detail) in &mix.bricks {
+        let level = details.iter().position(|d| d == detail).unwrap_or(0);
+        let ((ids, ends), (taken, start)) = (&parts[level], &mut next[level]);
+        let end = ends.get(*taken).copied().unwrap_or(*start);
+        let from = mix.ids.len();
+        mix.ids.extend_from_slice(&ids[*start..end]);
+        (*taken, *start) = (*taken + 1, end);
+        match mix.runs.last_mut() {
+            Some((d, run)) if *d == *detail => run.end = mix.ids.len(),
+            _ => mix.runs.push((*detail, from..mix.ids.len())),
+        }
+    }
+    Ok(())
+}
+
+/// How a grid drawn at `detail` relates to its own grid's voxels: the times each axis was
+/// halved (a level) and the factors it was refined by.
+fn brick_scale(detail: Detail) -> ([u32; 3], [u32; 3]) {
+    match detail {
+        Detail::Level(l, _) => (l.map(u32::from), [1; 3]),
+        Detail::Refined(f) => ([0; 3], f.map(|f| f.max(1))),
+    }
+}
+
+/// [`order_mix`] for the orderings that cannot walk a brick alone: each level the bricks use
+/// ordered whole by `ordering`, then each brick's splats taken from its level's order in the
+/// bricks' order (a counting sort by brick, which keeps the level's order within each
+/// brick).
+fn order_mix_from_whole_levels(
+    volumes: &mut HashMap<(NodeId, Detail), VolumeState>,
+    id: NodeId,
+    world: DMat4,
+    (eye, target): (DVec3, DVec3),
+    (ordering, options): (Ordering, &OrderOptions),
+    mix: &mut Mix,
+) -> Result<(), String> {
+    let own = volumes
+        .get(&(id, Detail::default()))
+        .ok_or("the volume's own grid is not classified")?;
+    let own_geometry = own.geometry(world).map_err(|e| e.to_string())?;
     let [bx, by, bz] = own_geometry.dims().map(|n| n.div_ceil(BRICK) as usize);
     let details = mix.details();
     for &detail in &details {
@@ -389,10 +484,7 @@ fn order_mix(
             strength_reduce::StrengthReducedU32::new(nx.max(1)),
             strength_reduce::StrengthReducedU32::new((nx * ny).max(1)),
         );
-        let (halvings, factors) = match detail {
-            Detail::Level(l, _) => (l.map(u32::from), [1; 3]),
-            Detail::Refined(f) => ([0; 3], f.map(|f| f.max(1))),
-        };
+        let (halvings, factors) = brick_scale(detail);
         // A refinement's bricks are `f` times the brick's side along each axis.
         let sides = factors.map(|f| strength_reduce::StrengthReducedU32::new(f * BRICK));
         let slot = &slot;
@@ -458,13 +550,15 @@ fn splat_share(detail: Detail) -> f64 {
     }
 }
 
-/// A volume's bricks are drawn each at its own level where that draws at most a third of the
-/// splats its one level would (by the own grid's splats in each brick). A mix orders every
-/// level it draws from whole and sorts the splats into bricks, about 5 ns a splat of those
-/// levels on this project's 2-core machine: on the 0.7 mm LIDC2 CT seen from 240 mm (its far
-/// bricks halved along the view, 2.3M splats instead of 5.4M) that cost what the fewer splats
-/// saved (BENCHMARKS.md, "Bricks at their own levels").
-const MIX_SAVING: f64 = 3.0;
+/// A volume's bricks are drawn each at its own level where that draws at most half the
+/// splats its one level would (by the own grid's splats in each brick). A mix walks each
+/// brick's splats alone, about 9 ns a splat drawn on this project's 2-core machine against
+/// 2 ns a splat of the whole grid for one level, and the splats it leaves out are mostly far
+/// ones that early termination skips anyway: on the 0.7 mm LIDC2 CT seen from 240 and 320 mm
+/// (its far bricks halved along the view, 55-70% of the splats) the mix and the one level
+/// took the same time, where a translucent volume seen deep (28%) took a third
+/// (BENCHMARKS.md, "Bricks walked alone").
+const MIX_SAVING: f64 = 2.0;
 
 /// The most levels of detail a volume keeps that are halved along some axes more than others
 /// (a camera orbiting a volume wants one for each axis its view runs along).
@@ -587,7 +681,7 @@ impl Renderer {
     /// level's draw order, so the order keeps every brick behind the bricks that can hide it;
     /// bricks whose splats cannot land on the image are left out before their splats are
     /// walked. A view whose bricks all want one level, or where the bricks' levels would draw
-    /// more than a third of the splats of the volume's one level (`MIX_SAVING`), draws that
+    /// more than half the splats of the volume's one level (`MIX_SAVING`), draws that
     /// one level as one grid, as before. The GPU passes draw one level a volume.
     pub fn set_levels_by_brick(&mut self, on: bool) {
         self.one_level = !on;
@@ -1207,8 +1301,8 @@ impl Renderer {
                 _ => None,
             };
             // The bricks that want refining take the refinement wanted, or the own grid
-            // without one. Drawn brick by brick where that draws at most a third of the splats
-            // of the one detail, by the own grid's splats in each brick; decided before
+            // without one. Drawn brick by brick where that draws at most half the splats of the
+            // one detail, by the own grid's splats in each brick; decided before
             // anything is made, so that a refinement for a volume drawn whole covers every
             // brick on the image.
             let refined_or_own = match wanted {

@@ -400,3 +400,92 @@ fn bricks_far_from_the_eye_draw_coarser_levels_and_those_off_the_image_none() {
         }
     }
 }
+
+#[test]
+fn bricks_walked_alone_give_their_levels_orders_sorted_into_bricks() {
+    // A translucent 96^3 field seen from 30 mm before its face along z, and from an oblique
+    // eye whose coordinates along y and z fall on brick boundaries, at 32 x 32 pixels: the near
+    // bricks draw the own grid, the far ones coarser levels. The mix's order walked brick by
+    // brick is the one each level's whole order gives, sorted into bricks, splat for splat, in
+    // both interleavings.
+    let n = 96u32;
+    let values: Vec<f32> = (0..n * n * n)
+        .map(|id| {
+            let k = [id % n, id / n % n, id / n / n].map(f64::from);
+            (200.0 + 250.0 * (k[0] / 7.0).sin() * (k[1] / 9.0).sin() * (k[2] / 11.0).sin()) as f32
+        })
+        .collect();
+    let volume = CpuVolume {
+        dims: [n; 3],
+        spacing: [1.0; 3],
+        origin: [0.0; 3],
+        direction: DMat3::IDENTITY,
+        values: values.into(),
+    };
+    let transfer = crate::classify::TransferFunction::new(vec![
+        (250.0, [0.9, 0.5, 0.3, 0.0]),
+        (450.0, [1.0, 0.9, 0.7, 0.05]),
+    ]);
+    let mut scene = Scene::new();
+    let node = VolumeNode {
+        volume: Arc::new(volume),
+        transfer: Arc::new(transfer),
+        splats: crate::scene::SplatSettings::default(),
+    };
+    let id = scene
+        .add(
+            "volume",
+            DMat4::IDENTITY,
+            None,
+            crate::scene::NodeContent::Volume(node),
+        )
+        .unwrap();
+    let cameras = [
+        (DVec3::new(48.0, 47.0, -30.0), DVec3::new(48.0, 50.0, 48.0)),
+        (DVec3::new(-20.0, 32.0, 16.0), DVec3::new(60.0, 50.0, 70.0)),
+    ];
+    for (eye, target) in cameras {
+        let camera = SceneCamera {
+            projection: crate::scene::Projection::Perspective {
+                fov_y_degrees: 50.0,
+            },
+            ..SceneCamera::look_at(eye, target)
+        };
+        for ordering in [Ordering::IpPbtfImplicit, Ordering::IpPbtfExplicit] {
+            let mut renderer = Renderer::with_compositor(super::super::Compositor::Cpu);
+            let options = FrameOptions {
+                ordering: Some(ordering),
+                ..FrameOptions::default()
+            };
+            let shot = renderer
+                .screenshot_without_gpu(&scene, &camera, (32, 32), &options)
+                .unwrap();
+            assert_eq!(shot.report.bricks_by_level, 1, "{eye}: {:?}", shot.report);
+            let mix = renderer.mixes.get(&id).unwrap();
+            assert!(mix.runs.len() > 1, "{eye}: {:?}", mix.runs);
+            let mut whole = Mix {
+                bricks: mix.bricks.clone(),
+                ..Mix::default()
+            };
+            let pinhole = shot.view.pinhole().unwrap();
+            order_mix_from_whole_levels(
+                &mut renderer.volumes,
+                id,
+                DMat4::IDENTITY,
+                (pinhole.eye, pinhole.target),
+                (
+                    ordering,
+                    &OrderOptions {
+                        cull_behind_eye: true,
+                        ..Default::default()
+                    },
+                ),
+                &mut whole,
+            )
+            .unwrap();
+            let mix = renderer.mixes.get(&id).unwrap();
+            assert_eq!(whole.runs, mix.runs, "{eye} {ordering:?}");
+            assert!(whole.ids == mix.ids, "{eye} {ordering:?}");
+        }
+    }
+}
