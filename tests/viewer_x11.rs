@@ -590,6 +590,25 @@ fn title_where(display: &str, window: &str, what: &str, check: impl Fn(&str) -> 
     title
 }
 
+/// The processor time process `pid` has used, user and system, in seconds (Linux's
+/// `/proc/PID/stat`, in ticks of 1/100 s).
+fn cpu_seconds(pid: u32) -> f64 {
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).expect("the viewer's stat");
+    // The fields after the command name (which may hold spaces), from the state on.
+    let fields: Vec<&str> = stat
+        .rsplit_once(')')
+        .map_or("", |(_, rest)| rest)
+        .split_whitespace()
+        .collect();
+    let ticks = |i: usize| {
+        fields
+            .get(i)
+            .and_then(|f| f.parse::<f64>().ok())
+            .unwrap_or(0.0)
+    };
+    (ticks(11) + ticks(12)) / 100.0
+}
+
 /// The splat count in a window title ("... | 54080 splats").
 fn splats_in(title: &str) -> usize {
     let before = title.split(" splats").next().unwrap();
@@ -939,6 +958,34 @@ fn viewer_picks_switches_orderings_and_takes_screenshots_under_xvfb() {
         (first.w, first.h),
         (640, 480),
         "PROSTHESIS, HEAD and STEM are for 640x480"
+    );
+
+    // The cursor passing over the window draws no frame: once the viewer rests (its frames
+    // take over 50 ms of processor time here), it spends next to none while the cursor
+    // moves over it, and the title (the last frame's) stays as it was.
+    let rested = title(&display, &window, " splats");
+    wait_for("the viewer at rest", 30, || {
+        let before = cpu_seconds(viewer.0.id());
+        std::thread::sleep(Duration::from_millis(500));
+        (cpu_seconds(viewer.0.id()) - before < 0.02).then_some(())
+    });
+    let busy = cpu_seconds(viewer.0.id());
+    for (x, y) in [
+        ("100", "100"),
+        ("400", "200"),
+        ("300", "420"),
+        ("520", "80"),
+    ] {
+        xdo(&display, &["mousemove", "--window", &window, x, y]).expect("hover");
+        std::thread::sleep(Duration::from_millis(150));
+    }
+    std::thread::sleep(Duration::from_millis(500));
+    let hovering = cpu_seconds(viewer.0.id()) - busy;
+    assert!(hovering < 0.04, "hovering drew frames: {hovering:.2} s");
+    assert_eq!(
+        title(&display, &window, " splats"),
+        rested,
+        "hovering drew a frame"
     );
 
     // The built-in view at 640x480 shows the prosthesis head at (320, 160).

@@ -681,7 +681,17 @@ impl App {
                 self.modifiers = modifiers.state();
                 return Ok(());
             }
-            WindowEvent::CursorMoved { position, .. } => self.mouse_moved(position),
+            WindowEvent::CursorMoved { position, .. } => {
+                self.mouse_moved(position);
+                // The cursor passing over the window changes nothing drawn, nor does a drag
+                // within its first pixels (a click's jitter): only a drag that has moved, or
+                // one that windows the values, which follows every pixel.
+                let windowing = self.windowing.is_some()
+                    || self.panes.as_ref().is_some_and(|p| p.windowing.is_some());
+                if !windowing && !self.drag.as_ref().is_some_and(|d| d.moved) {
+                    return Ok(());
+                }
+            }
             WindowEvent::MouseInput { state, button, .. } => match state {
                 ElementState::Pressed => {
                     let slice = match self.under(self.cursor.0, self.cursor.1) {
@@ -732,6 +742,14 @@ impl App {
                         moved: false,
                         slice,
                     });
+                    // A press alone changes nothing drawn but the histogram an Alt+drag shows:
+                    // the frame follows when the drag moves or the button is released, so a
+                    // drag does not wait for a full frame of what is on screen already.
+                    let windowing = self.windowing.is_some()
+                        || self.panes.as_ref().is_some_and(|p| p.windowing.is_some());
+                    if !windowing {
+                        return Ok(());
+                    }
                 }
                 ElementState::Released => {
                     let drag = self.drag.take();
