@@ -396,12 +396,13 @@ fn order_mix(
         )
         .map_err(|e| e.to_string())?;
         if !walked {
+            let bricks = own_geometry.dims().map(|n| n.div_ceil(BRICK) as usize);
             return order_mix_from_whole_levels(
                 volumes,
-                id,
-                world,
+                (id, world),
                 (eye, target),
                 (ordering, options),
+                bricks,
                 mix,
             );
         }
@@ -437,21 +438,16 @@ fn brick_scale(detail: Detail) -> ([u32; 3], [u32; 3]) {
 
 /// [`order_mix`] for the orderings that cannot walk a brick alone: each level the bricks use
 /// ordered whole by `ordering`, then each brick's splats taken from its level's order in the
-/// bricks' order (a counting sort by brick, which keeps the level's order within each
-/// brick).
+/// bricks' order, `mix.bricks` as ordered already in a grid of `[bx, by, bz]` bricks (a
+/// counting sort by brick, which keeps the level's order within each brick).
 fn order_mix_from_whole_levels(
     volumes: &mut HashMap<(NodeId, Detail), VolumeState>,
-    id: NodeId,
-    world: DMat4,
+    (id, world): (NodeId, DMat4),
     (eye, target): (DVec3, DVec3),
     (ordering, options): (Ordering, &OrderOptions),
+    [bx, by, bz]: [usize; 3],
     mix: &mut Mix,
 ) -> Result<(), String> {
-    let own = volumes
-        .get(&(id, Detail::default()))
-        .ok_or("the volume's own grid is not classified")?;
-    let own_geometry = own.geometry(world).map_err(|e| e.to_string())?;
-    let [bx, by, bz] = own_geometry.dims().map(|n| n.div_ceil(BRICK) as usize);
     let details = mix.details();
     for &detail in &details {
         volumes

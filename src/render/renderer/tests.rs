@@ -108,6 +108,17 @@ fn the_detail_follows_the_pixels_a_voxel_spans() {
     assert_eq!(detail_for(&g, &v), Detail::default());
 }
 
+/// An `n`^3 grid of 1 mm voxels at the origin holding `values`.
+fn unit_volume(n: u32, values: crate::volume::Voxels) -> CpuVolume {
+    CpuVolume {
+        dims: [n; 3],
+        spacing: [1.0; 3],
+        origin: [0.0; 3],
+        direction: DMat3::IDENTITY,
+        values,
+    }
+}
+
 /// An `n`^3 grid of 1 mm voxels, air but where `inside` (1000), classified by a ramp: its
 /// classification, occupied bricks and geometry.
 fn content_grid(
@@ -120,13 +131,7 @@ fn content_grid(
             if inside(k) { 1000.0 } else { 0.0 }
         })
         .collect();
-    let volume = CpuVolume {
-        dims: [n; 3],
-        spacing: [1.0; 3],
-        origin: [0.0; 3],
-        direction: DMat3::IDENTITY,
-        values,
-    };
+    let volume = unit_volume(n, values);
     let tf = crate::classify::TransferFunction::ramp(100.0, 900.0, [1.0, 1.0, 1.0, 0.8]);
     let classified = crate::classify::classify(&volume, &tf, 0.0).unwrap();
     let occupied = Occupied::of(&classified);
@@ -415,13 +420,7 @@ fn bricks_walked_alone_give_their_levels_orders_sorted_into_bricks() {
             (200.0 + 250.0 * (k[0] / 7.0).sin() * (k[1] / 9.0).sin() * (k[2] / 11.0).sin()) as f32
         })
         .collect();
-    let volume = CpuVolume {
-        dims: [n; 3],
-        spacing: [1.0; 3],
-        origin: [0.0; 3],
-        direction: DMat3::IDENTITY,
-        values: values.into(),
-    };
+    let volume = unit_volume(n, values.into());
     let transfer = crate::classify::TransferFunction::new(vec![
         (250.0, [0.9, 0.5, 0.3, 0.0]),
         (450.0, [1.0, 0.9, 0.7, 0.05]),
@@ -470,8 +469,7 @@ fn bricks_walked_alone_give_their_levels_orders_sorted_into_bricks() {
             let pinhole = shot.view.pinhole().unwrap();
             order_mix_from_whole_levels(
                 &mut renderer.volumes,
-                id,
-                DMat4::IDENTITY,
+                (id, DMat4::IDENTITY),
                 (pinhole.eye, pinhole.target),
                 (
                     ordering,
@@ -480,6 +478,7 @@ fn bricks_walked_alone_give_their_levels_orders_sorted_into_bricks() {
                         ..Default::default()
                     },
                 ),
+                [n.div_ceil(BRICK) as usize; 3],
                 &mut whole,
             )
             .unwrap();
