@@ -657,6 +657,11 @@ impl App {
         }
     }
 
+    /// Whether an Alt+drag is windowing the values, of the volume or of the slices.
+    fn windowing_values(&self) -> bool {
+        self.windowing.is_some() || self.panes.as_ref().is_some_and(|p| p.windowing.is_some())
+    }
+
     pub(super) fn zoom(&mut self, steps: f64) {
         let offset = self.camera.eye - self.camera.target;
         self.camera.eye = self.camera.target + offset * 0.9f64.powf(steps);
@@ -686,9 +691,7 @@ impl App {
                 // The cursor passing over the window changes nothing drawn, nor does a drag
                 // within its first pixels (a click's jitter): only a drag that has moved, or
                 // one that windows the values, which follows every pixel.
-                let windowing = self.windowing.is_some()
-                    || self.panes.as_ref().is_some_and(|p| p.windowing.is_some());
-                if !windowing && !self.drag.as_ref().is_some_and(|d| d.moved) {
+                if !self.windowing_values() && !self.drag.as_ref().is_some_and(|d| d.moved) {
                     return Ok(());
                 }
             }
@@ -745,9 +748,7 @@ impl App {
                     // A press alone changes nothing drawn but the histogram an Alt+drag shows:
                     // the frame follows when the drag moves or the button is released, so a
                     // drag does not wait for a full frame of what is on screen already.
-                    let windowing = self.windowing.is_some()
-                        || self.panes.as_ref().is_some_and(|p| p.windowing.is_some());
-                    if !windowing {
+                    if !self.windowing_values() {
                         return Ok(());
                     }
                 }
