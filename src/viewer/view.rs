@@ -110,12 +110,12 @@ impl App {
             }
         };
         let mut overlay = image::RgbaImage::new(window_size.0, window_size.1);
+        // A preview in one pane on the CPU tiles is drawn at half the window's size (or a
+        // third or a quarter, where previews are slow) and scaled up: a quarter of the pixels
+        // or fewer to composite, read back and convert, and coarser splats.
+        let small = preview && on_cpu && self.panes.is_none();
         if on_cpu {
-            // The tile compositor's frame, shown through the present pass like the GPU's. A
-            // preview in one pane is drawn at half the window's size (or less, where previews
-            // are slow) and scaled up: a quarter of the pixels to composite, read back and
-            // convert, and coarser splats.
-            let small = preview && self.panes.is_none();
+            // The tile compositor's frame, shown through the present pass like the GPU's.
             let size = if small {
                 let d = self.preview_divisor.max(1);
                 (view.size.0.div_ceil(d), view.size.1.div_ceil(d))
@@ -214,7 +214,7 @@ impl App {
         }
         // The size this preview was drawn at (the title's), and the next one's.
         let preview_divisor = self.preview_divisor;
-        if preview && on_cpu && self.panes.is_none() {
+        if small {
             // By what a preview costs frame after frame: not what this one spent making a
             // classification, a level or texels the next ones reuse.
             let t = &self.last.timings;
@@ -247,8 +247,7 @@ impl App {
             self.last.timings.order.as_secs_f64() * 1e3,
             self.last.splats,
             match (options.preview, self.last.refined, self.sharpen.is_some()) {
-                (true, _, _) if on_cpu && self.panes.is_none() =>
-                    format!(" (preview at 1/{} size)", preview_divisor),
+                (true, _, _) if small => format!(" (preview at 1/{} size)", preview_divisor),
                 (true, _, _) => " (preview)".to_string(),
                 (false, Some([x, y, z]), _) => format!(" (refined {x}x{y}x{z})"),
                 (false, None, true) => " (refining)".to_string(),
