@@ -1337,3 +1337,92 @@ fn a_ramps_row_sums_are_each_voxels_own_bit_for_bit() {
     #[cfg(not(target_arch = "x86_64"))]
     assert_eq!(checked, 0);
 }
+
+#[test]
+fn a_halved_grid_measures_each_block_spread_as_a_plain_variance() {
+    // A 7 x 4 x 5 grid (odd along x and z) of varied splats, some left out, halved along
+    // each set of axes: each splat's spread against the variance of its block's
+    // premultiplied colours, computed plainly in f64 (the voxels left out as clear).
+    let dims = [7u32, 4, 5];
+    let n = dims.iter().product::<u32>();
+    let (mut ids, mut colors) = (Vec::new(), Vec::new());
+    for id in 0..n {
+        if id % 4 == 1 || id % 7 == 3 {
+            continue;
+        }
+        ids.push(id);
+        colors.push(SplatColor {
+            rgb: [
+                (id * 37 % 256) as u8,
+                (id * 91 % 256) as u8,
+                (id * 13 % 256) as u8,
+            ],
+            density: half::f16::from_f32(0.02 + 0.3 * (id % 6) as f32),
+        });
+    }
+    let fine = Classified {
+        grid: SparseGrid::from_sorted_ids(dims, &ids).unwrap(),
+        colors,
+    };
+    let mm = 0.8f32;
+    let premultiplied = |id: u32| -> [f64; 4] {
+        let Some(rank) = fine.grid.rank(id) else {
+            return [0.0; 4];
+        };
+        let c = fine.colors[rank as usize];
+        let a = 1.0 - (-f64::from(c.density.to_f32()) * f64::from(mm)).exp();
+        [
+            a * f64::from(c.rgb[0]) / 255.0,
+            a * f64::from(c.rgb[1]) / 255.0,
+            a * f64::from(c.rgb[2]) / 255.0,
+            a,
+        ]
+    };
+    let mut largest = 0.0f64;
+    for axes in [
+        [true, true, true],
+        [true, false, false],
+        [false, true, true],
+        [true, false, true],
+    ] {
+        let step = axes.map(|h| if h { 2 } else { 1 });
+        let (coarse, spreads) = fine.halved_measured(axes, None, Some(mm)).unwrap();
+        assert_eq!(spreads.len(), coarse.grid.len());
+        // The same splats as the halving that measures nothing.
+        let plain = fine.halved_along(axes, None).unwrap();
+        assert!(plain.grid.ids().eq(coarse.grid.ids()));
+        assert!(
+            plain
+                .colors
+                .iter()
+                .zip(&coarse.colors)
+                .all(|(p, c)| p.rgb == c.rgb && p.density == c.density)
+        );
+        let out = coarse.grid.dims();
+        for (id, spread) in coarse.grid.ids().zip(&spreads) {
+            let b = [id % out[0], id / out[0] % out[1], id / out[0] / out[1]];
+            let mut block = Vec::new();
+            for v in 0..n {
+                let k = [v % dims[0], v / dims[0] % dims[1], v / dims[0] / dims[1]];
+                if (0..3).all(|a| k[a] / step[a] == b[a]) {
+                    block.push(premultiplied(v));
+                }
+            }
+            let count = block.len() as f64;
+            let mean: [f64; 4] =
+                std::array::from_fn(|c| block.iter().map(|p| p[c]).sum::<f64>() / count);
+            let want = block
+                .iter()
+                .map(|p| (0..4).map(|c| (p[c] - mean[c]).powi(2)).sum::<f64>())
+                .sum::<f64>()
+                / count;
+            largest = largest.max(want);
+            assert!(
+                (f64::from(*spread) - want).abs() < 1e-5,
+                "axes {axes:?}, block {b:?}: {spread} against {want}"
+            );
+        }
+    }
+    // The grid's colours vary enough for the comparison to mean something.
+    assert!(largest > 0.05, "{largest}");
+}

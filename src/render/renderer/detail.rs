@@ -68,6 +68,26 @@ pub const REFINE_TO: f64 = 1.5;
 /// across the view").
 pub(super) const COARSEN_TO: f64 = 1.0;
 
+/// A brick whose content is smooth ([`SMOOTH_SPREAD`]) is drawn at the level whose voxels
+/// are at most this many pixels apart, one level coarser than [`COARSEN_TO`] allows
+/// ([`brick_details`]). What a level loses goes by the content as much as by the spacing:
+/// on the Stanford CT head resampled to 0.5 mm, drawn with its voxels 1.3 pixels apart, the
+/// picture stayed within 0.017-0.024 of the reference ray marcher, where the LIDC2 CT's
+/// 0.7 mm grid, its edges kept sharp, went to 0.043 (BENCHMARKS.md, "A second CT").
+pub(super) const SMOOTH_COARSEN_TO: f64 = 2.0;
+
+/// The most a brick's splats may lose on average to be drawn at the coarser level
+/// [`SMOOTH_COARSEN_TO`] allows: the mean, over the splats of the brick at that level, of
+/// the squared spread of their blocks' premultiplied colours about the block's mean
+/// ([`crate::classify::Classified::halved_measured`], each voxel's opacity that of its own
+/// length of tissue), square-rooted. Measured at 512 x 512 (384 x 384 where said), soft
+/// tissue, against the reference ray marcher, from no brick drawn coarser to 0.01, 0.015 and
+/// 0.02: the 0.7 mm LIDC2 CT from the front 0.0244, 0.0247, 0.0251, 0.0255 (384 x 384:
+/// 0.0280 to 0.0293) and turned 45 degrees 0.0210 to 0.0257; the 0.5 mm CT head obliquely
+/// 0.0096, 0.0140, 0.0150, 0.0159 for 28.3M, 9.9M, 5.8M and 4.2M splats (BENCHMARKS.md,
+/// "Smooth bricks a level coarser").
+pub(super) const SMOOTH_SPREAD: f64 = 0.02;
+
 /// The most levels an axis is halved beyond the axis halved least ([`detail_for`]). An axis
 /// along the view direction has its voxels on top of each other on the screen and would be
 /// halved [`MAX_LEVEL`] times by the pixels alone; each splat would then carry the emission
@@ -118,6 +138,12 @@ pub fn detail_for(geometry: &VolumeGeometry, view: &ViewSetup) -> Detail {
 /// each axis where it is drawn largest, facing the eye as `apart` says (`None`: the eye
 /// inside it).
 pub(super) fn detail_at(dims: [u32; 3], apart: Option<Apart>) -> Detail {
+    detail_within(dims, apart, COARSEN_TO)
+}
+
+/// [`detail_at`], a level drawn along an axis where its voxels are at most `coarsen_to`
+/// pixels apart.
+fn detail_within(dims: [u32; 3], apart: Option<Apart>, coarsen_to: f64) -> Detail {
     let Some(Apart {
         pixels: apart,
         full,
@@ -133,7 +159,7 @@ pub(super) fn detail_at(dims: [u32; 3], apart: Option<Apart>) -> Detail {
     // and the axis still has more than one voxel.
     let levels: [u8; 3] = std::array::from_fn(|a| {
         let (mut apart, mut level, mut n) = (apart[a], 0, dims[a]);
-        while level < MAX_LEVEL && apart.is_finite() && apart >= 0.0 && 2.0 * apart <= COARSEN_TO {
+        while level < MAX_LEVEL && apart.is_finite() && apart >= 0.0 && 2.0 * apart <= coarsen_to {
             if n <= 1 {
                 break;
             }
@@ -541,7 +567,9 @@ pub(super) fn refine_factors(dims: [u32; 3], apart: [f64; 3]) -> Option<[u32; 3]
 /// and sight lines, the rule a volume's level follows at its nearest brick: a level of its
 /// pyramid, or its grid refined where its voxels fall more than [`REFINE_TO`] pixels apart. A
 /// brick the eye is in draws the own grid; a `preview` draws every brick at least a level
-/// coarser. A brick whose voxels fall more than `refine_from` pixels apart (whole edges) wants
+/// coarser. With each brick comes the level, halved once more along the axes halved least
+/// (and at most once more along the others), it may be drawn at where its content is smooth ([`SMOOTH_COARSEN_TO`]; `None` for a preview, a brick drawn refined or one that
+/// wants its own grid at any spacing). A brick whose voxels fall more than `refine_from` pixels apart (whole edges) wants
 /// refining whatever the rule says ([`REFINE_TO`] is the rule's own threshold). A brick is left out where its box, grown by two of its
 /// splats' voxels each way and by three pixels at its far side (the footprints' reach past
 /// their voxels and the screen's low-pass), lies off the image ([`off_image`]). Each brick
@@ -552,7 +580,7 @@ pub(super) fn brick_details(
     occupied: &Occupied,
     preview: bool,
     refine_from: f64,
-) -> Vec<([u32; 3], Detail, u32)> {
+) -> Vec<BrickWant> {
     let dims = geometry.dims();
     let m = geometry.index_to_world().matrix3;
     let abs = glam::DMat3::from_cols(m.x_axis.abs(), m.y_axis.abs(), m.z_axis.abs());
@@ -584,7 +612,37 @@ pub(super) fn brick_details(
             } else {
                 levels
             };
-            let reach = abs * DVec3::from(levels.map(|l| 2.0 * f64::from(1u32 << l)));
+            let smooth = match (wanted, preview) {
+                (Some(Detail::Level(..)), false) => {
+                    apart_in_box(geometry, view, (centre, half)).and_then(|apart| {
+                        // Halved once more along each axis halved least (those across the
+                        // view), and at most once more along the others.
+                        let least = (0..3)
+                            .filter(|&a| dims[a] > 1)
+                            .map(|a| levels[a])
+                            .min()
+                            .unwrap_or(0);
+                        match detail_within(dims, Some(apart), SMOOTH_COARSEN_TO) {
+                            Detail::Level(coarser, facing)
+                                if (0..3).all(|a| {
+                                    let more = coarser[a].checked_sub(levels[a]);
+                                    match (dims[a] > 1 && levels[a] == least, more) {
+                                        (true, more) => more == Some(1),
+                                        (false, more) => more.is_some_and(|m| m <= 1),
+                                    }
+                                }) =>
+                            {
+                                Some((coarser, facing))
+                            }
+                            _ => None,
+                        }
+                    })
+                }
+                _ => None,
+            };
+            // The splats' reach at the coarser of the levels the brick may be drawn at.
+            let reach_levels = smooth.map_or(levels, |(coarser, _)| coarser);
+            let reach = abs * DVec3::from(reach_levels.map(|l| 2.0 * f64::from(1u32 << l)));
             let pixel = if view.is_orthographic() {
                 1.0 / view.focal
             } else {
@@ -597,9 +655,28 @@ pub(super) fn brick_details(
                 Some(Detail::Refined(factors)) if !preview => Detail::Refined(factors),
                 _ => level_facing(levels, facing),
             };
-            shown.then_some((brick, detail, splats))
+            shown.then_some(BrickWant {
+                brick,
+                detail,
+                splats,
+                smooth: smooth.map(|(levels, facing)| Detail::Level(levels, facing)),
+            })
         })
         .collect()
+}
+
+/// What a brick on the image wants drawn ([`brick_details`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(super) struct BrickWant {
+    /// The brick, in bricks of [`BRICK`] own voxels.
+    pub(super) brick: [u32; 3],
+    /// The detail its distance and sight lines call for.
+    pub(super) detail: Detail,
+    /// The own grid's splats in it.
+    pub(super) splats: u32,
+    /// The level, coarser than `detail`, its content may be drawn at where that content
+    /// loses little by it ([`SMOOTH_COARSEN_TO`], [`SMOOTH_SPREAD`]).
+    pub(super) smooth: Option<Detail>,
 }
 
 /// Sorts `bricks` (coordinates in bricks of [`BRICK`] voxels of a grid placed as `geometry`)

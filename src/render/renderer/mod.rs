@@ -172,6 +172,59 @@ struct VolumeState {
     occupied: Option<Occupied>,
     /// The own grid's bricks a refinement was classified within (`None`: all of them).
     region: Option<Region>,
+    /// What halving this grid along some axes would lose, brick by brick, for the axes
+    /// asked for so far ([`Renderer::spread_of`]).
+    spreads: Vec<([bool; 3], Arc<BrickSpread>)>,
+}
+
+/// What halving a grid along some axes loses, per brick of [`BRICK`]^3 own voxels: the root
+/// mean square, over the brick's splats at the halved grid, of the spread of their blocks'
+/// premultiplied colours ([`Classified::halved_measured`]).
+#[derive(Debug)]
+struct BrickSpread {
+    /// Bricks along each axis.
+    dims: [u32; 3],
+    /// Per brick, x fastest.
+    rms: Vec<f32>,
+}
+
+impl BrickSpread {
+    /// The spread of the splats `spreads` (in id order of `classified`, a grid halved
+    /// `levels` times along each axis from the own grid), brick by brick.
+    fn of(classified: &Classified, levels: [u8; 3], spreads: &[f32]) -> Self {
+        // (At most [`MAX_LEVEL`] halvings, 16 = BRICK voxels: as many bricks as the own grid.)
+        let level_dims = classified.grid.dims();
+        let dims: [u32; 3] = std::array::from_fn(|a| (level_dims[a] << levels[a]).div_ceil(BRICK));
+        let bricks = dims.iter().map(|&n| n as usize).product();
+        let mut sums = vec![(0f64, 0u32); bricks];
+        for (id, &spread) in classified.grid.ids().zip(spreads) {
+            let k = classified.grid.coords(id);
+            let b: [u32; 3] = std::array::from_fn(|a| (k[a] << levels[a]) / BRICK);
+            let slot = &mut sums[(b[0] + dims[0] * (b[1] + dims[1] * b[2])) as usize];
+            slot.0 += f64::from(spread);
+            slot.1 += 1;
+        }
+        let rms = sums
+            .into_iter()
+            .map(|(sum, n)| {
+                if n == 0 {
+                    0.0
+                } else {
+                    (sum / f64::from(n)).sqrt() as f32
+                }
+            })
+            .collect();
+        Self { dims, rms }
+    }
+
+    /// The spread of `brick`; infinite for a brick outside the grid.
+    fn at(&self, brick: [u32; 3]) -> f64 {
+        if (0..3).any(|a| brick[a] >= self.dims[a]) {
+            return f64::INFINITY;
+        }
+        let [nx, ny, _] = self.dims;
+        f64::from(self.rms[(brick[0] + nx * (brick[1] + ny * brick[2])) as usize])
+    }
 }
 
 impl VolumeState {
@@ -196,6 +249,7 @@ impl VolumeState {
             ids,
             occupied: None,
             region: None,
+            spreads: Vec::new(),
         }
     }
 }
@@ -546,15 +600,17 @@ fn splat_share(detail: Detail) -> f64 {
     }
 }
 
-/// A volume's bricks are drawn each at its own level where that draws at most half the
-/// splats its one level would (by the own grid's splats in each brick). A mix walks each
+/// A volume's bricks are drawn each at its own level where that draws at most two thirds of
+/// the splats its one level would (by the own grid's splats in each brick). A mix walks each
 /// brick's splats alone, about 9 ns a splat drawn on this project's 2-core machine against
-/// 2 ns a splat of the whole grid for one level, and the splats it leaves out are mostly far
-/// ones that early termination skips anyway: on the 0.7 mm LIDC2 CT seen from 240 and 320 mm
-/// (its far bricks halved along the view, 55-70% of the splats) the mix and the one level
-/// took the same time, where a translucent volume seen deep (28%) took a third
-/// (BENCHMARKS.md, "Bricks walked alone").
-const MIX_SAVING: f64 = 2.0;
+/// 2 ns a splat of the whole grid for one level. Where the splats it leaves out are far ones
+/// that early termination skips anyway, it gains little: on the 0.7 mm LIDC2 CT seen from
+/// 240 and 320 mm (its far bricks halved along the view, 55-70% of the splats) the mix and
+/// the one level took the same time, where a translucent volume seen deep (28%) took a
+/// third (BENCHMARKS.md, "Bricks walked alone"). Smooth bricks drawn a level coarser save
+/// splats at every depth: the LIDC2 CT turned 49 degrees from the front drew 53% of the
+/// splats in 164 ms against 263 ms (BENCHMARKS.md, "Smooth bricks a level coarser").
+const MIX_SAVING: f64 = 1.5;
 
 /// The most levels of detail a volume keeps that are halved along some axes more than others
 /// (a camera orbiting a volume wants one for each axis its view runs along).
@@ -676,9 +732,11 @@ impl Renderer {
     /// to near in the IP-PBTF order of the grid of bricks and each brick's splats in its
     /// level's draw order, so the order keeps every brick behind the bricks that can hide it;
     /// bricks whose splats cannot land on the image are left out before their splats are
-    /// walked. A view whose bricks all want one level, or where the bricks' levels would draw
-    /// more than half the splats of the volume's one level (`MIX_SAVING`), draws that
-    /// one level as one grid, as before. The GPU passes draw one level a volume.
+    /// walked. A brick whose content loses little by it is drawn a level coarser than its
+    /// spacing alone allows (a spread of at most 0.02, `SMOOTH_SPREAD`). A view whose bricks
+    /// all want one level, or where the bricks' levels would draw more than two thirds of the
+    /// splats of the volume's one level (`MIX_SAVING`), draws that one level as one grid, as
+    /// before. The GPU passes draw one level a volume.
     pub fn set_levels_by_brick(&mut self, on: bool) {
         self.one_level = !on;
     }
@@ -880,7 +938,7 @@ impl Renderer {
         let started = Instant::now();
         let (tiles, texels) = self.composite_tiles(scene, &view, &ordered, &depth, &mut frame);
         report.tiles = Some(tiles);
-        report.timings.texels = texels;
+        report.timings.texels += texels;
         report.timings.splat_pass = started.elapsed();
         let translucent: Vec<_> = scene
             .meshes()
@@ -1105,6 +1163,96 @@ impl Renderer {
         self.volumes.get_mut(&(id, level))
     }
 
+    /// Draws each of `wants` (volume `id`'s bricks on the image) that has a coarser level
+    /// allowed ([`BrickWant::smooth`]) at that level where halving the level it wants loses
+    /// at most [`SMOOTH_SPREAD`] in the brick ([`Renderer::spread_of`]); makes the levels the
+    /// bricks want first (their spreads are measured on them), and where bricks draw the
+    /// own grid, its texels, before levels are halved from them (else each level would
+    /// make the own grid's texels one by one from the volume, several times slower).
+    fn draw_smooth_coarser(
+        &mut self,
+        id: NodeId,
+        spacing: [f64; 3],
+        wants: &mut [BrickWant],
+        report: &mut FrameReport,
+    ) -> Result<(), crate::grid::GridError> {
+        let own = (id, Detail::default());
+        if wants.iter().any(|w| w.detail == own.1)
+            && let Some(state) = self.volumes.get_mut(&own)
+            && state.texels.is_none()
+        {
+            let started = Instant::now();
+            state.texels = Some(SplatTexels::new(
+                &state.classified,
+                &state.volume,
+                state.factors,
+            ));
+            report.timings.texels += started.elapsed();
+        }
+        let mut spreads: HashMap<(Detail, Detail), Option<Arc<BrickSpread>>> = HashMap::new();
+        for want in wants {
+            let (Some(smooth @ Detail::Level(coarse, _)), Detail::Level(fine, facing)) =
+                (want.smooth, want.detail)
+            else {
+                continue;
+            };
+            // One halving more along some axes, none fewer.
+            if (0..3).any(|a| coarse[a] < fine[a] || coarse[a] > fine[a] + 1) {
+                continue;
+            }
+            let axes = std::array::from_fn(|a| coarse[a] > fine[a]);
+            let spread = match spreads.entry((want.detail, smooth)) {
+                std::collections::hash_map::Entry::Occupied(known) => known.into_mut(),
+                std::collections::hash_map::Entry::Vacant(slot) => {
+                    let got = self.make_levels(id, spacing, fine, facing, report)?;
+                    let spread = if got == want.detail {
+                        self.spread_of((id, got), axes, spacing, report)?
+                    } else {
+                        None
+                    };
+                    slot.insert(spread)
+                }
+            };
+            if spread
+                .as_ref()
+                .is_some_and(|s| s.at(want.brick) <= SMOOTH_SPREAD)
+            {
+                want.detail = smooth;
+            }
+        }
+        Ok(())
+    }
+
+    /// What halving the grid `key` along `axes` would lose, brick by brick
+    /// ([`BrickSpread`]), each voxel's opacity that of its own edge's length of tissue
+    /// (the geometric mean of its spacing, `spacing` being the own grid's); measured once a
+    /// grid and axes, timed as making levels. `None` where the grid is not made.
+    fn spread_of(
+        &mut self,
+        key: (NodeId, Detail),
+        axes: [bool; 3],
+        spacing: [f64; 3],
+        report: &mut FrameReport,
+    ) -> Result<Option<Arc<BrickSpread>>, crate::grid::GridError> {
+        let Some(state) = self.volumes.get_mut(&key) else {
+            return Ok(None);
+        };
+        if let Some((_, spread)) = state.spreads.iter().find(|(a, _)| *a == axes) {
+            return Ok(Some(Arc::clone(spread)));
+        }
+        let started = Instant::now();
+        let mm = (0..3)
+            .map(|a| spacing[a] * f64::from(1u32 << state.levels[a]))
+            .product::<f64>()
+            .cbrt() as f32;
+        let (halved, spreads) = state.classified.halved_measured(axes, None, Some(mm))?;
+        let levels = std::array::from_fn(|a| state.levels[a] + u8::from(axes[a]));
+        let spread = Arc::new(BrickSpread::of(&halved, levels, &spreads));
+        state.spreads.push((axes, Arc::clone(&spread)));
+        report.timings.levels += started.elapsed();
+        Ok(Some(spread))
+    }
+
     /// Makes the levels of volume `id`'s pyramid up to `wanted` halvings along each axis (facing
     /// the eye as `facing` says) that are missing, each from the one below by halving every
     /// axis still below its level (the levels even across axes first, shared by other views;
@@ -1296,41 +1444,68 @@ impl Renderer {
                 }
                 _ => None,
             };
-            // The bricks that want refining take the refinement wanted, or the own grid
-            // without one. Drawn brick by brick where that draws at most half the splats of the
-            // one detail, by the own grid's splats in each brick; decided before
-            // anything is made, so that a refinement for a volume drawn whole covers every
-            // brick on the image.
-            let refined_or_own = match wanted {
-                Detail::Refined(_) => wanted,
-                Detail::Level(..) => Detail::default(),
-            };
-            let share = |wants: &[([u32; 3], Detail, u32)], one: Option<Detail>| -> f64 {
-                wants
-                    .iter()
-                    .map(|(_, d, splats)| f64::from(*splats) * splat_share(one.unwrap_or(*d)))
-                    .sum()
-            };
-            let brick_wants = brick_wants
-                .map(|wants| {
-                    wants
-                        .into_iter()
-                        .map(|(brick, want, splats)| match want {
-                            Detail::Refined(_) => (brick, refined_or_own, splats),
-                            Detail::Level(..) => (brick, want, splats),
-                        })
-                        .collect::<Vec<_>>()
-                })
-                .filter(|w| {
-                    w.iter().any(|(_, d, _)| *d != wanted)
-                        && share(w, None) * MIX_SAVING <= share(w, Some(wanted))
-                });
             // The own grid's voxel size in the world (the opacities' step).
             let spacing = placed_geometry(&node.volume, world)
                 .map_err(|e| fail(e.to_string()))?
                 .spacing();
             self.frame += 1;
             let frame = self.frame;
+            // The bricks that want refining take the refinement wanted, or the own grid
+            // without one.
+            let refined_or_own = match wanted {
+                Detail::Refined(_) => wanted,
+                Detail::Level(..) => Detail::default(),
+            };
+            let mut brick_wants = brick_wants.map(|wants| {
+                wants
+                    .into_iter()
+                    .map(|w| match w.detail {
+                        Detail::Refined(_) => BrickWant {
+                            detail: refined_or_own,
+                            smooth: None,
+                            ..w
+                        },
+                        Detail::Level(..) => w,
+                    })
+                    .collect::<Vec<_>>()
+            });
+            // How many splats the bricks draw, each at its detail (or the volume's one).
+            let share = |wants: &[BrickWant], one: Option<Detail>| -> f64 {
+                wants
+                    .iter()
+                    .map(|w| f64::from(w.splats) * splat_share(one.unwrap_or(w.detail)))
+                    .sum()
+            };
+            // Smooth bricks go one level coarser where the mix could then be drawn at all.
+            if let Some(wants) = brick_wants.as_mut() {
+                let coarsest: Vec<BrickWant> = wants
+                    .iter()
+                    .map(|w| BrickWant {
+                        detail: w.smooth.unwrap_or(w.detail),
+                        ..*w
+                    })
+                    .collect();
+                if wants.iter().any(|w| w.smooth.is_some())
+                    && share(&coarsest, None) * MIX_SAVING <= share(wants, Some(wanted))
+                {
+                    self.draw_smooth_coarser(id, spacing, wants, report)
+                        .map_err(|e| fail(e.to_string()))?;
+                }
+            }
+            // Drawn brick by brick where that draws at most 1 / MIX_SAVING of the splats of
+            // the one detail, by the own grid's splats in each brick; decided before any
+            // refinement is made, so that a refinement for a volume drawn whole covers every
+            // brick on the image.
+            let brick_wants = brick_wants
+                .filter(|w| {
+                    w.iter().any(|w| w.detail != wanted)
+                        && share(w, None) * MIX_SAVING <= share(w, Some(wanted))
+                })
+                .map(|w| {
+                    w.into_iter()
+                        .map(|w| (w.brick, w.detail, w.splats))
+                        .collect::<Vec<_>>()
+                });
             let drawn = match wanted {
                 Detail::Level(wanted, facing) => self
                     .make_levels(id, spacing, wanted, facing, report)

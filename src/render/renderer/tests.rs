@@ -352,8 +352,8 @@ fn bricks_far_from_the_eye_draw_coarser_levels_and_those_off_the_image_none() {
     let at_z = |z: u32| {
         bricks
             .iter()
-            .filter(|(b, _, _)| b[2] == z)
-            .map(|(_, d, _)| level(d))
+            .filter(|w| w.brick[2] == z)
+            .map(|w| level(&w.detail))
             .collect::<Vec<_>>()
     };
     let (near, far) = (at_z(0), at_z(n / BRICK - 1));
@@ -369,7 +369,7 @@ fn bricks_far_from_the_eye_draw_coarser_levels_and_those_off_the_image_none() {
     assert_eq!(far.len(), (n / BRICK * n / BRICK) as usize);
     // Each brick left out lies off the image, as a plain test of its voxel centres says: no
     // centre of it projects within the image.
-    let kept: std::collections::HashSet<[u32; 3]> = bricks.iter().map(|(b, _, _)| *b).collect();
+    let kept: std::collections::HashSet<[u32; 3]> = bricks.iter().map(|w| w.brick).collect();
     let [right, up, forward] = [view.axes.x_axis, view.axes.y_axis, view.axes.z_axis];
     let project = |p: DVec3| {
         let d = p - view.camera.eye;
@@ -487,4 +487,100 @@ fn bricks_walked_alone_give_their_levels_orders_sorted_into_bricks() {
             assert!(whole.ids == mix.ids, "{eye} {ordering:?}");
         }
     }
+}
+
+#[test]
+fn smooth_bricks_draw_a_level_coarser_and_detailed_ones_their_own() {
+    // A 64^3 grid of 1 mm voxels, uniform where x < 32 and blocks of 2 x 2 x 2 voxels of two
+    // values in turn where x >= 32 (a pattern a level coarser would average away; one that
+    // alternates voxel by voxel the splats' cells average already), both translucent, seen
+    // along z from 100 mm before its face at 64 x 64 pixels: its voxels fall 0.55-0.9 pixels
+    // apart, so every brick wants its own grid across the view and most may be drawn a
+    // level coarser where they are smooth.
+    let n = 64u32;
+    let values: Vec<f32> = (0..n * n * n)
+        .map(|id| {
+            let k = [id % n, id / n % n, id / n / n];
+            match (k[0] < n / 2, k.iter().map(|c| c / 2).sum::<u32>() % 2) {
+                (true, _) => 350.0,
+                (false, 0) => 200.0,
+                (false, _) => 500.0,
+            }
+        })
+        .collect();
+    let transfer = crate::classify::TransferFunction::new(vec![
+        (100.0, [0.9, 0.5, 0.3, 0.0]),
+        (600.0, [1.0, 0.9, 0.7, 0.3]),
+    ]);
+    let mut scene = Scene::new();
+    let id = scene
+        .add(
+            "volume",
+            DMat4::IDENTITY,
+            None,
+            crate::scene::NodeContent::Volume(VolumeNode {
+                volume: Arc::new(unit_volume(n, values.into())),
+                transfer: Arc::new(transfer),
+                splats: crate::scene::SplatSettings::default(),
+            }),
+        )
+        .unwrap();
+    let camera = SceneCamera {
+        projection: crate::scene::Projection::Perspective {
+            fov_y_degrees: 40.0,
+        },
+        ..SceneCamera::look_at(DVec3::new(31.5, 31.5, -100.0), DVec3::new(31.5, 31.5, 31.5))
+    };
+    let mut renderer = Renderer::with_compositor(super::super::Compositor::Cpu);
+    let shot = renderer
+        .screenshot_without_gpu(&scene, &camera, (64, 64), &FrameOptions::default())
+        .unwrap();
+    assert_eq!(shot.report.bricks_by_level, 1, "{:?}", shot.report);
+    let mix = renderer.mixes.get(&id).unwrap();
+    // What each brick's spacing alone calls for, and the level its smoothness may take.
+    let occupied = renderer.volumes[&(id, Detail::default())]
+        .occupied
+        .as_ref()
+        .unwrap();
+    let geometry = VolumeGeometry::new([n; 3], glam::DAffine3::from_scale(DVec3::ONE)).unwrap();
+    let wants = brick_details(&geometry, &shot.view, occupied, false, REFINE_TO);
+    let half = n / 2 / BRICK;
+    let last = n / BRICK - 1;
+    let mut inner = 0;
+    for (brick, drawn) in &mix.bricks {
+        let want = wants.iter().find(|w| w.brick == *brick).unwrap();
+        if brick[0] >= half {
+            // The blocks' half: its own level, though its spacing allows a coarser one.
+            assert!(want.smooth.is_some(), "{brick:?}: {want:?}");
+            assert_eq!(*drawn, want.detail, "{brick:?}");
+        } else if brick[0] > 0 && (0..3).all(|a| a == 0 || (1..last).contains(&brick[a])) {
+            // The uniform half away from the grid's faces (where the cells that reach past
+            // the last voxels fade): a level coarser.
+            assert_eq!(Some(*drawn), want.smooth, "{brick:?}");
+            inner += 1;
+        }
+    }
+    assert!(inner >= 4, "{inner}");
+    // The uniform half's picture, away from the seam where the coarser splats meet the
+    // finer ones, stays that of the volume drawn at its one level.
+    let mut one = Renderer::with_compositor(super::super::Compositor::Cpu);
+    one.set_levels_by_brick(false);
+    let whole = one
+        .screenshot_without_gpu(&scene, &camera, (64, 64), &FrameOptions::default())
+        .unwrap();
+    let (mut squared, mut count) = (0.0f64, 0);
+    for (i, (a, b)) in shot
+        .frame
+        .pixels
+        .iter()
+        .zip(&whole.frame.pixels)
+        .enumerate()
+    {
+        if i % 64 < 28 {
+            squared += (0..3).map(|c| f64::from(a[c] - b[c]).powi(2)).sum::<f64>();
+            count += 3;
+        }
+    }
+    let rmse = (squared / f64::from(count)).sqrt();
+    assert!(rmse < 0.005, "{rmse}");
 }
