@@ -1164,11 +1164,11 @@ impl Renderer {
     }
 
     /// Draws each of `wants` (volume `id`'s bricks on the image) that has a coarser level
-    /// allowed ([`BrickWant::smooth`]) at that level where halving the level it wants loses
-    /// at most [`SMOOTH_SPREAD`] in the brick ([`Renderer::spread_of`]); makes the levels the
-    /// bricks want first (their spreads are measured on them), and where bricks draw the
-    /// own grid, its texels, before levels are halved from them (else each level would
-    /// make the own grid's texels one by one from the volume, several times slower).
+    /// allowed ([`BrickWant::smooth`]) at that level where halving the level it wants,
+    /// across the view, loses at most [`SMOOTH_SPREAD`] in the brick
+    /// ([`Renderer::spread_of`]). Where bricks draw the own grid, its texels are made first,
+    /// before levels are halved from them (else each level would make the own grid's texels
+    /// one by one from the volume, several times slower).
     fn draw_smooth_coarser(
         &mut self,
         id: NodeId,
@@ -1189,9 +1189,15 @@ impl Renderer {
             ));
             report.timings.texels += started.elapsed();
         }
-        let mut spreads: HashMap<(Detail, Detail), Option<Arc<BrickSpread>>> = HashMap::new();
+        let dims = match self.volumes.get(&own) {
+            Some(state) => state.classified.grid.dims(),
+            None => return Ok(()),
+        };
+        let axes = dims.map(|n| n > 1);
+        // Per level even across the axes, what halving it once more loses.
+        let mut spreads: HashMap<u8, Option<Arc<BrickSpread>>> = HashMap::new();
         for want in wants {
-            let (Some(smooth @ Detail::Level(coarse, _)), Detail::Level(fine, facing)) =
+            let (Some(smooth @ Detail::Level(coarse, _)), Detail::Level(fine, _)) =
                 (want.smooth, want.detail)
             else {
                 continue;
@@ -1200,12 +1206,21 @@ impl Renderer {
             if (0..3).any(|a| coarse[a] < fine[a] || coarse[a] > fine[a] + 1) {
                 continue;
             }
-            let axes = std::array::from_fn(|a| coarse[a] > fine[a]);
-            let spread = match spreads.entry((want.detail, smooth)) {
+            // Measured on the level below the brick's that is even across the axes (the
+            // one its level is halved from, along the view, or the own grid): the spread
+            // across the view is what the coarser level loses, and that level is made on
+            // the way to the brick's own.
+            let least = (0..3)
+                .filter(|&a| axes[a])
+                .map(|a| fine[a])
+                .min()
+                .unwrap_or(0);
+            let spread = match spreads.entry(least) {
                 std::collections::hash_map::Entry::Occupied(known) => known.into_mut(),
                 std::collections::hash_map::Entry::Vacant(slot) => {
-                    let got = self.make_levels(id, spacing, fine, facing, report)?;
-                    let spread = if got == want.detail {
+                    let even = axes.map(|h| if h { least } else { 0 });
+                    let got = self.make_levels(id, spacing, even, [0; 3], report)?;
+                    let spread = if got == Detail::Level(even, [0; 3]) {
                         self.spread_of((id, got), axes, spacing, report)?
                     } else {
                         None

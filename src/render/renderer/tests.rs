@@ -492,8 +492,10 @@ fn bricks_walked_alone_give_their_levels_orders_sorted_into_bricks() {
 #[test]
 fn smooth_bricks_draw_a_level_coarser_and_detailed_ones_their_own() {
     // A 64^3 grid of 1 mm voxels, uniform where x < 32 and blocks of 2 x 2 x 2 voxels of two
-    // values in turn where x >= 32 (a pattern a level coarser would average away; one that
-    // alternates voxel by voxel the splats' cells average already), both translucent, seen
+    // values in turn where x >= 32, each straddling two of the level above's blocks (a
+    // pattern a level coarser would average away; one that alternates voxel by voxel the
+    // splats' cells average already, and blocks that are the level's own lose nothing
+    // halved), both translucent, seen
     // along z from 100 mm before its face at 64 x 64 pixels: its voxels fall 0.55-0.9 pixels
     // apart, so every brick wants its own grid across the view and most may be drawn a
     // level coarser where they are smooth.
@@ -501,7 +503,7 @@ fn smooth_bricks_draw_a_level_coarser_and_detailed_ones_their_own() {
     let values: Vec<f32> = (0..n * n * n)
         .map(|id| {
             let k = [id % n, id / n % n, id / n / n];
-            match (k[0] < n / 2, k.iter().map(|c| c / 2).sum::<u32>() % 2) {
+            match (k[0] < n / 2, k.iter().map(|c| (c + 1) / 2).sum::<u32>() % 2) {
                 (true, _) => 350.0,
                 (false, 0) => 200.0,
                 (false, _) => 500.0,
