@@ -77,16 +77,16 @@ pub(super) const COARSEN_TO: f64 = 1.0;
 pub(super) const SMOOTH_COARSEN_TO: f64 = 2.0;
 
 /// The most a brick's splats may lose on average to be drawn at the coarser level
-/// [`SMOOTH_COARSEN_TO`] allows: the mean, over the splats of the brick at that level, of
-/// the squared spread of their blocks' premultiplied colours about the block's mean
-/// ([`crate::classify::Classified::halved_measured`], each voxel's opacity that of its own
-/// length of tissue), square-rooted. Measured at 512 x 512 (384 x 384 where said), soft
-/// tissue, against the reference ray marcher, from no brick drawn coarser to 0.01, 0.015 and
-/// 0.02: the 0.7 mm LIDC2 CT from the front 0.0244, 0.0247, 0.0251, 0.0255 (384 x 384:
-/// 0.0280 to 0.0293) and turned 45 degrees 0.0210 to 0.0257; the 0.5 mm CT head obliquely
-/// 0.0096, 0.0140, 0.0150, 0.0159 for 28.3M, 9.9M, 5.8M and 4.2M splats (BENCHMARKS.md,
-/// "Smooth bricks a level coarser").
-pub(super) const SMOOTH_SPREAD: f64 = 0.02;
+/// [`SMOOTH_COARSEN_TO`] allows: the mean, over the splats of the brick halved across the
+/// view, of the squared spread of their blocks' premultiplied colours about the block's
+/// mean ([`crate::classify::Classified::halved_measured`], each voxel's opacity that of its
+/// own length of tissue), square-rooted. Soft tissue against the reference ray marcher, from
+/// no brick drawn coarser to 0.01, 0.015 and 0.02: the 0.5 mm CT head seen obliquely at 512
+/// x 512 0.0096, 0.0140, 0.0150, 0.0159 (28.3M, 9.9M, 5.8M and 4.2M splats); the 0.7 mm
+/// LIDC2 CT turned 45 degrees 0.0210, 0.0210, 0.0246, 0.0259, and from the front at 384 x
+/// 384 0.0280, 0.0280, 0.0296, 0.0307, past the 0.03 this project holds a picture to
+/// (BENCHMARKS.md, "Smooth bricks a level coarser").
+pub(super) const SMOOTH_SPREAD: f64 = 0.015;
 
 /// The most levels an axis is halved beyond the axis halved least ([`detail_for`]). An axis
 /// along the view direction has its voxels on top of each other on the screen and would be

@@ -512,7 +512,7 @@ fn smooth_bricks_draw_a_level_coarser_and_detailed_ones_their_own() {
         .collect();
     let transfer = crate::classify::TransferFunction::new(vec![
         (100.0, [0.9, 0.5, 0.3, 0.0]),
-        (600.0, [1.0, 0.9, 0.7, 0.3]),
+        (600.0, [1.0, 0.9, 0.7, 0.15]),
     ]);
     let mut scene = Scene::new();
     let id = scene
