@@ -695,17 +695,15 @@ fn a_refined_normal_is_the_slope_of_its_own_cell() {
     }
 }
 
-#[test]
-fn a_coarser_level_keeps_each_blocks_optical_depth_and_emission() {
-    // A 5 x 4 x 3 grid (odd along x and z) of varied splats, some left out: each block's
-    // splat, computed plainly from its children.
-    let dims = [5u32, 4, 3];
-    let mut ids = Vec::new();
-    let mut colors = Vec::new();
-    for id in 0..60u32 {
-        if id % 3 == 1 {
-            continue;
-        }
+/// A `dims` grid whose voxels `id` are significant where `kept(id)`, of colours that vary from
+/// voxel to voxel and density `density(id)`.
+fn varied_splats(
+    dims: [u32; 3],
+    kept: impl Fn(u32) -> bool,
+    density: impl Fn(u32) -> f32,
+) -> Classified {
+    let (mut ids, mut colors) = (Vec::new(), Vec::new());
+    for id in (0..dims.iter().product::<u32>()).filter(|&id| kept(id)) {
         ids.push(id);
         colors.push(SplatColor {
             rgb: [
@@ -713,13 +711,21 @@ fn a_coarser_level_keeps_each_blocks_optical_depth_and_emission() {
                 (id * 91 % 256) as u8,
                 (id * 13 % 256) as u8,
             ],
-            density: half::f16::from_f32(0.05 + 0.07 * (id % 5) as f32),
+            density: half::f16::from_f32(density(id)),
         });
     }
-    let fine = Classified {
+    Classified {
         grid: SparseGrid::from_sorted_ids(dims, &ids).unwrap(),
         colors,
-    };
+    }
+}
+
+#[test]
+fn a_coarser_level_keeps_each_blocks_optical_depth_and_emission() {
+    // A 5 x 4 x 3 grid (odd along x and z) of varied splats, some left out: each block's
+    // splat, computed plainly from its children.
+    let dims = [5u32, 4, 3];
+    let fine = varied_splats(dims, |id| id % 3 != 1, |id| 0.05 + 0.07 * (id % 5) as f32);
     let coarse = fine.halved().unwrap();
     assert_eq!(coarse.grid.dims(), [3, 2, 2]);
     for block in 0..12u32 {
@@ -1345,25 +1351,11 @@ fn a_halved_grid_measures_each_block_spread_as_a_plain_variance() {
     // premultiplied colours, computed plainly in f64 (the voxels left out as clear).
     let dims = [7u32, 4, 5];
     let n = dims.iter().product::<u32>();
-    let (mut ids, mut colors) = (Vec::new(), Vec::new());
-    for id in 0..n {
-        if id % 4 == 1 || id % 7 == 3 {
-            continue;
-        }
-        ids.push(id);
-        colors.push(SplatColor {
-            rgb: [
-                (id * 37 % 256) as u8,
-                (id * 91 % 256) as u8,
-                (id * 13 % 256) as u8,
-            ],
-            density: half::f16::from_f32(0.02 + 0.3 * (id % 6) as f32),
-        });
-    }
-    let fine = Classified {
-        grid: SparseGrid::from_sorted_ids(dims, &ids).unwrap(),
-        colors,
-    };
+    let fine = varied_splats(
+        dims,
+        |id| id % 4 != 1 && id % 7 != 3,
+        |id| 0.02 + 0.3 * (id % 6) as f32,
+    );
     let mm = 0.8f32;
     let premultiplied = |id: u32| -> [f64; 4] {
         let Some(rank) = fine.grid.rank(id) else {

@@ -278,6 +278,20 @@ impl VolumeState {
         }
     }
 
+    /// Makes this state's texels where they are not made yet; returns the time it took.
+    fn make_texels(&mut self) -> Duration {
+        if self.texels.is_some() {
+            return Duration::ZERO;
+        }
+        let started = Instant::now();
+        self.texels = Some(SplatTexels::new(
+            &self.classified,
+            &self.volume,
+            self.factors,
+        ));
+        started.elapsed()
+    }
+
     /// Orders this state's splats into `ids` for the eye and target given, its node placed by
     /// `world`.
     fn order(
@@ -670,6 +684,8 @@ pub struct Renderer {
     one_level: bool,
     /// Every volume drawn from its own grid (`--lod off`).
     full_grid: bool,
+    /// No brick drawn coarser for being smooth ([`Renderer::set_smooth_bricks`]).
+    no_smooth: bool,
     /// No volume drawn refined ([`Renderer::set_refinement`]).
     no_refinement: bool,
     /// Refinements classified over the whole grid, not only where the image shows it
@@ -739,6 +755,14 @@ impl Renderer {
     /// before. The GPU passes draw one level a volume.
     pub fn set_levels_by_brick(&mut self, on: bool) {
         self.one_level = !on;
+    }
+
+    /// Whether a brick whose content loses little by it is drawn a level coarser than its
+    /// spacing alone allows (on by default, with the levels by brick;
+    /// [`Renderer::set_levels_by_brick`]). Off, each brick draws the level its spacing calls
+    /// for, whatever it holds.
+    pub fn set_smooth_bricks(&mut self, on: bool) {
+        self.no_smooth = !on;
     }
 
     /// Whether volumes whose voxels are more than [`REFINE_TO`] pixels apart may be drawn
@@ -1021,16 +1045,8 @@ impl Renderer {
         let mut texels = Duration::ZERO;
         for (id, _) in ordered {
             for detail in drawn(id) {
-                if let Some(state) = volumes.get_mut(&(*id, detail))
-                    && state.texels.is_none()
-                {
-                    let started = Instant::now();
-                    state.texels = Some(SplatTexels::new(
-                        &state.classified,
-                        &state.volume,
-                        state.factors,
-                    ));
-                    texels += started.elapsed();
+                if let Some(state) = volumes.get_mut(&(*id, detail)) {
+                    texels += state.make_texels();
                 }
             }
         }
@@ -1179,15 +1195,8 @@ impl Renderer {
         let own = (id, Detail::default());
         if wants.iter().any(|w| w.detail == own.1)
             && let Some(state) = self.volumes.get_mut(&own)
-            && state.texels.is_none()
         {
-            let started = Instant::now();
-            state.texels = Some(SplatTexels::new(
-                &state.classified,
-                &state.volume,
-                state.factors,
-            ));
-            report.timings.texels += started.elapsed();
+            report.timings.texels += state.make_texels();
         }
         let dims = match self.volumes.get(&own) {
             Some(state) => state.classified.grid.dims(),
@@ -1492,7 +1501,7 @@ impl Renderer {
                     .sum()
             };
             // Smooth bricks go one level coarser where the mix could then be drawn at all.
-            if let Some(wants) = brick_wants.as_mut() {
+            if let Some(wants) = brick_wants.as_mut().filter(|_| !self.no_smooth) {
                 let coarsest: Vec<BrickWant> = wants
                     .iter()
                     .map(|w| BrickWant {

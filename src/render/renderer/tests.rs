@@ -503,7 +503,7 @@ fn smooth_bricks_draw_a_level_coarser_and_detailed_ones_their_own() {
     let values: Vec<f32> = (0..n * n * n)
         .map(|id| {
             let k = [id % n, id / n % n, id / n / n];
-            match (k[0] < n / 2, k.iter().map(|c| (c + 1) / 2).sum::<u32>() % 2) {
+            match (k[0] < n / 2, k.iter().map(|c| c.div_ceil(2)).sum::<u32>() % 2) {
                 (true, _) => 350.0,
                 (false, 0) => 200.0,
                 (false, _) => 500.0,
@@ -563,6 +563,19 @@ fn smooth_bricks_draw_a_level_coarser_and_detailed_ones_their_own() {
         }
     }
     assert!(inner >= 4, "{inner}");
+    // Without smooth bricks, every brick draws what its spacing calls for: here one level
+    // for the whole volume.
+    let mut plain = Renderer::with_compositor(super::super::Compositor::Cpu);
+    plain.set_smooth_bricks(false);
+    let shot_plain = plain
+        .screenshot_without_gpu(&scene, &camera, (64, 64), &FrameOptions::default())
+        .unwrap();
+    assert_eq!(
+        shot_plain.report.bricks_by_level, 0,
+        "{:?}",
+        shot_plain.report
+    );
+    assert!(wants.iter().all(|w| w.detail == wants[0].detail));
     // The uniform half's picture, away from the seam where the coarser splats meet the
     // finer ones, stays that of the volume drawn at its one level.
     let mut one = Renderer::with_compositor(super::super::Compositor::Cpu);
