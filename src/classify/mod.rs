@@ -406,8 +406,8 @@ impl Classified {
     /// of the squared distance between a voxel's premultiplied RGBA and the block's mean
     /// (the voxels of the block without a splat counting as clear), each voxel's opacity
     /// that of `spread_mm` millimetres of its tissue. It is the energy of the block's Haar
-    /// details in the colours a ray meets: nothing where the block's voxels look alike, and
-    /// up to 0.25 where half of them are opaque white and half clear.
+    /// details in the colours a ray meets: nothing where the block's voxels look alike, 1
+    /// where half of them are opaque white and half clear.
     pub fn halved_measured(
         &self,
         axes: [bool; 3],

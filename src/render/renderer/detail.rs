@@ -568,9 +568,10 @@ pub(super) fn refine_factors(dims: [u32; 3], apart: [f64; 3]) -> Option<[u32; 3]
 /// pyramid, or its grid refined where its voxels fall more than [`REFINE_TO`] pixels apart. A
 /// brick the eye is in draws the own grid; a `preview` draws every brick at least a level
 /// coarser. With each brick comes the level, halved once more along the axes halved least
-/// (and at most once more along the others), it may be drawn at where its content is smooth ([`SMOOTH_COARSEN_TO`]; `None` for a preview, a brick drawn refined or one that
-/// wants its own grid at any spacing). A brick whose voxels fall more than `refine_from` pixels apart (whole edges) wants
-/// refining whatever the rule says ([`REFINE_TO`] is the rule's own threshold). A brick is left out where its box, grown by two of its
+/// (and at most once more along the others), it may be drawn at where its content is smooth
+/// ([`SMOOTH_COARSEN_TO`]; `None` for a preview, a brick drawn refined, or one whose voxels
+/// would fall too far apart). A brick whose voxels fall more than `refine_from` pixels
+/// apart (whole edges) wants refining whatever the rule says ([`REFINE_TO`] is the rule's own threshold). A brick is left out where its box, grown by two of its
 /// splats' voxels each way and by three pixels at its far side (the footprints' reach past
 /// their voxels and the screen's low-pass), lies off the image ([`off_image`]). Each brick
 /// comes with the own grid's splats in it.
@@ -594,15 +595,13 @@ pub(super) fn brick_details(
         .zip(&bricks.splats)
         .zip(bricks.world_boxes(geometry))
         .filter_map(|((&brick, &splats), (centre, half))| {
-            let wanted =
-                apart_in_box(geometry, view, (centre, half)).map(|apart| {
-                    match detail_at(dims, Some(apart)) {
-                        Detail::Level(..) if apart.full.iter().any(|&f| f > refine_from) => {
-                            Detail::Refined([1; 3])
-                        }
-                        wanted => wanted,
-                    }
-                });
+            let apart = apart_in_box(geometry, view, (centre, half));
+            let wanted = apart.map(|apart| match detail_at(dims, Some(apart)) {
+                Detail::Level(..) if apart.full.iter().any(|&f| f > refine_from) => {
+                    Detail::Refined([1; 3])
+                }
+                wanted => wanted,
+            });
             let (levels, facing) = match wanted {
                 Some(Detail::Level(levels, facing)) => (levels, facing),
                 _ => ([0; 3], [0; 3]),
@@ -614,7 +613,7 @@ pub(super) fn brick_details(
             };
             let smooth = match (wanted, preview) {
                 (Some(Detail::Level(..)), false) => {
-                    apart_in_box(geometry, view, (centre, half)).and_then(|apart| {
+                    apart.and_then(|apart| {
                         // Halved once more along each axis halved least (those across the
                         // view), and at most once more along the others.
                         let least = (0..3)

@@ -749,7 +749,7 @@ impl Renderer {
     /// level's draw order, so the order keeps every brick behind the bricks that can hide it;
     /// bricks whose splats cannot land on the image are left out before their splats are
     /// walked. A brick whose content loses little by it is drawn a level coarser than its
-    /// spacing alone allows (a spread of at most 0.02, `SMOOTH_SPREAD`). A view whose bricks
+    /// spacing alone allows (a spread of at most 0.015, `SMOOTH_SPREAD`). A view whose bricks
     /// all want one level, or where the bricks' levels would draw more than two thirds of the
     /// splats of the volume's one level (`MIX_SAVING`), draws that one level as one grid, as
     /// before. The GPU passes draw one level a volume.

@@ -503,7 +503,10 @@ fn smooth_bricks_draw_a_level_coarser_and_detailed_ones_their_own() {
     let values: Vec<f32> = (0..n * n * n)
         .map(|id| {
             let k = [id % n, id / n % n, id / n / n];
-            match (k[0] < n / 2, k.iter().map(|c| c.div_ceil(2)).sum::<u32>() % 2) {
+            match (
+                k[0] < n / 2,
+                k.iter().map(|c| c.div_ceil(2)).sum::<u32>() % 2,
+            ) {
                 (true, _) => 350.0,
                 (false, 0) => 200.0,
                 (false, _) => 500.0,
