@@ -168,6 +168,10 @@ struct VolumeState {
     texels: Option<SplatTexels>,
     orderer: Orderer,
     ids: Vec<u32>,
+    /// The view class `ids` was ordered for, where a view of the same class may reuse it.
+    ordered_for: Option<OrderKey>,
+    /// Whether `ids` is on the GPU as `gpu`'s draw order.
+    ids_on_gpu: bool,
     /// Where its splats lie, by bricks (the volume's own grid only).
     occupied: Option<Occupied>,
     /// The own grid's bricks a refinement was classified within (`None`: all of them).
@@ -175,6 +179,54 @@ struct VolumeState {
     /// What halving this grid along some axes would lose, brick by brick, for the axes
     /// asked for so far ([`Renderer::spread_of`]).
     spreads: Vec<([bool; 3], Arc<BrickSpread>)>,
+}
+
+/// The class of views that share one draw order of a grid: the ordering, its axis
+/// permutation and, per axis, where the eye lies against the voxel centres and the midpoints
+/// between them (`AxisCase::view` and, where the eye's plane cuts the grid, the merge
+/// threshold `floor(2 e)`). IP-PBTF (either interleaving) decides every pair of voxels by these
+/// alone, so two views of one class give the same list, as long as culling behind the eye
+/// leaves every voxel in: while a camera orbits a grid from outside, the order changes only
+/// when the axis nearest the view direction does.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct OrderKey {
+    ordering: Ordering,
+    permutation: [usize; 3],
+    axes: [(crate::order::AxisView, i64); 3],
+}
+
+impl OrderKey {
+    /// The class of `view` for `ordering`, or `None` where the order cannot be reused: the
+    /// orderings that depend on distances, not on the class, and views whose eye plane culls
+    /// some voxel centre of the grid (or comes within a hair of one).
+    fn of(view: &ViewCase, ordering: Ordering, options: &OrderOptions) -> Option<Self> {
+        if !matches!(
+            ordering,
+            Ordering::IpPbtfImplicit | Ordering::IpPbtfExplicit
+        ) {
+            return None;
+        }
+        if options.cull_behind_eye {
+            // The eye-plane distance is linear over the grid's box: positive at its eight
+            // corner voxels, it is positive at every voxel.
+            let n = view.axes.map(|a| a.n.saturating_sub(1));
+            let margin = 1e-6 * (1.0 + view.eye.abs().max_element());
+            let corners =
+                (0..8u32).map(|c| [0, 1, 2].map(|a| if c >> a & 1 == 1 { n[a] } else { 0 }));
+            // NaN fails the test too.
+            if !corners.into_iter().all(|k| view.eye_plane(k) > margin) {
+                return None;
+            }
+        }
+        Some(Self {
+            ordering,
+            permutation: view.permutation,
+            axes: view.axes.map(|a| match a.view {
+                crate::order::AxisView::Split { .. } => (a.view, a.merge_threshold()),
+                other => (other, 0),
+            }),
+        })
+    }
 }
 
 /// What halving a grid along some axes loses, per brick of [`BRICK`]^3 own voxels: the root
@@ -247,6 +299,8 @@ impl VolumeState {
             texels: None,
             orderer,
             ids,
+            ordered_for: None,
+            ids_on_gpu: false,
             occupied: None,
             region: None,
             spreads: Vec::new(),
@@ -302,6 +356,12 @@ impl VolumeState {
     ) -> Result<(), String> {
         let geometry = self.geometry(world).map_err(|e| e.to_string())?;
         let case = ViewCase::new(&geometry, eye, target).map_err(|e| e.to_string())?;
+        let key = OrderKey::of(&case, ordering, options);
+        if key.is_some() && key == self.ordered_for {
+            return Ok(());
+        }
+        self.ordered_for = None;
+        self.ids_on_gpu = false;
         self.orderer
             .order(
                 &self.classified.grid,
@@ -310,7 +370,9 @@ impl VolumeState {
                 options,
                 &mut self.ids,
             )
-            .map_err(|e| e.to_string())
+            .map_err(|e| e.to_string())?;
+        self.ordered_for = key;
+        Ok(())
     }
 }
 
@@ -1779,11 +1841,15 @@ impl Renderer {
                 let pass = splat_pass.get_or_insert_with(|| SplatPass::new(ctx));
                 let gpu = pass.upload(ctx, &state.classified, &|k, rank| state.texel(k, rank))?;
                 state.gpu = Some(gpu);
+                state.ids_on_gpu = false;
             }
             let Some(gpu) = &mut state.gpu else {
                 continue;
             };
-            SplatPass::upload_order(ctx, gpu, &state.ids)?;
+            if !state.ids_on_gpu {
+                SplatPass::upload_order(ctx, gpu, &state.ids)?;
+                state.ids_on_gpu = true;
+            }
             SplatPass::write_uniforms(ctx, gpu, geometry, view, &settings, &scene.clipping);
         }
         if let Some(pass) = &self.mesh_pass {

@@ -602,3 +602,120 @@ fn smooth_bricks_draw_a_level_coarser_and_detailed_ones_their_own() {
     let rmse = (squared / f64::from(count)).sqrt();
     assert!(rmse < 0.005, "{rmse}");
 }
+
+#[test]
+fn a_draw_order_is_reused_only_for_views_that_give_the_same_order() {
+    // A sparse 20 x 17 x 13 grid (about a third of its voxels significant), sheared and turned
+    // in the world, ordered along camera paths that orbit it from outside in small steps, look
+    // down on it from over its top face (the eye's planes cut two axes), pass through it, step
+    // the eye by a quarter voxel along each axis over it, and turn within it (the eye plane
+    // culls voxels).
+    // After every view the state's order must be the one a fresh orderer makes.
+    let dims = [20u32, 17, 13];
+    let mut seed = 0x2545_f491_4f6c_dd1du64;
+    let values: Vec<f32> = (0..dims.iter().product::<u32>())
+        .map(|_| {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            if seed.is_multiple_of(3) { 1000.0 } else { 0.0 }
+        })
+        .collect();
+    let volume = Arc::new(CpuVolume {
+        dims,
+        spacing: [0.7, 0.9, 1.6],
+        origin: [-5.0, 2.0, 1.0],
+        direction: DMat3::from_rotation_z(0.3) * DMat3::from_rotation_x(-0.2),
+        values: values.into(),
+    });
+    let tf = crate::classify::TransferFunction::ramp(100.0, 900.0, [1.0, 1.0, 1.0, 0.8]);
+    let classified = crate::classify::classify(&volume, &tf, 0.0).unwrap();
+    let world = DMat4::from_cols_array(&[
+        1.0, 0.0, 0.0, 0.0, 0.2, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 3.0, -1.0, 2.0, 1.0,
+    ]);
+    // One state an ordering, each keeping its own order from view to view.
+    let orderings = [Ordering::IpPbtfImplicit, Ordering::IpPbtfExplicit];
+    let mut states = orderings.map(|_| {
+        VolumeState::new(
+            (0, 0, 0, 0, 0, 0, None),
+            Arc::clone(&volume),
+            [1; 3],
+            classified.clone(),
+            Orderer::new(),
+            Vec::new(),
+        )
+    });
+    let geometry = states[0].geometry(world).unwrap();
+    let centre = geometry.centre_world();
+    let (mut eyes, mut turns) = (Vec::new(), Vec::new());
+    for step in 0..120 {
+        let a = f64::from(step).to_radians() * 3.0;
+        eyes.push(centre + DVec3::new(a.cos(), a.sin(), 0.35) * 60.0);
+    }
+    for step in 0..40 {
+        let t = f64::from(step) / 39.0;
+        eyes.push(centre + DVec3::new(-12.0 + 24.0 * t, -3.0 + 6.0 * t, 25.0));
+    }
+    for step in 0..40 {
+        let t = f64::from(step) / 39.0;
+        eyes.push(centre + DVec3::new(-30.0 + 60.0 * t, 4.0, 1.0));
+    }
+    for step in 0..40 {
+        let quarter = f64::from(step) * 0.25;
+        eyes.push(geometry.index_to_world().transform_point3(DVec3::new(
+            quarter,
+            0.5 * quarter,
+            20.0,
+        )));
+    }
+    // Standing inside it and turning by a degree a view: the class stays, the culled set does
+    // not.
+    let inside = centre + DVec3::new(1.3, -0.4, 0.2);
+    for step in 0..30 {
+        let a = f64::from(step - 15).to_radians();
+        eyes.push(inside);
+        turns.push(inside + DVec3::new(a.cos(), a.sin(), 0.1) * 10.0);
+    }
+    let options = OrderOptions {
+        cull_behind_eye: true,
+        ..Default::default()
+    };
+    let (mut reused, mut split_reused, mut culled, mut previous) = (0, 0, 0, [None; 2]);
+    for (i, &eye) in eyes.iter().enumerate() {
+        // Looking at the centre, or straight down from over the top face.
+        let target = if i >= 240 {
+            turns[i - 240]
+        } else if (120..160).contains(&i) || i >= 200 {
+            eye - geometry.index_to_world().transform_vector3(DVec3::Z)
+        } else {
+            centre
+        };
+        let case = ViewCase::new(&geometry, eye, target).unwrap();
+        for (o, (ordering, state)) in orderings.into_iter().zip(&mut states).enumerate() {
+            state
+                .order(world, (eye, target), (ordering, &options))
+                .unwrap();
+            let mut fresh = Vec::new();
+            Orderer::new()
+                .order(&classified.grid, &case, ordering, &options, &mut fresh)
+                .unwrap();
+            assert_eq!(state.ids, fresh, "view {i}, {ordering:?}");
+            let key = OrderKey::of(&case, ordering, &options);
+            if key.is_some() && key == previous[o] {
+                reused += 1;
+                if case.axes.iter().any(|a| a.is_split()) {
+                    split_reused += 1;
+                }
+            }
+            previous[o] = key;
+            if key.is_none() && i >= 240 {
+                culled += 1;
+            }
+        }
+    }
+    // The paths do reuse orders, with the eye's planes cutting the grid too.
+    assert!(reused > 100, "{reused}");
+    assert!(split_reused > 10, "{split_reused}");
+    // Turning within the grid culls other voxels at the same class: never reused.
+    assert!(culled > 20, "{culled}");
+}
