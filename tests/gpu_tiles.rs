@@ -23,6 +23,9 @@ const OPTIONS: FrameOptions = FrameOptions {
     preview: false,
 };
 
+/// Splats a batch of the GPU tiles in these tests.
+const BATCH: usize = 16_384;
+
 fn context() -> GpuContext {
     GpuContext::headless().expect("a GPU adapter (install mesa-vulkan-drivers)")
 }
@@ -40,6 +43,8 @@ fn shoot(
 ) -> Frame {
     let mut renderer = Renderer::with_compositor(compositor);
     renderer.tile_compositor_mut().opaque = opaque;
+    // Small batches on the GPU, so that the tests' orders take several.
+    renderer.set_gpu_tile_batch(std::num::NonZeroUsize::new(BATCH).unwrap());
     // The GPU tiles draw a volume at one level; so does the CPU here, to draw the same splats.
     renderer.set_levels_by_brick(false);
     renderer
@@ -140,13 +145,31 @@ fn two_volumes_are_taken_near_to_far() {
 #[test]
 fn long_orders_odd_images_and_early_termination() {
     // 42,875 splats (not a multiple of the 64 ids an order is bound from): three batches,
-    // later ones finding most pixels opaque; an image whose sides are not multiples of a
-    // tile; a turned view; and the same with no pixel ever stopping.
+    // later ones finding most pixels opaque, and one batch (the default size); an image whose
+    // sides are not multiples of a tile; a turned view; and the same with no pixel ever
+    // stopping.
     let scene = solid(35);
     let turned = camera_of(&scene).orbit_about(scene.up_axis(), 50.0, 20.0);
     let ctx = context();
     for (camera, size) in [(camera_of(&scene), (96, 80)), (turned, (150, 71))] {
         compare_at(&scene, &camera, size, &OPTIONS, "dense block");
+        let mut whole = Renderer::with_compositor(Compositor::GpuTiles);
+        whole.set_levels_by_brick(false);
+        let one = whole
+            .screenshot(&ctx, &scene, &camera, size, &OPTIONS)
+            .unwrap();
+        let cpu = shoot(
+            &ctx,
+            Compositor::Cpu,
+            &scene,
+            &camera,
+            size,
+            &OPTIONS,
+            splatscene::splat::tiled::OPAQUE,
+        );
+        assert!(one.report.splats > 2 * BATCH, "{}", one.report.splats);
+        let one = compare(&one.frame, &cpu).unwrap();
+        assert_same(&one, "dense block, one batch");
         let gpu = shoot(
             &ctx,
             Compositor::GpuTiles,

@@ -941,6 +941,59 @@ fn check_ip_pbtf(ordering: Ordering) {
     });
 }
 
+/// Grids large enough that the library walks IP-PBTF in slabs of slices on several threads:
+/// eyes outside the grid, within two axes' extents, within all three (culling behind the eye),
+/// each ordering's list the definition's.
+#[test]
+fn ip_pbtf_walked_in_slabs_is_its_definition() {
+    let placement = Placement {
+        name: "90x70x60 sheared",
+        dims: [90, 70, 60],
+        cols: [[0.7, 0.1, 0.0], [0.0, 0.7, 0.2], [0.05, 0.0, 1.6]],
+        origin: [-20.0, 4.0, 9.0],
+        dyadic: false,
+    };
+    let cases = [
+        ([-40.3, 150.2, 95.7], [45.0, 35.0, 30.0], false),
+        ([44.6, 31.3, 140.9], [40.1, 35.2, 30.0], false),
+        ([52.35, 18.6, 21.2], [10.0, 60.0, 40.0], true),
+        ([30.2, 40.7, 35.4], [31.0, 41.0, 90.0], true),
+    ];
+    for (i, (eye, target, cull)) in cases.into_iter().enumerate() {
+        let case = Case {
+            placement,
+            eye,
+            target,
+            percent: [60, 45][i % 2],
+            seed: 7 + i as u64,
+            cull,
+        };
+        let to_world = |x: V3| DVec3::from(placement.world(x));
+        let view = ViewCase::new(&placement.geometry(), to_world(eye), to_world(target)).unwrap();
+        let significant = mask(placement.voxels(), case.percent, case.seed);
+        let grid = SparseGrid::from_mask(placement.dims, |id| significant[id as usize]).unwrap();
+        assert!(grid.len() > 1 << 17, "{}", grid.len());
+        let oracle = Oracle::new(&case, view.eye.to_array(), &significant);
+        let options = OrderOptions {
+            cull_behind_eye: cull,
+            bucket_width: None,
+        };
+        for ordering in [Ordering::IpPbtfImplicit, Ordering::IpPbtfExplicit] {
+            let mut got = Vec::new();
+            Orderer::new()
+                .order(&grid, &view, ordering, &options, &mut got)
+                .unwrap();
+            check_total(
+                &oracle,
+                &got,
+                &oracle.ip_pbtf_permutations(),
+                |&perm, a, b| oracle.ip_pbtf_cmp(perm, a, b),
+            )
+            .unwrap_or_else(|e| panic!("{ordering} {}: {e}", case.label()));
+        }
+    }
+}
+
 #[test]
 fn ip_pbtf_explicit_is_its_definition() {
     check_ip_pbtf(Ordering::IpPbtfExplicit);

@@ -240,7 +240,7 @@ impl Orderer {
                 let explicit = ordering == Ordering::IpPbtfExplicit;
                 let [s0, s1, s2] = &mut self.sequences;
                 let plan = ip_pbtf_plan(grid, view, explicit, [s0, s1, s2], &mut self.offsets);
-                walk(grid, &plan, cull, &mut Collect(out));
+                walk_in_slabs(grid, &plan, cull, out);
             }
             Ordering::Exact => {
                 let [s0, s1, _] = &mut self.sequences;
@@ -468,6 +468,41 @@ fn ip_pbtf_plan<'a>(
         perm,
         outer: [s0, s1],
         inner,
+    }
+}
+
+/// [`walk`] into `out`, the outer axis cut into slabs of slices walked in parallel, each into
+/// its own list, joined in the outer axis's order: the same list, made on every core. A grid of
+/// fewer than [`SLAB_SPLATS`] splats is walked on one.
+fn walk_in_slabs(grid: &SparseGrid, plan: &Plan<'_>, cull: Option<&ViewCase>, out: &mut Vec<u32>) {
+    use rayon::prelude::*;
+    /// Splats under which one thread walks the whole grid.
+    const SLAB_SPLATS: usize = 1 << 16;
+    let slices = plan.outer[0].len();
+    let tasks = (rayon::current_num_threads() * 4).min(grid.len() / SLAB_SPLATS);
+    if tasks < 2 || slices < 2 {
+        walk(grid, plan, cull, &mut Collect(out));
+        return;
+    }
+    // Every task reads the rows along the inner axis: made before, outside the tasks (the
+    // rows are built in parallel themselves, see `SparseGrid::prepare_rows`).
+    grid.prepare_rows(plan.perm[2]);
+    let per_task = slices.div_ceil(tasks);
+    let parts: Vec<Vec<u32>> = plan.outer[0]
+        .par_chunks(per_task)
+        .map(|slab| {
+            let mut ids = Vec::new();
+            let part = Plan {
+                outer: [slab, plan.outer[1]],
+                ..*plan
+            };
+            walk(grid, &part, cull, &mut Collect(&mut ids));
+            ids
+        })
+        .collect();
+    out.reserve(parts.iter().map(Vec::len).sum());
+    for part in parts {
+        out.extend_from_slice(&part);
     }
 }
 

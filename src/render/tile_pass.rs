@@ -3,10 +3,13 @@
 //! ([`crate::splat::tiled`]), as compute passes (`shaders/tiles.wgsl`), then the finished
 //! layer laid "over" the meshes already in the colour target.
 //!
-//! The draw orders are walked nearest first in batches that double from [`FIRST_BATCH`] to
-//! [`MAX_BATCH`] splats, so that tiles stop early while later batches are still large enough
-//! to fill a GPU. Each batch is one dispatch that projects it and one that composites every
-//! tile; the layer of accumulated colour lives in a storage buffer between them. Nothing is
+//! The draw orders are walked nearest first in batches of up to [`MAX_BATCH`] splats (fewer
+//! where the adapter binds less). Each batch is one dispatch that projects it and one that
+//! composites every tile; the layer of accumulated colour lives in a storage buffer between
+//! them. A tile stops within a batch once its pixels are opaque, so small batches gain no
+//! early termination, while each batch waits for its slowest tile: on an NVIDIA H200, batches
+//! doubling from 16,384 to 524,288 splats took 6.9 ms for the engine's 1.1M splats, batches of
+//! 2,097,152 3.8-4.0 ms (BENCHMARKS.md). Nothing is
 //! read back: the meshes' colour and depth stay on the GPU, where the CPU compositor must read
 //! both back first.
 //!
@@ -21,10 +24,9 @@ use super::splat_pass::GpuVolume;
 use super::target::over_target;
 use super::{GpuContext, RenderError};
 
-/// Splats in the first (nearest) batch.
-const FIRST_BATCH: usize = 1 << 14;
-/// Splats in the largest batch.
-const MAX_BATCH: usize = 1 << 19;
+/// Splats in a batch, unless the adapter binds fewer or [`TilePass::set_batch`] asks for
+/// fewer: 192 MiB of projected splats.
+pub(crate) const MAX_BATCH: usize = 1 << 22;
 /// Splats a workgroup projects; the groups whose rectangles the tiles test.
 const GROUP: usize = 256;
 /// Tile side in pixels, as `shaders/tiles.wgsl` has it.
@@ -64,12 +66,14 @@ pub(crate) struct TilePass {
     cover: wgpu::RenderPipeline,
     /// Projected splats of one batch.
     projected: Option<wgpu::Buffer>,
-    /// The group rectangles of one batch.
+    /// The span rectangles of one batch.
     rects: Option<wgpu::Buffer>,
     /// The accumulated layer, premultiplied RGBA as f32 a pixel.
     layer: Option<wgpu::Buffer>,
     /// The batches' uniforms, one slot each.
     batches: Option<wgpu::Buffer>,
+    /// Splats in a batch, at most.
+    batch: usize,
 }
 
 /// A buffer of at least `bytes`, kept where the one held is large enough.
@@ -105,17 +109,16 @@ struct Stretch {
 }
 
 /// The stretches of the draw orders, nearest first: the volumes near to far, each one's order
-/// (back to front) from its end, in batches that double.
-fn stretches(counts: &[usize]) -> Vec<Stretch> {
+/// (back to front) from its end, in batches of `batch` splats (at least one).
+fn stretches(counts: &[usize], batch: usize) -> Vec<Stretch> {
+    let batch = batch.max(1);
     let mut out = Vec::new();
-    let mut batch = FIRST_BATCH;
     for (volume, &count) in counts.iter().enumerate() {
         let mut end = count;
         while end > 0 {
             let begin = end.saturating_sub(batch);
             out.push(Stretch { volume, begin, end });
             end = begin;
-            batch = (batch * 2).min(MAX_BATCH);
         }
     }
     out
@@ -167,7 +170,13 @@ impl TilePass {
             rects: None,
             layer: None,
             batches: None,
+            batch: MAX_BATCH,
         }
+    }
+
+    /// Composites at most `splats` splats a batch (still no more than the adapter binds).
+    pub(crate) fn set_batch(&mut self, splats: std::num::NonZeroUsize) {
+        self.batch = splats.get();
     }
 
     /// Makes `volume`'s opacity table for the step its uniforms were last written with, where
@@ -214,7 +223,15 @@ impl TilePass {
             });
         }
         let counts: Vec<usize> = volumes.iter().map(|v| v.count as usize).collect();
-        let stretches = stretches(&counts);
+        // The projected splats of a batch, and its stretch of the order, are bound whole.
+        let bindable = limits
+            .max_storage_buffer_binding_size
+            .min(limits.max_buffer_size)
+            / PROJECTED_BYTES;
+        let batch = self
+            .batch
+            .min(usize::try_from(bindable).unwrap_or(usize::MAX));
+        let stretches = stretches(&counts, batch);
         let largest = stretches.iter().map(|s| s.end - s.begin).max().unwrap_or(0);
         let storage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST;
         let projected = ensure(
@@ -365,23 +382,24 @@ mod tests {
     use super::*;
 
     /// The stretches cover every order exactly once, nearest first: volumes near to far, each
-    /// from its end, batches doubling to the largest.
+    /// from its end, in batches of at most the size asked for.
     #[test]
     fn stretches_cover_the_orders_nearest_first() {
         let counts = [100_000, 0, 3, 2_000_000];
-        let s = stretches(&counts);
-        for (v, &n) in counts.iter().enumerate() {
-            let mine: Vec<&Stretch> = s.iter().filter(|s| s.volume == v).collect();
-            let mut end = n;
-            for stretch in &mine {
-                assert_eq!(stretch.end, end);
-                assert!(stretch.begin < stretch.end);
-                end = stretch.begin;
+        for batch in [0, 1, 16_384, MAX_BATCH] {
+            let s = stretches(&counts, batch);
+            for (v, &n) in counts.iter().enumerate() {
+                let mine: Vec<&Stretch> = s.iter().filter(|s| s.volume == v).collect();
+                let mut end = n;
+                for stretch in &mine {
+                    assert_eq!(stretch.end, end);
+                    assert!(stretch.begin < stretch.end);
+                    end = stretch.begin;
+                }
+                assert_eq!(end, 0);
             }
-            assert_eq!(end, 0);
+            assert!(s.iter().all(|s| s.end - s.begin <= batch.max(1)));
+            assert!(s.windows(2).all(|p| p[0].volume <= p[1].volume));
         }
-        assert_eq!(s[0].end - s[0].begin, FIRST_BATCH);
-        assert!(s.iter().all(|s| s.end - s.begin <= MAX_BATCH));
-        assert!(s.windows(2).all(|p| p[0].volume <= p[1].volume));
     }
 }

@@ -759,6 +759,8 @@ pub struct Renderer {
     tiles: TiledCompositor,
     /// The tile compositor on the GPU ([`Compositor::GpuTiles`]), made on its first frame.
     tile_pass: Option<TilePass>,
+    /// Splats the GPU tile compositor takes in one batch, where not its own default.
+    gpu_tile_batch: Option<std::num::NonZeroUsize>,
     /// Frames whose levels of detail were chosen, counted (to drop levels least recently
     /// used).
     frame: u64,
@@ -817,6 +819,14 @@ impl Renderer {
     /// before. The GPU passes draw one level a volume.
     pub fn set_levels_by_brick(&mut self, on: bool) {
         self.one_level = !on;
+    }
+
+    /// Splats the GPU tile compositor ([`Compositor::GpuTiles`]) projects and composites in
+    /// one batch, at most (and no more than the adapter binds; 4,194,304 by default). Each
+    /// batch is one projecting and one compositing dispatch; fewer, larger batches are faster
+    /// on a GPU, and the picture is the same for any size.
+    pub fn set_gpu_tile_batch(&mut self, splats: std::num::NonZeroUsize) {
+        self.gpu_tile_batch = Some(splats);
     }
 
     /// Whether a brick whose content loses little by it is drawn a level coarser than its
@@ -1954,6 +1964,9 @@ impl Renderer {
                 return Ok(());
             }
             let pass = self.tile_pass.get_or_insert_with(|| TilePass::new(ctx));
+            if let Some(batch) = self.gpu_tile_batch {
+                pass.set_batch(batch);
+            }
             return pass.draw(ctx, &volumes, size, self.tiles.opaque, color, depth);
         }
         let Some(splat_pass) = &self.splat_pass else {
