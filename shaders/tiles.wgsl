@@ -5,10 +5,11 @@
 // The draw order is walked nearest first in batches, as on the CPU. Per batch:
 // - `project` places each splat of the batch (its centre, conic, premultiplied colour, reversed
 //   depth and pixel rectangle, exactly as `tiled::project` does), one thread a splat, and writes
-//   the rectangle that holds the footprints of every 256 consecutive splats (a group);
+//   the rectangle that holds the footprints of every 32 consecutive splats (a span);
 // - `composite` runs one workgroup a 16x16-pixel tile, one thread a pixel. Binning is done in
-//   two levels inside the workgroup, keeping the draw order: the groups whose rectangle meets
-//   the tile, in order, then in each such group its splats that meet the tile, in order. Each
+//   two levels inside the workgroup, keeping the draw order: the spans whose rectangle meets
+//   the tile, in order, then, eight such spans at a time, their splats that meet the tile, in
+//   order. Each
 //   pixel takes them front to back with the "under" operator `C += (1 - A) c; A += (1 - A) a`
 //   and stops at the opacity `batch.opaque`; a tile whose pixels have all stopped stops.
 // The accumulated layer (premultiplied RGBA a pixel) persists across batches; src/render/
@@ -16,6 +17,12 @@
 
 const TILE: u32 = 16u;
 const GROUP: u32 = 256u;
+// Splats a rectangle bounds (`SPAN` in src/render/tile_pass.rs), and spans in a group. In the
+// grid orders consecutive splats run along a row of voxels, which an oblique view lays
+// diagonally over the image: a rectangle of 32 such splats meets a few tiles, one of 256 meets
+// a large square of them, each of which would then load all 256 to find its few.
+const SPAN: u32 = 32u;
+const SPANS: u32 = GROUP / SPAN;
 
 // A splat on the screen (`Projected` in src/splat/tiled/project.rs).
 struct Projected {
@@ -40,8 +47,8 @@ struct Batch {
     // Opacity that stops a pixel; cut-off of the Gaussian's exponent.
     opaque: f32,
     cutoff: f32,
-    // Groups in the batch.
-    groups: u32,
+    // Spans in the batch.
+    spans: u32,
     pad: u32,
 }
 
@@ -52,8 +59,9 @@ struct Batch {
 @group(0) @binding(5) var<storage, read_write> group_rects: array<vec4<i32>>;
 @group(0) @binding(6) var<uniform> batch: Batch;
 
-var<workgroup> rect_lo: array<atomic<i32>, 2>;
-var<workgroup> rect_hi: array<atomic<i32>, 2>;
+// Per span of the group: its rectangle's lower x and y, then upper x and y.
+var<workgroup> rect_lo: array<atomic<i32>, 16>;
+var<workgroup> rect_hi: array<atomic<i32>, 16>;
 
 fn left_out() -> Projected {
     return Projected(vec4<f32>(0.0), vec4<f32>(0.0), vec4<u32>(0u, 0u, 1u, 0u));
@@ -129,39 +137,39 @@ fn project_splat(id: u32) -> Projected {
     );
 }
 
-// One thread a splat of the batch, nearest first; the group's rectangle from its threads.
+// One thread a splat of the batch, nearest first; each span's rectangle from its threads (an
+// empty one, lower above upper, where none of its splats is drawn or the batch has ended).
 @compute @workgroup_size(256)
 fn project(
     @builtin(workgroup_id) wg: vec3<u32>,
     @builtin(local_invocation_index) li: u32,
 ) {
-    if li == 0u {
-        atomicStore(&rect_lo[0], 0x3fffffff);
-        atomicStore(&rect_lo[1], 0x3fffffff);
-        atomicStore(&rect_hi[0], -1);
-        atomicStore(&rect_hi[1], -1);
+    if li < 2u * SPANS {
+        atomicStore(&rect_lo[li], 0x3fffffff);
+        atomicStore(&rect_hi[li], -1);
     }
     workgroupBarrier();
     let i = wg.x * GROUP + li;
+    let span = 2u * (li / SPAN);
     if i < batch.count {
         let s = project_splat(order[batch.first + batch.count - 1u - i]);
         let x0 = i32(s.b.z & 0xffffu);
         let x1 = i32(s.b.z >> 16u);
         if x0 <= x1 {
-            atomicMin(&rect_lo[0], x0);
-            atomicMax(&rect_hi[0], x1);
-            atomicMin(&rect_lo[1], i32(s.b.w & 0xffffu));
-            atomicMax(&rect_hi[1], i32(s.b.w >> 16u));
+            atomicMin(&rect_lo[span], x0);
+            atomicMax(&rect_hi[span], x1);
+            atomicMin(&rect_lo[span + 1u], i32(s.b.w & 0xffffu));
+            atomicMax(&rect_hi[span + 1u], i32(s.b.w >> 16u));
         }
         projected[i] = s;
     }
     workgroupBarrier();
-    if li == 0u {
-        group_rects[wg.x] = vec4<i32>(
-            atomicLoad(&rect_lo[0]),
-            atomicLoad(&rect_lo[1]),
-            atomicLoad(&rect_hi[0]),
-            atomicLoad(&rect_hi[1]),
+    if li < SPANS {
+        group_rects[wg.x * SPANS + li] = vec4<i32>(
+            atomicLoad(&rect_lo[2u * li]),
+            atomicLoad(&rect_lo[2u * li + 1u]),
+            atomicLoad(&rect_hi[2u * li]),
+            atomicLoad(&rect_hi[2u * li + 1u]),
         );
     }
 }
@@ -249,27 +257,30 @@ fn composite(
     var open = inside && acc.w < tiles.opaque;
     let centre = vec2<f32>(px) + 0.5;
     var done = count_open(li, open) == 0u;
-    for (var base = 0u; base < tiles.groups && !done; base += 256u) {
-        // The groups of this stretch that meet the tile, in order.
+    for (var base = 0u; base < tiles.spans && !done; base += 256u) {
+        // The spans of this stretch that meet the tile, in order.
         let g = base + li;
         var hit = 0u;
-        if g < tiles.groups && meets(rects[g], origin) {
+        if g < tiles.spans && meets(rects[g], origin) {
             hit = 1u;
         }
         let slot = prefix(li, hit);
         if hit == 1u {
             picked[slot - 1u] = g;
         }
-        let groups = workgroupUniformLoad(&total);
-        for (var j = 0u; j < groups && !done; j++) {
-            // The group's splats that meet the tile, in order.
-            let s = picked[j] * GROUP + li;
+        let spans = workgroupUniformLoad(&total);
+        for (var j = 0u; j < spans && !done; j += SPANS) {
+            // The splats of the next eight such spans that meet the tile, in order.
+            let which = j + li / SPAN;
             var splat = left_out();
             var touch = 0u;
-            if s < tiles.count {
-                splat = splats[s];
-                if meets(rect_of(splat), origin) {
-                    touch = 1u;
+            if which < spans {
+                let s = picked[which] * SPAN + li % SPAN;
+                if s < tiles.count {
+                    splat = splats[s];
+                    if meets(rect_of(splat), origin) {
+                        touch = 1u;
+                    }
                 }
             }
             let place = prefix(li, touch);

@@ -14,9 +14,9 @@
 //! both back first.
 //!
 //! Binning differs in form from the CPU's counting sort, not in result: a GPU workgroup (a
-//! tile) gathers, in order, the groups of 256 consecutive splats whose rectangle meets it and
-//! then each such group's splats that meet it, by prefix sums in workgroup memory, so that
-//! every tile takes its splats in the draw order without a global sort.
+//! tile) gathers, in order, the spans of [`SPAN`] consecutive splats whose rectangle meets it
+//! and then, eight such spans at a time, their splats that meet it, by prefix sums in workgroup
+//! memory, so that every tile takes its splats in the draw order without a global sort.
 
 use bytemuck::{Pod, Zeroable};
 
@@ -27,8 +27,11 @@ use super::{GpuContext, RenderError};
 /// Splats in a batch, unless the adapter binds fewer or [`TilePass::set_batch`] asks for
 /// fewer: 192 MiB of projected splats.
 pub(crate) const MAX_BATCH: usize = 1 << 22;
-/// Splats a workgroup projects; the groups whose rectangles the tiles test.
+/// Splats a workgroup projects.
 const GROUP: usize = 256;
+/// Consecutive splats whose footprints one rectangle bounds, the rectangles the tiles test
+/// (`SPAN` in `shaders/tiles.wgsl`).
+const SPAN: usize = 32;
 /// Tile side in pixels, as `shaders/tiles.wgsl` has it.
 const TILE: u32 = 16;
 /// Bytes of a projected splat (`Projected` in `shaders/tiles.wgsl`).
@@ -46,7 +49,7 @@ struct BatchUniforms {
     height: u32,
     opaque: f32,
     cutoff: f32,
-    groups: u32,
+    spans: u32,
     pad: u32,
 }
 
@@ -244,9 +247,9 @@ impl TilePass {
         let rects = ensure(
             ctx,
             &mut self.rects,
-            largest.div_ceil(GROUP) as u64 * 16,
+            (largest.div_ceil(GROUP) * (GROUP / SPAN)) as u64 * 16,
             storage,
-            "group rectangles",
+            "span rectangles",
         );
         let layer = ensure(ctx, &mut self.layer, layer_bytes, storage, "tile layer");
         let batches = ensure(
@@ -269,7 +272,7 @@ impl TilePass {
                 height: h,
                 opaque,
                 cutoff: cutoffs[s.volume],
-                groups: count.div_ceil(GROUP) as u32,
+                spans: count.div_ceil(SPAN) as u32,
                 pad: 0,
             };
             let at = i * SLOT as usize;
@@ -283,7 +286,7 @@ impl TilePass {
             height: h,
             opaque,
             cutoff: 0.0,
-            groups: 0,
+            spans: 0,
             pad: 0,
         };
         let at = stretches.len() * SLOT as usize;
