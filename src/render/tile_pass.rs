@@ -1,5 +1,5 @@
-//! The tile compositor on the GPU: the CPU tile compositor's projection, binning to 16x16-pixel
-//! tiles, front-to-back "under" compositing and early termination
+//! The tile compositor on the GPU: the CPU tile compositor's projection, binning to tiles (8x8
+//! pixels here, 16x16 on the CPU), front-to-back "under" compositing and early termination
 //! ([`crate::splat::tiled`]), as compute passes (`shaders/tiles.wgsl`), then the finished
 //! layer laid "over" the meshes already in the colour target.
 //!
@@ -15,7 +15,7 @@
 //!
 //! Binning differs in form from the CPU's counting sort, not in result: a GPU workgroup (a
 //! tile) gathers, in order, the spans of [`SPAN`] consecutive splats whose rectangle meets it
-//! and then, eight such spans at a time, their splats that meet it, by prefix sums in workgroup
+//! and then, two such spans at a time, their splats that meet it, by prefix sums in workgroup
 //! memory, so that every tile takes its splats in the draw order without a global sort.
 
 use bytemuck::{Pod, Zeroable};
@@ -33,7 +33,7 @@ const GROUP: usize = 256;
 /// (`SPAN` in `shaders/tiles.wgsl`).
 const SPAN: usize = 32;
 /// Tile side in pixels, as `shaders/tiles.wgsl` has it.
-const TILE: u32 = 16;
+const TILE: u32 = 8;
 /// Bytes of a projected splat (`Projected` in `shaders/tiles.wgsl`).
 const PROJECTED_BYTES: u64 = 48;
 /// Uniform slots are this far apart (wgpu's largest `min_uniform_buffer_offset_alignment`).
