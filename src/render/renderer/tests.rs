@@ -719,3 +719,53 @@ fn a_draw_order_is_reused_only_for_views_that_give_the_same_order() {
     // Turning within the grid culls other voxels at the same class: never reused.
     assert!(culled > 20, "{culled}");
 }
+
+#[test]
+fn bricks_that_want_a_rare_level_draw_a_finer_one_that_stands() {
+    let level = |l: [u8; 3], f: [i8; 3]| Detail::Level(l, f);
+    let own = Detail::default();
+    let even = level([1, 1, 1], [0; 3]);
+    let along_y = level([0, 1, 0], [0, 1, 0]);
+    let want = |detail: Detail, splats: u32| BrickWant {
+        brick: [0; 3],
+        detail,
+        splats,
+        smooth: None,
+    };
+    // 10,000 own splats: half the bricks' splats want the own grid, 30% the even level, 12%
+    // 0/1/0 (kept: over a tenth), 5% 1/0/0, 2% 2/1/1 and 1% 1/1/0 (rare).
+    let mut wants = vec![
+        want(own, 5_000),
+        want(even, 3_000),
+        want(along_y, 1_200),
+        want(level([1, 0, 0], [-1, 0, 0]), 500),
+        want(level([2, 1, 1], [-1, 0, 0]), 200),
+        want(level([1, 1, 0], [-1, 1, 0]), 100),
+    ];
+    fall_back_from_rare_levels(&mut wants, &[even], 10_000);
+    let got: Vec<Detail> = wants.iter().map(|w| w.detail).collect();
+    // 1/0/0 draws the own grid (the only one no coarser along x, y and z; 250 splats more),
+    // 2/1/1 the even level (12.5 more), 1/1/0 the kept 0/1/0 (25 more): 287.5 added to the
+    // mix's 6,362.5, within 5%.
+    assert_eq!(got, [own, even, along_y, own, even, along_y]);
+    // Where the own grid is drawn by no brick it stands in for none; where falling back adds
+    // too much, the cheapest fall back first and the level that would add most is made.
+    let mut wants = vec![
+        want(even, 9_000),
+        want(level([1, 0, 0], [-1, 0, 0]), 900),
+        want(level([2, 1, 1], [-1, 0, 0]), 100),
+    ];
+    fall_back_from_rare_levels(&mut wants, &[], 10_000);
+    let got: Vec<Detail> = wants.iter().map(|w| w.detail).collect();
+    assert_eq!(got, [even, level([1, 0, 0], [-1, 0, 0]), even]);
+    let mut wants = vec![
+        want(own, 8_000),
+        want(level([1, 0, 0], [-1, 0, 0]), 900),
+        want(level([0, 0, 1], [0, 0, 1]), 700),
+    ];
+    fall_back_from_rare_levels(&mut wants, &[], 10_000);
+    let got: Vec<Detail> = wants.iter().map(|w| w.detail).collect();
+    // The mix draws 8,800 splats; the z level falls back (350 more, 4%), then 1/0/0 would
+    // add 450 more: it is made.
+    assert_eq!(got, [own, level([1, 0, 0], [-1, 0, 0]), own]);
+}
