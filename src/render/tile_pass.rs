@@ -26,7 +26,7 @@ use super::{GpuContext, RenderError};
 
 /// Splats in a batch, unless the adapter binds fewer or [`TilePass::set_batch`] asks for
 /// fewer: 192 MiB of projected splats.
-pub(crate) const MAX_BATCH: usize = 1 << 22;
+const MAX_BATCH: usize = 1 << 22;
 /// Splats a workgroup projects.
 const GROUP: usize = 256;
 /// Consecutive splats whose footprints one rectangle bounds, the rectangles the tiles test

@@ -705,9 +705,11 @@ fn fall_back_from_rare_levels(wants: &mut [BrickWant], made: &[Detail], own_spla
     let mut standing: Vec<Detail> = made.to_vec();
     standing.extend(held.keys().copied().filter(|d| kept(d)));
     standing.retain(|d| *d != Detail::default() || own_drawn);
-    let coarseness = |d: &Detail| match d {
-        Detail::Level(l, _) => l.iter().map(|&l| u32::from(l)).sum::<u32>(),
-        Detail::Refined(_) => 0,
+    // Coarseness first; equally coarse levels by their halvings and facing, so that the
+    // choice does not follow the hash maps' order.
+    let coarseness = |d: &Detail| match *d {
+        Detail::Level(l, f) => (l.iter().map(|&l| u32::from(l)).sum::<u32>(), l, f),
+        Detail::Refined(_) => (0, [0; 3], [0; 3]),
     };
     // Each rare level, the level its bricks would draw instead and the splats that adds.
     let mut rare: Vec<(Detail, Detail, f64)> = held
@@ -725,7 +727,10 @@ fn fall_back_from_rare_levels(wants: &mut [BrickWant], made: &[Detail], own_spla
             Some((d, instead, n * (splat_share(instead) - splat_share(d))))
         })
         .collect();
-    rare.sort_by(|a, b| a.2.total_cmp(&b.2));
+    rare.sort_by(|a, b| {
+        a.2.total_cmp(&b.2)
+            .then_with(|| coarseness(&a.0).cmp(&coarseness(&b.0)))
+    });
     let drawn: f64 = wants
         .iter()
         .map(|w| f64::from(w.splats) * splat_share(w.detail))
