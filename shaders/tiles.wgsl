@@ -2,10 +2,13 @@
 // shaders/footprint.wgsl and shaders/splat.wgsl (whose uniforms `u`, texels and helpers it
 // shares; src/render/tile_pass.rs builds it).
 //
-// The draw order is walked nearest first in batches, as on the CPU. Per batch:
-// - `project` places each splat of the batch (its centre, conic, premultiplied colour, reversed
-//   depth and pixel rectangle, exactly as `tiled::project` does), one thread a splat, and writes
-//   the rectangle that holds the footprints of every 32 consecutive splats (a span);
+// The draw order is walked nearest first in batches, as on the CPU. A batch is one or more
+// pieces, nearest first: stretches of the draw orders of the grids a volume draws from (its
+// one level, or the levels of a volume drawn brick by brick, whose runs alternate). Per batch:
+// - `project`, a dispatch a piece, places each splat of the piece (its centre, conic,
+//   premultiplied colour, reversed depth and pixel rectangle, exactly as `tiled::project`
+//   does), one thread a splat, and writes the rectangle that holds the footprints of every 32
+//   consecutive splats (a span);
 // - `composite` runs one workgroup an 8x8-pixel tile, one thread a pixel. Binning is done in
 //   two levels inside the workgroup, keeping the draw order: the spans whose rectangle meets
 //   the tile, in order, then, two such spans at a time, their splats that meet the tile, in
@@ -42,10 +45,12 @@ struct Projected {
     b: vec4<u32>,
 }
 
-// One batch: a stretch of one volume's draw order. Keep in sync with `BatchUniforms` in
-// src/render/tile_pass.rs.
+// A piece of a batch (projection: a stretch of one grid's draw order) or a whole batch
+// (compositing: its pieces one after another, each padded to a whole group). Keep in sync with
+// `BatchUniforms` in src/render/tile_pass.rs.
 struct Batch {
-    // Splats in the batch; the index, within the bound order, of its first (farthest) splat.
+    // Splats in the piece or the batch; the index, within the bound order, of the piece's
+    // first (farthest) splat.
     count: u32,
     first: u32,
     // Image size in pixels.
@@ -56,7 +61,8 @@ struct Batch {
     cutoff: f32,
     // Spans in the batch.
     spans: u32,
-    pad: u32,
+    // Where the piece's projected splats start in the batch's (a multiple of `GROUP`).
+    out: u32,
 }
 
 @group(0) @binding(2) var<storage, read> order: array<u32>;
@@ -144,8 +150,10 @@ fn project_splat(id: u32) -> Projected {
     );
 }
 
-// One thread a splat of the batch, nearest first; each span's rectangle from its threads (an
-// empty one, lower above upper, where none of its splats is drawn or the batch has ended).
+// One thread a splat of the piece, nearest first; each span's rectangle from its threads (an
+// empty one, lower above upper, where none of its splats is drawn or the piece has ended).
+// The threads past the piece's end fill its last group with splats left out, so that the
+// next piece of the batch starts at a group.
 @compute @workgroup_size(256)
 fn project(
     @builtin(workgroup_id) wg: vec3<u32>,
@@ -158,8 +166,9 @@ fn project(
     workgroupBarrier();
     let i = wg.x * GROUP + li;
     let span = 2u * (li / SPAN);
+    var s = left_out();
     if i < batch.count {
-        let s = project_splat(order[batch.first + batch.count - 1u - i]);
+        s = project_splat(order[batch.first + batch.count - 1u - i]);
         let x0 = i32(s.b.z & 0xffffu);
         let x1 = i32(s.b.z >> 16u);
         if x0 <= x1 {
@@ -168,11 +177,11 @@ fn project(
             atomicMin(&rect_lo[span + 1u], i32(s.b.w & 0xffffu));
             atomicMax(&rect_hi[span + 1u], i32(s.b.w >> 16u));
         }
-        projected[i] = s;
     }
+    projected[batch.out + i] = s;
     workgroupBarrier();
     if li < SPANS {
-        group_rects[wg.x * SPANS + li] = vec4<i32>(
+        group_rects[(batch.out / GROUP + wg.x) * SPANS + li] = vec4<i32>(
             atomicLoad(&rect_lo[2u * li]),
             atomicLoad(&rect_lo[2u * li + 1u]),
             atomicLoad(&rect_hi[2u * li]),

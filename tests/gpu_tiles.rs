@@ -14,7 +14,9 @@ use splatscene::splat::reference::{Frame, ImageDifference, compare};
 
 mod common;
 use common::shapes::camera_of;
-use common::{compositor_cases, engine_view, shells, volume_scene};
+use common::{
+    before_the_blobs, compositor_cases, engine_view, shells, translucent_blobs, volume_scene,
+};
 
 const OPTIONS: FrameOptions = FrameOptions {
     ordering: None,
@@ -45,7 +47,7 @@ fn shoot(
     renderer.tile_compositor_mut().opaque = opaque;
     // Small batches on the GPU, so that the tests' orders take several.
     renderer.set_gpu_tile_batch(std::num::NonZeroUsize::new(BATCH).unwrap());
-    // The GPU tiles draw a volume at one level; so does the CPU here, to draw the same splats.
+    // One level a volume (drawn brick by brick in `volumes_drawn_brick_by_brick`).
     renderer.set_levels_by_brick(false);
     renderer
         .screenshot(ctx, scene, camera, size, options)
@@ -227,4 +229,48 @@ fn the_built_in_scene_and_the_engine() {
         return;
     };
     compare_at(&engine, &camera, (144, 120), &OPTIONS, "engine");
+}
+
+#[test]
+fn volumes_drawn_brick_by_brick() {
+    // The translucent blobs from 40 mm before their face (near bricks at the own grid, far ones
+    // coarser) and from an oblique eye, each volume drawn brick by brick: a batch holds runs of
+    // several levels' orders, each projected from its own grid, and the picture is the CPU
+    // tiles' (in small batches, and in one).
+    let ctx = context();
+    let scene = translucent_blobs();
+    let oblique = SceneCamera {
+        projection: Projection::Perspective {
+            fov_y_degrees: 50.0,
+        },
+        ..SceneCamera::look_at(
+            DVec3::new(-40.0, 150.0, -30.0),
+            DVec3::new(63.5, 63.5, 63.5),
+        )
+    };
+    let opaque = splatscene::splat::tiled::OPAQUE;
+    for (what, camera) in [("before", before_the_blobs(40.0)), ("oblique", oblique)] {
+        let shot = |compositor, batch: usize| {
+            let mut renderer = Renderer::with_compositor(compositor);
+            renderer.tile_compositor_mut().opaque = opaque;
+            renderer.set_gpu_tile_batch(std::num::NonZeroUsize::new(batch).unwrap());
+            renderer
+                .screenshot(&ctx, &scene, &camera, (64, 56), &OPTIONS)
+                .unwrap()
+        };
+        let cpu = shot(Compositor::Cpu, BATCH);
+        assert_eq!(cpu.report.bricks_by_level, 1, "{what}: {:?}", cpu.report);
+        assert!(cpu.report.levels.iter().any(|&l| l > 0), "{what}");
+        for batch in [BATCH, 1 << 22] {
+            let gpu = shot(Compositor::GpuTiles, batch);
+            assert_eq!(gpu.report.bricks_by_level, 1, "{what}: {:?}", gpu.report);
+            assert_eq!(gpu.report.splats, cpu.report.splats, "{what}");
+            let d = compare(&gpu.frame, &cpu.frame).unwrap();
+            eprintln!(
+                "{what}, batch {batch}: {} splats, levels {:?}: {d:?}",
+                cpu.report.splats, cpu.report.levels
+            );
+            assert_same(&d, what);
+        }
+    }
 }

@@ -13,7 +13,8 @@ use splatscene::splat::reference::{Frame, ImageDifference, SplatStyle, compare};
 mod common;
 use common::shapes::camera_of;
 use common::{
-    benchmark_view, compositor_cases, data_file, engine_view, reference_frame, shells, volume_scene,
+    before_the_blobs, benchmark_view, compositor_cases, data_file, engine_view, reference_frame,
+    shells, translucent_blobs, volume_scene,
 };
 
 fn context() -> GpuContext {
@@ -35,7 +36,8 @@ fn shoot(
     size: (u32, u32),
 ) -> Frame {
     let mut renderer = Renderer::with_compositor(compositor);
-    // The GPU passes draw a volume at one level; so does the CPU here, to draw the same splats.
+    // One level a volume (drawn brick by brick in
+    // `the_splat_pass_draws_the_mix_the_tiles_draw`).
     renderer.set_levels_by_brick(false);
     renderer
         .screenshot(ctx, scene, camera, size, &OPTIONS)
@@ -620,69 +622,6 @@ fn mesh_layers_read_back_by_their_rectangles_are_the_whole_layers() {
     }
 }
 
-/// A 128^3 grid of 1 mm voxels holding a translucent field of soft blobs and a denser shell,
-/// with a colour ramp: much of its depth shows through.
-fn translucent_blobs() -> Scene {
-    let n = 128u32;
-    let values: Vec<f32> = (0..n * n * n)
-        .map(|id| {
-            let k = [id % n, id / n % n, id / n / n].map(f64::from);
-            let blobs = (k[0] / 7.0).sin() * (k[1] / 9.0).sin() * (k[2] / 11.0).sin();
-            let r = glam::DVec3::from(k.map(|c| c - 63.5)).length();
-            let shell = if (40.0..44.0).contains(&r) {
-                300.0
-            } else {
-                0.0
-            };
-            (200.0 + 250.0 * blobs + shell) as f32
-        })
-        .collect();
-    let volume = splatscene::volume::CpuVolume {
-        dims: [n; 3],
-        spacing: [1.0; 3],
-        origin: [0.0; 3],
-        direction: glam::DMat3::IDENTITY,
-        values: values.into(),
-    };
-    let transfer = TransferFunction::new(vec![
-        (250.0, [0.9, 0.5, 0.3, 0.0]),
-        (450.0, [1.0, 0.9, 0.7, 0.03]),
-        (600.0, [0.9, 0.9, 1.0, 0.3]),
-    ]);
-    let mut scene = Scene::new();
-    let node = splatscene::scene::VolumeNode {
-        volume: std::sync::Arc::new(volume),
-        transfer: std::sync::Arc::new(transfer),
-        splats: splatscene::scene::SplatSettings {
-            shading: 0.8,
-            ..Default::default()
-        },
-    };
-    scene
-        .add(
-            "volume",
-            glam::DMat4::IDENTITY,
-            None,
-            NodeContent::Volume(node),
-        )
-        .unwrap();
-    scene
-}
-
-/// Looking along the z axis of [`translucent_blobs`] from `distance` mm before its face, at 50
-/// degrees.
-fn before_the_blobs(distance: f64) -> SceneCamera {
-    SceneCamera {
-        eye: glam::DVec3::new(63.5, 60.0, -distance),
-        target: glam::DVec3::new(63.5, 66.0, 64.0),
-        up: glam::DVec3::Y,
-        projection: Projection::Perspective {
-            fov_y_degrees: 50.0,
-        },
-        near: None,
-    }
-}
-
 #[test]
 fn bricks_drawn_at_their_own_levels_give_the_picture_of_the_whole_grid() {
     // From 40 mm before the grid's face, looking along it, at 50 degrees and 48 x 48 pixels:
@@ -814,4 +753,41 @@ fn a_volume_drawn_at_one_detail_by_brick_is_the_one_detail_picture() {
         whole_refined > 0 && mixed > 0,
         "{mixed} mixed, {whole_refined} refined whole"
     );
+}
+
+#[test]
+fn the_splat_pass_draws_the_mix_the_tiles_draw() {
+    // The translucent blobs from 40 mm before their face (near bricks at the own grid, far ones
+    // coarser) and from an oblique eye, each volume drawn brick by brick: the GPU splat pass
+    // draws the mix's runs of each level's order on the GPU, far to near, and gives the CPU
+    // tiles' picture.
+    let ctx = context();
+    let scene = translucent_blobs();
+    let oblique = SceneCamera {
+        projection: Projection::Perspective {
+            fov_y_degrees: 50.0,
+        },
+        ..SceneCamera::look_at(
+            glam::DVec3::new(-40.0, 150.0, -30.0),
+            glam::DVec3::new(63.5, 63.5, 63.5),
+        )
+    };
+    for (what, camera) in [("before", before_the_blobs(40.0)), ("oblique", oblique)] {
+        let shot = |compositor| {
+            Renderer::with_compositor(compositor)
+                .screenshot(&ctx, &scene, &camera, (64, 56), &OPTIONS)
+                .unwrap()
+        };
+        let (gpu, cpu) = (shot(Compositor::Gpu), shot(Compositor::Cpu));
+        assert_eq!(gpu.report.bricks_by_level, 1, "{what}: {:?}", gpu.report);
+        assert_eq!(cpu.report.bricks_by_level, 1, "{what}: {:?}", cpu.report);
+        assert_eq!(gpu.report.splats, cpu.report.splats, "{what}");
+        assert_eq!(gpu.report.levels, cpu.report.levels, "{what}");
+        let d = compare(&gpu.frame, &cpu.frame).unwrap();
+        eprintln!(
+            "{what}: {} splats, levels {:?}: {d:?}",
+            cpu.report.splats, cpu.report.levels
+        );
+        assert_alike(&d, what);
+    }
 }

@@ -62,9 +62,9 @@ pub struct RenderArgs {
     /// splat a level; an axis along the view halved once more) whose voxels are about a pixel
     /// apart on the screen where it is drawn largest, or, where its voxels are more than 1.5
     /// pixels apart, from its field on a grid refined until they are not, each 16^3-voxel
-    /// brick at the detail its own distance calls for (the CPU tiles; the GPU passes draw a
-    /// volume at one); `volume` draws each volume at one detail, the one its nearest brick
-    /// calls for; `off` from its own grid, every voxel a splat
+    /// brick at the detail its own distance calls for (with every compositor); `volume` draws
+    /// each volume at one detail, the one its nearest brick calls for; `off` from its own
+    /// grid, every voxel a splat
     #[arg(long, default_value = "on", value_parser = ["on", "volume", "off"])]
     lod: String,
     /// Transparent background (the PNG's alpha is the coverage).

@@ -333,18 +333,26 @@ impl SplatPass {
             .write_buffer(&volume.uniforms, 0, bytemuck::bytes_of(&u));
     }
 
-    /// Records the draw of one volume's splats.
-    pub(crate) fn draw(&self, pass: &mut wgpu::RenderPass<'_>, volume: &GpuVolume) {
+    /// Records the draw of `splats`, a stretch of one volume's draw order on the GPU (far to
+    /// near).
+    pub(crate) fn draw(
+        &self,
+        pass: &mut wgpu::RenderPass<'_>,
+        volume: &GpuVolume,
+        splats: std::ops::Range<usize>,
+    ) {
         let Some(order) = &volume.order else {
             return;
         };
-        if volume.count == 0 {
+        let end = splats.end.min(volume.count as usize) as u32;
+        let begin = (splats.start as u32).min(end);
+        if begin == end {
             return;
         }
         pass.set_pipeline(&self.pipeline);
         pass.set_bind_group(0, &volume.group, &[]);
         pass.set_vertex_buffer(0, order.slice(..u64::from(volume.count) * 4));
-        pass.draw(0..4, 0..volume.count);
+        pass.draw(0..4, begin..end);
     }
 }
 

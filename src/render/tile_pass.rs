@@ -50,7 +50,7 @@ struct BatchUniforms {
     opaque: f32,
     cutoff: f32,
     spans: u32,
-    pad: u32,
+    out: u32,
 }
 
 /// The tile pass's shader: the footprint and the splat pass's uniforms and helpers, then the
@@ -104,25 +104,54 @@ fn entry(binding: u32, resource: wgpu::BindingResource<'_>) -> wgpu::BindGroupEn
     wgpu::BindGroupEntry { binding, resource }
 }
 
-/// One stretch of one volume's draw order, composited as a whole.
-struct Stretch {
-    volume: usize,
+/// A stretch of one grid's draw order (`begin..end` of the order bound for `source`), projected
+/// by one dispatch into its batch's splats from `out` on.
+#[derive(Debug, Clone, PartialEq)]
+struct Piece {
+    source: usize,
     begin: usize,
     end: usize,
+    out: usize,
 }
 
-/// The stretches of the draw orders, nearest first: the volumes near to far, each one's order
-/// (back to front) from its end, in batches of `batch` splats (at least one).
-fn stretches(counts: &[usize], batch: usize) -> Vec<Stretch> {
-    let batch = batch.max(1);
+/// Pieces composited by one dispatch: their splats one after another, each piece padded to a
+/// whole [`GROUP`] (`len` in all).
+#[derive(Debug, Default)]
+struct Batch {
+    pieces: Vec<Piece>,
+    len: usize,
+}
+
+/// The batches of `runs` (each a source and a range of its draw order; nearest first, each
+/// walked from its end): up to `batch` splats a batch (rounded up to a whole [`GROUP`]), pieces
+/// of sources whose cut-offs (`cutoffs`) differ in different batches, since compositing reads
+/// one.
+fn batches(runs: &[(usize, std::ops::Range<usize>)], cutoffs: &[f32], batch: usize) -> Vec<Batch> {
+    let cap = batch.max(1).next_multiple_of(GROUP);
     let mut out = Vec::new();
-    for (volume, &count) in counts.iter().enumerate() {
-        let mut end = count;
-        while end > 0 {
-            let begin = end.saturating_sub(batch);
-            out.push(Stretch { volume, begin, end });
+    let mut current = Batch::default();
+    let mut cutoff: Option<u32> = None;
+    for (source, range) in runs {
+        let bits = cutoffs.get(*source).map(|c| c.to_bits());
+        let mut end = range.end;
+        while end > range.start {
+            if current.len == cap || (current.len > 0 && cutoff != bits) {
+                out.push(std::mem::take(&mut current));
+            }
+            cutoff = bits;
+            let begin = end.saturating_sub(cap - current.len).max(range.start);
+            current.pieces.push(Piece {
+                source: *source,
+                begin,
+                end,
+                out: current.len,
+            });
+            current.len += (end - begin).next_multiple_of(GROUP);
             end = begin;
         }
+    }
+    if current.len > 0 {
+        out.push(current);
     }
     out
 }
@@ -201,15 +230,17 @@ impl TilePass {
         volume.alpha = Some((bits, buffer));
     }
 
-    /// Composites `volumes` (near to far, each with its order and uniforms written and
-    /// [`TilePass::prepare`]d) over the
-    /// colour target `color` of `size`, depth-tested against `depth` (the meshes' reversed
-    /// depth; its texture must allow binding), stopping a pixel at the accumulated opacity
-    /// `opaque`.
+    /// Composites `runs` (nearest first; each a stretch of the draw order of one of
+    /// `volumes`, each with its order and uniforms written and [`TilePass::prepare`]d, drawn
+    /// from its end) over the colour target `color` of `size`, depth-tested against `depth`
+    /// (the meshes' reversed depth; its texture must allow binding), stopping a pixel at the
+    /// accumulated opacity `opaque`.
+    #[allow(clippy::too_many_arguments)]
     pub(crate) fn draw(
         &mut self,
         ctx: &GpuContext,
         volumes: &[&GpuVolume],
+        runs: &[(usize, std::ops::Range<usize>)],
         size: (u32, u32),
         opaque: f32,
         color: &wgpu::TextureView,
@@ -225,17 +256,27 @@ impl TilePass {
                 what: "hold the tile compositor's layer for an image this large in one storage buffer",
             });
         }
-        let counts: Vec<usize> = volumes.iter().map(|v| v.count as usize).collect();
-        // The projected splats of a batch, and its stretch of the order, are bound whole.
+        // The projected splats of a batch, and a piece's stretch of its order, are bound whole.
         let bindable = limits
             .max_storage_buffer_binding_size
             .min(limits.max_buffer_size)
             / PROJECTED_BYTES;
-        let batch = self
-            .batch
-            .min(usize::try_from(bindable).unwrap_or(usize::MAX));
-        let stretches = stretches(&counts, batch);
-        let largest = stretches.iter().map(|s| s.end - s.begin).max().unwrap_or(0);
+        // Whole groups, since a batch's pieces are padded to them.
+        let bindable = usize::try_from(bindable).unwrap_or(usize::MAX).max(GROUP) / GROUP * GROUP;
+        // Runs of a volume with nothing to draw from are left out (their pieces would be
+        // composited unprojected).
+        let runs: Vec<(usize, std::ops::Range<usize>)> = runs
+            .iter()
+            .filter(|(v, range)| {
+                volumes.get(*v).is_some_and(|v| {
+                    v.order.is_some() && v.alpha.is_some() && range.end <= v.count as usize
+                })
+            })
+            .cloned()
+            .collect();
+        let cutoffs: Vec<f32> = volumes.iter().map(|v| v.cutoff).collect();
+        let batches = batches(&runs, &cutoffs, self.batch.min(bindable));
+        let largest = batches.iter().map(|b| b.len).max().unwrap_or(0);
         let storage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST;
         let projected = ensure(
             ctx,
@@ -247,38 +288,26 @@ impl TilePass {
         let rects = ensure(
             ctx,
             &mut self.rects,
-            (largest.div_ceil(GROUP) * (GROUP / SPAN)) as u64 * 16,
+            (largest / SPAN) as u64 * 16,
             storage,
             "span rectangles",
         );
         let layer = ensure(ctx, &mut self.layer, layer_bytes, storage, "tile layer");
-        let batches = ensure(
+        // A uniform slot a piece, then one a batch, then the image's.
+        let pieces: usize = batches.iter().map(|b| b.pieces.len()).sum();
+        let slots = pieces + batches.len() + 1;
+        let uniform_buffer = ensure(
             ctx,
             &mut self.batches,
-            (stretches.len() as u64 + 1) * SLOT,
+            slots as u64 * SLOT,
             wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
             "tile batches",
         );
-        let mut uniforms = vec![0u8; (stretches.len() + 1) * SLOT as usize];
-        let cutoffs: Vec<f32> = volumes.iter().map(|v| v.cutoff).collect();
-        // An order is bound from a 256-byte boundary (64 ids) before the stretch.
-        let align = (limits.min_storage_buffer_offset_alignment / 4).max(1) as usize;
-        for (i, s) in stretches.iter().enumerate() {
-            let count = s.end - s.begin;
-            let u = BatchUniforms {
-                count: count as u32,
-                first: (s.begin % align) as u32,
-                width: w,
-                height: h,
-                opaque,
-                cutoff: cutoffs[s.volume],
-                spans: count.div_ceil(SPAN) as u32,
-                pad: 0,
-            };
-            let at = i * SLOT as usize;
+        let mut uniforms = vec![0u8; slots * SLOT as usize];
+        let mut put = |slot: usize, u: BatchUniforms| {
+            let at = slot * SLOT as usize;
             uniforms[at..at + size_of::<BatchUniforms>()].copy_from_slice(bytemuck::bytes_of(&u));
-        }
-        // The last slot: the image alone, for laying the layer over the target.
+        };
         let image = BatchUniforms {
             count: 0,
             first: 0,
@@ -287,13 +316,43 @@ impl TilePass {
             opaque,
             cutoff: 0.0,
             spans: 0,
-            pad: 0,
+            out: 0,
         };
-        let at = stretches.len() * SLOT as usize;
-        uniforms[at..at + size_of::<BatchUniforms>()].copy_from_slice(bytemuck::bytes_of(&image));
-        ctx.queue.write_buffer(&batches, 0, &uniforms);
-        let slot = |i: usize| wgpu::BufferBinding {
-            buffer: &batches,
+        // An order is bound from a 256-byte boundary (64 ids) before the stretch.
+        let align = (limits.min_storage_buffer_offset_alignment / 4).max(1) as usize;
+        let mut slot = 0;
+        for b in &batches {
+            let cutoff = b.pieces.first().map_or(0.0, |p| cutoffs[p.source]);
+            for p in &b.pieces {
+                let count = p.end - p.begin;
+                put(
+                    slot,
+                    BatchUniforms {
+                        count: count as u32,
+                        first: (p.begin % align) as u32,
+                        cutoff,
+                        spans: count.div_ceil(SPAN) as u32,
+                        out: p.out as u32,
+                        ..image
+                    },
+                );
+                slot += 1;
+            }
+            put(
+                slot,
+                BatchUniforms {
+                    count: b.len as u32,
+                    cutoff,
+                    spans: (b.len / SPAN) as u32,
+                    ..image
+                },
+            );
+            slot += 1;
+        }
+        put(slot, image);
+        ctx.queue.write_buffer(&uniform_buffer, 0, &uniforms);
+        let slot_binding = |i: usize| wgpu::BufferBinding {
+            buffer: &uniform_buffer,
             offset: i as u64 * SLOT,
             size: wgpu::BufferSize::new(size_of::<BatchUniforms>() as u64),
         };
@@ -303,30 +362,38 @@ impl TilePass {
             let mut pass = encoder.begin_compute_pass(&Default::default());
             let project_layout = self.project.get_bind_group_layout(0);
             let composite_layout = self.composite.get_bind_group_layout(0);
-            for (i, s) in stretches.iter().enumerate() {
-                let volume = &volumes[s.volume];
-                let (Some(order), Some((_, alpha))) = (&volume.order, &volume.alpha) else {
-                    continue;
-                };
-                let from = s.begin - s.begin % align;
-                let order_range = wgpu::BufferBinding {
-                    buffer: order,
-                    offset: from as u64 * 4,
-                    size: wgpu::BufferSize::new((s.end - from) as u64 * 4),
-                };
-                let project = device.create_bind_group(&wgpu::BindGroupDescriptor {
-                    label: Some("tile projection"),
-                    layout: &project_layout,
-                    entries: &[
-                        entry(0, volume.uniforms.as_entire_binding()),
-                        entry(1, wgpu::BindingResource::TextureView(&volume.texels)),
-                        entry(2, wgpu::BindingResource::Buffer(order_range)),
-                        entry(3, alpha.as_entire_binding()),
-                        entry(4, projected.as_entire_binding()),
-                        entry(5, rects.as_entire_binding()),
-                        entry(6, wgpu::BindingResource::Buffer(slot(i))),
-                    ],
-                });
+            let mut slot = 0;
+            for b in &batches {
+                for p in &b.pieces {
+                    let this = slot;
+                    slot += 1;
+                    let volume = &volumes[p.source];
+                    let (Some(order), Some((_, alpha))) = (&volume.order, &volume.alpha) else {
+                        continue;
+                    };
+                    let from = p.begin - p.begin % align;
+                    let order_range = wgpu::BufferBinding {
+                        buffer: order,
+                        offset: from as u64 * 4,
+                        size: wgpu::BufferSize::new((p.end - from) as u64 * 4),
+                    };
+                    let project = device.create_bind_group(&wgpu::BindGroupDescriptor {
+                        label: Some("tile projection"),
+                        layout: &project_layout,
+                        entries: &[
+                            entry(0, volume.uniforms.as_entire_binding()),
+                            entry(1, wgpu::BindingResource::TextureView(&volume.texels)),
+                            entry(2, wgpu::BindingResource::Buffer(order_range)),
+                            entry(3, alpha.as_entire_binding()),
+                            entry(4, projected.as_entire_binding()),
+                            entry(5, rects.as_entire_binding()),
+                            entry(6, wgpu::BindingResource::Buffer(slot_binding(this))),
+                        ],
+                    });
+                    pass.set_pipeline(&self.project);
+                    pass.set_bind_group(0, &project, &[]);
+                    pass.dispatch_workgroups((p.end - p.begin).div_ceil(GROUP) as u32, 1, 1);
+                }
                 let composite = device.create_bind_group(&wgpu::BindGroupDescriptor {
                     label: Some("tile compositing"),
                     layout: &composite_layout,
@@ -335,12 +402,10 @@ impl TilePass {
                         entry(9, rects.as_entire_binding()),
                         entry(10, layer.as_entire_binding()),
                         entry(11, wgpu::BindingResource::TextureView(depth)),
-                        entry(12, wgpu::BindingResource::Buffer(slot(i))),
+                        entry(12, wgpu::BindingResource::Buffer(slot_binding(slot))),
                     ],
                 });
-                pass.set_pipeline(&self.project);
-                pass.set_bind_group(0, &project, &[]);
-                pass.dispatch_workgroups((s.end - s.begin).div_ceil(GROUP) as u32, 1, 1);
+                slot += 1;
                 pass.set_pipeline(&self.composite);
                 pass.set_bind_group(0, &composite, &[]);
                 pass.dispatch_workgroups(w.div_ceil(TILE), h.div_ceil(TILE), 1);
@@ -351,7 +416,7 @@ impl TilePass {
             layout: &self.cover.get_bind_group_layout(0),
             entries: &[
                 entry(13, layer.as_entire_binding()),
-                entry(14, wgpu::BindingResource::Buffer(slot(stretches.len()))),
+                entry(14, wgpu::BindingResource::Buffer(slot_binding(slots - 1))),
             ],
         });
         {
@@ -384,25 +449,50 @@ impl TilePass {
 mod tests {
     use super::*;
 
-    /// The stretches cover every order exactly once, nearest first: volumes near to far, each
-    /// from its end, in batches of at most the size asked for.
+    /// The batches cover every run exactly once, nearest first: runs in the order given, each
+    /// from its end, no batch longer than asked for (in whole groups), every piece starting
+    /// at a group, and pieces of different cut-offs never in one batch.
     #[test]
-    fn stretches_cover_the_orders_nearest_first() {
-        let counts = [100_000, 0, 3, 2_000_000];
-        for batch in [0, 1, 16_384, MAX_BATCH] {
-            let s = stretches(&counts, batch);
-            for (v, &n) in counts.iter().enumerate() {
-                let mine: Vec<&Stretch> = s.iter().filter(|s| s.volume == v).collect();
-                let mut end = n;
-                for stretch in &mine {
-                    assert_eq!(stretch.end, end);
-                    assert!(stretch.begin < stretch.end);
-                    end = stretch.begin;
+    fn batches_cover_the_runs_nearest_first() {
+        let runs = [
+            (0, 0..100_000),
+            (1, 5..5),
+            (2, 0..3),
+            (0, 100_000..100_700),
+            (3, 17..2_000_017),
+            (2, 3..300),
+        ];
+        let cutoffs = [9.0, 9.0, 9.0, 4.0];
+        for batch in [0, 1, 300, 16_384, MAX_BATCH] {
+            let cap = batch.max(1).next_multiple_of(GROUP);
+            let got = batches(&runs, &cutoffs, batch);
+            let pieces: Vec<&Piece> = got.iter().flat_map(|b| &b.pieces).collect();
+            let mut next = pieces.iter();
+            for (source, range) in &runs {
+                let mut end = range.end;
+                while end > range.start {
+                    let p = next.next().expect("a piece for every stretch of a run");
+                    assert_eq!((p.source, p.end), (*source, end), "batch {batch}");
+                    assert!(p.begin < p.end && p.begin >= range.start);
+                    end = p.begin;
                 }
-                assert_eq!(end, 0);
             }
-            assert!(s.iter().all(|s| s.end - s.begin <= batch.max(1)));
-            assert!(s.windows(2).all(|p| p[0].volume <= p[1].volume));
+            assert!(next.next().is_none());
+            for b in &got {
+                assert!(b.len <= cap && b.len > 0 && b.len % GROUP == 0, "{b:?}");
+                let mut out = 0;
+                for p in &b.pieces {
+                    assert_eq!(p.out, out);
+                    out += (p.end - p.begin).next_multiple_of(GROUP);
+                }
+                assert_eq!(out, b.len);
+                let c = cutoffs[b.pieces[0].source];
+                assert!(b.pieces.iter().all(|p| cutoffs[p.source] == c), "{b:?}");
+            }
+            // Runs of one cut-off share batches where they fit.
+            if batch == MAX_BATCH {
+                assert_eq!(got.len(), 3, "{got:?}");
+            }
         }
     }
 }

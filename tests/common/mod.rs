@@ -199,3 +199,66 @@ pub fn engine_view(aspect: f64) -> Option<(Scene, SceneCamera)> {
         aspect,
     ))
 }
+
+/// A 128^3 grid of 1 mm voxels holding a translucent field of soft blobs and a denser shell,
+/// with a colour ramp: much of its depth shows through.
+pub fn translucent_blobs() -> Scene {
+    let n = 128u32;
+    let values: Vec<f32> = (0..n * n * n)
+        .map(|id| {
+            let k = [id % n, id / n % n, id / n / n].map(f64::from);
+            let blobs = (k[0] / 7.0).sin() * (k[1] / 9.0).sin() * (k[2] / 11.0).sin();
+            let r = glam::DVec3::from(k.map(|c| c - 63.5)).length();
+            let shell = if (40.0..44.0).contains(&r) {
+                300.0
+            } else {
+                0.0
+            };
+            (200.0 + 250.0 * blobs + shell) as f32
+        })
+        .collect();
+    let volume = splatscene::volume::CpuVolume {
+        dims: [n; 3],
+        spacing: [1.0; 3],
+        origin: [0.0; 3],
+        direction: glam::DMat3::IDENTITY,
+        values: values.into(),
+    };
+    let transfer = TransferFunction::new(vec![
+        (250.0, [0.9, 0.5, 0.3, 0.0]),
+        (450.0, [1.0, 0.9, 0.7, 0.03]),
+        (600.0, [0.9, 0.9, 1.0, 0.3]),
+    ]);
+    let mut scene = Scene::new();
+    let node = splatscene::scene::VolumeNode {
+        volume: std::sync::Arc::new(volume),
+        transfer: std::sync::Arc::new(transfer),
+        splats: splatscene::scene::SplatSettings {
+            shading: 0.8,
+            ..Default::default()
+        },
+    };
+    scene
+        .add(
+            "volume",
+            glam::DMat4::IDENTITY,
+            None,
+            NodeContent::Volume(node),
+        )
+        .unwrap();
+    scene
+}
+
+/// Looking along the z axis of [`translucent_blobs`] from `distance` mm before its face, at 50
+/// degrees.
+pub fn before_the_blobs(distance: f64) -> SceneCamera {
+    SceneCamera {
+        eye: glam::DVec3::new(63.5, 60.0, -distance),
+        target: glam::DVec3::new(63.5, 66.0, 64.0),
+        up: glam::DVec3::Y,
+        projection: splatscene::scene::Projection::Perspective {
+            fov_y_degrees: 50.0,
+        },
+        near: None,
+    }
+}

@@ -61,7 +61,7 @@ pub struct BatchArgs {
     #[arg(long, default_value = "auto")]
     compositor: Compositor,
     /// Level of detail: `on` draws each volume from the level of its pyramid whose voxels are
-    /// about a pixel apart, each 16^3-voxel brick by its own distance (the CPU tiles);
+    /// about a pixel apart, each 16^3-voxel brick by its own distance;
     /// `volume` one level a volume, by where it comes nearest the eye; `off` from its own grid
     /// (a job's pictures are redrawn when this changes)
     #[arg(long, default_value = "on", value_parser = ["on", "volume", "off"])]

@@ -813,6 +813,10 @@ pub struct Renderer {
     mixes: HashMap<NodeId, Mix>,
     /// The buffers of the last frame's mixes, for this frame's.
     spare_mixes: Vec<Mix>,
+    /// What the GPU passes draw of each volume in the current frame, far to near: runs of the
+    /// draw order on the GPU of one of its grids (the grid's whole order, or a mix's runs of
+    /// that level, which its order on the GPU then holds one after another).
+    gpu_runs: HashMap<NodeId, Vec<(Detail, std::ops::Range<usize>)>>,
     /// Every volume's bricks drawn at the volume's one level
     /// ([`Renderer::set_levels_by_brick`]).
     one_level: bool,
@@ -878,9 +882,9 @@ impl Renderer {
         self.full_grid = !on;
     }
 
-    /// Whether the CPU tile compositor draws each 16^3-voxel brick of a volume at the level its
-    /// own distance and sight lines call for (on by default, with the level of detail), rather
-    /// than the whole volume at the level its nearest brick on the image does. Bricks go far
+    /// Whether each 16^3-voxel brick of a volume is drawn at the level its own distance and
+    /// sight lines call for (on by default, with the level of detail), rather than the whole
+    /// volume at the level its nearest brick on the image does. Bricks go far
     /// to near in the IP-PBTF order of the grid of bricks and each brick's splats in its
     /// level's draw order, so the order keeps every brick behind the bricks that can hide it;
     /// bricks whose splats cannot land on the image are left out before their splats are
@@ -888,7 +892,8 @@ impl Renderer {
     /// spacing alone allows (a spread of at most 0.015, `SMOOTH_SPREAD`). A view whose bricks
     /// all want one level, or where the bricks' levels would draw more than two thirds of the
     /// splats of the volume's one level (`MIX_SAVING`), draws that one level as one grid, as
-    /// before. The GPU passes draw one level a volume.
+    /// before. Every compositor draws the same mix: the GPU passes draw the stretches of the
+    /// draw order of one level after another, far to near, as the CPU tiles do.
     pub fn set_levels_by_brick(&mut self, on: bool) {
         self.one_level = !on;
     }
@@ -960,7 +965,8 @@ impl Renderer {
         let mut report = FrameReport::default();
         self.sync_meshes(ctx, scene);
         let started = Instant::now();
-        report.classified = self.sync_volumes(scene, view, options.preview, false, &mut report)?;
+        report.classified =
+            self.sync_volumes(scene, view, options.preview, !self.one_level, &mut report)?;
         report.timings.classify = started.elapsed().saturating_sub(report.timings.levels);
         let ordered = self.order_volumes(scene, view, options, &mut report)?;
         let started = Instant::now();
@@ -1921,32 +1927,68 @@ impl Renderer {
             splat_pass,
             volumes,
             levels,
+            mixes,
+            gpu_runs,
             ..
         } = self;
-        for (id, geometry) in ordered {
-            let level = levels.get(id).copied().unwrap_or_default();
-            let Some(state) = volumes.get_mut(&(*id, level)) else {
+        gpu_runs.clear();
+        for (id, _) in ordered {
+            let Some((_, node, world)) = scene.volumes().find(|(v, _, _)| v == id) else {
                 continue;
             };
-            let settings = scene
-                .volumes()
-                .find(|(v, _, _)| v == id)
-                .map(|(_, node, _)| node.splats)
-                .unwrap_or_default();
-            if state.gpu.is_none() {
-                let pass = splat_pass.get_or_insert_with(|| SplatPass::new(ctx));
-                let gpu = pass.upload(ctx, &state.classified, &|k, rank| state.texel(k, rank))?;
-                state.gpu = Some(gpu);
-                state.ids_on_gpu = false;
-            }
-            let Some(gpu) = &mut state.gpu else {
-                continue;
+            let mix = mixes.get(id);
+            let details = match mix {
+                Some(mix) => mix.details(),
+                None => vec![levels.get(id).copied().unwrap_or_default()],
             };
-            if !state.ids_on_gpu {
-                SplatPass::upload_order(ctx, gpu, &state.ids)?;
-                state.ids_on_gpu = true;
+            // A mix's runs of each level, one after another, as that level's order on the GPU.
+            let mut mixed: Vec<Vec<u32>> = vec![Vec::new(); details.len()];
+            let mut runs = Vec::new();
+            match mix {
+                Some(mix) => {
+                    for (d, range) in &mix.runs {
+                        if let Some(i) = details.iter().position(|x| x == d) {
+                            let start = mixed[i].len();
+                            mixed[i].extend_from_slice(&mix.ids[range.clone()]);
+                            runs.push((*d, start..mixed[i].len()));
+                        }
+                    }
+                }
+                None => {
+                    if let Some(state) = volumes.get(&(*id, details[0])) {
+                        runs.push((details[0], 0..state.ids.len()));
+                    }
+                }
             }
-            SplatPass::write_uniforms(ctx, gpu, geometry, view, &settings, &scene.clipping);
+            for (detail, ids) in details.iter().zip(&mixed) {
+                let Some(state) = volumes.get_mut(&(*id, *detail)) else {
+                    continue;
+                };
+                if state.gpu.is_none() {
+                    let pass = splat_pass.get_or_insert_with(|| SplatPass::new(ctx));
+                    let gpu =
+                        pass.upload(ctx, &state.classified, &|k, rank| state.texel(k, rank))?;
+                    state.gpu = Some(gpu);
+                    state.ids_on_gpu = false;
+                }
+                let geometry = state.geometry(world).map_err(|e| RenderError::Volume {
+                    node: scene.nodes()[id.0].name.clone(),
+                    message: e.to_string(),
+                })?;
+                let Some(gpu) = &mut state.gpu else {
+                    continue;
+                };
+                if mix.is_some() {
+                    // The level's own order is no longer the one on the GPU.
+                    SplatPass::upload_order(ctx, gpu, ids)?;
+                    state.ids_on_gpu = false;
+                } else if !state.ids_on_gpu {
+                    SplatPass::upload_order(ctx, gpu, &state.ids)?;
+                    state.ids_on_gpu = true;
+                }
+                SplatPass::write_uniforms(ctx, gpu, &geometry, view, &node.splats, &scene.clipping);
+            }
+            gpu_runs.insert(*id, runs);
         }
         if let Some(pass) = &self.mesh_pass {
             pass.write_frame(ctx, view, &scene.lights, &scene.clipping);
@@ -2029,31 +2071,38 @@ impl Renderer {
                     "the GPU tile compositor reads the depth target as a texture, and this one was made without TEXTURE_BINDING".into(),
                 ));
             }
-            // Near to far, as the tile pass walks them.
-            let mut near_to_far = Vec::with_capacity(ordered.len());
+            // The grids drawn, and their runs near to far, as the tile pass walks them.
+            let mut keys: Vec<(NodeId, Detail)> = Vec::new();
+            let mut runs = Vec::new();
             for (id, _) in ordered.iter().rev() {
-                let level = self.levels.get(id).copied().unwrap_or_default();
-                if let Some(gpu) = self
-                    .volumes
-                    .get_mut(&(*id, level))
-                    .and_then(|s| s.gpu.as_mut())
-                {
-                    TilePass::prepare(ctx, gpu);
-                    near_to_far.push((*id, level));
+                for (detail, range) in self.gpu_runs.get(id).into_iter().flatten().rev() {
+                    let key = (*id, *detail);
+                    let Some(gpu) = self.volumes.get_mut(&key).and_then(|s| s.gpu.as_mut()) else {
+                        continue;
+                    };
+                    let source = match keys.iter().position(|k| *k == key) {
+                        Some(source) => source,
+                        None => {
+                            TilePass::prepare(ctx, gpu);
+                            keys.push(key);
+                            keys.len() - 1
+                        }
+                    };
+                    runs.push((source, range.clone()));
                 }
             }
-            let volumes: Vec<&GpuVolume> = near_to_far
+            let volumes: Vec<&GpuVolume> = keys
                 .iter()
                 .filter_map(|key| self.volumes.get(key).and_then(|s| s.gpu.as_ref()))
                 .collect();
-            if volumes.is_empty() {
+            if volumes.len() < keys.len() || runs.is_empty() {
                 return Ok(());
             }
             let pass = self.tile_pass.get_or_insert_with(|| TilePass::new(ctx));
             if let Some(batch) = self.gpu_tile_batch {
                 pass.set_batch(batch);
             }
-            return pass.draw(ctx, &volumes, size, self.tiles.opaque, color, depth);
+            return pass.draw(ctx, &volumes, &runs, size, self.tiles.opaque, color, depth);
         }
         let Some(splat_pass) = &self.splat_pass else {
             return Ok(());
@@ -2062,9 +2111,14 @@ impl Renderer {
         {
             let mut pass = begin(&mut encoder, color, depth, None, "splat pass");
             for (id, _) in ordered {
-                let level = self.levels.get(id).copied().unwrap_or_default();
-                if let Some(gpu) = self.volumes.get(&(*id, level)).and_then(|s| s.gpu.as_ref()) {
-                    splat_pass.draw(&mut pass, gpu);
+                for (detail, range) in self.gpu_runs.get(id).into_iter().flatten() {
+                    if let Some(gpu) = self
+                        .volumes
+                        .get(&(*id, *detail))
+                        .and_then(|s| s.gpu.as_ref())
+                    {
+                        splat_pass.draw(&mut pass, gpu, range.clone());
+                    }
                 }
             }
         }
