@@ -176,9 +176,9 @@ struct VolumeState {
     occupied: Option<Occupied>,
     /// The own grid's bricks a refinement was classified within (`None`: all of them).
     region: Option<Region>,
-    /// What halving this grid along some axes would lose, brick by brick, for the axes
-    /// asked for so far ([`Renderer::spread_of`]).
-    spreads: Vec<([bool; 3], Arc<BrickSpread>)>,
+    /// What halving this grid along every axis that has more than one voxel would lose,
+    /// brick by brick, once asked for ([`Renderer::spread_of`]).
+    spread: Option<Arc<BrickSpread>>,
 }
 
 /// The class of views that share one draw order of a grid: the ordering, its axis
@@ -303,7 +303,7 @@ impl VolumeState {
             ids_on_gpu: false,
             occupied: None,
             region: None,
-            spreads: Vec::new(),
+            spread: None,
         }
     }
 }
@@ -1387,7 +1387,7 @@ impl Renderer {
                     let even = axes.map(|h| if h { least } else { 0 });
                     let got = self.make_levels(id, spacing, even, [0; 3], report)?;
                     let spread = if got == Detail::Level(even, [0; 3]) {
-                        self.spread_of((id, got), axes, spacing, report)?
+                        self.spread_of((id, got), spacing, report)?
                     } else {
                         None
                     };
@@ -1404,23 +1404,23 @@ impl Renderer {
         Ok(())
     }
 
-    /// What halving the grid `key` along `axes` would lose, brick by brick
-    /// ([`BrickSpread`]), each voxel's opacity that of its own edge's length of tissue
-    /// (the geometric mean of its spacing, `spacing` being the own grid's); measured once a
-    /// grid and axes, timed as making levels. `None` where the grid is not made.
+    /// What halving the grid `key` along every axis with more than one voxel would lose,
+    /// brick by brick ([`BrickSpread`]), each voxel's opacity that of its own edge's length of
+    /// tissue (the geometric mean of its spacing, `spacing` being the own grid's); measured
+    /// once a grid, timed as making levels. `None` where the grid is not made.
     fn spread_of(
         &mut self,
         key: (NodeId, Detail),
-        axes: [bool; 3],
         spacing: [f64; 3],
         report: &mut FrameReport,
     ) -> Result<Option<Arc<BrickSpread>>, crate::grid::GridError> {
         let Some(state) = self.volumes.get_mut(&key) else {
             return Ok(None);
         };
-        if let Some((_, spread)) = state.spreads.iter().find(|(a, _)| *a == axes) {
+        if let Some(spread) = &state.spread {
             return Ok(Some(Arc::clone(spread)));
         }
+        let axes = state.classified.grid.dims().map(|n| n > 1);
         let started = Instant::now();
         let mm = (0..3)
             .map(|a| spacing[a] * f64::from(1u32 << state.levels[a]))
@@ -1429,7 +1429,7 @@ impl Renderer {
         let (halved, spreads) = state.classified.halved_measured(axes, None, Some(mm))?;
         let levels = std::array::from_fn(|a| state.levels[a] + u8::from(axes[a]));
         let spread = Arc::new(BrickSpread::of(&halved, levels, &spreads));
-        state.spreads.push((axes, Arc::clone(&spread)));
+        state.spread = Some(Arc::clone(&spread));
         report.timings.levels += started.elapsed();
         Ok(Some(spread))
     }
