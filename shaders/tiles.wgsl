@@ -3,8 +3,9 @@
 // shares; src/render/tile_pass.rs builds it).
 //
 // The draw order is walked nearest first in batches, as on the CPU. A batch is one or more
-// pieces, nearest first: stretches of the draw orders of the grids a volume draws from (its
-// one level, or the levels of a volume drawn brick by brick, whose runs alternate). Per batch:
+// pieces, nearest first: stretches of the draw orders of the grids the volumes draw from (a
+// volume's one level, or the levels of a volume drawn brick by brick, whose runs alternate).
+// Per batch:
 // - `project`, a dispatch a piece, places each splat of the piece (its centre, conic,
 //   premultiplied colour, reversed depth and pixel rectangle, exactly as `tiled::project`
 //   does), one thread a splat, and writes the rectangle that holds the footprints of every 32

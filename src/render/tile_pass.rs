@@ -4,9 +4,11 @@
 //! layer laid "over" the meshes already in the colour target.
 //!
 //! The draw orders are walked nearest first in batches of up to [`MAX_BATCH`] splats (fewer
-//! where the adapter binds less). Each batch is one dispatch that projects it and one that
-//! composites every tile; the layer of accumulated colour lives in a storage buffer between
-//! them. A tile stops within a batch once its pixels are opaque, so small batches gain no
+//! where the adapter binds less). A batch is one or more pieces, each a stretch of one grid's
+//! order (a volume's one level, or a run of a volume drawn brick by brick) padded to a whole
+//! workgroup of [`GROUP`] splats; each piece is one dispatch that projects it, and the batch
+//! one that composites every tile. The layer of accumulated colour lives in a storage buffer
+//! between them. A tile stops within a batch once its pixels are opaque, so small batches gain no
 //! early termination, while each batch waits for its slowest tile: on an NVIDIA H200, batches
 //! doubling from 16,384 to 524,288 splats took 6.9 ms for the engine's 1.1M splats, batches of
 //! 2,097,152 3.8-4.0 ms (BENCHMARKS.md). Nothing is
@@ -73,7 +75,7 @@ pub(crate) struct TilePass {
     rects: Option<wgpu::Buffer>,
     /// The accumulated layer, premultiplied RGBA as f32 a pixel.
     layer: Option<wgpu::Buffer>,
-    /// The batches' uniforms, one slot each.
+    /// The uniforms: a slot for each piece, one for each batch, then the image's.
     batches: Option<wgpu::Buffer>,
     /// Splats in a batch, at most.
     batch: usize,
@@ -262,7 +264,14 @@ impl TilePass {
             .min(limits.max_buffer_size)
             / PROJECTED_BYTES;
         // Whole groups, since a batch's pieces are padded to them.
-        let bindable = usize::try_from(bindable).unwrap_or(usize::MAX).max(GROUP) / GROUP * GROUP;
+        // A piece's projection is one dispatch of at most the adapter's workgroups along x.
+        let dispatchable = limits.max_compute_workgroups_per_dimension as usize * GROUP;
+        let bindable = usize::try_from(bindable)
+            .unwrap_or(usize::MAX)
+            .min(dispatchable)
+            .max(GROUP)
+            / GROUP
+            * GROUP;
         // Runs of a volume with nothing to draw from are left out (their pieces would be
         // composited unprojected).
         let runs: Vec<(usize, std::ops::Range<usize>)> = runs

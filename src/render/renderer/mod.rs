@@ -899,9 +899,10 @@ impl Renderer {
     }
 
     /// Splats the GPU tile compositor ([`Compositor::GpuTiles`]) projects and composites in
-    /// one batch, at most (and no more than the adapter binds; 4,194,304 by default). Each
-    /// batch is one projecting and one compositing dispatch; fewer, larger batches are faster
-    /// on a GPU, and the picture is the same for any size.
+    /// one batch, at most (and no more than the adapter binds; 4,194,304 by default; rounded
+    /// up to a whole workgroup of 256). Each batch is one projecting dispatch for each stretch
+    /// of a grid's order it holds and one compositing dispatch; fewer, larger batches are
+    /// faster on a GPU, and the picture is the same for any size.
     pub fn set_gpu_tile_batch(&mut self, splats: std::num::NonZeroUsize) {
         self.gpu_tile_batch = Some(splats);
     }
