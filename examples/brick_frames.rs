@@ -1,6 +1,6 @@
-//! Frame times of a u8 CT drawn by the CPU tiles with each brick at its own level and with one
-//! detail a volume, in turn, the camera turning about the superior axis: the measurement of
-//! "Bricks at their own levels" in BENCHMARKS.md.
+//! Frame times of a u8 or u16 volume (by the file's size) drawn by the CPU tiles with each
+//! brick at its own level and with one detail a volume, in turn, the camera turning about the
+//! superior axis: the measurement of "Bricks at their own levels" in BENCHMARKS.md.
 //!
 //! ```sh
 //! cargo run --release --example brick_frames -- VOLUME.raw NX,NY,NZ SX,SY,SZ LO,HI \
@@ -49,7 +49,16 @@ fn main() -> Result<()> {
     let [w, h] = numbers::<2>(&args[6])?.map(|v| v as u32);
     let frames: usize = args[7].parse().context("FRAMES")?;
     let turn: f64 = args[8].parse().context("TURN_DEGREES")?;
-    let spec = RawSpec::new(dims, ScalarType::U8, ByteOrder::Little);
+    // u8 or little-endian u16, by the file's size.
+    let voxels: u64 = dims.iter().map(|&n| u64::from(n)).product();
+    let bytes = std::fs::metadata(&args[0])
+        .with_context(|| args[0].clone())?
+        .len();
+    let scalar = match bytes / voxels.max(1) {
+        2 => ScalarType::U16,
+        _ => ScalarType::U8,
+    };
+    let spec = RawSpec::new(dims, scalar, ByteOrder::Little);
     let mut volume = load_raw(std::path::Path::new(&args[0]), &spec)?;
     volume.spacing = spacing;
     volume.direction = DMat3::from_diagonal(DVec3::new(-1.0, 1.0, -1.0));

@@ -168,20 +168,17 @@ fn render_writes_the_built_in_scene_at_any_size_with_depth() {
 
 #[test]
 fn a_small_picture_draws_a_coarser_level_unless_told_not_to() {
-    // The built-in scene at 40x30: its voxels fall well under a pixel, so a coarser level of
-    // the pyramid is drawn and the stage line says which; `--lod off` draws the full grid.
+    // The built-in scene at 40x30: its voxels fall well under a pixel, so with `--lod on` a
+    // coarser level of the pyramid is drawn and the stage line says which; `--lod off` draws
+    // the full grid, and so does the default (`auto`) for one picture, saying why.
     let dir = scratch("cli");
     let out = dir.join("small-lod.png");
     let run = |lod: &str| {
-        let result = splatscene(&[
-            "render",
-            "--out",
-            out.to_str().unwrap(),
-            "--size",
-            "40x30",
-            "--lod",
-            lod,
-        ]);
+        let mut args = vec!["render", "--out", out.to_str().unwrap(), "--size", "40x30"];
+        if !lod.is_empty() {
+            args.extend(["--lod", lod]);
+        }
+        let result = splatscene(&args);
         assert!(
             result.status.success(),
             "{}",
@@ -199,6 +196,15 @@ fn a_small_picture_draws_a_coarser_level_unless_told_not_to() {
     let (on, coarse) = run("on");
     let (off, full) = run("off");
     let (one, one_level) = run("volume");
+    let (auto, auto_splats) = run("auto");
+    let (default, default_splats) = run("");
+    assert!(
+        auto.contains("no level of detail made for one picture"),
+        "{auto}"
+    );
+    assert_eq!(auto_splats, full, "{auto}");
+    assert!(default.contains("no level of detail made"), "{default}");
+    assert_eq!(default_splats, full);
     assert!(on.contains("level of detail"), "{on}");
     assert!(one.contains("level of detail"), "{one}");
     assert!(!off.contains("level of detail"), "{off}");

@@ -64,8 +64,10 @@ pub struct RenderArgs {
     /// pixels apart, from its field on a grid refined until they are not, each 16^3-voxel
     /// brick at the detail its own distance calls for (with every compositor); `volume` draws
     /// each volume at one detail, the one its nearest brick calls for; `off` from its own
-    /// grid, every voxel a splat
-    #[arg(long, default_value = "on", value_parser = ["on", "volume", "off"])]
+    /// grid, every voxel a splat; `auto` as `on`, but a level of the pyramid is not made
+    /// for these few pictures (the own grid is drawn there: making a level takes longer than
+    /// drawing the own grid once), while grids coarser than the pixels are still refined
+    #[arg(long, default_value = "auto", value_parser = ["auto", "on", "volume", "off"])]
     lod: String,
     /// Transparent background (the PNG's alpha is the coverage).
     #[arg(long)]
@@ -301,7 +303,8 @@ pub fn run_render(args: RenderArgs) -> Result<()> {
     // One renderer for every view: the volumes are classified once.
     let mut renderer = Renderer::with_compositor(args.compositor);
     renderer.set_level_of_detail(args.lod != "off");
-    renderer.set_levels_by_brick(args.lod == "on");
+    renderer.set_levels_by_brick(args.lod == "on" || args.lod == "auto");
+    renderer.set_levels_made(args.lod != "auto");
     let device = ctx
         .as_ref()
         .map_or("no GPU adapter".into(), GpuContext::describe);
@@ -626,6 +629,10 @@ pub(crate) fn describe(r: &FrameReport) -> String {
                 ""
             };
             match (r.level, r.refined) {
+                (0, None) if r.levels_not_made => {
+                    " (own grid: no level of detail made for one picture; --lod on makes them)"
+                        .into()
+                }
                 (0, None) => String::new(),
                 (0, Some([x, y, z])) => format!(" (the grid refined {x}x{y}x{z}{by_brick})"),
                 (_, None) => format!(" (level of detail {level}{by_brick})"),

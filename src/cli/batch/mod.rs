@@ -62,9 +62,11 @@ pub struct BatchArgs {
     compositor: Compositor,
     /// Level of detail: `on` draws each volume from the level of its pyramid whose voxels are
     /// about a pixel apart, each 16^3-voxel brick by its own distance;
-    /// `volume` one level a volume, by where it comes nearest the eye; `off` from its own grid
-    /// (a job's pictures are redrawn when this changes)
-    #[arg(long, default_value = "on", value_parser = ["on", "volume", "off"])]
+    /// `volume` one level a volume, by where it comes nearest the eye; `off` from its own grid;
+    /// `auto` as `render --lod auto`: as `on`, with no level of the pyramid made (the own
+    /// grid drawn there), grids coarser than the pixels still refined (a job's pictures are
+    /// redrawn when this changes)
+    #[arg(long, default_value = "auto", value_parser = ["auto", "on", "volume", "off"])]
     lod: String,
 }
 
@@ -204,7 +206,8 @@ pub fn run_batch(args: BatchArgs) -> Result<()> {
     let fresh_renderer = || {
         let mut renderer = Renderer::with_compositor(args.compositor);
         renderer.set_level_of_detail(level_of_detail);
-        renderer.set_levels_by_brick(args.lod == "on");
+        renderer.set_levels_by_brick(args.lod == "on" || args.lod == "auto");
+        renderer.set_levels_made(args.lod != "auto");
         renderer
     };
     let mut renderer = fresh_renderer();
@@ -212,7 +215,8 @@ pub fn run_batch(args: BatchArgs) -> Result<()> {
         out,
         compositor: args.compositor,
         level_of_detail,
-        levels_by_brick: args.lod == "on",
+        levels_by_brick: args.lod == "on" || args.lod == "auto",
+        levels_made: args.lod != "auto",
         ctx: ctx.as_ref(),
     };
     for (slot, job) in mine.iter().enumerate() {
@@ -475,8 +479,11 @@ struct Settings<'a> {
     out: &'a Path,
     compositor: Compositor,
     level_of_detail: bool,
-    /// Each brick at its own level (`--lod on`), not one level a volume (`--lod volume`).
+    /// Each brick at its own level (`--lod on` and `auto`), not one level a volume
+    /// (`--lod volume`).
     levels_by_brick: bool,
+    /// Levels of the pyramid made where wanted (all but `--lod auto`).
+    levels_made: bool,
     ctx: Option<&'a GpuContext>,
 }
 
@@ -933,6 +940,7 @@ fn job_hash(
         "compositor": compositor_name(settings.compositor),
         "level_of_detail": settings.level_of_detail,
         "levels_by_brick": settings.levels_by_brick,
+        "levels_made": settings.levels_made,
         "job": job.spec,
         "scene": file,
         "inputs": inputs.iter().map(|i| &i.blake3).collect::<Vec<_>>(),

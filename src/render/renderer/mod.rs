@@ -114,6 +114,9 @@ pub struct FrameReport {
     /// Whether a volume drawn from its own grid wanted it refined, with refinement off
     /// ([`Renderer::set_refinement`]).
     pub unrefined: bool,
+    /// Whether a volume or a brick that wanted a level of detail not made yet drew its own
+    /// grid instead, with making levels off ([`Renderer::set_levels_made`]).
+    pub levels_not_made: bool,
     /// Volumes drawn brick by brick at more than one level ([`Renderer::set_levels_by_brick`]).
     pub bricks_by_level: usize,
     /// Volumes classified this frame (0 when nothing changed).
@@ -826,6 +829,8 @@ pub struct Renderer {
     no_smooth: bool,
     /// No volume drawn refined ([`Renderer::set_refinement`]).
     no_refinement: bool,
+    /// No level of detail made that is not made yet ([`Renderer::set_levels_made`]).
+    no_new_levels: bool,
     /// Refinements classified over the whole grid, not only where the image shows it
     /// ([`Renderer::set_refinement_on_image_only`]).
     refine_whole: bool,
@@ -913,6 +918,19 @@ impl Renderer {
     /// for, whatever it holds.
     pub fn set_smooth_bricks(&mut self, on: bool) {
         self.no_smooth = !on;
+    }
+
+    /// Whether a level of detail that a volume or a brick wants is made where it is not made
+    /// yet (on by default). Off, such a volume or brick draws its own grid instead (refined
+    /// where its voxels fall too far apart, as before), levels made already are still drawn,
+    /// and no brick is drawn coarser for being smooth ([`Renderer::set_smooth_bricks`]; that
+    /// measures the level above): for a few frames of a scene, as `splatscene render` draws. Making a level
+    /// from the own grid takes longer than drawing the own grid's splats once (the 0.5 mm CT
+    /// head from the front: 2.9 s of levels for a 0.2 s frame, against 0.9 s for its own
+    /// 28M splats), so a level pays only over several frames (BENCHMARKS.md, "Levels made
+    /// only where they pay").
+    pub fn set_levels_made(&mut self, on: bool) {
+        self.no_new_levels = !on;
     }
 
     /// Whether volumes whose voxels are more than [`REFINE_TO`] pixels apart may be drawn
@@ -1602,6 +1620,12 @@ impl Renderer {
                     report.unrefined = true;
                     Detail::default()
                 }
+                Detail::Level(..)
+                    if self.no_new_levels && !self.volumes.contains_key(&(id, wanted)) =>
+                {
+                    report.levels_not_made = true;
+                    Detail::default()
+                }
                 wanted => wanted,
             };
             // What each brick on the image wants, where they may differ. In a volume drawn
@@ -1638,6 +1662,9 @@ impl Renderer {
                 Detail::Refined(_) => wanted,
                 Detail::Level(..) => Detail::default(),
             };
+            let no_new_levels = self.no_new_levels;
+            let standing = |d: &Detail| self.volumes.contains_key(&(id, *d));
+            let mut levels_not_made = false;
             let mut brick_wants = brick_wants.map(|wants| {
                 wants
                     .into_iter()
@@ -1647,10 +1674,26 @@ impl Renderer {
                             smooth: None,
                             ..w
                         },
+                        // Levels not made yet are not made: the own grid instead, and no
+                        // smooth brick coarser (its spread would be measured on a level).
+                        Detail::Level(..) if no_new_levels => {
+                            let detail = if standing(&w.detail) {
+                                w.detail
+                            } else {
+                                levels_not_made |= w.detail != Detail::default();
+                                Detail::default()
+                            };
+                            BrickWant {
+                                detail,
+                                smooth: None,
+                                ..w
+                            }
+                        }
                         Detail::Level(..) => w,
                     })
                     .collect::<Vec<_>>()
             });
+            report.levels_not_made |= levels_not_made;
             // How many splats the bricks draw, each at its detail (or the volume's one).
             let share = |wants: &[BrickWant], one: Option<Detail>| -> f64 {
                 wants

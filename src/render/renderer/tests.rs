@@ -414,31 +414,7 @@ fn bricks_walked_alone_give_their_levels_orders_sorted_into_bricks() {
     // brick is the one each level's whole order gives, sorted into bricks, splat for splat, in
     // both interleavings.
     let n = 96u32;
-    let values: Vec<f32> = (0..n * n * n)
-        .map(|id| {
-            let k = [id % n, id / n % n, id / n / n].map(f64::from);
-            (200.0 + 250.0 * (k[0] / 7.0).sin() * (k[1] / 9.0).sin() * (k[2] / 11.0).sin()) as f32
-        })
-        .collect();
-    let volume = unit_volume(n, values.into());
-    let transfer = crate::classify::TransferFunction::new(vec![
-        (250.0, [0.9, 0.5, 0.3, 0.0]),
-        (450.0, [1.0, 0.9, 0.7, 0.05]),
-    ]);
-    let mut scene = Scene::new();
-    let node = VolumeNode {
-        volume: Arc::new(volume),
-        transfer: Arc::new(transfer),
-        splats: crate::scene::SplatSettings::default(),
-    };
-    let id = scene
-        .add(
-            "volume",
-            DMat4::IDENTITY,
-            None,
-            crate::scene::NodeContent::Volume(node),
-        )
-        .unwrap();
+    let (scene, id) = wavy_field(n);
     let cameras = [
         (DVec3::new(48.0, 47.0, -30.0), DVec3::new(48.0, 50.0, 48.0)),
         (DVec3::new(-20.0, 32.0, 16.0), DVec3::new(60.0, 50.0, 70.0)),
@@ -768,4 +744,86 @@ fn bricks_that_want_a_rare_level_draw_a_finer_one_that_stands() {
     // The mix draws 8,800 splats; the z level falls back (350 more, 4%), then 1/0/0 would
     // add 450 more: it is made.
     assert_eq!(got, [own, level([1, 0, 0], [-1, 0, 0]), own]);
+}
+
+/// A translucent field of `n`^3 unit voxels, waves along each axis (the node's id with it).
+fn wavy_field(n: u32) -> (Scene, NodeId) {
+    let values: Vec<f32> = (0..n * n * n)
+        .map(|id| {
+            let k = [id % n, id / n % n, id / n / n].map(f64::from);
+            (200.0 + 250.0 * (k[0] / 7.0).sin() * (k[1] / 9.0).sin() * (k[2] / 11.0).sin()) as f32
+        })
+        .collect();
+    let volume = unit_volume(n, values.into());
+    let transfer = crate::classify::TransferFunction::new(vec![
+        (250.0, [0.9, 0.5, 0.3, 0.0]),
+        (450.0, [1.0, 0.9, 0.7, 0.05]),
+    ]);
+    let mut scene = Scene::new();
+    let node = VolumeNode {
+        volume: Arc::new(volume),
+        transfer: Arc::new(transfer),
+        splats: crate::scene::SplatSettings::default(),
+    };
+    let id = scene
+        .add(
+            "volume",
+            DMat4::IDENTITY,
+            None,
+            crate::scene::NodeContent::Volume(node),
+        )
+        .unwrap();
+    (scene, id)
+}
+
+#[test]
+fn levels_not_made_yet_are_not_made_where_making_is_off() {
+    // The wavy field from 30 mm before its face at 32 x 32: by brick, the near bricks want the
+    // own grid and the far ones coarser levels. With making levels off, no level is made, every
+    // brick draws the own grid, and the picture is the full grid's; levels made by an earlier
+    // frame are drawn as before.
+    let (scene, _) = wavy_field(96);
+    let camera = SceneCamera {
+        projection: crate::scene::Projection::Perspective {
+            fov_y_degrees: 50.0,
+        },
+        ..SceneCamera::look_at(DVec3::new(48.0, 47.0, -30.0), DVec3::new(48.0, 50.0, 48.0))
+    };
+    let options = FrameOptions::default();
+    let shoot = |renderer: &mut Renderer| {
+        renderer
+            .screenshot_without_gpu(&scene, &camera, (32, 32), &options)
+            .unwrap()
+    };
+    let mut full = Renderer::with_compositor(super::super::Compositor::Cpu);
+    full.set_level_of_detail(false);
+    let full = shoot(&mut full);
+    let mut renderer = Renderer::with_compositor(super::super::Compositor::Cpu);
+    renderer.set_levels_made(false);
+    let own = shoot(&mut renderer);
+    assert!(own.report.levels_not_made, "{:?}", own.report);
+    assert_eq!(own.report.levels_made, 0);
+    assert_eq!(own.report.splats, full.report.splats);
+    assert_eq!(own.report.bricks_by_level, 0);
+    assert_eq!(own.frame.pixels, full.frame.pixels);
+    assert!(
+        renderer
+            .volumes
+            .keys()
+            .all(|(_, d)| *d == Detail::default())
+    );
+    // Made by a frame with making on, the levels are drawn with it off again, where the
+    // bricks' spacing wants them (no brick goes coarser for being smooth, which takes a
+    // measurement of the level above).
+    renderer.set_levels_made(true);
+    renderer.set_smooth_bricks(false);
+    let made = shoot(&mut renderer);
+    assert!(made.report.levels_made > 0, "{:?}", made.report);
+    assert!(made.report.splats < full.report.splats);
+    renderer.set_levels_made(false);
+    let again = shoot(&mut renderer);
+    assert_eq!(again.report.levels_made, 0);
+    assert!(!again.report.levels_not_made, "{:?}", again.report);
+    assert_eq!(again.report.splats, made.report.splats);
+    assert_eq!(again.frame.pixels, made.frame.pixels);
 }
