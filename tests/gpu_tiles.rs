@@ -15,7 +15,8 @@ use splatscene::splat::reference::{Frame, ImageDifference, compare};
 mod common;
 use common::shapes::camera_of;
 use common::{
-    before_the_blobs, compositor_cases, engine_view, shells, translucent_blobs, volume_scene,
+    across_the_blobs, before_the_blobs, compositor_cases, engine_view, shells, translucent_blobs,
+    volume_scene,
 };
 
 const OPTIONS: FrameOptions = FrameOptions {
@@ -239,15 +240,7 @@ fn volumes_drawn_brick_by_brick() {
     // tiles' (in small batches, and in one).
     let ctx = context();
     let scene = translucent_blobs();
-    let oblique = SceneCamera {
-        projection: Projection::Perspective {
-            fov_y_degrees: 50.0,
-        },
-        ..SceneCamera::look_at(
-            DVec3::new(-40.0, 150.0, -30.0),
-            DVec3::new(63.5, 63.5, 63.5),
-        )
-    };
+    let oblique = across_the_blobs();
     // And a second field beyond the first, offset so that it shows beside it: one volume drawn
     // brick by brick, the other at one level or brick by brick, in one batch.
     let mut two = translucent_blobs();

@@ -13,8 +13,8 @@ use splatscene::splat::reference::{Frame, ImageDifference, SplatStyle, compare};
 mod common;
 use common::shapes::camera_of;
 use common::{
-    before_the_blobs, benchmark_view, compositor_cases, data_file, engine_view, reference_frame,
-    shells, translucent_blobs, volume_scene,
+    across_the_blobs, before_the_blobs, benchmark_view, compositor_cases, data_file, engine_view,
+    reference_frame, shells, translucent_blobs, volume_scene,
 };
 
 fn context() -> GpuContext {
@@ -763,15 +763,7 @@ fn the_splat_pass_draws_the_mix_the_tiles_draw() {
     // tiles' picture.
     let ctx = context();
     let scene = translucent_blobs();
-    let oblique = SceneCamera {
-        projection: Projection::Perspective {
-            fov_y_degrees: 50.0,
-        },
-        ..SceneCamera::look_at(
-            glam::DVec3::new(-40.0, 150.0, -30.0),
-            glam::DVec3::new(63.5, 63.5, 63.5),
-        )
-    };
+    let oblique = across_the_blobs();
     for (what, camera) in [("before", before_the_blobs(40.0)), ("oblique", oblique)] {
         let shot = |compositor| {
             Renderer::with_compositor(compositor)

@@ -262,3 +262,17 @@ pub fn before_the_blobs(distance: f64) -> SceneCamera {
         near: None,
     }
 }
+
+/// Looking at the centre of [`translucent_blobs`] from an oblique eye beyond one corner of its
+/// face, at 50 degrees.
+pub fn across_the_blobs() -> SceneCamera {
+    SceneCamera {
+        projection: splatscene::scene::Projection::Perspective {
+            fov_y_degrees: 50.0,
+        },
+        ..SceneCamera::look_at(
+            DVec3::new(-40.0, 150.0, -30.0),
+            DVec3::new(63.5, 63.5, 63.5),
+        )
+    }
+}
