@@ -143,7 +143,7 @@ class Scene:
         depth: bool = ...,
         depth_mode: Optional[str] = ...,
         surface_opacity: float = ...,
-        lod: bool = ...,
+        lod: Union[bool, str, None] = ...,
         transparent: bool = ...,
     ) -> Union[npt.NDArray[np.uint8], Tuple[npt.NDArray[np.uint8], npt.NDArray[np.float32]]]: ...
     def pick(

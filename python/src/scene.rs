@@ -360,12 +360,15 @@ impl Scene {
     /// "anterolateral-right"...; "scene" is the scene's own camera) or an `eye` (and
     /// `target`), turned by `orbit` (yaw, pitch in degrees), with `fov` or an `orthographic`
     /// height; `ordering` of the splats; `annotate` (True, or parts "marker,letters,scale,
-    /// measurements") and a `caption`; `lod` (level of detail) on by default. Returns the RGBA
+    /// measurements") and a `caption`; `lod`, the level of detail as `splatscene render
+    /// --lod` takes it: "auto" (the default: no level of the pyramid made for the picture),
+    /// "on" or True (levels made, which pays over many frames of one scene, an orbit),
+    /// "volume", "off" or False. Returns the RGBA
     /// image, (height, width, 4) uint8; with `depth=True` also the depth, (height, width)
     /// float32 millimetres along the view axis, NaN where nothing was hit (`depth_mode`
     /// "mesh" or "surface", the volumes' first surface where the accumulated opacity reaches
     /// `surface_opacity`).
-    #[pyo3(signature = (size=None, *, view=None, eye=None, target=None, orbit=None, fov=None, orthographic=None, ordering=None, annotate=None, caption=None, depth=false, depth_mode=None, surface_opacity=0.3, lod=true, transparent=false))]
+    #[pyo3(signature = (size=None, *, view=None, eye=None, target=None, orbit=None, fov=None, orthographic=None, ordering=None, annotate=None, caption=None, depth=false, depth_mode=None, surface_opacity=0.3, lod=None, transparent=false))]
     #[allow(clippy::too_many_arguments)]
     fn render<'py>(
         &self,
@@ -383,9 +386,24 @@ impl Scene {
         depth: bool,
         depth_mode: Option<&str>,
         surface_opacity: f32,
-        lod: bool,
+        lod: Option<&Bound<'py, PyAny>>,
         transparent: bool,
     ) -> PyResult<Bound<'py, PyAny>> {
+        let lod = match lod {
+            None => "auto".to_string(),
+            Some(v) => match v.extract::<bool>() {
+                Ok(true) => "on".to_string(),
+                Ok(false) => "off".to_string(),
+                Err(_) => v
+                    .extract::<String>()
+                    .map_err(|_| PyTypeError::new_err("lod: expected True, False or a string"))?,
+            },
+        };
+        if !["auto", "on", "volume", "off"].contains(&lod.as_str()) {
+            return Err(bad(format!(
+                "lod: {lod:?} is not one of \"auto\", \"on\", \"volume\", \"off\""
+            )));
+        }
         let choice = CameraArgs {
             view,
             eye,
@@ -454,7 +472,11 @@ impl Scene {
                 state.ctx =
                     Some(context_for(Compositor::Auto, &with_marks).map_err(|e| e.to_string())?);
             }
-            state.renderer.set_level_of_detail(lod);
+            state.renderer.set_level_of_detail(lod != "off");
+            state
+                .renderer
+                .set_levels_by_brick(lod == "on" || lod == "auto");
+            state.renderer.set_levels_made(lod != "auto");
             let options = FrameOptions {
                 ordering,
                 background: if transparent {

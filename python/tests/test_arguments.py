@@ -107,6 +107,8 @@ def test_bad_render_arguments_are_refused():
         ({"depth_mode": "mesh"}, ValueError, "depth=True"),
         ({"depth": True, "depth_mode": "far"}, ValueError, "depth_mode"),
         ({"depth": True, "surface_opacity": 0.0}, ValueError, "surface_opacity"),
+        ({"lod": "half"}, ValueError, "lod"),
+        ({"lod": 1}, TypeError, "lod"),
     ]:
         with pytest.raises(error, match=match):
             scene.render(**kwargs)

@@ -33,6 +33,8 @@ def test_named_views_orbits_annotations_and_orderings_match_the_command_line(tmp
          ["--orbit", "30,10", "--ordering", "btf", "--caption", "stem {view} {size} {ordering}"]),
         (dict(eye=(300, 40, 60), target=(47, 33, 55), annotate="marker,scale"), ["--eye", "300,40,60", "--target", "47,33,55", "--annotate", "marker,scale"]),
         (dict(view="superior", orthographic=160.0, lod=False), ["--view", "superior", "--orthographic", "160", "--lod", "off"]),
+        (dict(view="anterior", lod="on"), ["--view", "anterior", "--lod", "on"]),
+        (dict(view="anterior", lod="volume"), ["--view", "anterior", "--lod", "volume"]),
     ]
     for i, (options, flags) in enumerate(cases):
         mine = scene.render(size=(200, 160), **options)
