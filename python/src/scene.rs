@@ -20,7 +20,8 @@ use splatscene::order::Ordering;
 use splatscene::pick::contact::{Classes, contact};
 use splatscene::pick::{PickOptions, Picker};
 use splatscene::render::{
-    Compositor, DepthMode, FrameOptions, FrameReport, GpuContext, Renderer, ViewSetup,
+    Compositor, DepthMode, FrameOptions, FrameReport, GpuContext, LevelOfDetail, Renderer,
+    ViewSetup,
 };
 use splatscene::scene::file::{
     BoxSpec, CameraSpec, Given, LoadedScene, SceneFile, VolumeSpec, apply_transfer,
@@ -389,21 +390,18 @@ impl Scene {
         lod: Option<&Bound<'py, PyAny>>,
         transparent: bool,
     ) -> PyResult<Bound<'py, PyAny>> {
-        let lod = match lod {
-            None => "auto".to_string(),
+        let lod: LevelOfDetail = match lod {
+            None => LevelOfDetail::Auto,
             Some(v) => match v.extract::<bool>() {
-                Ok(true) => "on".to_string(),
-                Ok(false) => "off".to_string(),
+                Ok(true) => LevelOfDetail::On,
+                Ok(false) => LevelOfDetail::Off,
                 Err(_) => v
                     .extract::<String>()
-                    .map_err(|_| PyTypeError::new_err("lod: expected True, False or a string"))?,
+                    .map_err(|_| PyTypeError::new_err("lod: expected True, False or a string"))?
+                    .parse()
+                    .map_err(|e: String| bad(format!("lod: {e}")))?,
             },
         };
-        if !["auto", "on", "volume", "off"].contains(&lod.as_str()) {
-            return Err(bad(format!(
-                "lod: {lod:?} is not one of \"auto\", \"on\", \"volume\", \"off\""
-            )));
-        }
         let choice = CameraArgs {
             view,
             eye,
@@ -472,11 +470,7 @@ impl Scene {
                 state.ctx =
                     Some(context_for(Compositor::Auto, &with_marks).map_err(|e| e.to_string())?);
             }
-            state.renderer.set_level_of_detail(lod != "off");
-            state
-                .renderer
-                .set_levels_by_brick(lod == "on" || lod == "auto");
-            state.renderer.set_levels_made(lod != "auto");
+            state.renderer.set_lod(lod);
             let options = FrameOptions {
                 ordering,
                 background: if transparent {

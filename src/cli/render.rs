@@ -13,7 +13,8 @@ use splatscene::order::Ordering;
 use splatscene::pick::contact::Classes;
 use splatscene::pick::paint::{paint, value_colour};
 use splatscene::render::{
-    Compositor, DepthImage, DepthMode, FrameOptions, FrameReport, GpuContext, Renderer, encode_png,
+    Compositor, DepthImage, DepthMode, FrameOptions, FrameReport, GpuContext, LevelOfDetail,
+    Renderer, encode_png,
 };
 use splatscene::scene::file::SceneFile;
 use splatscene::scene::{Scene, SceneCamera};
@@ -67,8 +68,8 @@ pub struct RenderArgs {
     /// grid, every voxel a splat; `auto` as `on`, but a level of the pyramid is not made
     /// for these few pictures (the own grid is drawn there: making a level takes longer than
     /// drawing the own grid once), while grids coarser than the pixels are still refined
-    #[arg(long, default_value = "auto", value_parser = ["auto", "on", "volume", "off"])]
-    lod: String,
+    #[arg(long, default_value = "auto")]
+    lod: LevelOfDetail,
     /// Transparent background (the PNG's alpha is the coverage).
     #[arg(long)]
     transparent: bool,
@@ -302,9 +303,7 @@ pub fn run_render(args: RenderArgs) -> Result<()> {
     let ctx = context_for(args.compositor, &drawn)?;
     // One renderer for every view: the volumes are classified once.
     let mut renderer = Renderer::with_compositor(args.compositor);
-    renderer.set_level_of_detail(args.lod != "off");
-    renderer.set_levels_by_brick(args.lod == "on" || args.lod == "auto");
-    renderer.set_levels_made(args.lod != "auto");
+    renderer.set_lod(args.lod);
     let device = ctx
         .as_ref()
         .map_or("no GPU adapter".into(), GpuContext::describe);

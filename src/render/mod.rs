@@ -21,8 +21,9 @@ pub use context::GpuContext;
 pub use depth_image::{DepthImage, DepthMode};
 pub use output::{encode_png, encode_png_with_text, frame_to_rgba8};
 pub use renderer::{
-    Compositor, Detail, FrameOptions, FrameReport, FrameTimings, MAX_DEPTH_LEVELS, MAX_LEVEL,
-    MAX_REFINE, MAX_REFINED_VOXELS, REFINE_TO, Renderer, Screenshot, detail_for, pixels_apart,
+    Compositor, Detail, FrameOptions, FrameReport, FrameTimings, LevelOfDetail, MAX_DEPTH_LEVELS,
+    MAX_LEVEL, MAX_REFINE, MAX_REFINED_VOXELS, REFINE_TO, Renderer, Screenshot, detail_for,
+    pixels_apart,
 };
 pub use target::{DEPTH_FORMAT, RenderTarget, color_format, read_texture};
 pub use view::ViewSetup;

@@ -12,7 +12,8 @@ use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
 use splatscene::annotate::Annotations;
 use splatscene::render::{
-    Compositor, DepthMode, FrameOptions, GpuContext, RenderError, Renderer, encode_png,
+    Compositor, DepthMode, FrameOptions, GpuContext, LevelOfDetail, RenderError, Renderer,
+    encode_png,
 };
 use splatscene::scene::file::{LoadedScene, camera as scene_camera, named_view_camera};
 use splatscene::scene::{NodeContent, NodeId, Scene};
@@ -66,8 +67,8 @@ pub struct BatchArgs {
     /// `auto` as `render --lod auto`: as `on`, with no level of the pyramid made (the own
     /// grid drawn there), grids coarser than the pixels still refined (a job's pictures are
     /// redrawn when this changes)
-    #[arg(long, default_value = "auto", value_parser = ["auto", "on", "volume", "off"])]
-    lod: String,
+    #[arg(long, default_value = "auto")]
+    lod: LevelOfDetail,
 }
 
 /// Runs `splatscene batch`.
@@ -202,21 +203,18 @@ pub fn run_batch(args: BatchArgs) -> Result<()> {
 
     let pictures: usize = mine.iter().map(|j| j.items.len()).sum();
     let bar = progress_bar(pictures as u64);
-    let level_of_detail = args.lod != "off";
     let fresh_renderer = || {
         let mut renderer = Renderer::with_compositor(args.compositor);
-        renderer.set_level_of_detail(level_of_detail);
-        renderer.set_levels_by_brick(args.lod == "on" || args.lod == "auto");
-        renderer.set_levels_made(args.lod != "auto");
+        renderer.set_lod(args.lod);
         renderer
     };
     let mut renderer = fresh_renderer();
     let settings = Settings {
         out,
         compositor: args.compositor,
-        level_of_detail,
-        levels_by_brick: args.lod == "on" || args.lod == "auto",
-        levels_made: args.lod != "auto",
+        level_of_detail: args.lod != LevelOfDetail::Off,
+        levels_by_brick: matches!(args.lod, LevelOfDetail::Auto | LevelOfDetail::On),
+        levels_made: args.lod != LevelOfDetail::Auto,
         ctx: ctx.as_ref(),
     };
     for (slot, job) in mine.iter().enumerate() {

@@ -800,6 +800,38 @@ impl std::str::FromStr for Compositor {
     }
 }
 
+/// How the level of detail is set, as `splatscene render --lod` and the Python module's
+/// `lod` name it ([`Renderer::set_lod`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum LevelOfDetail {
+    /// As [`LevelOfDetail::On`], but no level of the pyramid is made: a volume or brick that
+    /// wants one draws its own grid ([`Renderer::set_levels_made`]); for a few pictures.
+    #[default]
+    Auto,
+    /// Each brick at the level its distance calls for, levels made as wanted (the viewer's).
+    On,
+    /// One level a volume ([`Renderer::set_levels_by_brick`] off).
+    Volume,
+    /// Every volume from its own grid ([`Renderer::set_level_of_detail`] off).
+    Off,
+}
+
+impl std::str::FromStr for LevelOfDetail {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s {
+            "auto" => Ok(Self::Auto),
+            "on" => Ok(Self::On),
+            "volume" => Ok(Self::Volume),
+            "off" => Ok(Self::Off),
+            other => Err(format!(
+                "unknown level of detail {other:?}: auto, on, volume or off"
+            )),
+        }
+    }
+}
+
 /// Draws scenes; keeps GPU resources between frames so that a camera move uploads only the
 /// draw orders and a few uniforms.
 #[derive(Default)]
@@ -924,13 +956,21 @@ impl Renderer {
     /// yet (on by default). Off, such a volume or brick draws its own grid instead (refined
     /// where its voxels fall too far apart, as before), levels made already are still drawn,
     /// and no brick is drawn coarser for being smooth ([`Renderer::set_smooth_bricks`]; that
-    /// measures the level above): for a few frames of a scene, as `splatscene render` draws. Making a level
-    /// from the own grid takes longer than drawing the own grid's splats once (the 0.5 mm CT
-    /// head from the front: 2.9 s of levels for a 0.2 s frame, against 0.9 s for its own
-    /// 28M splats), so a level pays only over several frames (BENCHMARKS.md, "Levels made
-    /// only where they pay").
+    /// measures the level above): for a few frames of a scene, as `splatscene render` draws.
+    /// Making a level from the own grid takes longer than drawing the own grid's splats once
+    /// (the 0.5 mm CT head from the front: 2.9 s of levels for a 0.2 s frame, against 0.9 s
+    /// for its own 28M splats), so a level pays only over several frames (BENCHMARKS.md,
+    /// "Levels made only where they pay").
     pub fn set_levels_made(&mut self, on: bool) {
         self.no_new_levels = !on;
+    }
+
+    /// Sets the level of detail as `lod` names it: [`Renderer::set_level_of_detail`],
+    /// [`Renderer::set_levels_by_brick`] and [`Renderer::set_levels_made`] together.
+    pub fn set_lod(&mut self, lod: LevelOfDetail) {
+        self.set_level_of_detail(lod != LevelOfDetail::Off);
+        self.set_levels_by_brick(matches!(lod, LevelOfDetail::Auto | LevelOfDetail::On));
+        self.set_levels_made(lod != LevelOfDetail::Auto);
     }
 
     /// Whether volumes whose voxels are more than [`REFINE_TO`] pixels apart may be drawn
