@@ -170,11 +170,14 @@ fn render_writes_the_built_in_scene_at_any_size_with_depth() {
 fn a_small_picture_draws_a_coarser_level_unless_told_not_to() {
     // The built-in scene at 40x30: its voxels fall well under a pixel, so with `--lod on` a
     // coarser level of the pyramid is drawn and the stage line says which; `--lod off` draws
-    // the full grid, and so does the default (`auto`) for one picture, saying why.
+    // the full grid. The default (`auto`) makes the levels that pay within the one picture:
+    // at 40x30 they do (the picture draws under a 60th of the full grid's splats); at
+    // 200x150, where `on` halves the grid once, they do not, and the full grid is drawn,
+    // the stage line saying why.
     let dir = scratch("cli");
     let out = dir.join("small-lod.png");
-    let run = |lod: &str| {
-        let mut args = vec!["render", "--out", out.to_str().unwrap(), "--size", "40x30"];
+    let run_at = |lod: &str, size: &str| {
+        let mut args = vec!["render", "--out", out.to_str().unwrap(), "--size", size];
         if !lod.is_empty() {
             args.extend(["--lod", lod]);
         }
@@ -193,18 +196,24 @@ fn a_small_picture_draws_a_coarser_level_unless_told_not_to() {
             .unwrap_or_else(|| panic!("a splat count in {stderr}"));
         (stderr, splats)
     };
+    let run = |lod: &str| run_at(lod, "40x30");
     let (on, coarse) = run("on");
     let (off, full) = run("off");
     let (one, one_level) = run("volume");
     let (auto, auto_splats) = run("auto");
     let (default, default_splats) = run("");
+    assert_eq!(auto_splats, coarse, "{auto}");
+    assert_eq!(default_splats, coarse, "{default}");
+    assert!(default.contains("level of detail 2/3/2"), "{default}");
+    let (larger, larger_splats) = run_at("", "200x150");
+    let (larger_on, larger_coarse) = run_at("on", "200x150");
+    let (_, larger_full) = run_at("off", "200x150");
     assert!(
-        auto.contains("no level of detail made for one picture"),
-        "{auto}"
+        larger.contains("no level of detail pays for one picture"),
+        "{larger}"
     );
-    assert_eq!(auto_splats, full, "{auto}");
-    assert!(default.contains("no level of detail made"), "{default}");
-    assert_eq!(default_splats, full);
+    assert_eq!(larger_splats, larger_full, "{larger}");
+    assert!(larger_coarse < larger_full, "{larger_on}");
     assert!(on.contains("level of detail"), "{on}");
     assert!(one.contains("level of detail"), "{one}");
     assert!(!off.contains("level of detail"), "{off}");

@@ -362,7 +362,7 @@ impl Scene {
     /// `target`), turned by `orbit` (yaw, pitch in degrees), with `fov` or an `orthographic`
     /// height; `ordering` of the splats; `annotate` (True, or parts "marker,letters,scale,
     /// measurements") and a `caption`; `lod`, the level of detail as `splatscene render
-    /// --lod` takes it: "auto" (the default: no level of the pyramid made for the picture),
+    /// --lod` takes it: "auto" (the default: a level of the pyramid made only where it pays within the picture),
     /// "on" or True (levels made, which pays over many frames of one scene, an orbit),
     /// "volume", "off" or False. Returns the RGBA
     /// image, (height, width, 4) uint8; with `depth=True` also the depth, (height, width)

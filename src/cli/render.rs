@@ -629,7 +629,7 @@ pub(crate) fn describe(r: &FrameReport) -> String {
             };
             match (r.level, r.refined) {
                 (0, None) if r.levels_not_made => {
-                    " (own grid: no level of detail made for one picture; --lod on makes them)"
+                    " (own grid: no level of detail pays for one picture; --lod on makes them)"
                         .into()
                 }
                 (0, None) => String::new(),

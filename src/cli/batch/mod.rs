@@ -64,9 +64,10 @@ pub struct BatchArgs {
     /// Level of detail: `on` draws each volume from the level of its pyramid whose voxels are
     /// about a pixel apart, each 16^3-voxel brick by its own distance;
     /// `volume` one level a volume, by where it comes nearest the eye; `off` from its own grid;
-    /// `auto` as `render --lod auto`: as `on`, with no level of the pyramid made (the own
-    /// grid drawn there), grids coarser than the pixels still refined (a job's pictures are
-    /// redrawn when this changes)
+    /// `auto` as `render --lod auto`: as `on`, with a level of the pyramid made only where it
+    /// saves more drawing than its making costs in the one picture (else a finer level or
+    /// the own grid drawn there), grids coarser than the pixels still refined (a job's
+    /// pictures are redrawn when this changes)
     #[arg(long, default_value = "auto")]
     lod: LevelOfDetail,
 }
@@ -214,7 +215,7 @@ pub fn run_batch(args: BatchArgs) -> Result<()> {
         compositor: args.compositor,
         level_of_detail: args.lod != LevelOfDetail::Off,
         levels_by_brick: matches!(args.lod, LevelOfDetail::Auto | LevelOfDetail::On),
-        levels_made: args.lod != LevelOfDetail::Auto,
+        levels_for_one_frame: args.lod == LevelOfDetail::Auto,
         ctx: ctx.as_ref(),
     };
     for (slot, job) in mine.iter().enumerate() {
@@ -480,8 +481,8 @@ struct Settings<'a> {
     /// Each brick at its own level (`--lod on` and `auto`), not one level a volume
     /// (`--lod volume`).
     levels_by_brick: bool,
-    /// Levels of the pyramid made where wanted (all but `--lod auto`).
-    levels_made: bool,
+    /// Levels of the pyramid made only where they pay within the picture (`--lod auto`).
+    levels_for_one_frame: bool,
     ctx: Option<&'a GpuContext>,
 }
 
@@ -938,7 +939,7 @@ fn job_hash(
         "compositor": compositor_name(settings.compositor),
         "level_of_detail": settings.level_of_detail,
         "levels_by_brick": settings.levels_by_brick,
-        "levels_made": settings.levels_made,
+        "levels_for_one_frame": settings.levels_for_one_frame,
         "job": job.spec,
         "scene": file,
         "inputs": inputs.iter().map(|i| &i.blake3).collect::<Vec<_>>(),

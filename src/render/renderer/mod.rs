@@ -114,8 +114,9 @@ pub struct FrameReport {
     /// Whether a volume drawn from its own grid wanted it refined, with refinement off
     /// ([`Renderer::set_refinement`]).
     pub unrefined: bool,
-    /// Whether a volume or a brick that wanted a level of detail not made yet drew its own
-    /// grid instead, with making levels off ([`Renderer::set_levels_made`]).
+    /// Whether a volume or a brick that wanted a level of detail not made yet drew a finer
+    /// one or its own grid instead, the level not paying within the frame
+    /// ([`Renderer::set_levels_for_one_frame`]).
     pub levels_not_made: bool,
     /// Volumes drawn brick by brick at more than one level ([`Renderer::set_levels_by_brick`]).
     pub bricks_by_level: usize,
@@ -751,6 +752,92 @@ fn fall_back_from_rare_levels(wants: &mut [BrickWant], made: &[Detail], own_spla
     }
 }
 
+/// The time a level takes to be made, for each splat of the grid it is halved from (that
+/// grid's texels made), in the time one splat takes to be drawn (ordered, projected, binned
+/// and composited). On this project's 2-core machine (BENCHMARKS.md, "Levels made where
+/// they pay"), a level halved from the own grid's texels took 18-25 ns an own splat, and a
+/// frame 34-52 ns a splat drawn (the 0.5 mm CT head, the 0.7 mm LIDC2 CT and the dense ball
+/// at 512 x 512).
+const LEVEL_COST: f64 = 0.55;
+
+/// What the volume or bricks that want each of `asked` (levels of detail not made yet, each
+/// with the own grid's splats of the volume or bricks that want it) draw in one frame where
+/// levels are made only where they pay: the levels made are those of the set that saves the
+/// most drawing net of their making, among the sets of the levels asked that save the most
+/// alone (the first one, the first two, ...). A level costs [`LEVEL_COST`] times the
+/// splats of each grid it is halved from on its way from the own grid of `own_splats` splats
+/// (the steps of `Renderer::make_levels`), no step of `made` or of another level of the set
+/// counted twice. Each level asked draws the coarsest level made or on the way to one made,
+/// no coarser along any axis than itself, else the own grid ([`Detail::default`]). The own
+/// grid's texels are taken as made either way: a volume that draws any brick of its own grid
+/// has them made, and one that makes a level has them made first.
+fn levels_that_pay(
+    asked: &[(Detail, f64)],
+    made: &[Detail],
+    own_splats: usize,
+) -> Vec<(Detail, Detail)> {
+    let own = own_splats as f64;
+    let coarseness = |d: &Detail| match *d {
+        Detail::Level(l, f) => (l.iter().map(|&l| u32::from(l)).sum::<u32>(), l, f),
+        Detail::Refined(_) => (0, [0; 3], [0; 3]),
+    };
+    let mut asked: Vec<(Detail, f64)> = asked
+        .iter()
+        .copied()
+        .filter(|(d, _)| matches!(d, Detail::Level(..)))
+        .collect();
+    // The most saved alone first; equal savings by the level, so that the choice does not
+    // follow the order asked.
+    let alone = |(d, n): &(Detail, f64)| n * (1.0 - splat_share(*d));
+    asked.sort_by(|a, b| {
+        alone(b)
+            .total_cmp(&alone(a))
+            .then_with(|| coarseness(&a.0).cmp(&coarseness(&b.0)))
+    });
+    // What each level asked draws where `standing` are made.
+    let drawn = |standing: &[Detail], wanted: Detail| -> Detail {
+        let Detail::Level(want, _) = wanted else {
+            return Detail::default();
+        };
+        if standing.contains(&wanted) {
+            return wanted;
+        }
+        standing
+            .iter()
+            .copied()
+            .filter(|s| matches!(s, Detail::Level(l, _) if (0..3).all(|a| l[a] <= want[a])))
+            .max_by_key(coarseness)
+            .unwrap_or_default()
+    };
+    let mut standing: Vec<Detail> = made.to_vec();
+    let mut cost = 0.0;
+    let mut best = (0.0, standing.clone());
+    for &(wanted, _) in &asked {
+        let Detail::Level(wanted, facing) = wanted else {
+            continue;
+        };
+        // The steps not made yet, each halving every axis still short of the level asked.
+        let mut level = [0u8; 3];
+        while level != wanted {
+            let next: [u8; 3] = std::array::from_fn(|a| level[a] + u8::from(level[a] < wanted[a]));
+            let key = level_facing(next, facing);
+            if !standing.contains(&key) {
+                cost += LEVEL_COST * own * splat_share(Detail::Level(level, [0; 3]));
+                standing.push(key);
+            }
+            level = next;
+        }
+        let saved: f64 = asked
+            .iter()
+            .map(|&(d, n)| n * (1.0 - splat_share(drawn(&standing, d))))
+            .sum();
+        if saved - cost > best.0 {
+            best = (saved - cost, standing.clone());
+        }
+    }
+    asked.iter().map(|&(d, _)| (d, drawn(&best.1, d))).collect()
+}
+
 /// A volume's bricks are drawn each at its own level where that draws at most two thirds of
 /// the splats its one level would (by the own grid's splats in each brick). A mix walks each
 /// brick's splats alone, about 9 ns a splat drawn on this project's 2-core machine against
@@ -804,8 +891,9 @@ impl std::str::FromStr for Compositor {
 /// `lod` name it ([`Renderer::set_lod`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum LevelOfDetail {
-    /// As [`LevelOfDetail::On`], but no level of the pyramid is made: a volume or brick that
-    /// wants one draws its own grid ([`Renderer::set_levels_made`]); for a few pictures.
+    /// As [`LevelOfDetail::On`], but a level of the pyramid is made only where it pays within
+    /// the frame, and no brick goes coarser for being smooth
+    /// ([`Renderer::set_levels_for_one_frame`]); for a few pictures.
     #[default]
     Auto,
     /// Each brick at the level its distance calls for, levels made as wanted (the viewer's).
@@ -861,8 +949,9 @@ pub struct Renderer {
     no_smooth: bool,
     /// No volume drawn refined ([`Renderer::set_refinement`]).
     no_refinement: bool,
-    /// No level of detail made that is not made yet ([`Renderer::set_levels_made`]).
-    no_new_levels: bool,
+    /// Levels of detail made only where they pay within the frame
+    /// ([`Renderer::set_levels_for_one_frame`]).
+    levels_for_one_frame: bool,
     /// Refinements classified over the whole grid, not only where the image shows it
     /// ([`Renderer::set_refinement_on_image_only`]).
     refine_whole: bool,
@@ -952,25 +1041,27 @@ impl Renderer {
         self.no_smooth = !on;
     }
 
-    /// Whether a level of detail that a volume or a brick wants is made where it is not made
-    /// yet (on by default). Off, such a volume or brick draws its own grid instead (refined
-    /// where its voxels fall too far apart, as before), levels made already are still drawn,
-    /// and no brick is drawn coarser for being smooth ([`Renderer::set_smooth_bricks`]; that
-    /// measures the level above): for a few frames of a scene, as `splatscene render` draws.
-    /// Making a level from the own grid takes longer than drawing the own grid's splats once
-    /// (the 0.5 mm CT head from the front: 2.9 s of levels for a 0.2 s frame, against 0.9 s
-    /// for its own 28M splats), so a level pays only over several frames (BENCHMARKS.md,
-    /// "Levels made only where they pay").
-    pub fn set_levels_made(&mut self, on: bool) {
-        self.no_new_levels = !on;
+    /// Whether a level of detail that a volume or a brick wants, not made yet, is made only
+    /// where it pays within the frame (off by default: made wherever wanted, for the frames
+    /// to come). On, a level is made where the splats it saves take longer to draw than it
+    /// takes to make, about half a splat drawn for each splat of the grid it is halved from;
+    /// the volumes and bricks that want one not made draw the coarsest level made that is no
+    /// coarser, else their own grid (refined where its voxels fall too far apart, as
+    /// before); no brick is drawn coarser for being smooth ([`Renderer::set_smooth_bricks`];
+    /// that measures the level above). For a few frames of a scene, as `splatscene render`
+    /// draws: a grid drawn about a pixel apart saves too few splats by its levels to pay for
+    /// them in one frame, one seen a quarter as large pays in its first (BENCHMARKS.md,
+    /// "Levels made only where they pay" and "Levels made where they pay in one frame").
+    pub fn set_levels_for_one_frame(&mut self, on: bool) {
+        self.levels_for_one_frame = on;
     }
 
     /// Sets the level of detail as `lod` names it: [`Renderer::set_level_of_detail`],
-    /// [`Renderer::set_levels_by_brick`] and [`Renderer::set_levels_made`] together.
+    /// [`Renderer::set_levels_by_brick`] and [`Renderer::set_levels_for_one_frame`] together.
     pub fn set_lod(&mut self, lod: LevelOfDetail) {
         self.set_level_of_detail(lod != LevelOfDetail::Off);
         self.set_levels_by_brick(matches!(lod, LevelOfDetail::Auto | LevelOfDetail::On));
-        self.set_levels_made(lod != LevelOfDetail::Auto);
+        self.set_levels_for_one_frame(lod == LevelOfDetail::Auto);
     }
 
     /// Whether volumes whose voxels are more than [`REFINE_TO`] pixels apart may be drawn
@@ -1026,7 +1117,10 @@ impl Renderer {
         let started = Instant::now();
         report.classified =
             self.sync_volumes(scene, view, options.preview, !self.one_level, &mut report)?;
-        report.timings.classify = started.elapsed().saturating_sub(report.timings.levels);
+        // Levels and texels made on the way have their own timings.
+        report.timings.classify = started
+            .elapsed()
+            .saturating_sub(report.timings.levels + report.timings.texels);
         let ordered = self.order_volumes(scene, view, options, &mut report)?;
         let started = Instant::now();
         self.upload(ctx, scene, view, &ordered, &mut report)?;
@@ -1124,7 +1218,10 @@ impl Renderer {
         let by_brick = !self.one_level;
         report.classified =
             self.sync_volumes(scene, &view, options.preview, by_brick, &mut report)?;
-        report.timings.classify = started.elapsed().saturating_sub(report.timings.levels);
+        // Levels and texels made on the way have their own timings.
+        report.timings.classify = started
+            .elapsed()
+            .saturating_sub(report.timings.levels + report.timings.texels);
         let ordered = self.order_volumes(scene, &view, options, &mut report)?;
         // What lies under the splats: the meshes on the GPU, or the background alone.
         let has_meshes = scene.meshes().chain(scene.overlays()).next().is_some();
@@ -1651,19 +1748,13 @@ impl Renderer {
                     _ => wanted,
                 }
             };
-            let wanted = match wanted {
+            let mut wanted = match wanted {
                 Detail::Level(level, facing) if preview => {
                     level_facing(level.map(|l| l.max(1)), facing)
                 }
                 Detail::Refined(_) if preview => Detail::Level([1; 3], [0; 3]),
                 Detail::Refined(_) if self.no_refinement => {
                     report.unrefined = true;
-                    Detail::default()
-                }
-                Detail::Level(..)
-                    if self.no_new_levels && !self.volumes.contains_key(&(id, wanted)) =>
-                {
-                    report.levels_not_made = true;
                     Detail::default()
                 }
                 wanted => wanted,
@@ -1702,9 +1793,7 @@ impl Renderer {
                 Detail::Refined(_) => wanted,
                 Detail::Level(..) => Detail::default(),
             };
-            let no_new_levels = self.no_new_levels;
-            let standing = |d: &Detail| self.volumes.contains_key(&(id, *d));
-            let mut levels_not_made = false;
+            let levels_for_one_frame = self.levels_for_one_frame;
             let mut brick_wants = brick_wants.map(|wants| {
                 wants
                     .into_iter()
@@ -1714,26 +1803,56 @@ impl Renderer {
                             smooth: None,
                             ..w
                         },
-                        // Levels not made yet are not made: the own grid instead, and no
-                        // smooth brick coarser (its spread would be measured on a level).
-                        Detail::Level(..) if no_new_levels => {
-                            let detail = if standing(&w.detail) {
-                                w.detail
-                            } else {
-                                levels_not_made |= w.detail != Detail::default();
-                                Detail::default()
-                            };
-                            BrickWant {
-                                detail,
-                                smooth: None,
-                                ..w
-                            }
+                        // No smooth brick coarser where levels are made only where they pay
+                        // (its spread would be measured on a level).
+                        Detail::Level(..) if levels_for_one_frame => {
+                            BrickWant { smooth: None, ..w }
                         }
                         Detail::Level(..) => w,
                     })
                     .collect::<Vec<_>>()
             });
-            report.levels_not_made |= levels_not_made;
+            // Where levels are made only where they pay, the levels not made yet that save
+            // more drawing in this frame than their making costs are made; the volume or
+            // bricks that want others draw the own grid.
+            let mut paying_levels = false;
+            if levels_for_one_frame {
+                let made: Vec<Detail> = self
+                    .volumes
+                    .keys()
+                    .filter(|(v, _)| *v == id)
+                    .map(|(_, d)| *d)
+                    .collect();
+                let unmade = |d: &Detail| matches!(d, Detail::Level(..)) && !made.contains(d);
+                let mut asked: Vec<(Detail, f64)> = Vec::new();
+                for w in brick_wants.iter().flatten().filter(|w| unmade(&w.detail)) {
+                    match asked.iter_mut().find(|(d, _)| *d == w.detail) {
+                        Some((_, n)) => *n += f64::from(w.splats),
+                        None => asked.push((w.detail, f64::from(w.splats))),
+                    }
+                }
+                // The volume's own level, where no brick asks for it, saves nothing alone.
+                if unmade(&wanted) && !asked.iter().any(|(d, _)| *d == wanted) {
+                    let n = match brick_wants {
+                        Some(_) => 0.0,
+                        None => full.classified.grid.len() as f64,
+                    };
+                    asked.push((wanted, n));
+                }
+                let instead = levels_that_pay(&asked, &made, full.classified.grid.len());
+                paying_levels = instead.iter().any(|(_, d)| !made.contains(d));
+                report.levels_not_made |= instead.iter().any(|(a, d)| a != d);
+                let drawn = |d: Detail| {
+                    instead
+                        .iter()
+                        .find(|(a, _)| *a == d)
+                        .map_or(d, |(_, instead)| *instead)
+                };
+                wanted = drawn(wanted);
+                for w in brick_wants.iter_mut().flatten() {
+                    w.detail = drawn(w.detail);
+                }
+            }
             // How many splats the bricks draw, each at its detail (or the volume's one).
             let share = |wants: &[BrickWant], one: Option<Detail>| -> f64 {
                 wants
@@ -1785,10 +1904,12 @@ impl Renderer {
                         .map(|w| (w.brick, w.detail, w.splats))
                         .collect::<Vec<_>>()
                 });
-            // A volume drawn from its own grid in part has its texels made before the levels.
-            if brick_wants
-                .as_ref()
-                .is_some_and(|w| w.iter().any(|(_, d, _)| *d == Detail::default()))
+            // A volume drawn from its own grid in part has its texels made before the levels;
+            // so does one whose levels are made only where they pay, which counts on them.
+            if paying_levels
+                || brick_wants
+                    .as_ref()
+                    .is_some_and(|w| w.iter().any(|(_, d, _)| *d == Detail::default()))
             {
                 self.make_own_texels(id, report);
             }

@@ -746,6 +746,104 @@ fn bricks_that_want_a_rare_level_draw_a_finer_one_that_stands() {
     assert_eq!(got, [own, level([1, 0, 0], [-1, 0, 0]), own]);
 }
 
+#[test]
+fn levels_made_in_one_frame_where_they_save_more_drawing_than_they_cost() {
+    // An own grid of 1,000 splats: a level halved from it costs 550 (LEVEL_COST), one halved
+    // from a level 1/1/1 of 125 splats 68.75; n splats at 2^-l of them save n (1 - 2^-l).
+    assert_eq!(LEVEL_COST, 0.55);
+    let l = |l: [u8; 3]| Detail::Level(l, [0; 3]);
+    let own = Detail::default();
+    let pay = |asked: &[(Detail, f64)], made: &[Detail]| levels_that_pay(asked, made, 1_000);
+    // 700 splats save 612.5 (paid); 600 save 525 (not: the own grid).
+    assert_eq!(
+        pay(&[(l([1, 1, 1]), 700.0)], &[]),
+        [(l([1, 1, 1]), l([1, 1, 1]))]
+    );
+    assert_eq!(pay(&[(l([1, 1, 1]), 600.0)], &[]), [(l([1, 1, 1]), own)]);
+    // Made already, 1/1/1 costs nothing: 2/2/2 for 80 splats saves 78.75 against 68.75; for
+    // 60, 59.06 (not paid: they draw 1/1/1, made and no coarser along any axis).
+    assert_eq!(
+        pay(&[(l([2, 2, 2]), 80.0)], &[l([1, 1, 1])]),
+        [(l([2, 2, 2]), l([2, 2, 2]))]
+    );
+    assert_eq!(
+        pay(&[(l([2, 2, 2]), 60.0)], &[l([1, 1, 1])]),
+        [(l([2, 2, 2]), l([1, 1, 1]))]
+    );
+    // Three levels of 300 splats each: none pays alone (3/3/3 saves 299.4 for its 627.3), but
+    // made, 3/3/3 puts 1/1/1 and 2/2/2 on the way: 2/2/2 saves 295.3 and 2/2/3 draws 2/2/2
+    // (295.3): 890 for 627.3. Making 2/2/3 as well (8.6) would save 2.3 more.
+    let asked = [
+        (l([2, 2, 2]), 300.0),
+        (l([2, 2, 3]), 300.0),
+        (l([3, 3, 3]), 300.0),
+    ];
+    assert_eq!(
+        pay(&asked, &[]),
+        [
+            (l([3, 3, 3]), l([3, 3, 3])),
+            (l([2, 2, 3]), l([2, 2, 2])),
+            (l([2, 2, 2]), l([2, 2, 2])),
+        ]
+    );
+    assert_eq!(pay(&asked[2..], &[]), [(l([3, 3, 3]), own)]);
+    // Facing: a level halved along the view stands for the one asked only with its sides.
+    let along = Detail::Level([0, 1, 0], [0, 1, 0]);
+    assert_eq!(pay(&[(along, 2_000.0)], &[]), [(along, along)]);
+    assert_eq!(
+        pay(&[(along, 2_000.0)], &[Detail::Level([0, 1, 0], [0, -1, 0])]),
+        [(along, along)]
+    );
+}
+
+#[test]
+fn a_grid_seen_small_pays_for_its_levels_in_its_first_frame() {
+    // The wavy field seen from 0.6 m at 32 x 32: its voxels fall a sixth of a pixel apart, so
+    // every brick wants a coarse level, and levels made only where they pay are made in the
+    // first frame. The picture stays near the full grid's.
+    let (scene, _) = wavy_field(96);
+    let camera = SceneCamera {
+        projection: crate::scene::Projection::Perspective {
+            fov_y_degrees: 20.0,
+        },
+        ..SceneCamera::look_at(
+            DVec3::new(-300.0, 300.0, -400.0),
+            DVec3::new(48.0, 48.0, 48.0),
+        )
+    };
+    let options = FrameOptions::default();
+    let shoot = |renderer: &mut Renderer| {
+        renderer
+            .screenshot_without_gpu(&scene, &camera, (32, 32), &options)
+            .unwrap()
+    };
+    let mut full = Renderer::with_compositor(super::super::Compositor::Cpu);
+    full.set_level_of_detail(false);
+    let full = shoot(&mut full);
+    let mut renderer = Renderer::with_compositor(super::super::Compositor::Cpu);
+    renderer.set_levels_for_one_frame(true);
+    let once = shoot(&mut renderer);
+    assert!(once.report.levels_made > 0, "{:?}", once.report);
+    assert!(
+        once.report.splats * 8 < full.report.splats,
+        "{} of {}",
+        once.report.splats,
+        full.report.splats
+    );
+    // Over the pixels away from the background's colour (the corner's).
+    let background = full.frame.pixels[0];
+    let lit: Vec<usize> = (0..full.frame.pixels.len())
+        .filter(|&i| (0..3).any(|c| (full.frame.pixels[i][c] - background[c]).abs() > 0.05))
+        .collect();
+    assert!(lit.len() > 100, "{} pixels lit", lit.len());
+    let squared: f64 = (lit.iter())
+        .flat_map(|&i| (0..3).map(move |c| (i, c)))
+        .map(|(i, c)| f64::from(once.frame.pixels[i][c] - full.frame.pixels[i][c]).powi(2))
+        .sum();
+    let rmse = (squared / (3 * lit.len()) as f64).sqrt();
+    assert!(rmse < 0.03, "{rmse}");
+}
+
 /// A translucent field of `n`^3 unit voxels, waves along each axis (the node's id with it).
 fn wavy_field(n: u32) -> (Scene, NodeId) {
     let values: Vec<f32> = (0..n * n * n)
@@ -777,11 +875,11 @@ fn wavy_field(n: u32) -> (Scene, NodeId) {
 }
 
 #[test]
-fn levels_not_made_yet_are_not_made_where_making_is_off() {
+fn levels_that_do_not_pay_in_one_frame_are_not_made() {
     // The wavy field from 30 mm before its face at 32 x 32: by brick, the near bricks want the
-    // own grid and the far ones coarser levels. With making levels off, no level is made, every
-    // brick draws the own grid, and the picture is the full grid's; levels made by an earlier
-    // frame are drawn as before.
+    // own grid and the far ones coarser levels, too few to pay for one. Made only where they pay
+    // in the frame, no level is made, every brick draws the own grid, and the picture is the
+    // full grid's; levels made by an earlier frame are drawn as before.
     let (scene, _) = wavy_field(96);
     let camera = SceneCamera {
         projection: crate::scene::Projection::Perspective {
@@ -799,7 +897,7 @@ fn levels_not_made_yet_are_not_made_where_making_is_off() {
     full.set_level_of_detail(false);
     let full = shoot(&mut full);
     let mut renderer = Renderer::with_compositor(super::super::Compositor::Cpu);
-    renderer.set_levels_made(false);
+    renderer.set_levels_for_one_frame(true);
     let own = shoot(&mut renderer);
     assert!(own.report.levels_not_made, "{:?}", own.report);
     assert_eq!(own.report.levels_made, 0);
@@ -815,12 +913,12 @@ fn levels_not_made_yet_are_not_made_where_making_is_off() {
     // Made by a frame with making on, the levels are drawn with it off again, where the
     // bricks' spacing wants them (no brick goes coarser for being smooth, which takes a
     // measurement of the level above).
-    renderer.set_levels_made(true);
+    renderer.set_levels_for_one_frame(false);
     renderer.set_smooth_bricks(false);
     let made = shoot(&mut renderer);
     assert!(made.report.levels_made > 0, "{:?}", made.report);
     assert!(made.report.splats < full.report.splats);
-    renderer.set_levels_made(false);
+    renderer.set_levels_for_one_frame(true);
     let again = shoot(&mut renderer);
     assert_eq!(again.report.levels_made, 0);
     assert!(!again.report.levels_not_made, "{:?}", again.report);
