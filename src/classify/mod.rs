@@ -748,16 +748,17 @@ pub fn refined_gradient_snorm8(
 /// [`refined_gradient_snorm8`] for every voxel of one refined grid, with where each fine
 /// index lies along each axis worked out once (a frame's texels ask for tens of millions).
 #[derive(Debug)]
-pub struct RefinedGradients<'a> {
-    volume: &'a CpuVolume,
+pub struct RefinedGradients<V = std::sync::Arc<CpuVolume>> {
+    volume: V,
     factors: [u32; 3],
     /// Per axis, per fine index along it.
     places: [Vec<FinePlace>; 3],
 }
 
-impl<'a> RefinedGradients<'a> {
-    /// The gradients of `volume`'s field on its grid refined by `factors`.
-    pub fn new(volume: &'a CpuVolume, factors: [u32; 3]) -> Self {
+impl<V: std::ops::Deref<Target = CpuVolume>> RefinedGradients<V> {
+    /// The gradients of `volume`'s field on its grid refined by `factors` (`volume` held as
+    /// given: a reference, or an `Arc` for gradients asked for later).
+    pub fn new(volume: V, factors: [u32; 3]) -> Self {
         let n = volume.dims.map(|d| d.max(1) as usize);
         let places = std::array::from_fn(|a| {
             if factors == [1, 1, 1] {
@@ -777,7 +778,7 @@ impl<'a> RefinedGradients<'a> {
     /// [`refined_gradient_snorm8`] at fine voxel `k`.
     pub fn snorm8(&self, k: [u32; 3]) -> Option<[u8; 3]> {
         if self.factors == [1, 1, 1] {
-            return gradient_snorm8(self.volume, k);
+            return gradient_snorm8(&self.volume, k);
         }
         let places = [0, 1, 2].map(|a| self.places[a].get(k[a] as usize));
         let [Some(x), Some(y), Some(z)] = places else {

@@ -65,9 +65,10 @@ pub struct RenderArgs {
     /// pixels apart, from its field on a grid refined until they are not, each 16^3-voxel
     /// brick at the detail its own distance calls for (with every compositor); `volume` draws
     /// each volume at one detail, the one its nearest brick calls for; `off` from its own
-    /// grid, every voxel a splat; `auto` as `on`, but a level of the pyramid is not made
-    /// for these few pictures (the own grid is drawn there: making a level takes longer than
-    /// drawing the own grid once), while grids coarser than the pixels are still refined
+    /// grid, every voxel a splat; `auto` as `on`, but a level of the pyramid is made only
+    /// where the drawing it saves in these few pictures outweighs its making (else a finer
+    /// level made or the own grid is drawn there), while grids coarser than the pixels are
+    /// still refined
     #[arg(long, default_value = "auto")]
     lod: LevelOfDetail,
     /// Transparent background (the PNG's alpha is the coverage).

@@ -329,7 +329,7 @@ impl VolumeState {
     /// from the volume's gradients.
     fn texel(&self, k: [u32; 3], rank: usize) -> [u8; 8] {
         match &self.texels {
-            Some(texels) => texels.get(k[0], k[1], k[2]).copied().unwrap_or([0; 8]),
+            Some(texels) => texels.get(k[0], k[1], k[2]).unwrap_or([0; 8]),
             None => {
                 crate::splat::tiled::texel(&self.volume, self.factors, &self.classified, k, rank)
             }
@@ -416,7 +416,12 @@ fn make_level(
     // From the level below's texels where it has them; else each made as it is asked for,
     // from the volume, none held (the level below's are made once it is drawn itself).
     let texels = match &below.texels {
-        Some(fine) => fine.halved(&classified, step, front),
+        Some(fine) => {
+            // Every texel below is read: their normals made brick by brick in parallel first,
+            // in the bricks' own order.
+            fine.complete();
+            fine.halved(&classified, step, front)
+        }
         None => {
             let grid = &below.classified.grid;
             let [nx, ny, nz] = grid.dims();
@@ -2171,6 +2176,10 @@ impl Renderer {
                 };
                 if state.gpu.is_none() {
                     let pass = splat_pass.get_or_insert_with(|| SplatPass::new(ctx));
+                    // Every texel is read: their normals made in parallel first.
+                    if let Some(texels) = &state.texels {
+                        texels.complete();
+                    }
                     let gpu =
                         pass.upload(ctx, &state.classified, &|k, rank| state.texel(k, rank))?;
                     state.gpu = Some(gpu);

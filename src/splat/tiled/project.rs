@@ -339,7 +339,7 @@ pub(super) fn project(
     let Some(texel) = texels.get(x, y, z) else {
         return none;
     };
-    let peak = u.alpha_of(texel);
+    let peak = u.alpha_of(&texel);
     if peak <= 0.0 {
         return none;
     }

@@ -392,7 +392,7 @@ pub(super) mod avx2 {
             let Some(t) = group.texels.get(x, y, z) else {
                 continue;
             };
-            let peak = u.alpha_of(t);
+            let peak = u.alpha_of(&t);
             if peak <= 0.0 {
                 continue;
             }

@@ -1,5 +1,8 @@
 //! The splats' data as the compositor reads it: 8 bytes a significant voxel, brick by brick.
 
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU8, AtomicU64, Ordering};
+
 use rayon::prelude::*;
 
 use crate::classify::{Classified, Front, RefinedGradients, refined_gradient_snorm8, snorm8};
@@ -17,15 +20,43 @@ use crate::volume::CpuVolume;
 /// (the engine's 1.05M voxels with opacity, of 8.4M, take 8 MB of texels and 2 MB of bricks
 /// instead of 67 MB). A brick's significant voxels are a bit mask, and a voxel's texel is
 /// found by counting the bits before its own.
-#[derive(Debug, Clone, Default)]
+///
+/// The texels of a classified grid take their normals from the volume's gradients as each
+/// brick is first read ([`SplatTexels::new`]): a frame reads the texels of the splats it
+/// projects, and where most splats lie behind opaque ones (a close-up of bone, a dense
+/// volume) most gradients would never be asked for.
+#[derive(Debug, Default)]
 pub struct SplatTexels {
     pub(super) dims: [u32; 3],
     /// Bricks along x and y.
     pub(super) bricks: [usize; 2],
     /// Per brick, x fastest.
     pub(super) table: Vec<Brick>,
-    pub(super) texels: Vec<[u8; 8]>,
+    /// The texels' 8 bytes each as a little-endian `u64`; atomic, so that the thread that
+    /// first reads a brick can write its normals while others read other bricks.
+    pub(super) texels: Vec<AtomicU64>,
+    /// Where the normals are made as their bricks are first read.
+    normals: Option<LazyNormals>,
 }
+
+/// The normals of a grid's texels, made a brick at a time as the brick is first read.
+#[derive(Debug)]
+struct LazyNormals {
+    gradients: RefinedGradients,
+    /// Per unit of [`NORMAL_UNIT`] bricks along x: [`NOT_MADE`], [`MAKING`] or [`MADE`].
+    state: Vec<AtomicU8>,
+}
+
+/// Bricks along x whose normals are made together: neighbouring bricks along x read the
+/// volume's same rows (cache lines) for their gradients.
+const NORMAL_UNIT: usize = 4;
+
+/// A unit whose normals are not made yet.
+const NOT_MADE: u8 = 0;
+/// A unit whose normals a thread is making.
+const MAKING: u8 = 1;
+/// A unit whose normals are made.
+const MADE: u8 = 2;
 
 /// Which voxels of a brick have opacity, and where their texels start.
 #[derive(Debug, Clone, Copy, Default)]
@@ -43,13 +74,36 @@ impl SplatTexels {
     /// The texels of a classified volume: its colours and densities, and the gradients of the
     /// volume it was classified from, on a grid `factors` times finer than the volume's
     /// ([`crate::classify::classify_refined`]; `[1, 1, 1]` for its own). Built brick by brick
-    /// from the significant voxels; no buffer the size of the whole grid.
-    pub fn new(classified: &Classified, volume: &CpuVolume, factors: [u32; 3]) -> Self {
-        let gradients = RefinedGradients::new(volume, factors);
-        Self::build(&classified.grid, |k, rank| {
+    /// from the significant voxels; no buffer the size of the whole grid. The colours and
+    /// densities are written here; each brick's normals when the brick is first read
+    /// ([`SplatTexels::get`]).
+    pub fn new(classified: &Classified, volume: &Arc<CpuVolume>, factors: [u32; 3]) -> Self {
+        let mut texels = Self::build(&classified.grid, |_, rank| {
             let c = classified.colors.get(rank).copied().unwrap_or_default();
-            packed(c, gradients.snorm8(k))
-        })
+            packed(c, None)
+        });
+        texels.normals = Some(LazyNormals {
+            gradients: RefinedGradients::new(Arc::clone(volume), factors),
+            state: (0..texels.table.len().div_ceil(texels.bricks[0]) * texels.units_x())
+                .map(|_| AtomicU8::new(NOT_MADE))
+                .collect(),
+        });
+        texels
+    }
+
+    /// Makes every brick's normals not made yet, in parallel: for a whole grid's texels read
+    /// at once.
+    pub fn complete(&self) {
+        if let Some(lazy) = &self.normals {
+            (0..lazy.state.len())
+                .into_par_iter()
+                .for_each(|u| self.ensure_unit(u, lazy));
+        }
+    }
+
+    /// Units of [`NORMAL_UNIT`] bricks along x in a row of bricks.
+    fn units_x(&self) -> usize {
+        self.bricks[0].div_ceil(NORMAL_UNIT)
     }
 
     /// The texels of `grid`'s voxels, each given by `texel(voxel, rank)`.
@@ -90,7 +144,11 @@ impl SplatTexels {
             count += brick.present.count_ones();
         }
         // The texels, brick by brick in the same layers: each layer's a contiguous stretch.
-        let mut texels = vec![[0u8; 8]; count as usize];
+        // Zeros written in parallel: the first touch of each page is most of the cost.
+        let mut texels: Vec<AtomicU64> = (0..count)
+            .into_par_iter()
+            .map(|_| AtomicU64::new(0))
+            .collect();
         let mut stretches = Vec::with_capacity(layers);
         let mut rest = texels.as_mut_slice();
         for bz in 0..layers {
@@ -117,7 +175,7 @@ impl SplatTexels {
                         let k = [x, y, z].map(|c| c as u32);
                         let id = (x + nx * (y + ny * z)) as u32;
                         if let (Some(slot), Some(rank)) = (slots.next(), grid.rank(id)) {
-                            *slot = texel(k, rank as usize);
+                            *slot.get_mut() = u64::from_le_bytes(texel(k, rank as usize));
                         }
                     }
                 }
@@ -127,6 +185,7 @@ impl SplatTexels {
             bricks,
             table,
             texels,
+            normals: None,
         }
     }
 
@@ -140,7 +199,7 @@ impl SplatTexels {
     /// again: the block's surface, with no volume resampled for it. No normal where the
     /// block's cancel.
     pub fn halved(&self, above: &Classified, step: [u32; 3], front: Option<Front>) -> Self {
-        Self::halved_from(|x, y, z| self.get(x, y, z).copied(), above, step, front)
+        Self::halved_from(|x, y, z| self.get(x, y, z), above, step, front)
     }
 
     /// [`SplatTexels::halved`] from the texels `fine(x, y, z)` of the level below (`None`
@@ -219,29 +278,99 @@ impl SplatTexels {
 
     /// The texel of voxel `(x, y, z)`: straight RGB8, the gradient as snorm8, the density's
     /// f16 bits (little-endian); `None` off the grid or where the voxel is not significant.
+    /// Makes its brick's normals where they are not made yet.
     #[inline]
-    pub fn get(&self, x: u32, y: u32, z: u32) -> Option<&[u8; 8]> {
-        self.texels.get(self.index(x, y, z)?)
+    pub fn get(&self, x: u32, y: u32, z: u32) -> Option<[u8; 8]> {
+        let (brick, i) = self.index(x, y, z)?;
+        self.ensure_normals(brick);
+        let texel = self.texels.get(i)?;
+        Some(texel.load(Ordering::Relaxed).to_le_bytes())
     }
 
-    /// Where the texel of voxel `(x, y, z)` lies in `texels`: its brick's first texel plus the
-    /// brick's significant voxels before it; `None` off the grid or where the voxel is not
-    /// significant.
+    /// Where the texel of voxel `(x, y, z)` lies: its brick, and its index in `texels` (the
+    /// brick's first texel plus the brick's significant voxels before it); `None` off the
+    /// grid or where the voxel is not significant.
     #[inline(always)]
-    fn index(&self, x: u32, y: u32, z: u32) -> Option<usize> {
+    fn index(&self, x: u32, y: u32, z: u32) -> Option<(usize, usize)> {
         let [nx, ny, nz] = self.dims;
         if x >= nx || y >= ny || z >= nz {
             return None;
         }
         let [x, y, z] = [x, y, z].map(|v| v as usize);
-        let brick = ((z / BRICK) * self.bricks[1] + y / BRICK) * self.bricks[0] + x / BRICK;
-        let brick = self.table.get(brick)?;
+        let b = ((z / BRICK) * self.bricks[1] + y / BRICK) * self.bricks[0] + x / BRICK;
+        let brick = self.table.get(b)?;
         let bit = within_brick(x, y, z);
         if brick.present >> bit & 1 == 0 {
             return None;
         }
         let before = (brick.present & ((1u64 << bit) - 1)).count_ones();
-        Some((brick.first + before) as usize)
+        Some((b, (brick.first + before) as usize))
+    }
+
+    /// Makes the normals of brick `b`'s unit where they are made lazily and not made yet.
+    #[inline(always)]
+    fn ensure_normals(&self, b: usize) {
+        if let Some(lazy) = &self.normals {
+            let nx = self.bricks[0];
+            self.ensure_unit(b / nx * self.units_x() + b % nx / NORMAL_UNIT, lazy);
+        }
+    }
+
+    /// Makes the normals of unit `u` where they are not made yet.
+    #[inline(always)]
+    fn ensure_unit(&self, u: usize, lazy: &LazyNormals) {
+        if lazy
+            .state
+            .get(u)
+            .is_some_and(|s| s.load(Ordering::Acquire) != MADE)
+        {
+            self.make_normals(u, lazy);
+        }
+    }
+
+    /// Makes the normals of unit `u` (bricks `NORMAL_UNIT u..` along x of its row of
+    /// bricks), or waits while another thread makes them.
+    #[cold]
+    fn make_normals(&self, u: usize, lazy: &LazyNormals) {
+        let Some(state) = lazy.state.get(u) else {
+            return;
+        };
+        if state
+            .compare_exchange(NOT_MADE, MAKING, Ordering::Acquire, Ordering::Acquire)
+            .is_err()
+        {
+            // Another thread makes them: a few hundred gradients.
+            while state.load(Ordering::Acquire) != MADE {
+                std::thread::yield_now();
+            }
+            return;
+        }
+        let (row, first) = (u / self.units_x(), u % self.units_x() * NORMAL_UNIT);
+        let (by, bz) = (row % self.bricks[1], row / self.bricks[1]);
+        for bx in first..(first + NORMAL_UNIT).min(self.bricks[0]) {
+            let Some(brick) = self.table.get(row * self.bricks[0] + bx) else {
+                break;
+            };
+            let mut bits = brick.present;
+            let mut i = brick.first as usize;
+            while bits != 0 {
+                let bit = bits.trailing_zeros() as usize;
+                bits &= bits - 1;
+                let k = [
+                    bx * BRICK + bit % BRICK,
+                    by * BRICK + (bit / BRICK) % BRICK,
+                    bz * BRICK + bit / (BRICK * BRICK),
+                ]
+                .map(|c| c as u32);
+                if let (Some(n), Some(texel)) = (lazy.gradients.snorm8(k), self.texels.get(i)) {
+                    let mut t = texel.load(Ordering::Relaxed).to_le_bytes();
+                    t[3..6].copy_from_slice(&n);
+                    texel.store(u64::from_le_bytes(t), Ordering::Relaxed);
+                }
+                i += 1;
+            }
+        }
+        state.store(MADE, Ordering::Release);
     }
 
     /// Asks the processor to bring the texel of voxel `(x, y, z)` into its caches, without
@@ -251,13 +380,13 @@ impl SplatTexels {
     #[inline]
     pub(super) fn prefetch(&self, x: u32, y: u32, z: u32) {
         #[cfg(target_arch = "x86_64")]
-        if let Some(texel) = self.index(x, y, z).and_then(|i| self.texels.get(i)) {
+        if let Some(texel) = self.index(x, y, z).and_then(|(_, i)| self.texels.get(i)) {
             use std::arch::x86_64::{_MM_HINT_T0, _mm_prefetch};
             #[allow(unsafe_code)]
             // SAFETY: SSE is part of every x86-64 processor; a prefetch is a hint that reads
             // nothing and faults on no address.
             unsafe {
-                _mm_prefetch::<_MM_HINT_T0>(texel.as_ptr().cast())
+                _mm_prefetch::<_MM_HINT_T0>(texel.as_ptr().cast_const().cast())
             };
         }
         #[cfg(not(target_arch = "x86_64"))]
@@ -352,6 +481,79 @@ mod tests {
 
     use super::*;
     use crate::classify::SplatColor;
+
+    #[test]
+    fn normals_made_as_their_bricks_are_read_are_the_volumes_gradients() {
+        // A field with structure along every axis, its grid at its own spacing and refined
+        // 2 x 2 x 1, two thirds of the voxels significant. Every texel read, by threads in
+        // parallel reading each brick many times over, equals the texel made voxel by voxel
+        // from the volume; none of a brick's normals is made before the brick is read.
+        let dims = [13u32, 11, 9];
+        let values: Vec<f32> = (0..dims.iter().product::<u32>())
+            .map(|i| {
+                let [x, y, z] = [i % dims[0], i / dims[0] % dims[1], i / dims[0] / dims[1]];
+                ((x * 37 + y * y * 11 + z * z * z * 3) % 500) as f32
+            })
+            .collect();
+        let volume = Arc::new(CpuVolume {
+            dims,
+            spacing: [1.0; 3],
+            origin: [0.0; 3],
+            direction: glam::DMat3::IDENTITY,
+            values: values.into(),
+        });
+        for factors in [[1, 1, 1], [2, 2, 1]] {
+            let fine: [u32; 3] = std::array::from_fn(|a| dims[a] * factors[a]);
+            let ids: Vec<u32> = (0..fine.iter().product::<u32>())
+                .filter(|id| id % 3 != 0)
+                .collect();
+            let classified = Classified {
+                grid: SparseGrid::from_sorted_ids(fine, &ids).unwrap(),
+                colors: ids
+                    .iter()
+                    .map(|&id| SplatColor {
+                        rgb: [id as u8, (id / 7) as u8, 90],
+                        density: half::f16::from_f32(0.1 + (id % 5) as f32),
+                    })
+                    .collect(),
+            };
+            let texels = SplatTexels::new(&classified, &volume, factors);
+            assert!(
+                texels
+                    .texels
+                    .iter()
+                    .all(|t| t.load(Ordering::Relaxed).to_le_bytes()[3..6] == [0; 3]),
+                "no normal before a read"
+            );
+            let want = |id: u32| {
+                let k = classified.grid.coords(id);
+                let rank = classified.grid.rank(id).unwrap() as usize;
+                texel(&volume, factors, &classified, k, rank)
+            };
+            let with_normals = ids.iter().filter(|&&id| want(id)[3..6] != [0; 3]).count();
+            assert!(with_normals * 2 > ids.len(), "{factors:?}: {with_normals}");
+            // Eight reads of each voxel, scattered, in parallel.
+            let reads: Vec<u32> = (0..ids.len() * 8)
+                .map(|i| ids[(i * 7919) % ids.len()])
+                .collect();
+            reads.par_iter().for_each(|&id| {
+                let k = classified.grid.coords(id);
+                assert_eq!(
+                    texels.get(k[0], k[1], k[2]),
+                    Some(want(id)),
+                    "{factors:?} {k:?}"
+                );
+            });
+            texels.complete();
+            for &id in &ids {
+                let k = classified.grid.coords(id);
+                assert_eq!(texels.get(k[0], k[1], k[2]), Some(want(id)));
+            }
+            // Voxels not significant, or off the grid, have none.
+            assert_eq!(texels.get(0, 0, 0), None);
+            assert_eq!(texels.get(fine[0], 0, 0), None);
+        }
+    }
 
     /// The shading a normal gets from a headlight along `axis`, as the compositors shade.
     fn lit(n: Vec3, axis: usize) -> f32 {
