@@ -801,25 +801,11 @@ fn a_grid_seen_small_pays_for_its_levels_in_its_first_frame() {
     // The wavy field seen from 0.6 m at 32 x 32: its voxels fall a sixth of a pixel apart, so
     // every brick wants a coarse level, and levels made only where they pay are made in the
     // first frame. The picture stays near the full grid's.
-    let (scene, _) = wavy_field(96);
-    let camera = SceneCamera {
-        projection: crate::scene::Projection::Perspective {
-            fov_y_degrees: 20.0,
-        },
-        ..SceneCamera::look_at(
-            DVec3::new(-300.0, 300.0, -400.0),
-            DVec3::new(48.0, 48.0, 48.0),
-        )
-    };
-    let options = FrameOptions::default();
-    let shoot = |renderer: &mut Renderer| {
-        renderer
-            .screenshot_without_gpu(&scene, &camera, (32, 32), &options)
-            .unwrap()
-    };
-    let mut full = Renderer::with_compositor(super::super::Compositor::Cpu);
-    full.set_level_of_detail(false);
-    let full = shoot(&mut full);
+    let (shoot, full) = wavy_field_seen(
+        DVec3::new(-300.0, 300.0, -400.0),
+        DVec3::new(48.0, 48.0, 48.0),
+        20.0,
+    );
     let mut renderer = Renderer::with_compositor(super::super::Compositor::Cpu);
     renderer.set_levels_for_one_frame(true);
     let once = shoot(&mut renderer);
@@ -842,6 +828,30 @@ fn a_grid_seen_small_pays_for_its_levels_in_its_first_frame() {
         .sum();
     let rmse = (squared / (3 * lit.len()) as f64).sqrt();
     assert!(rmse < 0.03, "{rmse}");
+}
+
+/// [`wavy_field`] of 96^3 voxels seen from `eye` towards `target` with a vertical field of
+/// view of `fov` degrees at 32 x 32: a function that draws it with a renderer, and its
+/// picture from the full grid.
+fn wavy_field_seen(
+    eye: DVec3,
+    target: DVec3,
+    fov: f64,
+) -> (impl Fn(&mut Renderer) -> Screenshot, Screenshot) {
+    let (scene, _) = wavy_field(96);
+    let camera = SceneCamera {
+        projection: crate::scene::Projection::Perspective { fov_y_degrees: fov },
+        ..SceneCamera::look_at(eye, target)
+    };
+    let shoot = move |renderer: &mut Renderer| {
+        renderer
+            .screenshot_without_gpu(&scene, &camera, (32, 32), &FrameOptions::default())
+            .unwrap()
+    };
+    let mut full = Renderer::with_compositor(super::super::Compositor::Cpu);
+    full.set_level_of_detail(false);
+    let full = shoot(&mut full);
+    (shoot, full)
 }
 
 /// A translucent field of `n`^3 unit voxels, waves along each axis (the node's id with it).
@@ -880,22 +890,11 @@ fn levels_that_do_not_pay_in_one_frame_are_not_made() {
     // own grid and the far ones coarser levels, too few to pay for one. Made only where they pay
     // in the frame, no level is made, every brick draws the own grid, and the picture is the
     // full grid's; levels made by an earlier frame are drawn as before.
-    let (scene, _) = wavy_field(96);
-    let camera = SceneCamera {
-        projection: crate::scene::Projection::Perspective {
-            fov_y_degrees: 50.0,
-        },
-        ..SceneCamera::look_at(DVec3::new(48.0, 47.0, -30.0), DVec3::new(48.0, 50.0, 48.0))
-    };
-    let options = FrameOptions::default();
-    let shoot = |renderer: &mut Renderer| {
-        renderer
-            .screenshot_without_gpu(&scene, &camera, (32, 32), &options)
-            .unwrap()
-    };
-    let mut full = Renderer::with_compositor(super::super::Compositor::Cpu);
-    full.set_level_of_detail(false);
-    let full = shoot(&mut full);
+    let (shoot, full) = wavy_field_seen(
+        DVec3::new(48.0, 47.0, -30.0),
+        DVec3::new(48.0, 50.0, 48.0),
+        50.0,
+    );
     let mut renderer = Renderer::with_compositor(super::super::Compositor::Cpu);
     renderer.set_levels_for_one_frame(true);
     let own = shoot(&mut renderer);
