@@ -760,7 +760,7 @@ fn fall_back_from_rare_levels(wants: &mut [BrickWant], made: &[Detail], own_spla
 /// The time a level takes to be made, for each splat of the grid it is halved from (that
 /// grid's texels made), in the time one splat takes to be drawn (ordered, projected, binned
 /// and composited). On this project's 2-core machine (BENCHMARKS.md, "Levels made where
-/// they pay"), a level halved from the own grid's texels took 18-25 ns an own splat, and a
+/// they pay in one frame"), a level halved from the own grid's texels took 18-25 ns an own splat, and a
 /// frame 34-52 ns a splat drawn (the 0.5 mm CT head, the 0.7 mm LIDC2 CT and the dense ball
 /// at 512 x 512).
 const LEVEL_COST: f64 = 0.55;
