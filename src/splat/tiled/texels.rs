@@ -144,7 +144,7 @@ impl SplatTexels {
             count += brick.present.count_ones();
         }
         // The texels, brick by brick in the same layers: each layer's a contiguous stretch.
-        // Zeros written in parallel: the first touch of each page is most of the cost.
+        // Atomics have no zeroed allocation in safe code: the zeros are written, in parallel.
         let mut texels: Vec<AtomicU64> = (0..count)
             .into_par_iter()
             .map(|_| AtomicU64::new(0))
