@@ -1819,7 +1819,8 @@ impl Renderer {
             });
             // Where levels are made only where they pay, the levels not made yet that save
             // more drawing in this frame than their making costs are made; the volume or
-            // bricks that want others draw the own grid.
+            // bricks that want others draw the coarsest level made no coarser, else the own
+            // grid ([`levels_that_pay`]).
             let mut paying_levels = false;
             if levels_for_one_frame {
                 let made: Vec<Detail> = self
