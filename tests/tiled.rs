@@ -167,6 +167,10 @@ fn with_and_without_culling(
     let mut culling = Renderer::with_compositor(Compositor::Cpu);
     let mut all = Renderer::with_compositor(Compositor::Cpu);
     all.tile_compositor_mut().cull_hidden = false;
+    // Every refined brick on the image drawn, hidden or not: the compositor's own culling is
+    // what is tested (a refinement leaves hidden bricks out before the compositor sees them).
+    culling.set_refinement_where_seen(false);
+    all.set_refinement_where_seen(false);
     let a = culling
         .screenshot(ctx, scene, camera, size, &OPTIONS)
         .unwrap();
@@ -320,7 +324,10 @@ fn a_close_up_refines_only_what_lies_on_the_image_with_the_same_picture() {
             ..near
         };
         for (camera, size) in [(&near, (64, 48)), (&flat, (60, 47))] {
+            // Every brick on the image refined, shown or hidden (see
+            // `a_refinement_leaves_out_the_bricks_hidden_behind_opaque_tissue`).
             let mut cropped = Renderer::with_compositor(Compositor::Cpu);
+            cropped.set_refinement_where_seen(false);
             let mut whole_grid = Renderer::with_compositor(Compositor::Cpu);
             whole_grid.set_refinement_on_image_only(false);
             let a = cropped
@@ -356,7 +363,9 @@ fn a_close_up_refines_only_what_lies_on_the_image_with_the_same_picture() {
             let again = cropped
                 .screenshot(&ctx, &scene, &turned, size, &OPTIONS)
                 .unwrap();
-            let fresh = Renderer::with_compositor(Compositor::Cpu)
+            let mut fresh = Renderer::with_compositor(Compositor::Cpu);
+            fresh.set_refinement_where_seen(false);
+            let fresh = fresh
                 .screenshot(&ctx, &scene, &turned, size, &OPTIONS)
                 .unwrap();
             assert_eq!(
@@ -366,6 +375,108 @@ fn a_close_up_refines_only_what_lies_on_the_image_with_the_same_picture() {
             );
         }
     }
+}
+
+#[test]
+fn a_refinement_leaves_out_the_bricks_hidden_behind_opaque_tissue() {
+    // A closed-form phantom: a box of opaque "bone" walls three voxels thick around a
+    // translucent fill, a square window cut in the wall the camera faces, seen so close that
+    // its 1.5 mm voxels fall about 3 pixels apart (the grid is drawn refined). The refinement
+    // then classifies the wall's bricks and those seen through the window, not the hidden
+    // fill: fewer splats, and the picture of every brick on the image refined, within the
+    // opacity the own grid's picture leaves to what lies behind an opaque pixel.
+    let ctx = context();
+    let n = 48u32;
+    let window = |x: u32, z: u32| (19..29).contains(&x) && (19..29).contains(&z);
+    let values: Vec<f32> = (0..n * n * n)
+        .map(|id| {
+            let [x, y, z] = [id % n, id / n % n, id / n / n];
+            let wall = [x, y, z].iter().any(|&c| c < 3 || c >= n - 3);
+            match (wall, y < 3 && window(x, z)) {
+                (_, true) => -1000.0,
+                (true, false) => 1300.0,
+                // A fill that varies, so that its refined cells differ from its voxels.
+                (false, false) => 230.0 + ((x * 7 + y * 3 + z * 5) % 11) as f32 * 9.0,
+            }
+        })
+        .collect();
+    let volume = splatscene::volume::CpuVolume {
+        dims: [n; 3],
+        spacing: [1.5; 3],
+        origin: [0.0; 3],
+        direction: glam::DMat3::IDENTITY,
+        values: values.into(),
+    };
+    let mut scene = Scene::new();
+    let node = splatscene::scene::VolumeNode {
+        volume: std::sync::Arc::new(volume),
+        transfer: std::sync::Arc::new(TransferFunction::ct_bone()),
+        splats: splatscene::scene::SplatSettings {
+            shading: 0.8,
+            ..Default::default()
+        },
+    };
+    scene
+        .add(
+            "volume",
+            glam::DMat4::IDENTITY,
+            None,
+            NodeContent::Volume(node),
+        )
+        .unwrap();
+    // Orthographic, so that a turned view keeps the refinement's factors.
+    let centre = glam::DVec3::new(35.25, 35.25, 35.25);
+    let camera = SceneCamera {
+        eye: centre - glam::DVec3::new(-4.0, 75.0, 3.0),
+        target: centre,
+        up: glam::DVec3::Z,
+        projection: Projection::Orthographic { height: 24.0 },
+        near: None,
+    };
+    let size = (64, 48);
+    let shoot = |renderer: &mut Renderer, camera: &SceneCamera| {
+        renderer
+            .screenshot(&ctx, &scene, camera, size, &OPTIONS)
+            .unwrap()
+    };
+    let mut seen = Renderer::with_compositor(Compositor::Cpu);
+    let mut every = Renderer::with_compositor(Compositor::Cpu);
+    every.set_refinement_where_seen(false);
+    let a = shoot(&mut seen, &camera);
+    let b = shoot(&mut every, &camera);
+    assert!(a.report.refined.is_some(), "{:?}", a.report);
+    assert_eq!(a.report.refined, b.report.refined);
+    assert!(!a.report.timings.seen.is_zero());
+    assert!(b.report.timings.seen.is_zero());
+    assert!(
+        a.report.splats * 2 < b.report.splats,
+        "the hidden fill is left out: {} of {} splats",
+        a.report.splats,
+        b.report.splats
+    );
+    let d = compare(&a.frame, &b.frame).unwrap();
+    assert!(d.max_abs < 0.01, "{d:?}");
+    // The same view again looks for nothing and classifies nothing.
+    let same = shoot(&mut seen, &camera);
+    assert_eq!(same.report.classified, 0);
+    assert!(same.report.timings.seen.is_zero());
+    assert_eq!(same.frame.pixels, a.frame.pixels);
+    // Turned so that the window shows fill the first view hid: the same renderer refines
+    // every brick on the image once, and draws the picture of the renderer that refined every
+    // brick on the image from the start; the next frame from there looks for nothing.
+    let turned = SceneCamera {
+        eye: centre + glam::DQuat::from_rotation_z(0.5) * (camera.eye - centre),
+        ..camera
+    };
+    let again = shoot(&mut seen, &turned);
+    let every_again = shoot(&mut every, &turned);
+    assert_eq!(again.report.refined, a.report.refined);
+    assert_eq!(again.report.classified, 1);
+    let d = compare(&again.frame, &every_again.frame).unwrap();
+    assert!(d.max_abs < 1e-6, "{d:?}");
+    let still = shoot(&mut seen, &turned);
+    assert_eq!(still.report.classified, 0);
+    assert!(still.report.timings.seen.is_zero());
 }
 
 #[test]

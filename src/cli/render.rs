@@ -302,9 +302,12 @@ pub fn run_render(args: RenderArgs) -> Result<()> {
         parts: label_parts,
     } = measured(&drawn, parts.as_ref())?;
     let ctx = context_for(args.compositor, &drawn)?;
-    // One renderer for every view: the volumes are classified once.
+    // One renderer for every view: the volumes are classified once. A refinement covers the
+    // bricks on the image of every view, not only those one view shows: a first view refined
+    // where it shows would have the next one classify again.
     let mut renderer = Renderer::with_compositor(args.compositor);
     renderer.set_lod(args.lod);
+    renderer.set_refinement_where_seen(cameras.len() == 1);
     let device = ctx
         .as_ref()
         .map_or("no GPU adapter".into(), GpuContext::describe);
@@ -613,7 +616,7 @@ pub(crate) fn describe(r: &FrameReport) -> String {
         None => format!("splat pass {:.1} ms", ms(r.timings.splat_pass)),
     };
     format!(
-        "{} meshes ({} triangles), {} splats{}; classify {:.0} ms{}{}, order {:.1} ms, upload {:.1} ms, mesh pass {:.1} ms, {splats}, readback {:.1} ms{}",
+        "{} meshes ({} triangles), {} splats{}; classify {:.0} ms{}{}{}, order {:.1} ms, upload {:.1} ms, mesh pass {:.1} ms, {splats}, readback {:.1} ms{}",
         r.meshes,
         r.triangles,
         r.splats,
@@ -651,6 +654,11 @@ pub(crate) fn describe(r: &FrameReport) -> String {
             String::new()
         } else {
             format!(", texels {:.0} ms", ms(r.timings.texels))
+        },
+        if r.timings.seen.is_zero() {
+            String::new()
+        } else {
+            format!(", bricks shown found in {:.0} ms", ms(r.timings.seen))
         },
         ms(r.timings.order),
         ms(r.timings.upload),

@@ -678,7 +678,8 @@ pub(super) struct BrickWant {
     pub(super) smooth: Option<Detail>,
 }
 
-/// Sorts `bricks` (coordinates in bricks of [`BRICK`] voxels of a grid placed as `geometry`)
+/// Sorts `bricks` (coordinates in bricks of `side`^3 voxels of a grid placed as `geometry`:
+/// [`BRICK`] for a mix, [`REGION_BRICK`] for the bricks a refinement is classified within)
 /// into a visibility order for the eye `eye` looking at `target` (world), far to near: the
 /// IP-PBTF order of the grid of bricks (lexicographic by the bricks' distances from the eye in
 /// brick units along the axes of [`ViewCase::permutation`], descending; equal distances, lower
@@ -693,10 +694,11 @@ pub(super) fn brick_order(
     geometry: &VolumeGeometry,
     eye: DVec3,
     target: DVec3,
+    side: u32,
     bricks: &mut [([u32; 3], Detail)],
 ) -> Result<(), crate::order::OrderError> {
-    let dims = geometry.dims().map(|n| n.div_ceil(BRICK));
-    let side = f64::from(BRICK);
+    let dims = geometry.dims().map(|n| n.div_ceil(side));
+    let side = f64::from(side);
     let to_own = glam::DAffine3::from_scale_rotation_translation(
         DVec3::splat(side),
         glam::DQuat::IDENTITY,

@@ -27,12 +27,14 @@ use crate::splat::tiled::{Run, SplatTexels, TileStats, TiledCompositor};
 use crate::volume::CpuVolume;
 
 mod detail;
+mod seen;
 
 use detail::*;
 pub use detail::{
     Detail, MAX_DEPTH_LEVELS, MAX_LEVEL, MAX_REFINE, MAX_REFINED_VOXELS, REFINE_TO, detail_for,
     pixels_apart,
 };
+use seen::seen_bricks;
 
 /// Per-frame choices that are not part of the scene.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -73,6 +75,10 @@ pub struct FrameTimings {
     /// Making the splats' texels for the CPU tile compositor (only on frames that draw a grid
     /// whose texels are not made yet).
     pub texels: Duration,
+    /// Drawing a volume's own grid alone to find the bricks a refinement shows (only on frames
+    /// that refine a grid where the refinement made does not cover what the view shows;
+    /// [`Renderer::set_refinement_where_seen`]).
+    pub seen: Duration,
     /// Computing the draw orders on the CPU.
     pub order: Duration,
     /// Writing the draw orders and uniforms to the GPU.
@@ -180,6 +186,9 @@ struct VolumeState {
     occupied: Option<Occupied>,
     /// The own grid's bricks a refinement was classified within (`None`: all of them).
     region: Option<Region>,
+    /// The own grid's projection in the last view whose bricks shown this refinement was
+    /// found to cover (or was made for), where that was looked for ([`seen_bricks`]).
+    seen_for: Option<seen::SeenFor>,
     /// What halving this grid along every axis that has more than one voxel would lose,
     /// brick by brick, once asked for ([`Renderer::spread_of`]).
     spread: Option<Arc<BrickSpread>>,
@@ -307,6 +316,7 @@ impl VolumeState {
             ids_on_gpu: false,
             occupied: None,
             region: None,
+            seen_for: None,
             spread: None,
         }
     }
@@ -495,7 +505,7 @@ fn order_mix(
         .get(&(id, Detail::default()))
         .ok_or("the volume's own grid is not classified")?;
     let own_geometry = own.geometry(world).map_err(|e| e.to_string())?;
-    brick_order(&own_geometry, eye, target, &mut mix.bricks).map_err(|e| e.to_string())?;
+    brick_order(&own_geometry, eye, target, BRICK, &mut mix.bricks).map_err(|e| e.to_string())?;
     let details = mix.details();
     // Per level, its bricks' splats brick after brick in draw order, and where each ends.
     let mut parts: Vec<(Vec<u32>, Vec<usize>)> = Vec::with_capacity(details.len());
@@ -960,6 +970,9 @@ pub struct Renderer {
     /// Refinements classified over the whole grid, not only where the image shows it
     /// ([`Renderer::set_refinement_on_image_only`]).
     refine_whole: bool,
+    /// Refine the bricks on the image whether or not the own grid shows them
+    /// ([`Renderer::set_refinement_where_seen`]).
+    refine_hidden: bool,
     /// Who composites the splats of screenshots.
     compositor: Compositor,
     /// The CPU tile compositor's buffers.
@@ -1086,6 +1099,19 @@ impl Renderer {
         self.refine_whole = !on;
     }
 
+    /// Whether a refinement is classified only within the own grid's bricks on the image that
+    /// add to the own grid's picture, drawn alone (with their neighbours), rather than within
+    /// every brick on the image (on by default; no effect where the refinement is not limited
+    /// to the image, [`Renderer::set_refinement_on_image_only`]). A close-up of a thick-slice
+    /// CT then classifies the refined splats in front of the opaque tissue, not behind it.
+    /// The picture can differ from the whole refinement's where a pixel opaque to the own grid
+    /// (an opacity past 0.9999) is not opaque to the refinement: by what shows through the
+    /// rest, at most a hundredth where the two fields agree within their splats' width
+    /// (`tests/tiled.rs`).
+    pub fn set_refinement_where_seen(&mut self, on: bool) {
+        self.refine_hidden = !on;
+    }
+
     /// The CPU tile compositor, to set its opacity threshold.
     pub fn tile_compositor_mut(&mut self) -> &mut TiledCompositor {
         &mut self.tiles
@@ -1122,10 +1148,10 @@ impl Renderer {
         let started = Instant::now();
         report.classified =
             self.sync_volumes(scene, view, options.preview, !self.one_level, &mut report)?;
-        // Levels and texels made on the way have their own timings.
+        // Levels, texels and the look for bricks shown made on the way have their own timings.
         report.timings.classify = started
             .elapsed()
-            .saturating_sub(report.timings.levels + report.timings.texels);
+            .saturating_sub(report.timings.levels + report.timings.texels + report.timings.seen);
         let ordered = self.order_volumes(scene, view, options, &mut report)?;
         let started = Instant::now();
         self.upload(ctx, scene, view, &ordered, &mut report)?;
@@ -1223,10 +1249,10 @@ impl Renderer {
         let by_brick = !self.one_level;
         report.classified =
             self.sync_volumes(scene, &view, options.preview, by_brick, &mut report)?;
-        // Levels and texels made on the way have their own timings.
+        // Levels, texels and the look for bricks shown made on the way have their own timings.
         report.timings.classify = started
             .elapsed()
-            .saturating_sub(report.timings.levels + report.timings.texels);
+            .saturating_sub(report.timings.levels + report.timings.texels + report.timings.seen);
         let ordered = self.order_volumes(scene, &view, options, &mut report)?;
         // What lies under the splats: the meshes on the GPU, or the background alone.
         let has_meshes = scene.meshes().chain(scene.overlays()).next().is_some();
@@ -1949,22 +1975,78 @@ impl Renderer {
                         }
                     };
                     // A refinement made within fewer bricks than this view shows is made anew.
-                    let covered = |made: &VolumeState| match (&made.region, &region) {
+                    let covered = |made: &VolumeState, region: &Option<Region>| match (
+                        &made.region,
+                        region,
+                    ) {
                         (None, _) => true,
                         (Some(made), Some(wanted)) => made.contains(wanted),
                         (Some(made), None) => made.is_whole(),
                     };
-                    if !self.volumes.get(&refined).is_some_and(covered) {
-                        // Made anew over the bricks the one it replaces covered too, so that a
-                        // camera turning about a close-up soon has what it shows.
-                        let region = match (self.volumes.get(&refined), region) {
+                    // A first refinement at these factors is made within the bricks on the
+                    // image that the own grid drawn alone shows; redrawn from the same view, it
+                    // stands. A view that shows bricks a refinement made lacks has it made anew
+                    // over them and its own bricks, all the bricks on the image, as before:
+                    // looking again each frame of a turning camera would cost a drawing of the
+                    // own grid a frame and save little, since the union is reclassified anyway.
+                    let made_covers =
+                        |volumes: &HashMap<(NodeId, Detail), VolumeState>,
+                         region: &Option<Region>| {
+                            volumes
+                                .get(&refined)
+                                .is_some_and(|made| covered(made, region))
+                        };
+                    let looked = || seen::SeenFor {
+                        view: *view,
+                        world,
+                        splats: node.splats,
+                        clipping: scene.clipping.clone(),
+                    };
+                    let mut seen = None;
+                    let mut seen_for = None;
+                    let kept = made_covers(&self.volumes, &region)
+                        || self
+                            .volumes
+                            .get(&refined)
+                            .and_then(|r| r.seen_for.as_ref())
+                            .is_some_and(|s| *s == looked());
+                    if !kept
+                        && !self.refine_whole
+                        && !self.refine_hidden
+                        && !self.volumes.contains_key(&refined)
+                    {
+                        self.make_own_texels(id, report);
+                        if let Some(state) = self.volumes.get(&own) {
+                            let started = Instant::now();
+                            let geometry =
+                                state.geometry(world).map_err(|e| fail(e.to_string()))?;
+                            let projection =
+                                projection(&geometry, view, &node.splats, &scene.clipping);
+                            seen = seen_bricks(
+                                &mut self.tiles,
+                                state,
+                                world,
+                                view,
+                                &projection,
+                                region.as_ref(),
+                            )
+                            .map_err(fail)?;
+                            report.timings.seen += started.elapsed();
+                            seen_for = seen.as_ref().map(|_| looked());
+                        }
+                    }
+                    if !kept {
+                        let region = match (self.volumes.get(&refined), region, seen) {
                             (
                                 Some(VolumeState {
                                     region: Some(made), ..
                                 }),
                                 Some(wanted),
+                                _,
                             ) => made.union(&wanted).filter(|r| !r.is_whole()),
-                            (_, region) => region,
+                            (Some(_), region, _) => region,
+                            (None, _, Some(seen)) => Some(seen),
+                            (None, region, None) => region,
                         };
                         // One refinement a volume is kept: a view that wants another makes it
                         // anew.
@@ -1990,6 +2072,11 @@ impl Renderer {
                         );
                         state.region = region;
                         self.volumes.insert(refined, state);
+                    }
+                    if let (Some(state), Some(seen_for)) =
+                        (self.volumes.get_mut(&refined), seen_for)
+                    {
+                        state.seen_for = Some(seen_for);
                     }
                     wanted
                 }

@@ -302,7 +302,7 @@ fn bricks_are_ordered_so_that_none_lies_behind_a_later_one() {
             target
         };
         let mut bricks = all.clone();
-        brick_order(&geometry, eye, target, &mut bricks).unwrap();
+        brick_order(&geometry, eye, target, BRICK, &mut bricks).unwrap();
         let place: HashMap<[u32; 3], usize> = bricks
             .iter()
             .enumerate()

@@ -180,6 +180,23 @@ impl TiledCompositor {
         depth: &[f32],
         under: &mut [[f32; 4]],
     ) -> TileStats {
+        self.composite_runs_seen(size, sources, runs, depth, under, &mut [])
+    }
+
+    /// [`TiledCompositor::composite_runs`] that also marks, in `seen` (one flag a run, or
+    /// empty for none), each run of which some splat reached a pixel still open: the runs
+    /// that add to the image. A run left unmarked added nothing: its splats were off the
+    /// image, behind opaque pixels or transparent.
+    pub(crate) fn composite_runs_seen(
+        &mut self,
+        size: (u32, u32),
+        sources: &[(&SplatProjection, &SplatTexels)],
+        runs: &[Run<'_>],
+        depth: &[f32],
+        under: &mut [[f32; 4]],
+        seen: &mut [bool],
+    ) -> TileStats {
+        let marks = seen.len() == runs.len();
         let (w, h) = (size.0 as usize, size.1 as usize);
         let (tx, ty) = (w.div_ceil(TILE), h.div_ceil(TILE));
         let mut stats = TileStats {
@@ -201,10 +218,10 @@ impl TiledCompositor {
         let mut batch = FIRST_BATCH;
         let mut run = runs.len();
         let mut end = runs.last().map_or(0, |r| r.ids.len());
-        // A batch's stretches of runs in draw order (source, splats), and its chunks (source,
-        // splats, index of the first in the batch).
-        let mut pieces: Vec<(usize, &[u32])> = Vec::new();
-        let mut work: Vec<(usize, &[u32], usize)> = Vec::new();
+        // A batch's stretches of runs in draw order (source, splats, run), and its chunks
+        // (source, splats, index of the first in the batch, run).
+        let mut pieces: Vec<(usize, &[u32], usize)> = Vec::new();
+        let mut work: Vec<(usize, &[u32], usize, usize)> = Vec::new();
         loop {
             pieces.clear();
             let mut wanted = batch;
@@ -212,7 +229,7 @@ impl TiledCompositor {
                 let begin = end.saturating_sub(wanted);
                 if begin < end {
                     let r = &runs[run - 1];
-                    pieces.push((r.source, &r.ids[begin..end]));
+                    pieces.push((r.source, &r.ids[begin..end], run - 1));
                     wanted -= end - begin;
                 }
                 end = begin;
@@ -225,7 +242,7 @@ impl TiledCompositor {
                 break;
             }
             pieces.reverse();
-            let count: usize = pieces.iter().map(|(_, ids)| ids.len()).sum();
+            let count: usize = pieces.iter().map(|(_, ids, _)| ids.len()).sum();
             batch = (batch * 2).min(MAX_BATCH);
             if open_pixels == 0 && self.cull_hidden {
                 // Every tile is opaque: nothing further can show.
@@ -239,9 +256,9 @@ impl TiledCompositor {
             let chunk = (count / 4).clamp(2048, 1 << 15);
             work.clear();
             let mut first = 0;
-            for &(source, ids) in &pieces {
+            for &(source, ids, run) in &pieces {
                 for ids in ids.chunks(chunk) {
-                    work.push((source, ids, first));
+                    work.push((source, ids, first, run));
                     first += ids.len();
                 }
             }
@@ -260,7 +277,7 @@ impl TiledCompositor {
             }
             let mut outs: Vec<&mut [Projected]> = Vec::with_capacity(chunks);
             let mut rest = &mut self.projected[..count];
-            for &(_, ids, _) in &work {
+            for &(_, ids, _, _) in &work {
                 let (out, after) = rest.split_at_mut(ids.len());
                 outs.push(out);
                 rest = after;
@@ -272,7 +289,7 @@ impl TiledCompositor {
                 .par_iter_mut()
                 .zip(work.par_iter())
                 .zip(self.bins[..chunks].par_iter_mut())
-                .map(|((out, &(source, ids, first)), bins)| {
+                .map(|((out, &(source, ids, first, _)), bins)| {
                     let started = std::time::Instant::now();
                     let (projection, texels) = sources[source];
                     let (mut culled, mut off_image) = (0, 0);
@@ -357,6 +374,19 @@ impl TiledCompositor {
             for (t, tile) in self.tiles.iter().enumerate() {
                 self.mask
                     .set_tile((t % tx) * TILE, (t / tx) * TILE, &tile.rows);
+            }
+            if marks {
+                // A chunk's splats on the image lie packed from its first index, all of one
+                // run.
+                for &(_, ids, first, run) in &work {
+                    if !seen[run]
+                        && self.drew[first..first + ids.len()]
+                            .iter_mut()
+                            .any(|d| *d.get_mut())
+                    {
+                        seen[run] = true;
+                    }
+                }
             }
             // Counted and cleared through `&mut`: plain loads and stores, no locked
             // instruction per splat.
