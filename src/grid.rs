@@ -56,6 +56,24 @@ pub enum GridError {
         /// The grid it was given for.
         dims: [u32; 3],
     },
+    /// A classification holds another number of colours than its grid has significant voxels.
+    #[error("a classification holds {colors} colours for {voxels} significant voxels")]
+    ColorsMismatch {
+        /// Colours held.
+        colors: usize,
+        /// Significant voxels of its grid.
+        voxels: usize,
+    },
+    /// Two grids joined into one are of different sizes, or share a voxel.
+    #[error(
+        "grids of {a:?} and {b:?} voxels cannot be joined: they must be of one size and share no voxel"
+    )]
+    NotDisjoint {
+        /// The first grid's size.
+        a: [u32; 3],
+        /// The second grid's size.
+        b: [u32; 3],
+    },
 }
 
 /// A run of consecutive significant voxels along one axis: `start..start + len`.
@@ -494,6 +512,32 @@ impl SparseGrid {
         {
             *last &= (1u64 << (nx % 64)) - 1;
         }
+    }
+
+    /// The significant voxels of this grid and of `other`, a grid of the same size that shares
+    /// no significant voxel with it ([`GridError::NotDisjoint`] otherwise).
+    pub fn joined_with(&self, other: &SparseGrid) -> Result<Self, GridError> {
+        let refused = GridError::NotDisjoint {
+            a: self.dims,
+            b: other.dims,
+        };
+        if self.dims != other.dims {
+            return Err(refused);
+        }
+        let mut bits = Vec::with_capacity(self.bits.len());
+        for (&a, &b) in self.bits.iter().zip(&other.bits) {
+            if a & b != 0 {
+                return Err(refused);
+            }
+            bits.push(a | b);
+        }
+        Ok(Self::from_bits(self.dims, bits))
+    }
+
+    /// The bitmap's words: voxel `id` is significant where bit `id % 64` of word `id / 64` is
+    /// set.
+    pub(crate) fn words(&self) -> &[u64] {
+        &self.bits
     }
 
     /// Grid size in voxels along x, y and z.

@@ -14,7 +14,7 @@ mod common;
 use common::shapes::camera_of;
 use common::{
     across_the_blobs, before_the_blobs, benchmark_view, compositor_cases, data_file, engine_view,
-    reference_frame, shells, translucent_blobs, volume_scene,
+    reference_frame, shaded_scene, shells, translucent_blobs, volume_scene,
 };
 
 fn context() -> GpuContext {
@@ -167,10 +167,6 @@ fn with_and_without_culling(
     let mut culling = Renderer::with_compositor(Compositor::Cpu);
     let mut all = Renderer::with_compositor(Compositor::Cpu);
     all.tile_compositor_mut().cull_hidden = false;
-    // Every refined brick on the image drawn, hidden or not: the compositor's own culling is
-    // what is tested (a refinement leaves hidden bricks out before the compositor sees them).
-    culling.set_refinement_where_seen(false);
-    all.set_refinement_where_seen(false);
     let a = culling
         .screenshot(ctx, scene, camera, size, &OPTIONS)
         .unwrap();
@@ -292,23 +288,7 @@ fn a_close_up_refines_only_what_lies_on_the_image_with_the_same_picture() {
         ..shells.clone()
     };
     for volume in [shells, fog(square)] {
-        let mut scene = Scene::new();
-        let node = splatscene::scene::VolumeNode {
-            volume: std::sync::Arc::new(volume),
-            transfer: std::sync::Arc::new(TransferFunction::ct_bone()),
-            splats: splatscene::scene::SplatSettings {
-                shading: 0.8,
-                ..Default::default()
-            },
-        };
-        scene
-            .add(
-                "volume",
-                glam::DMat4::IDENTITY,
-                None,
-                NodeContent::Volume(node),
-            )
-            .unwrap();
+        let scene = shaded_scene(volume, TransferFunction::ct_bone());
         let whole = camera_of(&scene);
         let corner = whole.target + glam::DVec3::new(2.0, 1.0, 12.0);
         let near = SceneCamera {
@@ -324,10 +304,7 @@ fn a_close_up_refines_only_what_lies_on_the_image_with_the_same_picture() {
             ..near
         };
         for (camera, size) in [(&near, (64, 48)), (&flat, (60, 47))] {
-            // Every brick on the image refined, shown or hidden (see
-            // `a_refinement_leaves_out_the_bricks_hidden_behind_opaque_tissue`).
             let mut cropped = Renderer::with_compositor(Compositor::Cpu);
-            cropped.set_refinement_where_seen(false);
             let mut whole_grid = Renderer::with_compositor(Compositor::Cpu);
             whole_grid.set_refinement_on_image_only(false);
             let a = cropped
@@ -363,9 +340,7 @@ fn a_close_up_refines_only_what_lies_on_the_image_with_the_same_picture() {
             let again = cropped
                 .screenshot(&ctx, &scene, &turned, size, &OPTIONS)
                 .unwrap();
-            let mut fresh = Renderer::with_compositor(Compositor::Cpu);
-            fresh.set_refinement_where_seen(false);
-            let fresh = fresh
+            let fresh = Renderer::with_compositor(Compositor::Cpu)
                 .screenshot(&ctx, &scene, &turned, size, &OPTIONS)
                 .unwrap();
             assert_eq!(
@@ -407,23 +382,7 @@ fn a_refinement_leaves_out_the_bricks_hidden_behind_opaque_tissue() {
         direction: glam::DMat3::IDENTITY,
         values: values.into(),
     };
-    let mut scene = Scene::new();
-    let node = splatscene::scene::VolumeNode {
-        volume: std::sync::Arc::new(volume),
-        transfer: std::sync::Arc::new(TransferFunction::ct_bone()),
-        splats: splatscene::scene::SplatSettings {
-            shading: 0.8,
-            ..Default::default()
-        },
-    };
-    scene
-        .add(
-            "volume",
-            glam::DMat4::IDENTITY,
-            None,
-            NodeContent::Volume(node),
-        )
-        .unwrap();
+    let scene = shaded_scene(volume, TransferFunction::ct_bone());
     // Orthographic, so that a turned view keeps the refinement's factors.
     let centre = glam::DVec3::new(35.25, 35.25, 35.25);
     let camera = SceneCamera {
@@ -440,8 +399,8 @@ fn a_refinement_leaves_out_the_bricks_hidden_behind_opaque_tissue() {
             .unwrap()
     };
     let mut seen = Renderer::with_compositor(Compositor::Cpu);
+    seen.set_refinement_where_seen(true);
     let mut every = Renderer::with_compositor(Compositor::Cpu);
-    every.set_refinement_where_seen(false);
     let a = shoot(&mut seen, &camera);
     let b = shoot(&mut every, &camera);
     assert!(a.report.refined.is_some(), "{:?}", a.report);
@@ -461,9 +420,10 @@ fn a_refinement_leaves_out_the_bricks_hidden_behind_opaque_tissue() {
     assert_eq!(same.report.classified, 0);
     assert!(same.report.timings.seen.is_zero());
     assert_eq!(same.frame.pixels, a.frame.pixels);
-    // Turned so that the window shows fill the first view hid: the same renderer refines
-    // every brick on the image once, and draws the picture of the renderer that refined every
-    // brick on the image from the start; the next frame from there looks for nothing.
+    // Turned so that the window shows fill the first view hid: the same renderer classifies
+    // the bricks on the image its refinement lacks, once, joins them to it, and draws the
+    // picture of the renderer that refined every brick on the image from the start; the next
+    // frame from there looks for nothing.
     let turned = SceneCamera {
         eye: centre + glam::DQuat::from_rotation_z(0.5) * (camera.eye - centre),
         ..camera

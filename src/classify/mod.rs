@@ -357,6 +357,53 @@ impl Classified {
             .collect()
     }
 
+    /// This classification and `other`, a classification of the same grid's other voxels
+    /// (those of a [`Region`] this one left out, say): the significant voxels of both, each
+    /// with its own colour. Classifying a region and then the bricks a later view adds gives
+    /// what classifying the two regions at once gives, voxel for voxel, since a voxel's
+    /// colour does not depend on the region it was classified within. Refused
+    /// ([`GridError::NotDisjoint`]) where the grids differ in size or share a voxel, and
+    /// ([`GridError::ColorsMismatch`]) where either holds other than a colour a voxel.
+    pub fn joined_with(self, other: Classified) -> Result<Self, GridError> {
+        for c in [&self, &other] {
+            if c.colors.len() != c.grid.len() {
+                return Err(GridError::ColorsMismatch {
+                    colors: c.colors.len(),
+                    voxels: c.grid.len(),
+                });
+            }
+        }
+        let grid = self.grid.joined_with(&other.grid)?;
+        let mut colors = Vec::with_capacity(self.colors.len() + other.colors.len());
+        let (mut i, mut j) = (0usize, 0usize);
+        // Word by word: a word with voxels of one side only takes its colours as a stretch.
+        for (&a, &b) in self.grid.words().iter().zip(other.grid.words()) {
+            if b == 0 {
+                let n = a.count_ones() as usize;
+                colors.extend_from_slice(&self.colors[i..i + n]);
+                i += n;
+            } else if a == 0 {
+                let n = b.count_ones() as usize;
+                colors.extend_from_slice(&other.colors[j..j + n]);
+                j += n;
+            } else {
+                let mut both = a | b;
+                while both != 0 {
+                    let bit = both & both.wrapping_neg();
+                    if a & bit != 0 {
+                        colors.push(self.colors[i]);
+                        i += 1;
+                    } else {
+                        colors.push(other.colors[j]);
+                        j += 1;
+                    }
+                    both ^= bit;
+                }
+            }
+        }
+        Ok(Self { grid, colors })
+    }
+
     /// The significant voxels of a `dims` grid and their colours from per-slice lists, the
     /// slices in increasing id order.
     fn joined(dims: [u32; 3], parts: Vec<(Vec<u32>, Vec<SplatColor>)>) -> Result<Self, GridError> {
@@ -1147,6 +1194,28 @@ impl Region {
                 .collect(),
             ..self.clone()
         })
+    }
+
+    /// The bricks this region covers and `other` does not; `None` for regions of different
+    /// bricks.
+    pub fn without(&self, other: &Region) -> Option<Region> {
+        (self.side == other.side && self.dims == other.dims).then(|| Region {
+            covered: self
+                .covered
+                .iter()
+                .zip(&other.covered)
+                .map(|(&a, &b)| a && !b)
+                .collect(),
+            ..self.clone()
+        })
+    }
+
+    /// The bricks this region does not cover.
+    pub fn complement(&self) -> Region {
+        Region {
+            covered: self.covered.iter().map(|&c| !c).collect(),
+            ..self.clone()
+        }
     }
 
     /// Whether every brick is covered.

@@ -519,6 +519,22 @@ fn a_refined_gradient_is_the_fields_along_the_fine_axes() {
     );
 }
 
+/// A `dims` volume whose value at voxel `k` is `k . slopes` folded back into `0..fold`: ramps
+/// of tissue in every direction, each fold a sharp edge.
+fn folded_ramp(dims: [u32; 3], slopes: [u32; 3], fold: f32) -> CpuVolume {
+    let values: Vec<f32> = (0..dims.iter().product::<u32>())
+        .map(|id| {
+            let k = [
+                id % dims[0],
+                id / dims[0] % dims[1],
+                id / (dims[0] * dims[1]),
+            ];
+            (k[0] * slopes[0] + k[1] * slopes[1] + k[2] * slopes[2]) as f32 % fold
+        })
+        .collect();
+    unit_volume(dims, values)
+}
+
 #[test]
 fn a_region_leaves_out_the_fine_voxels_of_the_bricks_it_does_not_cover() {
     // A ramp of tissue through a 19 x 13 x 11 grid, refined 2 x 3 x 1, in bricks of 4: the
@@ -526,13 +542,7 @@ fn a_region_leaves_out_the_fine_voxels_of_the_bricks_it_does_not_cover() {
     // voxel lies in a covered brick, the same ids and colours, with and without rows sampled
     // whole.
     let dims = [19u32, 13, 11];
-    let values: Vec<f32> = (0..dims.iter().product::<u32>())
-        .map(|id| {
-            let k = [id % 19, id / 19 % 13, id / 247];
-            (k[0] * 7 + k[1] * 3 + k[2] * 5) as f32 % 200.0
-        })
-        .collect();
-    let volume = unit_volume(dims, values);
+    let volume = folded_ramp(dims, [7, 3, 5], 200.0);
     let tf = TransferFunction::ramp(40.0, 160.0, [1.0, 0.5, 0.25, 0.8]);
     let factors = [2u32, 3, 1];
     let region = Region::new(dims, 4, |b| (b[0] + b[1] + b[2]) % 2 == 0).unwrap();
@@ -591,6 +601,71 @@ fn a_region_leaves_out_the_fine_voxels_of_the_bricks_it_does_not_cover() {
             .union(&Region::new(dims, 2, |_| true).unwrap())
             .is_none()
     );
+}
+
+#[test]
+fn a_refinement_joined_with_the_bricks_it_lacked_is_the_union_classified_at_once() {
+    // The oracle is the whole refinement filtered to the union's bricks (as in the test
+    // above): a region's classification, joined with the classification of the bricks a
+    // second region adds, holds the same ids and colours.
+    let dims = [19u32, 13, 11];
+    let volume = folded_ramp(dims, [5, 11, 3], 190.0);
+    let tf = TransferFunction::ramp(40.0, 160.0, [1.0, 0.5, 0.25, 0.8]);
+    let options = ClassifyOptions::default();
+    let factors = [2u32, 1, 3];
+    let first = Region::new(dims, 4, |b| b[0] <= b[2]).unwrap();
+    let second = Region::new(dims, 4, |b| b[1] == 1 || b[0] == 4).unwrap();
+    let union = first.union(&second).unwrap();
+    let added = second.without(&first).unwrap();
+    assert!(!added.is_whole() && !union.is_whole());
+    let whole = classify_refined(&volume, &tf, &options, factors).unwrap();
+    let fine = whole.grid.dims();
+    let coarse = |id: u32| {
+        let f = [
+            id % fine[0],
+            id / fine[0] % fine[1],
+            id / (fine[0] * fine[1]),
+        ];
+        [0, 1, 2].map(|a| f[a] / factors[a])
+    };
+    let listed = |c: &Classified, keep: &dyn Fn(u32) -> bool| -> Vec<(u32, SplatColor)> {
+        c.grid
+            .ids()
+            .zip(&c.colors)
+            .filter(|(id, _)| keep(*id))
+            .map(|(id, c)| (id, *c))
+            .collect()
+    };
+    let want = listed(&whole, &|id| union.covers(coarse(id)));
+    let a = classify_refined_in(&volume, &tf, &options, factors, Some(&first)).unwrap();
+    let b = classify_refined_in(&volume, &tf, &options, factors, Some(&added)).unwrap();
+    assert!(!a.colors.is_empty() && !b.colors.is_empty());
+    let joined = a.clone().joined_with(b.clone()).unwrap();
+    assert_eq!(listed(&joined, &|_| true), want);
+    assert_eq!(joined.grid.len(), joined.colors.len());
+    // Either way round.
+    let other_way = b.clone().joined_with(a.clone()).unwrap();
+    assert_eq!(listed(&other_way, &|_| true), want);
+    // Refused: a voxel in both, grids of two sizes, colours that do not match the grid.
+    assert!(matches!(
+        a.clone().joined_with(a.clone()),
+        Err(GridError::NotDisjoint { .. })
+    ));
+    let small = classify_refined_in(&volume, &tf, &options, [1, 1, 1], None).unwrap();
+    assert!(matches!(
+        a.clone().joined_with(small),
+        Err(GridError::NotDisjoint { .. })
+    ));
+    let mut short = b;
+    short.colors.pop();
+    assert!(matches!(
+        a.joined_with(short),
+        Err(GridError::ColorsMismatch { .. })
+    ));
+    // The complement of a region covers what it does not.
+    let rest = first.complement();
+    assert!(first.union(&rest).unwrap().is_whole());
+    assert!(first.without(&rest).unwrap().contains(&first));
 }
 
 #[test]

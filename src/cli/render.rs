@@ -302,12 +302,9 @@ pub fn run_render(args: RenderArgs) -> Result<()> {
         parts: label_parts,
     } = measured(&drawn, parts.as_ref())?;
     let ctx = context_for(args.compositor, &drawn)?;
-    // One renderer for every view: the volumes are classified once. A refinement covers the
-    // bricks on the image of every view, not only those one view shows: a first view refined
-    // where it shows would have the next one classify again.
+    // One renderer for every view: the volumes are classified once.
     let mut renderer = Renderer::with_compositor(args.compositor);
     renderer.set_lod(args.lod);
-    renderer.set_refinement_where_seen(cameras.len() == 1);
     let device = ctx
         .as_ref()
         .map_or("no GPU adapter".into(), GpuContext::describe);

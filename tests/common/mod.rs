@@ -229,22 +229,23 @@ pub fn translucent_blobs() -> Scene {
         (450.0, [1.0, 0.9, 0.7, 0.03]),
         (600.0, [0.9, 0.9, 1.0, 0.3]),
     ]);
+    shaded_scene(volume, transfer)
+}
+
+/// A scene of `volume` alone, classified by `transfer` and shaded (0.8) as the renderer shades
+/// by default.
+pub fn shaded_scene(volume: CpuVolume, transfer: TransferFunction) -> Scene {
     let mut scene = Scene::new();
-    let node = splatscene::scene::VolumeNode {
-        volume: std::sync::Arc::new(volume),
-        transfer: std::sync::Arc::new(transfer),
-        splats: splatscene::scene::SplatSettings {
+    let node = VolumeNode {
+        volume: Arc::new(volume),
+        transfer: Arc::new(transfer),
+        splats: SplatSettings {
             shading: 0.8,
             ..Default::default()
         },
     };
     scene
-        .add(
-            "volume",
-            glam::DMat4::IDENTITY,
-            None,
-            NodeContent::Volume(node),
-        )
+        .add("volume", DMat4::IDENTITY, None, NodeContent::Volume(node))
         .unwrap();
     scene
 }

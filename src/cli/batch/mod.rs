@@ -207,10 +207,6 @@ pub fn run_batch(args: BatchArgs) -> Result<()> {
     let fresh_renderer = || {
         let mut renderer = Renderer::with_compositor(args.compositor);
         renderer.set_lod(args.lod);
-        // A job's pictures do not depend on the jobs drawn before it: a refinement covers
-        // every brick on the image, as one made for an earlier view does, not only the
-        // bricks this view shows.
-        renderer.set_refinement_where_seen(false);
         renderer
     };
     let mut renderer = fresh_renderer();

@@ -970,9 +970,9 @@ pub struct Renderer {
     /// Refinements classified over the whole grid, not only where the image shows it
     /// ([`Renderer::set_refinement_on_image_only`]).
     refine_whole: bool,
-    /// Refine the bricks on the image whether or not the own grid shows them
+    /// A first refinement classified only within the bricks the own grid shows
     /// ([`Renderer::set_refinement_where_seen`]).
-    refine_hidden: bool,
+    refine_where_seen: bool,
     /// Who composites the splats of screenshots.
     compositor: Compositor,
     /// The CPU tile compositor's buffers.
@@ -1099,17 +1099,25 @@ impl Renderer {
         self.refine_whole = !on;
     }
 
-    /// Whether a refinement is classified only within the own grid's bricks on the image that
-    /// add to the own grid's picture, drawn alone (with their neighbours), rather than within
-    /// every brick on the image (on by default; no effect where the refinement is not limited
-    /// to the image, [`Renderer::set_refinement_on_image_only`]). A close-up of a thick-slice
-    /// CT then classifies the refined splats in front of the opaque tissue, not behind it.
-    /// The picture can differ from the whole refinement's where a pixel opaque to the own grid
-    /// (an opacity past 0.9999) is not opaque to the refinement: by what shows through the
-    /// rest, at most a hundredth where the two fields agree within their splats' width
-    /// (`tests/tiled.rs`).
+    /// Whether a first refinement is classified only within the own grid's bricks on the image
+    /// that add to the own grid's picture drawn alone (a pixel counting as opaque past 0.9999),
+    /// with the empty bricks beside them, rather than within every brick on the image (off by
+    /// default; no effect where the refinement is not limited to the image,
+    /// [`Renderer::set_refinement_on_image_only`]). A close-up of a thick-slice CT then
+    /// classifies the refined splats in front of the opaque tissue, not behind it: the 1.5 mm
+    /// aorta CT's close-up 3 times faster in a third of the memory (BENCHMARKS.md, "A
+    /// refinement classifies only the bricks a view shows"). Redrawn from the same view, the
+    /// refinement stands; a view that shows bricks it lacks has them classified and joined
+    /// to it.
+    ///
+    /// Off by default because the picture then depends on the views drawn before: where a
+    /// pixel opaque to the own grid is not quite opaque to the refinement, a brick left out
+    /// would have shown through it by a few 8-bit levels, and a refinement joined for earlier
+    /// views holds such a brick where a first one does not. The viewer's screenshot is promised
+    /// to be `render`'s picture of its scene file, so every drawing path keeps every brick on
+    /// the image.
     pub fn set_refinement_where_seen(&mut self, on: bool) {
-        self.refine_hidden = !on;
+        self.refine_where_seen = on;
     }
 
     /// The CPU tile compositor, to set its opacity threshold.
@@ -1983,12 +1991,12 @@ impl Renderer {
                         (Some(made), Some(wanted)) => made.contains(wanted),
                         (Some(made), None) => made.is_whole(),
                     };
-                    // A first refinement at these factors is made within the bricks on the
-                    // image that the own grid drawn alone shows; redrawn from the same view, it
-                    // stands. A view that shows bricks a refinement made lacks has it made anew
-                    // over them and its own bricks, all the bricks on the image, as before:
-                    // looking again each frame of a turning camera would cost a drawing of the
-                    // own grid a frame and save little, since the union is reclassified anyway.
+                    // Where refinements go where the own grid shows, a first one at these
+                    // factors is made within the bricks on the image that the own grid drawn
+                    // alone shows; redrawn from the same view, it stands. A view that shows
+                    // bricks a refinement made lacks has those of its bricks on the image
+                    // classified and joined to it (looking again each frame of a turning
+                    // camera would cost a drawing of the own grid a frame).
                     let made_covers =
                         |volumes: &HashMap<(NodeId, Detail), VolumeState>,
                          region: &Option<Region>| {
@@ -2012,7 +2020,7 @@ impl Renderer {
                             .is_some_and(|s| *s == looked());
                     if !kept
                         && !self.refine_whole
-                        && !self.refine_hidden
+                        && self.refine_where_seen
                         && !self.volumes.contains_key(&refined)
                     {
                         self.make_own_texels(id, report);
@@ -2036,30 +2044,63 @@ impl Renderer {
                         }
                     }
                     if !kept {
-                        let region = match (self.volumes.get(&refined), region, seen) {
-                            (
-                                Some(VolumeState {
-                                    region: Some(made), ..
-                                }),
-                                Some(wanted),
-                                _,
-                            ) => made.union(&wanted).filter(|r| !r.is_whole()),
-                            (Some(_), region, _) => region,
-                            (None, _, Some(seen)) => Some(seen),
-                            (None, region, None) => region,
+                        // The refinement made at these factors, within fewer bricks than this
+                        // view shows: only the bricks it lacks are classified, and joined to it.
+                        let previous = self
+                            .volumes
+                            .remove(&refined)
+                            .and_then(|mut p| p.region.take().map(|made| (p, made)));
+                        let (region, extra) = match (&previous, region, seen) {
+                            (Some((_, made)), wanted, _) => {
+                                let extra = match &wanted {
+                                    Some(wanted) => wanted.without(made),
+                                    None => Some(made.complement()),
+                                };
+                                let union = match wanted {
+                                    Some(wanted) => made.union(&wanted).filter(|r| !r.is_whole()),
+                                    None => None,
+                                };
+                                (union, extra)
+                            }
+                            (None, _, Some(seen)) => (Some(seen), None),
+                            (None, region, None) => (region, None),
                         };
                         // One refinement a volume is kept: a view that wants another makes it
                         // anew.
                         self.volumes
                             .retain(|(v, d), _| *v != id || matches!(d, Detail::Level(..)));
-                        let result = classify_refined_in(
-                            &node.volume,
-                            &node.transfer,
-                            &options,
-                            factors,
-                            region.as_ref(),
-                        )
-                        .map_err(|e| fail(e.to_string()))?;
+                        let classify = |region: Option<&Region>| {
+                            classify_refined_in(
+                                &node.volume,
+                                &node.transfer,
+                                &options,
+                                factors,
+                                region,
+                            )
+                            .map_err(|e| fail(e.to_string()))
+                        };
+                        let (result, orderer, ids) = match (previous, extra) {
+                            (Some((previous, _)), Some(extra)) => {
+                                let VolumeState {
+                                    classified,
+                                    orderer,
+                                    mut ids,
+                                    texels,
+                                    gpu,
+                                    ..
+                                } = previous;
+                                // Made anew for the joined grid.
+                                drop((texels, gpu));
+                                let more = classify(Some(&extra))?;
+                                afford(&more)?;
+                                let joined = classified
+                                    .joined_with(more)
+                                    .map_err(|e| fail(e.to_string()))?;
+                                ids.clear();
+                                (joined, orderer, ids)
+                            }
+                            _ => (classify(region.as_ref())?, Orderer::new(), Vec::new()),
+                        };
                         afford(&result)?;
                         made += 1;
                         let mut state = VolumeState::new(
@@ -2067,8 +2108,8 @@ impl Renderer {
                             Arc::clone(&node.volume),
                             factors,
                             result,
-                            Orderer::new(),
-                            Vec::new(),
+                            orderer,
+                            ids,
                         );
                         state.region = region;
                         self.volumes.insert(refined, state);
