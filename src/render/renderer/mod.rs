@@ -75,9 +75,8 @@ pub struct FrameTimings {
     /// Making the splats' texels for the CPU tile compositor (only on frames that draw a grid
     /// whose texels are not made yet).
     pub texels: Duration,
-    /// Drawing a volume's own grid alone to find the bricks a refinement shows (only on frames
-    /// that refine a grid where the refinement made does not cover what the view shows;
-    /// [`Renderer::set_refinement_where_seen`]).
+    /// Drawing a volume's own grid alone to find the bricks a first refinement shows (only on
+    /// frames that make one, where [`Renderer::set_refinement_where_seen`] is on).
     pub seen: Duration,
     /// Computing the draw orders on the CPU.
     pub order: Duration,
@@ -186,8 +185,9 @@ struct VolumeState {
     occupied: Option<Occupied>,
     /// The own grid's bricks a refinement was classified within (`None`: all of them).
     region: Option<Region>,
-    /// The own grid's projection in the last view whose bricks shown this refinement was
-    /// found to cover (or was made for), where that was looked for ([`seen_bricks`]).
+    /// The view (with the node's placement, splat settings and the clip planes) a first
+    /// refinement was made for, where it was made within the bricks the own grid shows
+    /// ([`seen_bricks`]): redrawn from that view, it stands.
     seen_for: Option<seen::SeenFor>,
     /// What halving this grid along every axis that has more than one voxel would lose,
     /// brick by brick, once asked for ([`Renderer::spread_of`]).
@@ -1982,7 +1982,8 @@ impl Renderer {
                             None => shown,
                         }
                     };
-                    // A refinement made within fewer bricks than this view shows is made anew.
+                    // Whether a refinement made covers the bricks this view shows (else the
+                    // bricks it lacks are classified and joined to it, below).
                     let covered = |made: &VolumeState, region: &Option<Region>| match (
                         &made.region,
                         region,

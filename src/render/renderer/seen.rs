@@ -2,7 +2,9 @@
 //! refinement, so that the refinement classifies the bricks that show and leaves out those
 //! hidden behind opaque tissue. A close-up of a thick-slice CT refines its grid by up to
 //! 5 x 5 x 4, and of the refined splats on the image most lie behind the skin or the bone
-//! (BENCHMARKS.md, "A refinement classifies only the bricks a view shows").
+//! (BENCHMARKS.md, "A refinement classifies only the bricks a view shows"). Used where
+//! `Renderer::set_refinement_where_seen` turns it on: the picture then depends, by a few
+//! 8-bit levels, on the views drawn before.
 
 use glam::DMat4;
 
@@ -31,10 +33,10 @@ pub(super) const SEEN_OPAQUE: f32 = 0.9999;
 
 /// The bricks of [`REGION_BRICK`]^3 voxels of `own` (a volume's own grid, its texels made)
 /// among `shown` (`None`: all of them) that add to the image when the grid alone is drawn
-/// through `projection` in `view` (its node placed by `world`), with every brick next to one of
-/// them (across a face, an edge or a corner): a margin for the refinement's sharper edges and
-/// for the bricks whose splats a refinement's cells spread into. `Ok(None)` where the own grid
-/// has no texels.
+/// through `projection` in `view` (its node placed by `world`), with the bricks next to one of
+/// them (across a face, an edge or a corner) that hold no splat: a fine voxel's cell samples
+/// the coarse voxels around it, so a refinement can put splats there. `Ok(None)` where the own
+/// grid has no texels.
 ///
 /// The meshes and the other volumes are left out of the drawing: they can only hide more, so
 /// a brick they hide is kept, never a brick they would show left out. A brick that holds no
