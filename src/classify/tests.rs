@@ -519,6 +519,16 @@ fn a_refined_gradient_is_the_fields_along_the_fine_axes() {
     );
 }
 
+/// The own voxel that fine voxel `id` of a refinement by `factors` (a `fine` grid) splits.
+fn coarse_voxel(fine: [u32; 3], factors: [u32; 3], id: u32) -> [u32; 3] {
+    let f = [
+        id % fine[0],
+        id / fine[0] % fine[1],
+        id / (fine[0] * fine[1]),
+    ];
+    [0, 1, 2].map(|a| f[a] / factors[a])
+}
+
 /// A `dims` volume whose value at voxel `k` is `k . slopes` folded back into `0..fold`: ramps
 /// of tissue in every direction, each fold a sharp edge.
 fn folded_ramp(dims: [u32; 3], slopes: [u32; 3], fold: f32) -> CpuVolume {
@@ -549,14 +559,7 @@ fn a_region_leaves_out_the_fine_voxels_of_the_bricks_it_does_not_cover() {
     assert!(!region.is_whole());
     let whole = classify_refined(&volume, &tf, &ClassifyOptions::default(), factors).unwrap();
     let fine = whole.grid.dims();
-    let coarse = |id: u32| {
-        let f = [
-            id % fine[0],
-            id / fine[0] % fine[1],
-            id / (fine[0] * fine[1]),
-        ];
-        [0, 1, 2].map(|a| f[a] / factors[a])
-    };
+    let coarse = |id: u32| coarse_voxel(fine, factors, id);
     let want: Vec<(u32, [u8; 3])> = whole
         .grid
         .ids()
@@ -620,14 +623,7 @@ fn a_refinement_joined_with_the_bricks_it_lacked_is_the_union_classified_at_once
     assert!(!added.is_whole() && !union.is_whole());
     let whole = classify_refined(&volume, &tf, &options, factors).unwrap();
     let fine = whole.grid.dims();
-    let coarse = |id: u32| {
-        let f = [
-            id % fine[0],
-            id / fine[0] % fine[1],
-            id / (fine[0] * fine[1]),
-        ];
-        [0, 1, 2].map(|a| f[a] / factors[a])
-    };
+    let coarse = |id: u32| coarse_voxel(fine, factors, id);
     let listed = |c: &Classified, keep: &dyn Fn(u32) -> bool| -> Vec<(u32, SplatColor)> {
         c.grid
             .ids()
