@@ -76,7 +76,7 @@ pub struct FrameTimings {
     /// whose texels are not made yet).
     pub texels: Duration,
     /// Drawing a volume's own grid alone to find the bricks a first refinement shows (only on
-    /// frames that make one, where [`Renderer::set_refinement_where_seen`] is on).
+    /// frames whose view the refinement has not looked for, [`Renderer::set_refinement_where_seen`]).
     pub seen: Duration,
     /// Computing the draw orders on the CPU.
     pub order: Duration,
@@ -189,6 +189,10 @@ struct VolumeState {
     /// refinement was made for, where it was made within the bricks the own grid shows
     /// ([`seen_bricks`]): redrawn from that view, it stands.
     seen_for: Option<seen::SeenFor>,
+    /// The own grid's bricks this refinement is drawn within (`None`: all it holds): the
+    /// bricks the current view shows ([`seen_bricks`]), so that the picture is the view's
+    /// alone, whatever bricks earlier views joined to the refinement.
+    within: Option<Region>,
     /// What halving this grid along every axis that has more than one voxel would lose,
     /// brick by brick, once asked for ([`Renderer::spread_of`]).
     spread: Option<Arc<BrickSpread>>,
@@ -317,6 +321,7 @@ impl VolumeState {
             occupied: None,
             region: None,
             seen_for: None,
+            within: None,
             spread: None,
         }
     }
@@ -385,6 +390,26 @@ impl VolumeState {
                 &mut self.ids,
             )
             .map_err(|e| e.to_string())?;
+        // A refinement drawn within the bricks the view shows, where it holds more: the whole
+        // order with the rest left out (a visibility order of a set keeps one for any part of
+        // it, and IP-PBTF's order of a part is the whole's restricted to it, so the picture is
+        // the one a refinement made within those bricks alone draws). Walking the bricks one
+        // by one in brick order would be cheaper, but splats overlap across the bricks' faces,
+        // and the two orders' pictures differ there by up to 0.1 on opaque tissue.
+        if let Some(within) = &self.within
+            && self
+                .region
+                .as_ref()
+                .is_none_or(|made| !within.contains(made))
+        {
+            keep_within(
+                &mut self.ids,
+                None,
+                self.classified.grid.dims(),
+                self.factors,
+                within,
+            );
+        }
         self.ordered_for = key;
         Ok(())
     }
@@ -544,6 +569,11 @@ fn order_mix(
             &mut ends,
         )
         .map_err(|e| e.to_string())?;
+        if walked && let Some(within) = &state.within {
+            // A refinement drawn within the bricks the view shows.
+            let dims = state.classified.grid.dims();
+            keep_within(&mut ids, Some(&mut ends), dims, factors, within);
+        }
         if !walked {
             let bricks = own_geometry.dims().map(|n| n.div_ceil(BRICK) as usize);
             return order_mix_from_whole_levels(
@@ -574,6 +604,58 @@ fn order_mix(
         }
     }
     Ok(())
+}
+
+/// Leaves out of `ids` (voxel ids of a grid of `dims`, refined by `factors` from the own
+/// grid) the splats outside the own grid's bricks `within`, keeping the order of the rest;
+/// `ends` (one past each box's last splat in `ids`), where given, moved to match.
+fn keep_within(
+    ids: &mut Vec<u32>,
+    ends: Option<&mut Vec<usize>>,
+    dims: [u32; 3],
+    factors: [u32; 3],
+    within: &Region,
+) {
+    // A fine coordinate's own brick, axis by axis, looked up rather than divided per splat.
+    let bricks: [Vec<u32>; 3] = std::array::from_fn(|a| {
+        let side = REGION_BRICK * factors[a].max(1);
+        (0..dims[a]).map(|k| k / side).collect()
+    });
+    let [nx, ny, _] = dims;
+    let inside = |id: u32| {
+        let (x, y, z) = (id % nx, (id / nx) % ny, id / nx / ny);
+        within.covers_brick([
+            bricks[0][x as usize],
+            bricks[1][y as usize],
+            bricks[2][z as usize],
+        ])
+    };
+    match ends {
+        None => {
+            let kept: Vec<Vec<u32>> = ids
+                .par_chunks(1 << 20)
+                .map(|c| c.iter().copied().filter(|&id| inside(id)).collect())
+                .collect();
+            ids.clear();
+            for k in kept {
+                ids.extend_from_slice(&k);
+            }
+        }
+        Some(ends) => {
+            let (mut kept, mut start) = (0, 0);
+            for end in ends.iter_mut() {
+                for i in start..*end {
+                    if inside(ids[i]) {
+                        ids[kept] = ids[i];
+                        kept += 1;
+                    }
+                }
+                start = *end;
+                *end = kept;
+            }
+            ids.truncate(kept);
+        }
+    }
 }
 
 /// How a grid drawn at `detail` relates to its own grid's voxels: the times each axis was
@@ -970,9 +1052,9 @@ pub struct Renderer {
     /// Refinements classified over the whole grid, not only where the image shows it
     /// ([`Renderer::set_refinement_on_image_only`]).
     refine_whole: bool,
-    /// A first refinement classified only within the bricks the own grid shows
-    /// ([`Renderer::set_refinement_where_seen`]).
-    refine_where_seen: bool,
+    /// Refinements classified and drawn within every brick on the image, not only those the
+    /// own grid shows ([`Renderer::set_refinement_where_seen`]).
+    refine_hidden: bool,
     /// Who composites the splats of screenshots.
     compositor: Compositor,
     /// The CPU tile compositor's buffers.
@@ -1099,25 +1181,22 @@ impl Renderer {
         self.refine_whole = !on;
     }
 
-    /// Whether a first refinement is classified only within the own grid's bricks on the image
-    /// that add to the own grid's picture drawn alone (a pixel counting as opaque past 0.9999),
-    /// with the empty bricks beside them, rather than within every brick on the image (off by
-    /// default; no effect where the refinement is not limited to the image,
+    /// Whether a refinement is classified and drawn only within the own grid's bricks on the
+    /// image that add to the own grid's picture drawn alone (a pixel counting as opaque past
+    /// 0.9999), with the empty bricks beside them, rather than within every brick on the image
+    /// (on by default; no effect where the refinement is not limited to the image,
     /// [`Renderer::set_refinement_on_image_only`]). A close-up of a thick-slice CT then
-    /// classifies the refined splats in front of the opaque tissue, not behind it: the 1.5 mm
-    /// aorta CT's close-up 3 times faster in a third of the memory (BENCHMARKS.md, "A
-    /// refinement classifies only the bricks a view shows"). Redrawn from the same view, the
-    /// refinement stands; a view that shows bricks it lacks has them classified and joined
-    /// to it.
-    ///
-    /// Off by default because the picture then depends on the views drawn before: where a
-    /// pixel opaque to the own grid is not quite opaque to the refinement, a brick left out
-    /// would have shown through it by a few 8-bit levels, and a refinement joined for earlier
-    /// views holds such a brick where a first one does not. The viewer's screenshot is promised
-    /// to be `render`'s picture of its scene file, so every drawing path keeps every brick on
-    /// the image.
+    /// classifies and draws the refined splats in front of the opaque tissue, not behind it:
+    /// the 1.5 mm aorta CT's close-up 3 times faster in a third of the memory (BENCHMARKS.md,
+    /// "A refinement classifies only the bricks a view shows"). Each view pays a drawing of
+    /// the own grid to find its bricks (once: redrawn from the same view, they stand); the
+    /// bricks it shows that the refinement lacks are classified and joined to it, and the
+    /// refinement is drawn within the view's bricks alone, so that the picture is the view's
+    /// whatever views came before (the viewer's screenshot is `render`'s picture of its
+    /// scene file). Where a pixel opaque to the own grid is not quite opaque to the refinement,
+    /// a brick left out would have shown through it by a few 8-bit levels.
     pub fn set_refinement_where_seen(&mut self, on: bool) {
-        self.refine_where_seen = on;
+        self.refine_hidden = !on;
     }
 
     /// The CPU tile compositor, to set its opacity threshold.
@@ -1992,58 +2071,62 @@ impl Renderer {
                         (Some(made), Some(wanted)) => made.contains(wanted),
                         (Some(made), None) => made.is_whole(),
                     };
-                    // Where refinements go where the own grid shows, a first one at these
-                    // factors is made within the bricks on the image that the own grid drawn
-                    // alone shows; redrawn from the same view, it stands. A view that shows
-                    // bricks a refinement made lacks has those of its bricks on the image
-                    // classified and joined to it (looking again each frame of a turning
-                    // camera would cost a drawing of the own grid a frame).
-                    let made_covers =
-                        |volumes: &HashMap<(NodeId, Detail), VolumeState>,
-                         region: &Option<Region>| {
-                            volumes
-                                .get(&refined)
-                                .is_some_and(|made| covered(made, region))
-                        };
+                    // Where refinements go where the own grid shows, each view has the
+                    // bricks on the image that the own grid drawn alone shows looked for (once
+                    // a view: redrawn from the same view, the bricks stand), the refinement
+                    // classified within them, and drawn within them alone, so that the
+                    // picture is the view's whatever earlier views joined to the refinement.
+                    let looking = !self.refine_whole && !self.refine_hidden;
                     let looked = || seen::SeenFor {
                         view: *view,
                         world,
                         splats: node.splats,
                         clipping: scene.clipping.clone(),
                     };
-                    let mut seen = None;
-                    let mut seen_for = None;
-                    let kept = made_covers(&self.volumes, &region)
-                        || self
+                    let mut within = None;
+                    if looking {
+                        let standing = self
                             .volumes
                             .get(&refined)
-                            .and_then(|r| r.seen_for.as_ref())
-                            .is_some_and(|s| *s == looked());
-                    if !kept
-                        && !self.refine_whole
-                        && self.refine_where_seen
-                        && !self.volumes.contains_key(&refined)
-                    {
-                        self.make_own_texels(id, report);
-                        if let Some(state) = self.volumes.get(&own) {
-                            let started = Instant::now();
-                            let geometry =
-                                state.geometry(world).map_err(|e| fail(e.to_string()))?;
-                            let projection =
-                                projection(&geometry, view, &node.splats, &scene.clipping);
-                            seen = seen_bricks(
-                                &mut self.tiles,
-                                state,
-                                world,
-                                view,
-                                &projection,
-                                region.as_ref(),
-                            )
-                            .map_err(fail)?;
-                            report.timings.seen += started.elapsed();
-                            seen_for = seen.as_ref().map(|_| looked());
-                        }
+                            .filter(|r| r.seen_for.as_ref().is_some_and(|s| *s == looked()));
+                        within = match standing {
+                            Some(state) => state.within.clone(),
+                            None => {
+                                self.make_own_texels(id, report);
+                                match self.volumes.get(&own) {
+                                    Some(state) => {
+                                        let started = Instant::now();
+                                        let geometry = state
+                                            .geometry(world)
+                                            .map_err(|e| fail(e.to_string()))?;
+                                        let projection = projection(
+                                            &geometry,
+                                            view,
+                                            &node.splats,
+                                            &scene.clipping,
+                                        );
+                                        let seen = seen_bricks(
+                                            &mut self.tiles,
+                                            state,
+                                            world,
+                                            view,
+                                            &projection,
+                                            region.as_ref(),
+                                        )
+                                        .map_err(fail)?;
+                                        report.timings.seen += started.elapsed();
+                                        seen
+                                    }
+                                    None => None,
+                                }
+                            }
+                        };
                     }
+                    let region = within.clone().or(region);
+                    let kept = self
+                        .volumes
+                        .get(&refined)
+                        .is_some_and(|made| covered(made, &region));
                     if !kept {
                         // The refinement made at these factors, within fewer bricks than this
                         // view shows: only the bricks it lacks are classified, and joined to it.
@@ -2051,8 +2134,8 @@ impl Renderer {
                             .volumes
                             .remove(&refined)
                             .and_then(|mut p| p.region.take().map(|made| (p, made)));
-                        let (region, extra) = match (&previous, region, seen) {
-                            (Some((_, made)), wanted, _) => {
+                        let (region, extra) = match (&previous, region) {
+                            (Some((_, made)), wanted) => {
                                 let extra = match &wanted {
                                     Some(wanted) => wanted.without(made),
                                     None => Some(made.complement()),
@@ -2063,8 +2146,7 @@ impl Renderer {
                                 };
                                 (union, extra)
                             }
-                            (None, _, Some(seen)) => (Some(seen), None),
-                            (None, region, None) => (region, None),
+                            (None, region) => (region, None),
                         };
                         // One refinement a volume is kept: a view that wants another makes it
                         // anew.
@@ -2115,10 +2197,12 @@ impl Renderer {
                         state.region = region;
                         self.volumes.insert(refined, state);
                     }
-                    if let (Some(state), Some(seen_for)) =
-                        (self.volumes.get_mut(&refined), seen_for)
-                    {
-                        state.seen_for = Some(seen_for);
+                    if let Some(state) = self.volumes.get_mut(&refined) {
+                        state.seen_for = looking.then(looked);
+                        if state.within != within {
+                            state.within = within;
+                            state.ordered_for = None;
+                        }
                     }
                     wanted
                 }

@@ -2,9 +2,9 @@
 //! refinement, so that the refinement classifies the bricks that show and leaves out those
 //! hidden behind opaque tissue. A close-up of a thick-slice CT refines its grid by up to
 //! 5 x 5 x 4, and of the refined splats on the image most lie behind the skin or the bone
-//! (BENCHMARKS.md, "A refinement classifies only the bricks a view shows"). Used where
-//! `Renderer::set_refinement_where_seen` turns it on: the picture then depends, by a few
-//! 8-bit levels, on the views drawn before.
+//! (BENCHMARKS.md, "A refinement classifies only the bricks a view shows"). On by default
+//! (`Renderer::set_refinement_where_seen`): each view looks once, and the refinement is drawn
+//! within the bricks its view shows, so that the picture depends on the view alone.
 
 use glam::DMat4;
 
