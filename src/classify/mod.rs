@@ -1223,6 +1223,11 @@ impl Region {
         self.covered.iter().all(|&c| c)
     }
 
+    /// How many bricks are covered.
+    pub fn bricks_covered(&self) -> usize {
+        self.covered.iter().filter(|&&c| c).count()
+    }
+
     /// Clears `open` (one byte a voxel of row `y` of slice `z`) outside the region.
     fn clear_outside(&self, open: &mut [u8], y: usize, z: usize) {
         let side = self.side as usize;

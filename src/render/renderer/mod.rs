@@ -2133,8 +2133,18 @@ impl Renderer {
                         let previous = self
                             .volumes
                             .remove(&refined)
-                            .and_then(|mut p| p.region.take().map(|made| (p, made)));
-                        let (region, extra) = match (&previous, region) {
+                            .and_then(|mut p| p.region.take().map(|made| (p, made)))
+                            // A refinement that holds over twice the bricks this view wants is
+                            // made anew within them: joined for ever, a camera that travels
+                            // would hold every brick it passed, and the memory budget could
+                            // refuse a view that alone fits.
+                            .filter(|(_, made)| {
+                                region.as_ref().is_none_or(|wanted| {
+                                    made.bricks_covered() <= 2 * wanted.bricks_covered()
+                                })
+                            });
+                        let view_region = region.clone();
+                        let (mut region, extra) = match (&previous, region) {
                             (Some((_, made)), wanted) => {
                                 let extra = match &wanted {
                                     Some(wanted) => wanted.without(made),
@@ -2180,7 +2190,14 @@ impl Renderer {
                                     .joined_with(more)
                                     .map_err(|e| fail(e.to_string()))?;
                                 ids.clear();
-                                (joined, orderer, ids)
+                                if afford(&joined).is_ok() {
+                                    (joined, orderer, ids)
+                                } else {
+                                    // Past the budget joined: the view's bricks alone.
+                                    drop(joined);
+                                    region = view_region;
+                                    (classify(region.as_ref())?, orderer, ids)
+                                }
                             }
                             _ => (classify(region.as_ref())?, Orderer::new(), Vec::new()),
                         };

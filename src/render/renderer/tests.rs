@@ -924,3 +924,94 @@ fn levels_that_do_not_pay_in_one_frame_are_not_made() {
     assert_eq!(again.report.splats, made.report.splats);
     assert_eq!(again.frame.pixels, made.frame.pixels);
 }
+
+#[test]
+fn a_camera_that_travels_holds_a_refinement_near_the_size_of_its_view() {
+    // A bar of opaque tissue 192 mm long, seen close up (orthographic, its 2 mm voxels 6 pixels
+    // apart: refined) by a camera sliding along it. Each view joins the bricks it shows; a
+    // refinement grown past twice the view's bricks is made anew within them, so the one held
+    // stays near the view's size, and each picture is a fresh renderer's.
+    let dims = [96u32, 16, 16];
+    let values: Vec<f32> = (0..dims.iter().product::<u32>())
+        .map(|id| {
+            let k = [id % dims[0], id / dims[0] % dims[1], id / dims[0] / dims[1]];
+            350.0 + ((k[0] * 7 + k[1] * 3 + k[2] * 5) % 13) as f32 * 8.0
+        })
+        .collect();
+    let volume = CpuVolume {
+        dims,
+        spacing: [2.0; 3],
+        origin: [0.0; 3],
+        direction: DMat3::IDENTITY,
+        values: values.into(),
+    };
+    let transfer = crate::classify::TransferFunction::new(vec![
+        (250.0, [0.9, 0.5, 0.3, 0.0]),
+        (400.0, [1.0, 0.9, 0.7, 0.9]),
+    ]);
+    let mut scene = Scene::new();
+    let node = VolumeNode {
+        volume: Arc::new(volume),
+        transfer: Arc::new(transfer),
+        splats: crate::scene::SplatSettings::default(),
+    };
+    let id = scene
+        .add(
+            "bar",
+            DMat4::IDENTITY,
+            None,
+            crate::scene::NodeContent::Volume(node),
+        )
+        .unwrap();
+    let camera_at = |x: f64| SceneCamera {
+        eye: DVec3::new(x, -60.0, 15.0),
+        target: DVec3::new(x, 15.0, 15.0),
+        up: DVec3::Z,
+        projection: crate::scene::Projection::Orthographic { height: 16.0 },
+        near: None,
+    };
+    let shoot = |renderer: &mut Renderer, x: f64| {
+        renderer
+            .screenshot_without_gpu(&scene, &camera_at(x), (64, 48), &FrameOptions::default())
+            .unwrap()
+    };
+    let held = |renderer: &Renderer| {
+        let (_, state) = renderer
+            .volumes
+            .iter()
+            .find(|((v, d), _)| *v == id && matches!(d, Detail::Refined(_)))
+            .expect("a refinement is held");
+        let bricks = |r: &Option<Region>| r.as_ref().map_or(0, Region::bricks_covered);
+        (bricks(&state.region), bricks(&state.within))
+    };
+    let mut travelling = Renderer::with_compositor(super::super::Compositor::Cpu);
+    let mut most_held = 0;
+    let mut remade = false;
+    let mut before = 0;
+    for step in 0..12 {
+        let x = 12.0 + 14.0 * f64::from(step);
+        let shot = shoot(&mut travelling, x);
+        assert!(shot.report.refined.is_some(), "{:?}", shot.report);
+        let (made, within) = held(&travelling);
+        assert!(within > 0 && made >= within, "{made} {within}");
+        assert!(
+            made <= 3 * within,
+            "held {made} bricks for a view of {within}"
+        );
+        most_held = most_held.max(made);
+        remade |= step > 0 && made < before;
+        before = made;
+        if step % 4 == 3 {
+            let fresh = shoot(
+                &mut Renderer::with_compositor(super::super::Compositor::Cpu),
+                x,
+            );
+            assert_eq!(shot.report.splats, fresh.report.splats, "step {step}");
+            assert_eq!(shot.frame.pixels, fresh.frame.pixels, "step {step}");
+        }
+    }
+    assert!(
+        remade,
+        "the refinement was made anew on the way (at most {most_held} bricks)"
+    );
+}
