@@ -10,12 +10,18 @@ use super::project::Projected;
 /// Pixels in a tile.
 pub(super) const PIXELS: usize = TILE * TILE;
 /// A plane of a tile's pixels, with room for a group of lanes starting at the last pixel
-/// (lanes past a row's end fall on the next row, or here, and are never open).
-pub(super) const PLANE: usize = PIXELS + LANES;
+/// (lanes past a row's end fall on the next row, or here, and are never open), rounded up to
+/// whole cache lines so that every plane of a [`TilePixels`] starts on one.
+pub(super) const PLANE: usize = (PIXELS + LANES).next_multiple_of(16);
 
 /// One tile's pixels as planes (premultiplied red, green, blue, alpha, and the meshes' reversed
-/// depth), so that a row of pixels is a few vector registers.
+/// depth), so that a row of pixels is a few vector registers. Aligned to a cache line: a row
+/// then starts on one, and a group of lanes from its first pixel is one line. Left to the
+/// allocator (16 bytes), the planes' offset within a line depends on what was allocated
+/// before them, and the pixel loop's time moved between builds by up to a fifth (BENCHMARKS.md, "Tile planes on cache
+/// lines").
 #[derive(Debug, Clone)]
+#[repr(C, align(64))]
 pub(super) struct TilePixels {
     pub(super) r: [f32; PLANE],
     pub(super) g: [f32; PLANE],
