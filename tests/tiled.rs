@@ -357,15 +357,10 @@ fn a_close_up_refines_only_what_lies_on_the_image_with_the_same_picture() {
     }
 }
 
-#[test]
-fn a_refinement_leaves_out_the_bricks_hidden_behind_opaque_tissue() {
-    // A closed-form phantom: a box of opaque "bone" walls three voxels thick around a
-    // translucent fill, a square window cut in the wall the camera faces, seen so close that
-    // its 1.5 mm voxels fall about 3 pixels apart (the grid is drawn refined). The refinement
-    // then classifies the wall's bricks and those seen through the window, not the hidden
-    // fill: fewer splats, and the picture of every brick on the image refined, within the
-    // opacity the own grid's picture leaves to what lies behind an opaque pixel.
-    let ctx = context();
+/// A closed-form phantom: a box of 48^3 voxels of 1.5 mm whose opaque "bone" walls are three
+/// voxels thick around a translucent fill that varies, with a square window cut in the wall at
+/// y = 0 (x and z 19..29).
+fn windowed_box() -> splatscene::volume::CpuVolume {
     let n = 48u32;
     let window = |x: u32, z: u32| (19..29).contains(&x) && (19..29).contains(&z);
     let values: Vec<f32> = (0..n * n * n)
@@ -380,13 +375,64 @@ fn a_refinement_leaves_out_the_bricks_hidden_behind_opaque_tissue() {
             }
         })
         .collect();
-    let volume = splatscene::volume::CpuVolume {
+    splatscene::volume::CpuVolume {
         dims: [n; 3],
         spacing: [1.5; 3],
         origin: [0.0; 3],
         direction: glam::DMat3::IDENTITY,
         values: values.into(),
+    }
+}
+
+#[test]
+fn a_close_up_is_drawn_the_same_whatever_came_before() {
+    // The windowed box close up in perspective, obliquely, the camera turning so that the
+    // refinement's factors change and change back. Whatever views a renderer drew before, a
+    // view's factors, splats and picture are a fresh renderer's.
+    let ctx = context();
+    let scene = shaded_scene(windowed_box(), TransferFunction::ct_bone());
+    let centre = glam::DVec3::new(35.25, 35.25, 35.25);
+    let camera = |turn: f64| SceneCamera {
+        eye: centre + glam::DQuat::from_rotation_z(turn) * glam::DVec3::new(-20.0, -70.0, 12.0),
+        target: centre,
+        up: glam::DVec3::Z,
+        projection: Projection::Perspective {
+            fov_y_degrees: 40.0,
+        },
+        near: None,
     };
+    let size = (96, 72);
+    let shoot = |renderer: &mut Renderer, turn: f64| {
+        renderer
+            .screenshot(&ctx, &scene, &camera(turn), size, &OPTIONS)
+            .unwrap()
+    };
+    let mut history = Renderer::with_compositor(Compositor::Cpu);
+    let turns = [0.0, 0.4, -0.3, 0.0, 0.4];
+    let mut factors = Vec::new();
+    for (i, &turn) in turns.iter().enumerate() {
+        let shot = shoot(&mut history, turn);
+        let fresh = shoot(&mut Renderer::with_compositor(Compositor::Cpu), turn);
+        assert!(shot.report.refined.is_some(), "{:?}", shot.report);
+        assert_eq!(shot.report.refined, fresh.report.refined, "view {i}");
+        assert_eq!(shot.report.splats, fresh.report.splats, "view {i}");
+        assert_eq!(shot.frame.pixels, fresh.frame.pixels, "view {i}");
+        factors.push(shot.report.refined);
+    }
+    // The path changes the refinement's factors on the way, and back.
+    assert_ne!(factors[0], factors[2], "{factors:?}");
+}
+
+#[test]
+fn a_refinement_leaves_out_the_bricks_hidden_behind_opaque_tissue() {
+    // A closed-form phantom: a box of opaque "bone" walls three voxels thick around a
+    // translucent fill, a square window cut in the wall the camera faces, seen so close that
+    // its 1.5 mm voxels fall about 3 pixels apart (the grid is drawn refined). The refinement
+    // then classifies the wall's bricks and those seen through the window, not the hidden
+    // fill: fewer splats, and the picture of every brick on the image refined, within the
+    // opacity the own grid's picture leaves to what lies behind an opaque pixel.
+    let ctx = context();
+    let volume = windowed_box();
     let scene = shaded_scene(volume, TransferFunction::ct_bone());
     // Orthographic, so that a turned view keeps the refinement's factors.
     let centre = glam::DVec3::new(35.25, 35.25, 35.25);

@@ -1844,27 +1844,11 @@ impl Renderer {
                 let geometry =
                     placed_geometry(&full.volume, world).map_err(|e| fail(e.to_string()))?;
                 let apart = apart_near(&geometry, view, full.occupied.as_ref());
-                let wanted = detail_at(geometry.dims(), apart);
-                // Refinement goes by the voxels' whole edges.
-                let apart = apart.map(|a| a.full);
-                // A refinement made already stays while its voxels are still between half a
-                // pixel and REFINE_TO apart, so that a camera orbiting at one distance does not
-                // classify anew.
-                let kept = self.volumes.keys().find_map(|(v, d)| match d {
-                    Detail::Refined(f) if *v == id => Some(*f),
-                    _ => None,
-                });
-                match (wanted, kept, apart) {
-                    (Detail::Refined(_), Some(f), Some(apart))
-                        if (0..3).all(|a| {
-                            let drawn = apart[a] / f64::from(f[a]);
-                            drawn <= REFINE_TO && (f[a] == 1 || drawn > 0.5)
-                        }) =>
-                    {
-                        Detail::Refined(f)
-                    }
-                    _ => wanted,
-                }
+                // The view's own detail, whatever was drawn before: a refinement made for
+                // other factors is not kept while its voxels stay near enough a pixel apart, as
+                // it once was, since the picture would then depend on the views before it (and
+                // the viewer's screenshot would not be `render`'s picture of its scene file).
+                detail_at(geometry.dims(), apart)
             };
             let mut wanted = match wanted {
                 Detail::Level(level, facing) if preview => {

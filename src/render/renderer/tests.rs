@@ -1043,7 +1043,11 @@ fn keeping_a_refinement_within_bricks_keeps_the_order_and_moves_the_ends() {
     assert_eq!(kept, expected);
     let mut start = 0;
     for (i, &end) in ends.iter().enumerate() {
-        let stretch: Vec<u32> = ids[start..end].iter().copied().filter(|&id| inside(id)).collect();
+        let stretch: Vec<u32> = ids[start..end]
+            .iter()
+            .copied()
+            .filter(|&id| inside(id))
+            .collect();
         let from = if i == 0 { 0 } else { moved[i - 1] };
         assert_eq!(kept[from..moved[i]], stretch[..], "stretch {i}");
         start = end;
