@@ -790,21 +790,22 @@ const LEVEL_USE: f64 = 0.1;
 /// splats, as a share of them ([`LEVEL_USE`]).
 const FALL_BACK_EXTRA: f64 = 0.05;
 
-/// Gives the bricks of `wants` that want a rare level (neither made, in `made`, nor wanted by
-/// bricks holding [`LEVEL_USE`] of `own_splats`) the coarsest level that is made or kept and
-/// no coarser along any axis than the one they wanted, the rare levels that cost the fewest
-/// added splats first, while the added splats stay within [`FALL_BACK_EXTRA`] of the mix's.
-/// The own grid stands in only where some brick draws it anyway (its texels are then made).
-fn fall_back_from_rare_levels(wants: &mut [BrickWant], made: &[Detail], own_splats: usize) {
+/// Gives the bricks of `wants` that want a rare level (one not wanted by bricks holding
+/// [`LEVEL_USE`] of `own_splats`) the coarsest level that is kept and no coarser along any axis
+/// than the one they wanted, the rare levels that cost the fewest added splats first, while
+/// the added splats stay within [`FALL_BACK_EXTRA`] of the mix's. The own grid stands in only
+/// where some brick draws it anyway (its texels are then made). Levels made for earlier views
+/// do not count: the view's bricks alone decide, so that its picture is the same whatever was
+/// drawn before (the viewer's screenshot is `render`'s picture of its scene file).
+fn fall_back_from_rare_levels(wants: &mut [BrickWant], own_splats: usize) {
     let mut held: HashMap<Detail, f64> = HashMap::new();
     for w in wants.iter() {
         *held.entry(w.detail).or_default() += f64::from(w.splats);
     }
     let own = own_splats.max(1) as f64;
-    let kept = |d: &Detail| made.contains(d) || held.get(d).is_some_and(|&n| n >= LEVEL_USE * own);
+    let kept = |d: &Detail| held.get(d).is_some_and(|&n| n >= LEVEL_USE * own);
     let own_drawn = held.contains_key(&Detail::default());
-    let mut standing: Vec<Detail> = made.to_vec();
-    standing.extend(held.keys().copied().filter(|d| kept(d)));
+    let mut standing: Vec<Detail> = held.keys().copied().filter(|d| kept(d)).collect();
     standing.retain(|d| *d != Detail::default() || own_drawn);
     // Coarseness first; equally coarse levels by their halvings and facing, so that the
     // choice does not follow the hash maps' order.
@@ -1141,12 +1142,14 @@ impl Renderer {
         self.no_smooth = !on;
     }
 
-    /// Whether a level of detail that a volume or a brick wants, not made yet, is made only
-    /// where it pays within the frame (off by default: made wherever wanted, for the frames
-    /// to come). On, a level is made where the splats it saves take longer to draw than it
-    /// takes to make, about half a splat drawn for each splat of the grid it is halved from;
-    /// the volumes and bricks that want one not made draw the coarsest level made that is no
-    /// coarser, else their own grid (refined where its voxels fall too far apart, as
+    /// Whether a level of detail that a volume or a brick wants is made and drawn only where
+    /// it pays within the frame (off by default: made wherever wanted, for the frames to
+    /// come). On, a level is drawn where the splats it saves take longer to draw than it
+    /// takes to make, about half a splat drawn for each splat of the grid it is halved from,
+    /// as though no level were made yet (one made by an earlier frame is reused, not made
+    /// again, but drawn only where it would pay), so the picture is the frame's alone; the
+    /// volumes and bricks that want another draw the coarsest level the frame draws that is
+    /// no coarser, else their own grid (refined where its voxels fall too far apart, as
     /// before); no brick is drawn coarser for being smooth ([`Renderer::set_smooth_bricks`];
     /// that measures the level above). For a few frames of a scene, as `splatscene render`
     /// draws: a grid drawn about a pixel apart saves too few splats by its levels to pay for
@@ -1920,12 +1923,11 @@ impl Renderer {
             // grid ([`levels_that_pay`]).
             let mut paying_levels = false;
             if levels_for_one_frame {
-                let made: Vec<Detail> = self
-                    .volumes
-                    .keys()
-                    .filter(|(v, _)| *v == id)
-                    .map(|(_, d)| *d)
-                    .collect();
+                // Decided as if no level were made yet: the levels earlier frames made are
+                // reused where this frame makes them, but drawn only where they pay in it, so
+                // that the picture is the one a fresh renderer draws (a script's frames are
+                // `splatscene render`'s pictures, whatever it drew before).
+                let made: Vec<Detail> = vec![Detail::default()];
                 let unmade = |d: &Detail| matches!(d, Detail::Level(..)) && !made.contains(d);
                 let mut asked: Vec<(Detail, f64)> = Vec::new();
                 for w in brick_wants.iter().flatten().filter(|w| unmade(&w.detail)) {
@@ -1981,17 +1983,11 @@ impl Renderer {
             }
             // Levels few bricks want are not made for them.
             if let Some(wants) = brick_wants.as_mut() {
-                let made: Vec<Detail> = self
-                    .volumes
-                    .keys()
-                    .filter(|(v, d)| *v == id && matches!(d, Detail::Level(..)))
-                    .map(|(_, d)| *d)
-                    .collect();
                 let own_splats = self
                     .volumes
                     .get(&(id, Detail::default()))
                     .map_or(0, |s| s.classified.grid.len());
-                fall_back_from_rare_levels(wants, &made, own_splats);
+                fall_back_from_rare_levels(wants, own_splats);
             }
             // Drawn brick by brick where that draws at most 1 / MIX_SAVING of the splats of
             // the one detail, by the own grid's splats in each brick; decided before any
