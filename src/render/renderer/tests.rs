@@ -862,11 +862,17 @@ fn wavy_field(n: u32) -> (Scene, NodeId) {
             (200.0 + 250.0 * (k[0] / 7.0).sin() * (k[1] / 9.0).sin() * (k[2] / 11.0).sin()) as f32
         })
         .collect();
-    let volume = unit_volume(n, values.into());
-    let transfer = crate::classify::TransferFunction::new(vec![
-        (250.0, [0.9, 0.5, 0.3, 0.0]),
-        (450.0, [1.0, 0.9, 0.7, 0.05]),
-    ]);
+    volume_scene(
+        unit_volume(n, values.into()),
+        crate::classify::TransferFunction::new(vec![
+            (250.0, [0.9, 0.5, 0.3, 0.0]),
+            (450.0, [1.0, 0.9, 0.7, 0.05]),
+        ]),
+    )
+}
+
+/// A scene of `volume` alone, classified by `transfer` (the node's id with it).
+fn volume_scene(volume: CpuVolume, transfer: crate::classify::TransferFunction) -> (Scene, NodeId) {
     let mut scene = Scene::new();
     let node = VolumeNode {
         volume: Arc::new(volume),
@@ -946,24 +952,13 @@ fn a_camera_that_travels_holds_a_refinement_near_the_size_of_its_view() {
         direction: DMat3::IDENTITY,
         values: values.into(),
     };
-    let transfer = crate::classify::TransferFunction::new(vec![
-        (250.0, [0.9, 0.5, 0.3, 0.0]),
-        (400.0, [1.0, 0.9, 0.7, 0.9]),
-    ]);
-    let mut scene = Scene::new();
-    let node = VolumeNode {
-        volume: Arc::new(volume),
-        transfer: Arc::new(transfer),
-        splats: crate::scene::SplatSettings::default(),
-    };
-    let id = scene
-        .add(
-            "bar",
-            DMat4::IDENTITY,
-            None,
-            crate::scene::NodeContent::Volume(node),
-        )
-        .unwrap();
+    let (scene, id) = volume_scene(
+        volume,
+        crate::classify::TransferFunction::new(vec![
+            (250.0, [0.9, 0.5, 0.3, 0.0]),
+            (400.0, [1.0, 0.9, 0.7, 0.9]),
+        ]),
+    );
     let camera_at = |x: f64| SceneCamera {
         eye: DVec3::new(x, -60.0, 15.0),
         target: DVec3::new(x, 15.0, 15.0),
