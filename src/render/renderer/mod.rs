@@ -75,8 +75,8 @@ pub struct FrameTimings {
     /// Making the splats' texels for the CPU tile compositor (only on frames that draw a grid
     /// whose texels are not made yet).
     pub texels: Duration,
-    /// Drawing a volume's own grid alone to find the bricks a first refinement shows (only on
-    /// frames whose view the refinement has not looked for, [`Renderer::set_refinement_where_seen`]).
+    /// Drawing a volume's own grid alone to find the bricks a refinement shows (only on frames
+    /// whose view the refinement has not looked for, [`Renderer::set_refinement_where_seen`]).
     pub seen: Duration,
     /// Computing the draw orders on the CPU.
     pub order: Duration,
@@ -185,9 +185,8 @@ struct VolumeState {
     occupied: Option<Occupied>,
     /// The own grid's bricks a refinement was classified within (`None`: all of them).
     region: Option<Region>,
-    /// The view (with the node's placement, splat settings and the clip planes) a first
-    /// refinement was made for, where it was made within the bricks the own grid shows
-    /// ([`seen_bricks`]): redrawn from that view, it stands.
+    /// The view (with the node's placement, splat settings and the clip planes) whose bricks
+    /// shown ([`seen_bricks`]) `within` holds: redrawn from that view, no look is needed.
     seen_for: Option<seen::SeenFor>,
     /// The own grid's bricks this refinement is drawn within (`None`: all it holds): the
     /// bricks the current view shows ([`seen_bricks`]), so that the picture is the view's
