@@ -33,8 +33,10 @@ struct Splat {
     n1: vec4<f32>,
     n2: vec4<f32>,
     // Clip planes in camera space (x right, y up, z forward, eye at the origin): a splat is
-    // kept where dot(xyz, p) <= w for each; dims.w counts them.
-    clip: array<vec4<f32>, 12>,
+    // kept where dot(xyz, p) <= w for each; dims.w counts them. The scene's planes and crop
+    // box, then in perspective the four beside the view (src/splat/footprint.rs,
+    // `beside_the_view`).
+    clip: array<vec4<f32>, 16>,
 }
 
 @group(0) @binding(0) var<uniform> u: Splat;

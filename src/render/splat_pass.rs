@@ -30,9 +30,13 @@ struct SplatUniforms {
     depth: [f32; 4],
     dims: [u32; 4],
     normal: [[f32; 4]; 3],
-    clip: [[f32; 4]; 12],
+    clip: [[f32; 4]; CLIP_SLOTS],
 }
-const _: () = assert!(size_of::<SplatUniforms>() == 416);
+const _: () = assert!(size_of::<SplatUniforms>() == 480);
+
+/// Planes a splat is tested against: the scene's clip planes and crop box (at most 12), and,
+/// in perspective, the four beside the view ([`crate::splat::footprint::beside_the_view`]).
+const CLIP_SLOTS: usize = 16;
 
 /// The splat pipeline.
 #[derive(Debug)]
@@ -373,13 +377,27 @@ fn uniforms(
     let (w, h) = (f64::from(view.size.0), f64::from(view.size.1));
     let cutoff = (style.cutoff / style.sigma).powi(2);
     let ortho = view.is_orthographic();
+    let mut planes = camera_planes(view, clipping.all_planes().iter());
+    if !ortho {
+        let rows = cov.transpose().to_cols_array_2d();
+        planes.extend(
+            crate::splat::footprint::beside_the_view(
+                view.focal,
+                (w, h),
+                &rows,
+                cutoff,
+                style.pixel_variance,
+            )
+            .map(|p| p.map(|v| v as f32)),
+        );
+    }
     SplatUniforms {
         m: [row(m.row(0)), row(m.row(1)), row(m.row(2))],
         eye: [
             eye_index.x as f32,
             eye_index.y as f32,
             eye_index.z as f32,
-            view.near.max(0.1 * min_spacing) as f32,
+            view.splat_near(min_spacing) as f32,
         ],
         cov: [row(cov.row(0)), row(cov.row(1)), row(cov.row(2))],
         screen: [
@@ -402,8 +420,7 @@ fn uniforms(
         ],
         dims: {
             let d = geometry.dims();
-            let planes = clipping.all_planes().len().min(12) as u32;
-            [d[0], d[1], d[2], planes]
+            [d[0], d[1], d[2], planes.len() as u32]
         },
         normal: {
             let n = view.axes.transpose() * linear.inverse().transpose();
@@ -411,7 +428,13 @@ fn uniforms(
             rows[0][3] = settings.shading.clamp(0.0, 1.0);
             rows
         },
-        clip: camera_planes(view, clipping.all_planes().iter()),
+        clip: {
+            let mut slots = [[0.0; 4]; CLIP_SLOTS];
+            for (slot, plane) in slots.iter_mut().zip(&planes) {
+                *slot = *plane;
+            }
+            slots
+        },
     }
 }
 
@@ -452,12 +475,13 @@ pub(crate) fn projection(
 pub(crate) fn camera_planes<'a>(
     view: &ViewSetup,
     planes: impl Iterator<Item = &'a ClipPlane>,
-) -> [[f32; 4]; 12] {
-    let mut out = [[0.0; 4]; 12];
-    for (slot, plane) in out.iter_mut().zip(planes) {
-        let n = view.axes.transpose() * plane.normal;
-        let d = plane.offset - plane.normal.dot(view.camera.eye);
-        *slot = [n.x as f32, n.y as f32, n.z as f32, d as f32];
-    }
-    out
+) -> Vec<[f32; 4]> {
+    planes
+        .take(12)
+        .map(|plane| {
+            let n = view.axes.transpose() * plane.normal;
+            let d = plane.offset - plane.normal.dot(view.camera.eye);
+            [n.x as f32, n.y as f32, n.z as f32, d as f32]
+        })
+        .collect()
 }

@@ -65,6 +65,13 @@ impl ViewSetup {
         })
     }
 
+    /// The distance from the eye within which a perspective view leaves the splats of a grid
+    /// whose finest voxel edge is `finest_spacing` out: the near plane, and at least a tenth of
+    /// that edge, since a splat nearer than that would cover the image many times over.
+    pub fn splat_near(&self, finest_spacing: f64) -> f64 {
+        self.near.max(0.1 * finest_spacing)
+    }
+
     /// Whether the projection is orthographic.
     pub fn is_orthographic(&self) -> bool {
         matches!(self.camera.projection, Projection::Orthographic { .. })

@@ -102,6 +102,48 @@ pub fn footprint<T: Float>(p: [T; 3], cov: &[[T; 3]; 3], lens: &Lens<T>) -> Opti
     })
 }
 
+/// The four planes, in camera space (x right, y up, z forward, the eye at the origin), past
+/// which a perspective view leaves a splat out: a splat centred at `p` is kept where
+/// `dot(n, p) <= w` for each plane `[n.x, n.y, n.z, w]`.
+///
+/// Each is a side of the view's frustum for an image of `size` pixels and focal length `focal`,
+/// widened by a pixel and the reach of the screen's low-pass (`sqrt(cutoff pixel_variance)`
+/// pixels), and moved out by the splat's own reach along its normal, `sqrt(cutoff n^T S n)`
+/// for the camera-space covariance `cov` (`cutoff`: the Gaussian exponent's cut-off,
+/// radius^2 / sigma^2). A splat past one has its whole cut-off ellipsoid outside the view:
+/// nothing of it lies on a line of sight through the image. The affine approximation of the
+/// perspective map does not know that where a splat lies near the plane of the eye: one a few
+/// millimetres beside the eye gets a footprint of thousands of pixels, and a view from inside
+/// a CT drew its walls as one flat tone (BENCHMARKS.md, "The eye inside the volume"). Far
+/// from the eye the two agree, and the planes leave out only splats whose footprints miss
+/// the image anyway.
+pub fn beside_the_view(
+    focal: f64,
+    size: (f64, f64),
+    cov: &[[f64; 3]; 3],
+    cutoff: f64,
+    pixel_variance: f64,
+) -> [[f64; 4]; 4] {
+    let margin = 1.0 + (cutoff * pixel_variance).max(0.0).sqrt();
+    let tan_x = (0.5 * size.0 + margin) / focal;
+    let tan_y = (0.5 * size.1 + margin) / focal;
+    [
+        [1.0, 0.0, -tan_x],
+        [-1.0, 0.0, -tan_x],
+        [0.0, 1.0, -tan_y],
+        [0.0, -1.0, -tan_y],
+    ]
+    .map(|n| {
+        let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+        let n = n.map(|v| v / len);
+        let spread: f64 = (0..3)
+            .map(|r| n[r] * (0..3).map(|c| cov[r][c] * n[c]).sum::<f64>())
+            .sum();
+        let reach = (cutoff * spread.max(0.0)).sqrt();
+        [n[0], n[1], n[2], reach]
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -180,5 +222,63 @@ mod tests {
         let far = footprint([1.0, 2.0, 300.0], &unit, &ortho).unwrap();
         assert_eq!(near, far);
         assert_eq!(near.cov, [100.3, 0.0, 100.3]);
+    }
+
+    /// The planes beside the view leave out a splat only where its footprint's cut-off box
+    /// misses the image, for splats far from the eye, all around the image's edges; and they
+    /// leave out a splat beside the eye, whose footprint would cover the image many times.
+    #[test]
+    fn the_planes_beside_the_view_leave_out_only_what_misses_the_image() {
+        let (w, h) = (120.0f64, 80.0f64);
+        let lens = Lens {
+            focal: 150.0,
+            centre: [0.5 * w, 0.5 * h],
+            pixel_variance: 0.3,
+            orthographic: false,
+        };
+        // An oblique covariance, 1.5 mm voxels and sigma 0.55.
+        let cov = [[0.68, 0.1, -0.2], [0.1, 0.5, 0.05], [-0.2, 0.05, 0.9]];
+        let cutoff = 8.2;
+        let planes = beside_the_view(lens.focal, (w, h), &cov, cutoff, lens.pixel_variance);
+        let kept = |p: [f64; 3]| {
+            planes
+                .iter()
+                .all(|c| c[0] * p[0] + c[1] * p[1] + c[2] * p[2] <= c[3])
+        };
+        let mut left_out = 0;
+        for z in [30.0, 200.0, 2000.0] {
+            // Centres across and past every edge of the image, in half-pixel steps.
+            let (tx, ty) = (0.5 * w / lens.focal, 0.5 * h / lens.focal);
+            for i in -80..=80 {
+                for j in -80..=80 {
+                    let s = [f64::from(i) / 60.0 * tx, f64::from(j) / 60.0 * ty];
+                    let p = [s[0] * z, s[1] * z, z];
+                    let f = footprint(p, &cov, &lens).unwrap();
+                    let (ex, ey) = ((cutoff * f.cov[0]).sqrt(), (cutoff * f.cov[2]).sqrt());
+                    let meets = f.centre[0] + ex >= 0.0
+                        && f.centre[0] - ex <= w
+                        && f.centre[1] + ey >= 0.0
+                        && f.centre[1] - ey <= h;
+                    if !kept(p) {
+                        left_out += 1;
+                        assert!(
+                            !meets,
+                            "{p:?}: left out, but its footprint {f:?} meets the image"
+                        );
+                    }
+                }
+            }
+        }
+        assert!(left_out > 10_000, "{left_out}");
+        // Beside the eye: 0.5 mm in front of it, 10 mm to the right. Its footprint covers
+        // the image, though its cut-off ellipsoid (about 2.7 mm across) lies wholly outside
+        // the view.
+        let beside = [10.0, 0.0, 0.5];
+        let f = footprint(beside, &cov, &lens).unwrap();
+        let ex = (cutoff * f.cov[0]).sqrt();
+        assert!(f.centre[0] - ex < 0.0 && ex > 10.0 * w, "{f:?}");
+        assert!(!kept(beside));
+        // The view's own axis, however near, is kept.
+        assert!(kept([0.0, 0.0, 0.05]) && kept([0.3, -0.2, 1.0]));
     }
 }

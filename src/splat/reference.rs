@@ -286,6 +286,13 @@ fn project(
         orthographic: false,
     };
     let cov = cov.transpose().to_cols_array_2d();
+    let beside = crate::splat::footprint::beside_the_view(
+        frame.focal,
+        (f64::from(camera.width), f64::from(camera.height)),
+        &cov,
+        radius * radius,
+        style.pixel_variance,
+    );
     let (w, h) = (i64::from(camera.width), i64::from(camera.height));
     let mut out = Vec::with_capacity(order.len());
     for (position, &id) in order.iter().enumerate() {
@@ -298,7 +305,11 @@ fn project(
         }
         let k = DVec3::from(grid.coords(id).map(f64::from));
         let p = m * (k - eye_index);
-        if p.z <= near {
+        if p.z <= near
+            || beside
+                .iter()
+                .any(|c| c[0] * p.x + c[1] * p.y + c[2] * p.z > c[3])
+        {
             continue;
         }
         let Some(footprint) = footprint(p.to_array(), &cov, &lens) else {

@@ -129,14 +129,19 @@ pub(super) const MAX_REFINED_DIM: u64 = 2048;
 ///   resampled to 0.7 mm at 512 x 512: 3.4 times faster, but RMSE 0.037 against the reference
 ///   ray marcher where the full grid gives 0.024.)
 ///
-/// The volume's own grid when the eye is inside the box.
+/// With the eye inside the box (or nearer it than splats are drawn), the grid's voxels may lie
+/// as near the eye as the splats' near cut ([`ViewSetup::splat_near`]), so it is refined as far
+/// as [`MAX_REFINE`] and [`MAX_REFINED_VOXELS`] allow: drawn from its own grid there, its splats
+/// a few millimetres from the eye span hundreds of pixels and blur the image into one tone
+/// (RMSE 0.19 against the reference marcher on a view from inside a CT's lung, BENCHMARKS.md,
+/// "The eye inside the volume").
 pub fn detail_for(geometry: &VolumeGeometry, view: &ViewSetup) -> Detail {
     detail_at(geometry.dims(), apart_near(geometry, view, None))
 }
 
 /// [`detail_for`] a `dims` grid whose voxels are `apart` pixels apart on the screen along
-/// each axis where it is drawn largest, facing the eye as `apart` says (`None`: the eye
-/// inside it).
+/// each axis where it is drawn largest, facing the eye as `apart` says (`None`: not known, the own
+/// grid).
 pub(super) fn detail_at(dims: [u32; 3], apart: Option<Apart>) -> Detail {
     detail_within(dims, apart, COARSEN_TO)
 }
@@ -313,8 +318,9 @@ impl Occupied {
 
 /// How many pixels apart on the screen the voxels of a grid placed as `geometry` fall along
 /// each of its axes in `view`, where the grid is drawn largest: a voxel's edge along the axis
-/// projected across the line of sight, at the distance of the grid's box from the eye.
-/// `None` when the eye is inside the box.
+/// projected across the line of sight, at the distance of the grid's box from the eye (at
+/// least the splats' near cut, [`ViewSetup::splat_near`]: an eye inside the box sees voxels
+/// drawn as near as that). `None` where a value is not finite.
 pub fn pixels_apart(geometry: &VolumeGeometry, view: &ViewSetup) -> Option<[f64; 3]> {
     pixels_apart_near(geometry, view, None)
 }
@@ -350,7 +356,8 @@ pub(super) struct Apart {
 
 /// How many pixels apart the voxels of a grid placed as `geometry` fall on the screen along
 /// each of its axes in `view` at the world box `(centre, half size)` of some of its voxels
-/// (see [`apart_near`]); `None` when the eye is in the box.
+/// (see [`apart_near`]), at least the splats' near cut away; `None` where a value is not
+/// finite.
 fn apart_in_box(
     geometry: &VolumeGeometry,
     view: &ViewSetup,
@@ -385,11 +392,11 @@ fn apart_in_box(
     let pixel = if view.is_orthographic() {
         1.0 / view.focal
     } else {
+        // An eye in the box (or nearer it than splats are drawn) may have the box's voxels
+        // as near as the splats' near cut: that is where they are drawn largest.
+        let finest = spacing.into_iter().fold(f64::INFINITY, f64::min);
         let nearest = (eye.clamp(centre - half, centre + half) - eye).length();
-        if nearest.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
-            return None;
-        }
-        nearest / view.focal
+        nearest.max(view.splat_near(finest)) / view.focal
     };
     // The sight lines to the box's corners (one, the view direction, orthographic).
     let sights: [DVec3; 8] = std::array::from_fn(|corner| {
@@ -440,7 +447,7 @@ pub(super) fn apart_near(
             if off_image(view, b) {
                 continue;
             }
-            // The eye in a box (or a box at no distance): the own grid.
+            // A value that is not finite: the own grid.
             let apart = of_box(b)?;
             let m = most.get_or_insert(apart);
             for a in 0..3 {
@@ -566,7 +573,7 @@ pub(super) fn refine_factors(dims: [u32; 3], apart: [f64; 3]) -> Option<[u32; 3]
 /// for the bricks whose splats can land on the image: [`detail_at`] the brick's own distance
 /// and sight lines, the rule a volume's level follows at its nearest brick: a level of its
 /// pyramid, or its grid refined where its voxels fall more than [`REFINE_TO`] pixels apart. A
-/// brick the eye is in draws the own grid; a `preview` draws every brick at least a level
+/// brick the eye is in is seen from the splats' near cut; a `preview` draws every brick at least a level
 /// coarser. With each brick comes the level, halved once more along the axes halved least
 /// (and at most once more along the others), it may be drawn at where its content is smooth
 /// ([`SMOOTH_COARSEN_TO`]; `None` for a preview, a brick drawn refined, or one whose voxels

@@ -1,5 +1,11 @@
 use super::*;
 
+/// The bounds views are set up with: a 2 m cube about the origin, holding every grid of these
+/// tests, so that the near plane lies nearer the eye than any of them (without bounds the
+/// near plane lies a millimetre short of the target, past the nearer half of each grid, and
+/// its splats would be left out).
+const WORLD: Option<(DVec3, DVec3)> = Some((DVec3::splat(-1000.0), DVec3::splat(1000.0)));
+
 #[test]
 fn refined_voxels_tile_the_coarse_box() {
     // Fine voxel j of coarse voxel k sits at k - 1/2 + (j + 1/2) / f: the first fine
@@ -39,7 +45,7 @@ fn the_detail_follows_the_pixels_a_voxel_spans() {
         VolumeGeometry::new([50; 3], glam::DAffine3::from_scale(DVec3::splat(spacing))).unwrap()
     };
     let camera = SceneCamera::look_at(DVec3::new(50.0, 50.0, -400.0), DVec3::splat(50.0));
-    let view = |pixels: u32| ViewSetup::new(&camera, (pixels, pixels), None).unwrap();
+    let view = |pixels: u32| ViewSetup::new(&camera, (pixels, pixels), WORLD).unwrap();
     let apart = |g: &VolumeGeometry, v: &ViewSetup| pixels_apart(g, v).unwrap();
     // About 2 pixels apart across the view at 256: refined 2 x 2 x 2 (the voxels' edges
     // along z, the view, would span as many pixels across it). Along z the voxels lie nearly
@@ -76,11 +82,11 @@ fn the_detail_follows_the_pixels_a_voxel_spans() {
     }
     // From the other side its larger indices face the eye.
     let behind = SceneCamera::look_at(DVec3::new(50.0, 50.0, 500.0), DVec3::splat(50.0));
-    let v = ViewSetup::new(&behind, (160, 160), None).unwrap();
+    let v = ViewSetup::new(&behind, (160, 160), WORLD).unwrap();
     assert_eq!(detail_for(&g, &v), Detail::Level([0, 0, 1], [0, 0, 1]));
     // Along the diagonal no axis lies along the view: every axis alike.
     let diagonal = SceneCamera::look_at(DVec3::splat(-300.0), DVec3::splat(50.0));
-    let v = ViewSetup::new(&diagonal, (48, 48), None).unwrap();
+    let v = ViewSetup::new(&diagonal, (48, 48), WORLD).unwrap();
     let a = apart(&g, &v);
     assert!(
         (a[0] - a[1]).abs() < 1e-9 && (a[1] - a[2]).abs() < 1e-9,
@@ -95,17 +101,47 @@ fn the_detail_follows_the_pixels_a_voxel_spans() {
         projection: crate::scene::Projection::Orthographic { height: 200.0 },
         ..SceneCamera::look_at(DVec3::new(-400.0, 50.0, 50.0), DVec3::splat(50.0))
     };
-    let v = ViewSetup::new(&ortho, (100, 100), None).unwrap();
+    let v = ViewSetup::new(&ortho, (100, 100), WORLD).unwrap();
     let a = apart(&g, &v);
     assert!(a[0].abs() < 1e-9 && (a[1] - 1.0).abs() < 1e-9, "{a:?}");
     assert_eq!(
         detail_for(&g, &v),
         Detail::Level([MAX_DEPTH_LEVELS, 0, 0], [-1, 0, 0])
     );
-    // The eye inside the box: the own grid.
+    // The eye inside the box: its voxels may lie as near as the splats' near cut, a tenth of
+    // a voxel (the view's own near plane is nearer), so the grid is refined as far as it may
+    // be: MAX_REFINE along every axis (50^3 voxels refined 8^3 times is under
+    // MAX_REFINED_VOXELS).
     let inside = SceneCamera::look_at(DVec3::splat(50.0), DVec3::new(50.0, 50.0, 400.0));
-    let v = ViewSetup::new(&inside, (256, 256), None).unwrap();
-    assert_eq!(detail_for(&g, &v), Detail::default());
+    let v = ViewSetup::new(
+        &inside,
+        (256, 256),
+        Some((DVec3::ZERO, DVec3::splat(100.0))),
+    )
+    .unwrap();
+    let near = v.splat_near(2.0);
+    assert!((near - 0.2).abs() < 1e-12, "{near}");
+    let a = apart(&g, &v);
+    let expected = 2.0 * v.focal / near;
+    assert!(
+        a.iter().all(|&p| (p - expected).abs() < 1e-6 * expected),
+        "{a:?} against {expected}"
+    );
+    assert_eq!(detail_for(&g, &v), Detail::Refined([MAX_REFINE; 3]));
+    // A larger grid inside: the factors shrink to MAX_REFINED_VOXELS, largest first.
+    let large =
+        VolumeGeometry::new([400; 3], glam::DAffine3::from_scale(DVec3::splat(0.25))).unwrap();
+    match detail_for(&large, &v) {
+        Detail::Refined(f) => {
+            let voxels: u64 = f.iter().map(|&f| 400 * u64::from(f)).product();
+            assert!(voxels <= MAX_REFINED_VOXELS, "{f:?}");
+            assert!(
+                f.iter().all(|&f| f >= 1) && f.iter().max().unwrap() - f.iter().min().unwrap() <= 1,
+                "{f:?}"
+            );
+        }
+        other => panic!("{other:?}"),
+    }
 }
 
 /// An `n`^3 grid of 1 mm voxels at the origin holding `values`.
@@ -168,7 +204,7 @@ fn the_detail_goes_by_where_the_content_comes_nearest() {
     let camera = SceneCamera::look_at(eye, DVec3::splat(53.0));
     let mut coarser = 0;
     for pixels in (16..=256).step_by(4) {
-        let view = ViewSetup::new(&camera, (pixels, pixels), None).unwrap();
+        let view = ViewSetup::new(&camera, (pixels, pixels), WORLD).unwrap();
         let by_box = pixels_apart(&geometry, &view).unwrap()[0];
         let by_content = pixels_apart_near(&geometry, &view, Some(&occupied)).unwrap()[0];
         assert!(by_content < 0.7 * by_box, "{by_content} against {by_box}");
@@ -194,7 +230,7 @@ fn content_off_the_image_does_not_set_the_detail() {
     // Looking along +z from the origin at 35 degrees (half-angle 17.5): a box 100 mm ahead
     // is on the image; one as far ahead but 100 mm to a side, or behind the eye, is not.
     let camera = SceneCamera::look_at(DVec3::ZERO, DVec3::new(0.0, 0.0, 100.0));
-    let view = ViewSetup::new(&camera, (200, 100), None).unwrap();
+    let view = ViewSetup::new(&camera, (200, 100), WORLD).unwrap();
     let half = DVec3::splat(5.0);
     let at = |x: f64, y: f64, z: f64| (DVec3::new(x, y, z), half);
     assert!(!off_image(&view, at(0.0, 0.0, 100.0)));
@@ -220,7 +256,7 @@ fn content_off_the_image_does_not_set_the_detail() {
         projection: crate::scene::Projection::Orthographic { height: 100.0 },
         ..camera
     };
-    let view = ViewSetup::new(&ortho, (200, 100), None).unwrap();
+    let view = ViewSetup::new(&ortho, (200, 100), WORLD).unwrap();
     assert!(!off_image(&view, at(90.0, 0.0, 500.0)));
     assert!(off_image(&view, at(0.0, 60.0, 500.0)));
     assert!(off_image(&view, at(0.0, 0.0, -100.0)));
@@ -237,7 +273,7 @@ fn content_off_the_image_does_not_set_the_detail() {
         },
         ..SceneCamera::look_at(DVec3::new(32.0, 32.0, -40.0), DVec3::new(32.0, 32.0, 60.0))
     };
-    let view = ViewSetup::new(&camera, (64, 64), None).unwrap();
+    let view = ViewSetup::new(&camera, (64, 64), WORLD).unwrap();
     let on_image = pixels_apart_near(&geometry, &view, Some(&occupied)).unwrap();
     // By the far cube's brick alone (z from 47.5), 87.5 mm from the eye; the near cube's
     // brick, off the image, lies 42 mm from it.
@@ -343,7 +379,7 @@ fn bricks_far_from_the_eye_draw_coarser_levels_and_those_off_the_image_none() {
         },
         ..SceneCamera::look_at(DVec3::new(64.0, 64.0, -30.0), DVec3::new(64.0, 64.0, 64.0))
     };
-    let view = ViewSetup::new(&camera, (96, 96), None).unwrap();
+    let view = ViewSetup::new(&camera, (96, 96), WORLD).unwrap();
     let bricks = brick_details(&geometry, &view, &occupied, false, REFINE_TO);
     let level = |d: &Detail| match d {
         Detail::Level(l, _) => l.iter().copied().max().unwrap_or(0),
