@@ -10,7 +10,7 @@ use super::GpuContext;
 use super::target::{DEPTH_FORMAT, color_format};
 use super::view::ViewSetup;
 use crate::mesh::{CpuMesh, Material};
-use crate::scene::{ClipPlane, Clipping, Lights};
+use crate::scene::{ClipPlane, Clipping, Lights, MAX_PLANES_IN_FORCE};
 
 /// Keep in sync with `Frame` in shaders/mesh.wgsl.
 #[repr(C)]
@@ -21,7 +21,7 @@ struct FrameUniforms {
     params: [f32; 4],
     light_dir: [[f32; 4]; 4],
     light_color: [[f32; 4]; 4],
-    clip: [[f32; 4]; 12],
+    clip: [[f32; 4]; MAX_PLANES_IN_FORCE],
 }
 const _: () = assert!(size_of::<FrameUniforms>() == 416);
 
@@ -237,7 +237,7 @@ impl MeshPass {
             .all_planes()
             .into_iter()
             .filter(|p| p.meshes)
-            .take(12)
+            .take(MAX_PLANES_IN_FORCE)
             .collect();
         let mut u = FrameUniforms {
             view_proj: view.view_proj().to_cols_array_2d(),
@@ -250,7 +250,7 @@ impl MeshPass {
             ],
             light_dir: [[0.0; 4]; 4],
             light_color: [[0.0; 4]; 4],
-            clip: [[0.0; 4]; 12],
+            clip: [[0.0; 4]; MAX_PLANES_IN_FORCE],
         };
         for (slot, plane) in u.clip.iter_mut().zip(&planes) {
             // Camera-relative world: the offset moves with the eye, in f64.
@@ -440,4 +440,15 @@ fn mesh_pipeline(
         multiview_mask: None,
         cache: None,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_shader_holds_as_many_planes_as_the_uniforms() {
+        let wgsl = include_str!("../../shaders/mesh.wgsl");
+        assert!(wgsl.contains(&format!("clip: array<vec4<f32>, {MAX_PLANES_IN_FORCE}>")));
+    }
 }

@@ -16,7 +16,7 @@ use super::view::ViewSetup;
 use super::{GpuContext, RenderError};
 use crate::classify::{Classified, view_step_mm};
 use crate::geometry::VolumeGeometry;
-use crate::scene::{ClipPlane, Clipping, SplatSettings};
+use crate::scene::{ClipPlane, Clipping, MAX_PLANES_IN_FORCE, SplatSettings};
 
 /// Keep in sync with `Splat` in shaders/splat.wgsl.
 #[repr(C)]
@@ -34,9 +34,10 @@ struct SplatUniforms {
 }
 const _: () = assert!(size_of::<SplatUniforms>() == 480);
 
-/// Planes a splat is tested against: the scene's clip planes and crop box (at most 12), and,
-/// in perspective, the four beside the view ([`crate::splat::footprint::beside_the_view`]).
-const CLIP_SLOTS: usize = 16;
+/// Planes a splat is tested against: the scene's clip planes and crop box
+/// ([`MAX_PLANES_IN_FORCE`]), and, in perspective, the four beside the view
+/// ([`crate::splat::footprint::beside_the_view`]). `shaders/splat.wgsl` holds as many.
+const CLIP_SLOTS: usize = MAX_PLANES_IN_FORCE + 4;
 
 /// The splat pipeline.
 #[derive(Debug)]
@@ -477,11 +478,22 @@ pub(crate) fn camera_planes<'a>(
     planes: impl Iterator<Item = &'a ClipPlane>,
 ) -> Vec<[f32; 4]> {
     planes
-        .take(12)
+        .take(MAX_PLANES_IN_FORCE)
         .map(|plane| {
             let n = view.axes.transpose() * plane.normal;
             let d = plane.offset - plane.normal.dot(view.camera.eye);
             [n.x as f32, n.y as f32, n.z as f32, d as f32]
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_shader_holds_as_many_planes_as_the_uniforms() {
+        let wgsl = include_str!("../../shaders/splat.wgsl");
+        assert!(wgsl.contains(&format!("clip: array<vec4<f32>, {CLIP_SLOTS}>")));
+    }
 }

@@ -8,6 +8,10 @@ use glam::DVec3;
 /// The most planes a scene may have (the crop box comes on top).
 pub const MAX_CLIP_PLANES: usize = 6;
 
+/// The most planes in force at once ([`Clipping::all_planes`]): the scene's and the crop box's
+/// six. The shaders' plane arrays are sized from it.
+pub const MAX_PLANES_IN_FORCE: usize = MAX_CLIP_PLANES + 6;
+
 /// A plane that keeps the half-space `normal . p <= offset` and cuts away the rest.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ClipPlane {

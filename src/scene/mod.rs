@@ -23,7 +23,7 @@ pub mod shoulder;
 pub mod slice_spec;
 mod view;
 
-pub use clip::{ClipPlane, Clipping, MAX_CLIP_PLANES};
+pub use clip::{ClipPlane, Clipping, MAX_CLIP_PLANES, MAX_PLANES_IN_FORCE};
 pub use objects::{ObjectError, world_triangles};
 pub use view::{Light, Lights, Projection, SceneCamera};
 

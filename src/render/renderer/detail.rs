@@ -140,8 +140,8 @@ pub fn detail_for(geometry: &VolumeGeometry, view: &ViewSetup) -> Detail {
 }
 
 /// [`detail_for`] a `dims` grid whose voxels are `apart` pixels apart on the screen along
-/// each axis where it is drawn largest, facing the eye as `apart` says (`None`: not known, the own
-/// grid).
+/// each axis where it is drawn largest, facing the eye as `apart` says. Where `apart` is not
+/// known (`None`), the own grid.
 pub(super) fn detail_at(dims: [u32; 3], apart: Option<Apart>) -> Detail {
     detail_within(dims, apart, COARSEN_TO)
 }
@@ -328,9 +328,9 @@ pub fn pixels_apart(geometry: &VolumeGeometry, view: &ViewSetup) -> Option<[f64;
 /// [`pixels_apart`] where the grid's content is drawn largest, where its `occupied` bricks
 /// are known (the volume's own grid), else where its box is; bricks off the image do not
 /// count. Along each axis, the largest over the bricks of the voxel's edge across the line of
-/// sight (the least cosine between the
-/// axis and the lines of sight to the brick's corners; none where they fall on both sides of
-/// it) over the world size of a pixel at the brick's nearest point.
+/// sight (the least cosine between the axis and the lines of sight to the brick's corners;
+/// none where they fall on both sides of it) over the world size of a pixel at the brick's
+/// nearest point.
 pub(super) fn pixels_apart_near(
     geometry: &VolumeGeometry,
     view: &ViewSetup,
@@ -573,15 +573,16 @@ pub(super) fn refine_factors(dims: [u32; 3], apart: [f64; 3]) -> Option<[u32; 3]
 /// for the bricks whose splats can land on the image: [`detail_at`] the brick's own distance
 /// and sight lines, the rule a volume's level follows at its nearest brick: a level of its
 /// pyramid, or its grid refined where its voxels fall more than [`REFINE_TO`] pixels apart. A
-/// brick the eye is in is seen from the splats' near cut; a `preview` draws every brick at least a level
-/// coarser. With each brick comes the level, halved once more along the axes halved least
-/// (and at most once more along the others), it may be drawn at where its content is smooth
-/// ([`SMOOTH_COARSEN_TO`]; `None` for a preview, a brick drawn refined, or one whose voxels
-/// would fall too far apart). A brick whose voxels fall more than `refine_from` pixels
-/// apart (whole edges) wants refining whatever the rule says ([`REFINE_TO`] is the rule's own threshold). A brick is left out where its box, grown by two of its
-/// splats' voxels each way and by three pixels at its far side (the footprints' reach past
-/// their voxels and the screen's low-pass), lies off the image ([`off_image`]). Each brick
-/// comes with the own grid's splats in it.
+/// brick the eye is in is seen from the splats' near cut; a `preview` draws every brick at
+/// least a level coarser. With each brick comes the level, halved once more along the axes
+/// halved least (and at most once more along the others), it may be drawn at where its
+/// content is smooth ([`SMOOTH_COARSEN_TO`]; `None` for a preview, a brick drawn refined, or
+/// one whose voxels would fall too far apart). A brick whose voxels fall more than
+/// `refine_from` pixels apart (whole edges) wants refining whatever the rule says
+/// ([`REFINE_TO`] is the rule's own threshold). A brick is left out where its box, grown by
+/// two of its splats' voxels each way and by three pixels at its far side (the footprints'
+/// reach past their voxels and the screen's low-pass), lies off the image ([`off_image`]).
+/// Each brick comes with the own grid's splats in it.
 pub(super) fn brick_details(
     geometry: &VolumeGeometry,
     view: &ViewSetup,
