@@ -511,12 +511,171 @@ impl Mix {
     }
 }
 
+/// The most bricks the least box of bricks holding a run ([`brick_runs`]) may hold for each
+/// brick of the run: a run is walked over its box, and the splats of the box's other bricks
+/// are walked and dropped.
+const RUN_BOX_SPARE: u32 = 2;
+
+/// Bricks that follow one another in a mix's draw order at one detail, drawn as one: their
+/// splats in their level's order over all of them, so that no face between two of them is
+/// drawn as one brick's splats after the other's (a seam where a surface crosses it).
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct BrickRun {
+    /// One past its last brick in the draw order.
+    end: usize,
+    detail: Detail,
+    /// The least box of bricks holding it, brick coordinates, inclusive.
+    lo: [u32; 3],
+    hi: [u32; 3],
+    /// Its bricks.
+    bricks: u32,
+}
+
+impl BrickRun {
+    /// Whether every brick of its box is one of its own.
+    fn fills_its_box(&self) -> bool {
+        (0..3).map(|a| self.hi[a] - self.lo[a] + 1).product::<u32>() == self.bricks
+    }
+}
+
+/// `bricks` (in draw order) cut into runs: bricks that follow one another at one detail, each
+/// such stretch halved (at its middle, again and again) until the least box holding each part
+/// holds at most [`RUN_BOX_SPARE`] bricks for each of its own. (The brick order takes the rows
+/// of a slab from both sides of the eye in turn, so a stretch's box fills only once it is
+/// whole: cut greedily, a slab would be cut at every row.) A run's splats in its level's order
+/// are a visibility order of them (a level's IP-PBTF order restricted to some of its voxels is
+/// one), and runs are drawn in the bricks' order, so the mix is a visibility order of whole
+/// bricks between runs.
+fn brick_runs(bricks: &[([u32; 3], Detail)]) -> Vec<BrickRun> {
+    fn cut(bricks: &[([u32; 3], Detail)], start: usize, runs: &mut Vec<BrickRun>) {
+        let (mut lo, mut hi) = (bricks[0].0, bricks[0].0);
+        for (b, _) in bricks {
+            lo = std::array::from_fn(|a| lo[a].min(b[a]));
+            hi = std::array::from_fn(|a| hi[a].max(b[a]));
+        }
+        let boxed: u64 = (0..3).map(|a| u64::from(hi[a] - lo[a] + 1)).product();
+        if bricks.len() > 1 && boxed > u64::from(RUN_BOX_SPARE) * bricks.len() as u64 {
+            let half = bricks.len() / 2;
+            cut(&bricks[..half], start, runs);
+            cut(&bricks[half..], start + half, runs);
+        } else {
+            runs.push(BrickRun {
+                end: start + bricks.len(),
+                detail: bricks[0].1,
+                lo,
+                hi,
+                bricks: bricks.len() as u32,
+            });
+        }
+    }
+    let mut runs = Vec::new();
+    let mut start = 0;
+    while start < bricks.len() {
+        let detail = bricks[start].1;
+        let end = bricks[start..]
+            .iter()
+            .position(|(_, d)| *d != detail)
+            .map_or(bricks.len(), |n| start + n);
+        cut(&bricks[start..end], start, &mut runs);
+        start = end;
+    }
+    runs
+}
+
+/// Per brick of a grid of `[bx, by, bz]` bricks (x fastest), the index among the runs at
+/// `detail` of the run it is drawn in, or `u32::MAX`.
+fn bricks_in_runs(
+    bricks: &[([u32; 3], Detail)],
+    runs: &[BrickRun],
+    [bx, by, bz]: [u32; 3],
+    detail: Detail,
+) -> Vec<u32> {
+    let (bx, by) = (bx as usize, by as usize);
+    let mut slot = vec![u32::MAX; bx * by * bz as usize];
+    let (mut start, mut r) = (0, 0u32);
+    for run in runs {
+        if run.detail == detail {
+            for (b, _) in &bricks[start..run.end] {
+                let [x, y, z] = b.map(|c| c as usize);
+                if let Some(s) = slot.get_mut(x + bx * (y + by * z)) {
+                    *s = r;
+                }
+            }
+            r += 1;
+        }
+        start = run.end;
+    }
+    slot
+}
+
+/// Leaves out of `ids` (voxel ids of a grid of `dims`, a level or refinement of the own grid
+/// as `(halvings, factors)` say, box after box, `ends` one past each box's last) the splats
+/// whose brick is not in box `i`'s run (`in_run`, [`bricks_in_runs`], over a grid of
+/// `bricks`), keeping the order of the rest and moving `ends` to match.
+fn keep_in_runs(
+    ids: &mut Vec<u32>,
+    ends: &mut [usize],
+    dims: [u32; 3],
+    (halvings, factors): ([u32; 3], [u32; 3]),
+    in_run: &[u32],
+    bricks: [u32; 3],
+) {
+    // A voxel's brick, axis by axis, looked up rather than divided per splat: a level's voxel
+    // `k` lies in brick `floor(k 2^l / BRICK)`, a refinement's in `floor(k / (f BRICK))`.
+    let brick_of: [Vec<u32>; 3] = std::array::from_fn(|a| {
+        (0..dims[a])
+            .map(|k| (k << halvings[a]) / (BRICK * factors[a]))
+            .collect()
+    });
+    let [nx, ny, _] = dims;
+    let [bx, by, _] = bricks;
+    let run_of = |id: u32| {
+        let (x, y, z) = (id % nx, (id / nx) % ny, id / nx / ny);
+        let b = [
+            brick_of[0][x as usize],
+            brick_of[1][y as usize],
+            brick_of[2][z as usize],
+        ];
+        in_run
+            .get((b[0] + bx * (b[1] + by * b[2])) as usize)
+            .copied()
+            .unwrap_or(u32::MAX)
+    };
+    // Each box filtered apart (in parallel), then joined in order.
+    let mut start = 0;
+    let spans: Vec<(u32, std::ops::Range<usize>)> = ends
+        .iter()
+        .enumerate()
+        .map(|(r, &end)| {
+            let span = (r as u32, start..end);
+            start = end;
+            span
+        })
+        .collect();
+    let kept: Vec<Vec<u32>> = spans
+        .par_iter()
+        .map(|(r, span)| {
+            ids[span.clone()]
+                .iter()
+                .copied()
+                .filter(|&id| run_of(id) == *r)
+                .collect()
+        })
+        .collect();
+    ids.clear();
+    for (end, k) in ends.iter_mut().zip(kept) {
+        ids.extend_from_slice(&k);
+        *end = ids.len();
+    }
+}
+
 /// Orders volume `id`'s splats drawn brick by brick as `mix` says, its node placed by
-/// `world`, for the eye and target `view`: the bricks put far to near ([`brick_order`]), each
-/// brick's splats in its level's order, into `mix.ids`, cut into runs of one level. In the
-/// IP-PBTF orders each brick's splats are walked within the brick alone
-/// ([`Orderer::order_boxes`]), so the cost follows the splats drawn; in the others each level
-/// is ordered whole and its splats sorted into bricks ([`order_mix_from_whole_levels`]).
+/// `world`, for the eye and target `view`: the bricks put far to near ([`brick_order`]) and
+/// cut into runs of one detail ([`brick_runs`]), each run's splats in its level's order, into
+/// `mix.ids`, cut into stretches of one level. In the IP-PBTF orders each run's splats are
+/// walked within the least box of bricks holding it ([`Orderer::order_boxes`]), so the cost
+/// follows the splats drawn; in the others each level is ordered whole and its splats sorted
+/// into runs ([`order_mix_from_whole_levels`]).
 fn order_mix(
     volumes: &mut HashMap<(NodeId, Detail), VolumeState>,
     id: NodeId,
@@ -530,6 +689,8 @@ fn order_mix(
         .ok_or("the volume's own grid is not classified")?;
     let own_geometry = own.geometry(world).map_err(|e| e.to_string())?;
     brick_order(&own_geometry, eye, target, BRICK, &mut mix.bricks).map_err(|e| e.to_string())?;
+    let own_bricks = own_geometry.dims().map(|n| n.div_ceil(BRICK));
+    let runs = brick_runs(&mix.bricks);
     let details = mix.details();
     // Per level, its bricks' splats brick after brick in draw order, and where each ends.
     let mut parts: Vec<(Vec<u32>, Vec<usize>)> = Vec::with_capacity(details.len());
@@ -542,17 +703,17 @@ fn order_mix(
         let (halvings, factors) = brick_scale(detail);
         // A level's voxel `k` lies in brick `floor(k 2^l / BRICK)`, a refinement's in brick
         // `floor(k / (f BRICK))`: the voxels of brick `b` are those from `ceil(b side / step)`.
-        let boxes: Vec<[(u32, u32); 3]> = mix
-            .bricks
+        // A run is walked over the least box of bricks that holds it.
+        let level_runs: Vec<&BrickRun> = runs.iter().filter(|r| r.detail == detail).collect();
+        let boxes: Vec<[(u32, u32); 3]> = level_runs
             .iter()
-            .filter(|(_, d)| *d == detail)
-            .map(|(b, _)| {
+            .map(|run| {
                 std::array::from_fn(|a| {
                     let side = BRICK * factors[a];
                     let step = 1u32 << halvings[a];
                     (
-                        (b[a] * side).div_ceil(step),
-                        ((b[a] + 1) * side).div_ceil(step),
+                        (run.lo[a] * side).div_ceil(step),
+                        ((run.hi[a] + 1) * side).div_ceil(step),
                     )
                 })
             })
@@ -568,19 +729,30 @@ fn order_mix(
             &mut ends,
         )
         .map_err(|e| e.to_string())?;
+        if walked && level_runs.iter().any(|r| !r.fills_its_box()) {
+            let dims = state.classified.grid.dims();
+            let in_run = bricks_in_runs(&mix.bricks, &runs, own_bricks, detail);
+            keep_in_runs(
+                &mut ids,
+                &mut ends,
+                dims,
+                (halvings, factors),
+                &in_run,
+                own_bricks,
+            );
+        }
         if walked && let Some(within) = &state.within {
             // A refinement drawn within the bricks the view shows.
             let dims = state.classified.grid.dims();
             keep_within(&mut ids, Some(&mut ends), dims, factors, within);
         }
         if !walked {
-            let bricks = own_geometry.dims().map(|n| n.div_ceil(BRICK) as usize);
             return order_mix_from_whole_levels(
                 volumes,
                 (id, world),
                 (eye, target),
                 (ordering, options),
-                bricks,
+                own_bricks,
                 mix,
             );
         }
@@ -588,9 +760,9 @@ fn order_mix(
     }
     mix.ids.clear();
     mix.runs.clear();
-    // Per level, the bricks of it taken so far and where the next one's splats start.
+    // Per level, the runs of it taken so far and where the next one's splats start.
     let mut next = vec![(0usize, 0usize); details.len()];
-    for (_, detail) in &mix.bricks {
+    for BrickRun { detail, .. } in &runs {
         let level = details.iter().position(|d| d == detail).unwrap_or(0);
         let ((ids, ends), (taken, start)) = (&parts[level], &mut next[level]);
         let end = ends.get(*taken).copied().unwrap_or(*start);
@@ -667,18 +839,19 @@ fn brick_scale(detail: Detail) -> ([u32; 3], [u32; 3]) {
 }
 
 /// [`order_mix`] for the orderings that cannot walk a brick alone: each level the bricks use
-/// ordered whole by `ordering`, then each brick's splats taken from its level's order in the
-/// bricks' order, `mix.bricks` as ordered already in a grid of `[bx, by, bz]` bricks (a
-/// counting sort by brick, which keeps the level's order within each brick).
+/// ordered whole by `ordering`, then each run's splats ([`brick_runs`]) taken from its level's
+/// order in the bricks' order, `mix.bricks` as ordered already in a grid of `bricks` bricks
+/// (a counting sort by run, which keeps the level's order within each run).
 fn order_mix_from_whole_levels(
     volumes: &mut HashMap<(NodeId, Detail), VolumeState>,
     (id, world): (NodeId, DMat4),
     (eye, target): (DVec3, DVec3),
     (ordering, options): (Ordering, &OrderOptions),
-    [bx, by, bz]: [usize; 3],
+    bricks: [u32; 3],
     mix: &mut Mix,
 ) -> Result<(), String> {
     let details = mix.details();
+    let runs = brick_runs(&mix.bricks);
     for &detail in &details {
         volumes
             .get_mut(&(id, detail))
@@ -687,19 +860,24 @@ fn order_mix_from_whole_levels(
     }
     // A brick a level does not draw.
     const NONE: u32 = u32::MAX;
-    let mut starts = vec![0usize; mix.bricks.len() + 1];
+    let [bx, by, _] = bricks.map(|n| n as usize);
+    let mut starts = vec![0usize; runs.len() + 1];
     // Per level, each splat's brick's place (a splat's brick: its voxel's first own voxel
     // over the brick's side; `k 2^l` on a level, `k / f` on a refinement), found in parallel.
     let mut places = std::mem::take(&mut mix.places);
     places.resize_with(details.len(), Vec::new);
     for (&detail, place) in details.iter().zip(places.iter_mut()) {
-        // The place in the draw order of each brick the level draws, by the brick's index in
-        // the grid of bricks.
-        let mut slot = vec![NONE; bx * by * bz];
-        for (i, (b, d)) in mix.bricks.iter().enumerate() {
-            if *d == detail {
-                slot[b[0] as usize + bx * (b[1] as usize + by * b[2] as usize)] = i as u32;
-            }
+        // The place in the draw order of the run of each brick the level draws, by the
+        // brick's index in the grid of bricks.
+        let mut slot = bricks_in_runs(&mix.bricks, &runs, bricks, detail);
+        let places: Vec<usize> = runs
+            .iter()
+            .enumerate()
+            .filter(|(_, r)| r.detail == detail)
+            .map(|(i, _)| i)
+            .collect();
+        for s in slot.iter_mut().filter(|s| **s != NONE) {
+            *s = places[*s as usize] as u32;
         }
         place.clear();
         let Some(state) = volumes.get(&(id, detail)) else {
@@ -740,10 +918,10 @@ fn order_mix_from_whole_levels(
             }
         }
     }
-    for s in 0..mix.bricks.len() {
+    for s in 0..runs.len() {
         starts[s + 1] += starts[s];
     }
-    mix.ids.resize(starts[mix.bricks.len()], 0);
+    mix.ids.resize(starts[runs.len()], 0);
     let mut next = starts.clone();
     for (&detail, place) in details.iter().zip(&places) {
         if let Some(state) = volumes.get(&(id, detail)) {
@@ -757,7 +935,7 @@ fn order_mix_from_whole_levels(
     }
     mix.places = places;
     mix.runs.clear();
-    for (s, (_, detail)) in mix.bricks.iter().enumerate() {
+    for (s, BrickRun { detail, .. }) in runs.iter().enumerate() {
         let range = starts[s]..starts[s + 1];
         match mix.runs.last_mut() {
             Some((d, run)) if *d == *detail => run.end = range.end,

@@ -443,12 +443,12 @@ fn bricks_far_from_the_eye_draw_coarser_levels_and_those_off_the_image_none() {
 }
 
 #[test]
-fn bricks_walked_alone_give_their_levels_orders_sorted_into_bricks() {
+fn runs_walked_alone_give_their_levels_orders_sorted_into_runs() {
     // A translucent 96^3 field seen from 30 mm before its face along z, and from an oblique
     // eye whose coordinates along y and z fall on brick boundaries, at 32 x 32 pixels: the near
-    // bricks draw the own grid, the far ones coarser levels. The mix's order walked brick by
-    // brick is the one each level's whole order gives, sorted into bricks, splat for splat, in
-    // both interleavings.
+    // bricks draw the own grid, the far ones coarser levels. The mix's order walked run by
+    // run (each over its box of bricks) is the one each level's whole order gives, sorted into
+    // runs, splat for splat, in both interleavings.
     let n = 96u32;
     let (scene, id) = wavy_field(n);
     let cameras = [
@@ -490,7 +490,7 @@ fn bricks_walked_alone_give_their_levels_orders_sorted_into_bricks() {
                         ..Default::default()
                     },
                 ),
-                [n.div_ceil(BRICK) as usize; 3],
+                [n.div_ceil(BRICK); 3],
                 &mut whole,
             )
             .unwrap();
@@ -1084,4 +1084,43 @@ fn keeping_a_refinement_within_bricks_keeps_the_order_and_moves_the_ends() {
         assert_eq!(kept[from..moved[i]], stretch[..], "stretch {i}");
         start = end;
     }
+}
+
+#[test]
+fn bricks_that_follow_one_another_at_one_detail_run_as_one_where_their_box_is_full_enough() {
+    let own = Detail::default();
+    let level = Detail::Level([1, 1, 1], [0; 3]);
+    // A slab of 4 x 3 bricks taken as the brick order takes it, its rows from both sides of
+    // the eye in turn (rows 0 and 2 before row 1): one run, though its first two rows' box is
+    // half empty.
+    let slab: Vec<([u32; 3], Detail)> = [0, 2, 1]
+        .iter()
+        .flat_map(|&y| (0..4).map(move |x| ([x, y, 5], own)))
+        .collect();
+    let runs = brick_runs(&slab);
+    assert_eq!(runs.len(), 1, "{runs:?}");
+    assert_eq!(
+        (runs[0].lo, runs[0].hi, runs[0].bricks),
+        ([0, 0, 5], [3, 2, 5], 12)
+    );
+    assert!(runs[0].fills_its_box());
+    // A change of detail ends a run; a stretch whose box holds over two bricks a brick is
+    // halved until each part's does not.
+    let mut mixed = slab.clone();
+    for b in [[0, 0, 4], [1, 0, 4], [2, 0, 4], [3, 3, 0]] {
+        mixed.push((b, level));
+    }
+    let runs = brick_runs(&mixed);
+    let ends: Vec<usize> = runs.iter().map(|r| r.end).collect();
+    assert_eq!(ends, [12, 14, 15, 16], "{runs:?}");
+    assert_eq!(runs[1].detail, level);
+    // Every brick lies in the run of its place: runs follow one another, each of one detail,
+    // and `bricks_in_runs` numbers them per detail.
+    let in_level = bricks_in_runs(&mixed, &runs, [4, 4, 6], level);
+    let at = |b: [u32; 3]| in_level[(b[0] + 4 * (b[1] + 4 * b[2])) as usize];
+    assert_eq!(
+        [[0, 0, 4], [1, 0, 4], [2, 0, 4], [3, 3, 0]].map(at),
+        [0, 0, 1, 2]
+    );
+    assert_eq!(at([0, 0, 5]), u32::MAX);
 }
