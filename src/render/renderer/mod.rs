@@ -489,7 +489,7 @@ struct Mix {
     /// The occupied bricks of [`BRICK`]^3 own voxels on the image, in draw order (far to near
     /// once ordered), each with the level it is drawn from.
     bricks: Vec<([u32; 3], Detail)>,
-    /// Their splats: brick after brick, each brick's in its level's draw order.
+    /// Their splats: run after run ([`brick_runs`]), each run's in its level's draw order.
     ids: Vec<u32>,
     /// Stretches of `ids` drawn from one level, far to near.
     runs: Vec<(Detail, std::ops::Range<usize>)>,
@@ -692,7 +692,7 @@ fn order_mix(
     let own_bricks = own_geometry.dims().map(|n| n.div_ceil(BRICK));
     let runs = brick_runs(&mix.bricks);
     let details = mix.details();
-    // Per level, its bricks' splats brick after brick in draw order, and where each ends.
+    // Per level, its runs' splats run after run in draw order, and where each ends.
     let mut parts: Vec<(Vec<u32>, Vec<usize>)> = Vec::with_capacity(details.len());
     for &detail in &details {
         let state = volumes
