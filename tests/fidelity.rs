@@ -14,7 +14,7 @@ use std::sync::Arc;
 
 use glam::{DMat3, DMat4, DVec3};
 use splatscene::classify::TransferFunction;
-use splatscene::render::{FrameOptions, Renderer};
+use splatscene::render::{FrameOptions, MAX_REFINED_VOXELS, Renderer};
 use splatscene::scene::{NodeContent, Projection, Scene, SceneCamera, SplatSettings, VolumeNode};
 use splatscene::splat::reference::{Frame, ImageDifference, SplatStyle, compare};
 use splatscene::volume::raw::{load_raw_slices, slice_stack};
@@ -797,6 +797,58 @@ fn a_grid_coarser_than_the_pixels_is_drawn_refined_nearer_the_marcher() {
             "{name}: refined {near:?} against unrefined {far:?}"
         );
     }
+}
+
+#[test]
+fn a_close_up_of_a_fine_grid_in_a_large_box_is_refined_as_a_coarse_grid_is() {
+    // The phantom at 0.6 mm in a box of air 200 mm across (336^3 voxels, 38M): refined 2 x 2
+    // x 2 as a whole, it would be past the cap on the voxels a refinement is classified in
+    // (2^28), as the LIDC2 CT resampled to 0.7 mm is. A close-up at 160 x 160 from 120 mm
+    // has its voxels about 2 pixels apart where the phantom comes nearest; the refinement is
+    // classified within the occupied bricks on the image alone (the phantom's bone), so it
+    // is drawn refined, nearer the marcher's picture than its own grid is.
+    let pad = DVec3::splat(52.0);
+    let (lo, hi) = (LO - pad, HI + pad);
+    let air = |p: DVec3| {
+        if (0..3).all(|a| p[a] > LO[a] - 4.0 && p[a] < HI[a] + 4.0) {
+            phantom(p)
+        } else {
+            -1000.0
+        }
+    };
+    let grid = sampled_field(air, lo, hi, [0.6; 3]);
+    assert!(grid.dims.iter().map(|&n| u64::from(n)).product::<u64>() * 8 > MAX_REFINED_VOXELS);
+    let target = 0.5 * (LO + HI);
+    let direction = DVec3::new(0.35, 1.0, -0.3).normalize();
+    let camera = SceneCamera {
+        eye: target - direction * 120.0,
+        target,
+        up: DVec3::Z,
+        projection: Projection::Perspective {
+            fov_y_degrees: 35.0,
+        },
+        near: Some(1.0),
+    };
+    let tf = TransferFunction::ct_bone();
+    let (refined, report) = splats_of(grid.clone(), tf.clone(), &camera, SIZE, true, true);
+    let (coarse, coarse_report) = splats_of(grid, tf.clone(), &camera, SIZE, true, false);
+    eprintln!(
+        "refined {:?}, {} splats against {}",
+        report.refined, report.splats, coarse_report.splats
+    );
+    let factors = report.refined.expect("drawn refined");
+    assert!(factors.iter().all(|&f| f >= 2), "{factors:?}");
+    assert!(coarse_report.unrefined);
+    let reference = marched_with(&tf, &camera, SIZE, (LO, HI));
+    let near = compare(&refined, &reference).unwrap();
+    let far = compare(&coarse, &reference).unwrap();
+    // Measured: 0.0135 refined 2 x 2 x 2 (1.29M splats), 0.0229 unrefined (347K).
+    check("refined, against the marcher", &near, 0.018);
+    check("unrefined, against the marcher", &far, 0.03);
+    assert!(
+        near.rmse < 0.8 * far.rmse,
+        "refined {near:?} against unrefined {far:?}"
+    );
 }
 
 /// The Stanford CT head every other voxel across the slices (128 x 128 x 113 at 2 mm, in the

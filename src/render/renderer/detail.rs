@@ -97,10 +97,44 @@ pub const MAX_DEPTH_LEVELS: u8 = 1;
 /// The most a grid is refined along one axis ([`Detail::Refined`]).
 pub const MAX_REFINE: u32 = 8;
 
-/// The most voxels a refined grid has (2^28, a 645^3 grid; the LIDC2 CT's 256 x 256 x 133
-/// grid refined 2 x 1 x 3 at 512 x 512 has 52M): past it the factors are lowered, largest
-/// first.
+/// The most fine voxels a refinement is classified in (2^28, a 645^3 grid; the LIDC2 CT's
+/// 256 x 256 x 133 grid refined 2 x 1 x 3 at 512 x 512 has 52M): past it the factors are
+/// lowered, largest first. Where the CPU tiles draw a refinement classified within the bricks
+/// on the image ([`Renderer::set_refinement_on_image_only`]), it may instead count the fine
+/// voxels of the own grid's occupied bricks on the image alone, its splats then bounded by
+/// the pixels (64 a pixel), where that refines further: so that a close-up of a thin-slice CT
+/// is refined as its thick-slice original is. The GPU passes hold a grid as a dense texture
+/// and count the whole grid's.
 pub const MAX_REFINED_VOXELS: u64 = 1 << 28;
+
+/// The most voxels a refined grid spans in all, classified or not (2^31): its significance
+/// bitmap and the bitmap's ranks take 3/16 of a byte a fine voxel, 384 MiB at most. The
+/// LIDC2 CT resampled to 0.7 mm (512 x 512 x 532) refined 2 x 2 x 3 spans 1.67G.
+pub(super) const MAX_REFINED_GRID: u64 = 1 << 31;
+
+/// The most splats a refinement counted by the bricks on the image may hold, a pixel of the
+/// picture (the own grid's splats on the image times the factors' product,
+/// [`most_refined_splats`]): so that a close-up's cost follows its pixels, not its voxels. Measured on the LIDC2 CT's 1.4 x
+/// 1.4 x 2.5 mm grid and its 0.7 mm resampling at 512 x 512 close up (BENCHMARKS.md, "A
+/// close-up refined by the bricks on the image"): a bound of 64 kept the thick grid as near
+/// its ray marcher as no bound did (0.015; refined 5 x 4 x 4, not 6 x 6 x 5) in half the time
+/// and memory, and brought the thin grid from 0.022 unrefined to 0.014 (0.011 with no bound,
+/// at twice the time). The bound is on the splats of the bricks on the image, hidden or not,
+/// so a view that hides most of them (the aorta CT's opaque close-up) keeps the factors the
+/// whole grid's cap gives it ([`refine_factors`]).
+pub(super) const MAX_REFINED_SPLATS_PER_PIXEL: u64 = 64;
+
+/// The splats a refinement may hold however small the picture ([`most_refined_splats`]): a
+/// 256 x 256 picture's 64 a pixel.
+pub(super) const MIN_REFINED_SPLATS: u64 = 1 << 22;
+
+/// The most splats a refinement drawn into a picture of `size` may hold
+/// ([`MAX_REFINED_SPLATS_PER_PIXEL`], at least [`MIN_REFINED_SPLATS`]).
+pub(super) fn most_refined_splats(size: (u32, u32)) -> u64 {
+    (u64::from(size.0) * u64::from(size.1))
+        .saturating_mul(MAX_REFINED_SPLATS_PER_PIXEL)
+        .max(MIN_REFINED_SPLATS)
+}
 
 /// The most voxels a refined grid has along an axis (the 3D texture size GPUs take).
 pub(super) const MAX_REFINED_DIM: u64 = 2048;
@@ -113,8 +147,10 @@ pub(super) const MAX_REFINED_DIM: u64 = 2048;
 /// - Where a voxel's edge along some axis spans more than [`REFINE_TO`] (1.5) pixels at that
 ///   distance (whether it lies across the view or along it), its own grid refined along each
 ///   such axis until they span at most that ([`Detail::Refined`], at most [`MAX_REFINE`]
-///   times an axis and [`MAX_REFINED_VOXELS`] in all): splats a coarse voxel wide are far
-///   softer than the trilinear field a ray caster samples. On the LIDC2 CT's 1.4 x 1.4 x 2.5
+///   times an axis and [`MAX_REFINED_VOXELS`] over the whole grid; a renderer drawing with
+///   the CPU tiles may count the occupied bricks on the image alone, the splats bounded by
+///   the pixels): splats a coarse voxel wide are far softer than the trilinear field a ray
+///   caster samples. On the LIDC2 CT's 1.4 x 1.4 x 2.5
 ///   mm grid at 512 x 512 (voxels 2.2 and 3.9 pixels apart) refining it 2 x 2 x 3 brought the
 ///   picture to 0.029-0.031 of the reference ray marcher, from 0.049-0.053 (BENCHMARKS.md,
 ///   "Grids coarser than the pixels"). The axis along the view is refined too: one splat
@@ -136,19 +172,24 @@ pub(super) const MAX_REFINED_DIM: u64 = 2048;
 /// (RMSE 0.19 against the reference marcher on a view from inside a CT's lung, BENCHMARKS.md,
 /// "The eye inside the volume").
 pub fn detail_for(geometry: &VolumeGeometry, view: &ViewSetup) -> Detail {
-    detail_at(geometry.dims(), apart_near(geometry, view, None))
+    detail_at(
+        geometry.dims(),
+        apart_near(geometry, view, None),
+        Within::WHOLE,
+    )
 }
 
 /// [`detail_for`] a `dims` grid whose voxels are `apart` pixels apart on the screen along
 /// each axis where it is drawn largest, facing the eye as `apart` says. Where `apart` is not
 /// known (`None`), the own grid.
-pub(super) fn detail_at(dims: [u32; 3], apart: Option<Apart>) -> Detail {
-    detail_within(dims, apart, COARSEN_TO)
+/// A refinement is classified `within` ([`refine_factors`]).
+pub(super) fn detail_at(dims: [u32; 3], apart: Option<Apart>, within: Within) -> Detail {
+    detail_within(dims, apart, within, COARSEN_TO)
 }
 
 /// [`detail_at`], a level drawn along an axis where its voxels are at most `coarsen_to`
 /// pixels apart.
-fn detail_within(dims: [u32; 3], apart: Option<Apart>, coarsen_to: f64) -> Detail {
+fn detail_within(dims: [u32; 3], apart: Option<Apart>, within: Within, coarsen_to: f64) -> Detail {
     let Some(Apart {
         pixels: apart,
         full,
@@ -157,7 +198,7 @@ fn detail_within(dims: [u32; 3], apart: Option<Apart>, coarsen_to: f64) -> Detai
     else {
         return Detail::Level([0; 3], [0; 3]);
     };
-    if let Some(factors) = refine_factors(dims, full) {
+    if let Some(factors) = refine_factors(dims, full, within) {
         return Detail::Refined(factors);
     }
     // Coarser along each axis while the next level's voxels are still at most a pixel apart
@@ -201,6 +242,9 @@ pub(super) fn level_facing(levels: [u8; 3], facing: [i8; 3]) -> Detail {
 /// Side, in voxels, of the bricks whose occupancy tells where a volume's content comes
 /// nearest the eye ([`Occupied`]).
 pub(super) const BRICK: u32 = 16;
+
+/// The voxels of one brick of [`BRICK`]^3.
+const BRICK_VOXELS: u64 = (BRICK as u64).pow(3);
 
 /// The bricks of [`BRICK`]^3 voxels of a classified grid that hold at least one splat: where a
 /// volume's content lies, so that the level of detail goes by the nearest content rather
@@ -515,6 +559,38 @@ pub(super) fn on_image(geometry: &VolumeGeometry, view: &ViewSetup) -> Option<Re
     (!region.is_whole()).then_some(region)
 }
 
+/// The own grid's voxels and splats in the `occupied` bricks (of [`BRICK`]^3 voxels) that
+/// hold a brick of `on_image` ([`on_image`]; `None`: every brick is on the image): where a
+/// refinement classified within the bricks on the image has its splats, the bricks with
+/// none of the own grid's (air, or their neighbours, whose fine voxels only the edges of
+/// the field's cells reach) left uncounted.
+pub(super) fn on_image_within(
+    dims: [u32; 3],
+    occupied: &Occupied,
+    on_image: Option<&Region>,
+) -> (u64, u64) {
+    let per = BRICK / REGION_BRICK;
+    occupied
+        .bricks
+        .iter()
+        .zip(&occupied.splats)
+        .filter(|(b, _)| {
+            on_image.is_none_or(|region| {
+                (0..per * per * per).any(|i| {
+                    let d = [i % per, i / per % per, i / per / per];
+                    region.covers_brick(std::array::from_fn(|a| b[a] * per + d[a]))
+                })
+            })
+        })
+        .map(|(b, &splats)| {
+            let voxels = (0..3)
+                .map(|a| u64::from(BRICK.min(dims[a] - b[a] * BRICK)))
+                .product::<u64>();
+            (voxels, u64::from(splats))
+        })
+        .fold((0, 0), |(v, s), (bv, bs)| (v + bv, s + bs))
+}
+
 /// Whether the world box `(centre, half size)` lies wholly outside what `view` sees: beyond
 /// one of the planes through the image's edges (for perspective, through the eye), or
 /// behind the eye.
@@ -540,10 +616,42 @@ pub(super) fn off_image(view: &ViewSetup, (centre, half): (DVec3, DVec3)) -> boo
     }
 }
 
+/// What a refinement of a grid is classified in ([`refine_factors`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) struct Within {
+    /// The own grid's voxels (counted at most as the whole grid's).
+    pub voxels: u64,
+    /// The own grid's splats among them, and the most splats the refinement may hold (bounded
+    /// by those splats times the factors' product); `None`: no bound.
+    pub splats: Option<(u64, u64)>,
+}
+
+impl Within {
+    /// The whole grid, the splats unbounded.
+    pub const WHOLE: Within = Within {
+        voxels: u64::MAX,
+        splats: None,
+    };
+
+    /// `voxels` of the own grid, the splats unbounded.
+    pub fn voxels(voxels: u64) -> Self {
+        Self {
+            voxels,
+            splats: None,
+        }
+    }
+}
+
 /// The factors a `dims` grid whose voxels are `apart` pixels apart along each axis is refined
-/// by (see [`detail_for`]); `None` where no axis is.
-pub(super) fn refine_factors(dims: [u32; 3], apart: [f64; 3]) -> Option<[u32; 3]> {
-    let mut factors = [0, 1, 2].map(|a| {
+/// by (see [`detail_for`]), its refinement classified `within`; `None` where no axis is. The
+/// factors wanted are lowered, largest first, until the whole refined grid holds at most
+/// [`MAX_REFINED_VOXELS`]; or, where they come out larger so, until the refined voxels
+/// `within` do, the whole refined grid holds at most [`MAX_REFINED_GRID`] and the refinement
+/// at most `within.splats` splats: a refinement bounded by what a view shows is never coarser
+/// than one bounded by the whole grid (whose cost the views that show little of the grid, or
+/// little of it unhidden, keep).
+pub(super) fn refine_factors(dims: [u32; 3], apart: [f64; 3], within: Within) -> Option<[u32; 3]> {
+    let wanted = [0, 1, 2].map(|a| {
         let wanted = if apart[a].is_finite() {
             (apart[a] / REFINE_TO).ceil()
         } else {
@@ -552,18 +660,37 @@ pub(super) fn refine_factors(dims: [u32; 3], apart: [f64; 3]) -> Option<[u32; 3]
         let most = (MAX_REFINED_DIM / u64::from(dims[a].max(1))).max(1) as f64;
         wanted.clamp(1.0, f64::from(MAX_REFINE).min(most)) as u32
     });
-    let count = |f: &[u32; 3]| {
-        (0..3)
-            .map(|a| u64::from(dims[a]) * u64::from(f[a]))
-            .product::<u64>()
+    let whole: u64 = dims.iter().map(|&n| u64::from(n)).product();
+    let voxels = within.voxels.min(whole);
+    let fine = |f: &[u32; 3], voxels: u64| {
+        f.iter()
+            .fold(voxels, |n, &f| n.saturating_mul(u64::from(f)))
     };
-    while count(&factors) > MAX_REFINED_VOXELS.max(count(&[1; 3])) {
-        let a = (0..3).max_by_key(|&a| factors[a]).unwrap_or(0);
-        if factors[a] == 1 {
-            break;
+    let lowered = |too_many: &dyn Fn(&[u32; 3]) -> bool| {
+        let mut factors = wanted;
+        while too_many(&factors) {
+            let a = (0..3).max_by_key(|&a| factors[a]).unwrap_or(0);
+            if factors[a] == 1 {
+                break;
+            }
+            factors[a] -= 1;
         }
-        factors[a] -= 1;
-    }
+        factors
+    };
+    let by_whole = lowered(&|f| fine(f, whole) > MAX_REFINED_VOXELS);
+    let by_view = lowered(&|f| {
+        fine(f, voxels) > MAX_REFINED_VOXELS
+            || fine(f, whole) > MAX_REFINED_GRID
+            || within
+                .splats
+                .is_some_and(|(splats, most)| fine(f, splats) > most)
+    });
+    let product = |f: &[u32; 3]| fine(f, 1);
+    let factors = if product(&by_view) > product(&by_whole) {
+        by_view
+    } else {
+        by_whole
+    };
     (factors != [1; 3]).then_some(factors)
 }
 
@@ -604,11 +731,13 @@ pub(super) fn brick_details(
         .zip(bricks.world_boxes(geometry))
         .filter_map(|((&brick, &splats), (centre, half))| {
             let apart = apart_in_box(geometry, view, (centre, half));
-            let wanted = apart.map(|apart| match detail_at(dims, Some(apart)) {
-                Detail::Level(..) if apart.full.iter().any(|&f| f > refine_from) => {
-                    Detail::Refined([1; 3])
+            let wanted = apart.map(|apart| {
+                match detail_at(dims, Some(apart), Within::voxels(BRICK_VOXELS)) {
+                    Detail::Level(..) if apart.full.iter().any(|&f| f > refine_from) => {
+                        Detail::Refined([1; 3])
+                    }
+                    wanted => wanted,
                 }
-                wanted => wanted,
             });
             let (levels, facing) = match wanted {
                 Some(Detail::Level(levels, facing)) => (levels, facing),
@@ -629,7 +758,12 @@ pub(super) fn brick_details(
                             .map(|a| levels[a])
                             .min()
                             .unwrap_or(0);
-                        match detail_within(dims, Some(apart), SMOOTH_COARSEN_TO) {
+                        match detail_within(
+                            dims,
+                            Some(apart),
+                            Within::voxels(BRICK_VOXELS),
+                            SMOOTH_COARSEN_TO,
+                        ) {
                             Detail::Level(coarser, facing)
                                 if (0..3).all(|a| {
                                     let more = coarser[a].checked_sub(levels[a]);

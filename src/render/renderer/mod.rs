@@ -582,8 +582,8 @@ fn brick_runs(bricks: &[([u32; 3], Detail)]) -> Vec<BrickRun> {
     runs
 }
 
-/// Per brick of a grid of `[bx, by, bz]` bricks (x fastest), the index among the runs at
-/// `detail` of the run it is drawn in, or `u32::MAX`.
+/// Per brick of a grid of `[bx, by, bz]` bricks (x fastest), the place in the draw order
+/// (the index in `runs`) of the run at `detail` it is drawn in, or `u32::MAX`.
 fn bricks_in_runs(
     bricks: &[([u32; 3], Detail)],
     runs: &[BrickRun],
@@ -592,50 +592,79 @@ fn bricks_in_runs(
 ) -> Vec<u32> {
     let (bx, by) = (bx as usize, by as usize);
     let mut slot = vec![u32::MAX; bx * by * bz as usize];
-    let (mut start, mut r) = (0, 0u32);
-    for run in runs {
+    let mut start = 0;
+    for (r, run) in runs.iter().enumerate() {
         if run.detail == detail {
             for (b, _) in &bricks[start..run.end] {
                 let [x, y, z] = b.map(|c| c as usize);
                 if let Some(s) = slot.get_mut(x + bx * (y + by * z)) {
-                    *s = r;
+                    *s = r as u32;
                 }
             }
-            r += 1;
         }
         start = run.end;
     }
     slot
 }
 
+/// The brick of `side`^3 own voxels each voxel of a grid lies in, the grid a level or a
+/// refinement of the own grid: looked up axis by axis rather than divided per splat.
+struct BrickOf {
+    /// Per axis, per voxel coordinate, its brick's.
+    tables: [Vec<u32>; 3],
+    /// The grid's voxels along x and y.
+    row: u32,
+    plane: u32,
+}
+
+impl BrickOf {
+    /// For a grid of `dims`, halved and refined from the own grid as `(halvings, factors)`
+    /// say: a level's voxel `k` lies in brick `floor(k 2^l / side)`, a refinement's in
+    /// `floor(k / (f side))`.
+    fn new(dims: [u32; 3], (halvings, factors): ([u32; 3], [u32; 3]), side: u32) -> Self {
+        Self {
+            tables: std::array::from_fn(|a| {
+                (0..dims[a])
+                    .map(|k| (k << halvings[a]) / (side * factors[a].max(1)))
+                    .collect()
+            }),
+            row: dims[0].max(1),
+            plane: dims[1].max(1),
+        }
+    }
+
+    /// The brick of voxel `id` (x fastest) of the grid.
+    fn of(&self, id: u32) -> [u32; 3] {
+        let (x, y, z) = (
+            id % self.row,
+            (id / self.row) % self.plane,
+            id / self.row / self.plane,
+        );
+        [
+            self.tables[0][x as usize],
+            self.tables[1][y as usize],
+            self.tables[2][z as usize],
+        ]
+    }
+}
+
 /// Leaves out of `ids` (voxel ids of a grid of `dims`, a level or refinement of the own grid
 /// as `(halvings, factors)` say, box after box, `ends` one past each box's last) the splats
-/// whose brick is not in box `i`'s run (`in_run`, [`bricks_in_runs`], over a grid of
-/// `bricks`), keeping the order of the rest and moving `ends` to match.
+/// whose brick is not in box `i`'s run, the run in place `box_runs[i]` of the draw order
+/// (`in_run`: per brick of a grid of `bricks`, its run's place, [`bricks_in_runs`]), keeping
+/// the order of the rest and moving `ends` to match.
 fn keep_in_runs(
     ids: &mut Vec<u32>,
     ends: &mut [usize],
     dims: [u32; 3],
     (halvings, factors): ([u32; 3], [u32; 3]),
-    in_run: &[u32],
+    (in_run, box_runs): (&[u32], &[u32]),
     bricks: [u32; 3],
 ) {
-    // A voxel's brick, axis by axis, looked up rather than divided per splat: a level's voxel
-    // `k` lies in brick `floor(k 2^l / BRICK)`, a refinement's in `floor(k / (f BRICK))`.
-    let brick_of: [Vec<u32>; 3] = std::array::from_fn(|a| {
-        (0..dims[a])
-            .map(|k| (k << halvings[a]) / (BRICK * factors[a]))
-            .collect()
-    });
-    let [nx, ny, _] = dims;
+    let brick_of = BrickOf::new(dims, (halvings, factors), BRICK);
     let [bx, by, _] = bricks;
     let run_of = |id: u32| {
-        let (x, y, z) = (id % nx, (id / nx) % ny, id / nx / ny);
-        let b = [
-            brick_of[0][x as usize],
-            brick_of[1][y as usize],
-            brick_of[2][z as usize],
-        ];
+        let b = brick_of.of(id);
         in_run
             .get((b[0] + bx * (b[1] + by * b[2])) as usize)
             .copied()
@@ -645,9 +674,9 @@ fn keep_in_runs(
     let mut start = 0;
     let spans: Vec<(u32, std::ops::Range<usize>)> = ends
         .iter()
-        .enumerate()
-        .map(|(r, &end)| {
-            let span = (r as u32, start..end);
+        .zip(box_runs)
+        .map(|(&end, &r)| {
+            let span = (r, start..end);
             start = end;
             span
         })
@@ -704,7 +733,12 @@ fn order_mix(
         // A level's voxel `k` lies in brick `floor(k 2^l / BRICK)`, a refinement's in brick
         // `floor(k / (f BRICK))`: the voxels of brick `b` are those from `ceil(b side / step)`.
         // A run is walked over the least box of bricks that holds it.
-        let level_runs: Vec<&BrickRun> = runs.iter().filter(|r| r.detail == detail).collect();
+        let (places, level_runs): (Vec<u32>, Vec<&BrickRun>) = runs
+            .iter()
+            .enumerate()
+            .filter(|(_, r)| r.detail == detail)
+            .map(|(i, r)| (i as u32, r))
+            .unzip();
         let boxes: Vec<[(u32, u32); 3]> = level_runs
             .iter()
             .map(|run| {
@@ -737,7 +771,7 @@ fn order_mix(
                 &mut ends,
                 dims,
                 (halvings, factors),
-                &in_run,
+                (&in_run, &places),
                 own_bricks,
             );
         }
@@ -787,20 +821,8 @@ fn keep_within(
     factors: [u32; 3],
     within: &Region,
 ) {
-    // A fine coordinate's own brick, axis by axis, looked up rather than divided per splat.
-    let bricks: [Vec<u32>; 3] = std::array::from_fn(|a| {
-        let side = REGION_BRICK * factors[a].max(1);
-        (0..dims[a]).map(|k| k / side).collect()
-    });
-    let [nx, ny, _] = dims;
-    let inside = |id: u32| {
-        let (x, y, z) = (id % nx, (id / nx) % ny, id / nx / ny);
-        within.covers_brick([
-            bricks[0][x as usize],
-            bricks[1][y as usize],
-            bricks[2][z as usize],
-        ])
-    };
+    let brick_of = BrickOf::new(dims, ([0; 3], factors), REGION_BRICK);
+    let inside = |id: u32| within.covers_brick(brick_of.of(id));
     match ends {
         None => {
             let kept: Vec<Vec<u32>> = ids
@@ -869,16 +891,7 @@ fn order_mix_from_whole_levels(
     for (&detail, place) in details.iter().zip(places.iter_mut()) {
         // The place in the draw order of the run of each brick the level draws, by the
         // brick's index in the grid of bricks.
-        let mut slot = bricks_in_runs(&mix.bricks, &runs, bricks, detail);
-        let places: Vec<usize> = runs
-            .iter()
-            .enumerate()
-            .filter(|(_, r)| r.detail == detail)
-            .map(|(i, _)| i)
-            .collect();
-        for s in slot.iter_mut().filter(|s| **s != NONE) {
-            *s = places[*s as usize] as u32;
-        }
+        let slot = bricks_in_runs(&mix.bricks, &runs, bricks, detail);
         place.clear();
         let Some(state) = volumes.get(&(id, detail)) else {
             continue;
@@ -1413,8 +1426,14 @@ impl Renderer {
         let mut report = FrameReport::default();
         self.sync_meshes(ctx, scene);
         let started = Instant::now();
-        report.classified =
-            self.sync_volumes(scene, view, options.preview, !self.one_level, &mut report)?;
+        report.classified = self.sync_volumes(
+            scene,
+            view,
+            options.preview,
+            !self.one_level,
+            true,
+            &mut report,
+        )?;
         // Levels, texels and the look for bricks shown made on the way have their own timings.
         report.timings.classify = started
             .elapsed()
@@ -1515,7 +1534,7 @@ impl Renderer {
         let started = Instant::now();
         let by_brick = !self.one_level;
         report.classified =
-            self.sync_volumes(scene, &view, options.preview, by_brick, &mut report)?;
+            self.sync_volumes(scene, &view, options.preview, by_brick, false, &mut report)?;
         // Levels, texels and the look for bricks shown made on the way have their own timings.
         report.timings.classify = started
             .elapsed()
@@ -1955,13 +1974,15 @@ impl Renderer {
     /// the levels up to it that are missing (counted in `report.levels_made`); returns how
     /// many classifications were made. With `by_brick`, a volume drawn at a level has its
     /// bricks on the image drawn each at its own ([`Renderer::set_levels_by_brick`]) where
-    /// they want more than one.
+    /// they want more than one. A `dense` frame (the GPU passes, which hold a grid as a dense
+    /// texture) counts a refinement's voxels over its whole grid ([`MAX_REFINED_VOXELS`]).
     fn sync_volumes(
         &mut self,
         scene: &Scene,
         view: &ViewSetup,
         preview: bool,
         by_brick: bool,
+        dense: bool,
         report: &mut FrameReport,
     ) -> Result<usize, RenderError> {
         let mut live = Vec::new();
@@ -2028,7 +2049,24 @@ impl Renderer {
                 // other factors is not kept while its voxels stay near enough a pixel apart, as
                 // it once was, since the picture would then depend on the views before it (and
                 // the viewer's screenshot would not be `render`'s picture of its scene file).
-                detail_at(geometry.dims(), apart)
+                // A refinement classified within the occupied bricks on the image (the CPU
+                // tiles') may count those alone, its splats bounded by the pixels; else the
+                // whole grid ([`refine_factors`]).
+                let within = match (&full.occupied, dense || self.refine_whole) {
+                    (Some(occupied), false) => {
+                        let (voxels, splats) = on_image_within(
+                            geometry.dims(),
+                            occupied,
+                            on_image(&geometry, view).as_ref(),
+                        );
+                        Within {
+                            voxels,
+                            splats: Some((splats, most_refined_splats(view.size))),
+                        }
+                    }
+                    _ => Within::WHOLE,
+                };
+                detail_at(geometry.dims(), apart, within)
             };
             let mut wanted = match wanted {
                 Detail::Level(level, facing) if preview => {

@@ -19,23 +19,59 @@ fn refined_voxels_tile_the_coarse_box() {
 
 #[test]
 fn refinement_brings_voxels_to_about_a_pixel_within_its_caps() {
+    let all = Within::WHOLE;
     // To at most 1.5 pixels: 1.4 pixels apart stays, 1.6 doubles, 3.5 triples, 3.0
     // doubles.
-    assert_eq!(refine_factors([100; 3], [1.4, 1.5, 0.3]), None);
-    assert_eq!(refine_factors([100; 3], [1.6, 3.5, 3.0]), Some([2, 3, 2]));
-    // At most MAX_REFINE an axis, and 2048 voxels along it.
-    assert_eq!(refine_factors([10; 3], [50.0, 1.0, 1.0]), Some([8, 1, 1]));
+    assert_eq!(refine_factors([100; 3], [1.4, 1.5, 0.3], all), None);
     assert_eq!(
-        refine_factors([1000, 4, 4], [5.0, 1.0, 1.0]),
+        refine_factors([100; 3], [1.6, 3.5, 3.0], all),
+        Some([2, 3, 2])
+    );
+    // At most MAX_REFINE an axis, and 2048 voxels along it.
+    assert_eq!(
+        refine_factors([10; 3], [50.0, 1.0, 1.0], all),
+        Some([8, 1, 1])
+    );
+    assert_eq!(
+        refine_factors([1000, 4, 4], [5.0, 1.0, 1.0], all),
         Some([2, 1, 1])
     );
     // At most MAX_REFINED_VOXELS in all: the largest factor goes down first.
-    let f = refine_factors([512, 512, 512], [4.0, 4.0, 2.0]).unwrap();
-    let count: u64 = (0..3).map(|a| 512 * u64::from(f[a])).product();
-    assert!(count <= MAX_REFINED_VOXELS, "{f:?}");
+    let fine = |f: [u32; 3], voxels: u64| voxels * f.iter().map(|&f| u64::from(f)).product::<u64>();
+    let f = refine_factors([512, 512, 512], [4.0, 4.0, 2.0], all).unwrap();
+    assert!(fine(f, 512 * 512 * 512) <= MAX_REFINED_VOXELS, "{f:?}");
     assert!(f.iter().all(|&f| f >= 1) && f != [1; 3], "{f:?}");
+    // A thin-slice CT's grid (0.7 mm, 512 x 512 x 532) whose voxels fall 2.5 pixels apart:
+    // classified whole, it is past the cap at any refinement...
+    let (ct, apart) = ([512, 512, 532], [2.5, 2.5, 2.5]);
+    let voxels = 512 * 512 * 532;
+    assert_eq!(refine_factors(ct, apart, all), None);
+    // ...but a close-up classified within a sixth of it is refined as a thick-slice grid is.
+    let f = refine_factors(ct, apart, Within::voxels(voxels / 6)).unwrap();
+    assert_eq!(f, [2, 2, 2]);
+    assert!(fine(f, voxels / 6) <= MAX_REFINED_VOXELS);
+    // Within few voxels, the whole refined grid is still bounded (its bitmap spans it all).
+    let f = refine_factors(ct, [5.0; 3], Within::voxels(4096)).unwrap();
+    assert!(fine(f, voxels) <= MAX_REFINED_GRID, "{f:?}");
+    assert!(fine(f.map(|f| f + 1), voxels) > MAX_REFINED_GRID, "{f:?}");
+    // The refinement's splats bounded: the own grid's splats times the factors' product.
+    let bounded = |splats, most| Within {
+        voxels: voxels / 6,
+        splats: Some((splats, most)),
+    };
+    assert_eq!(
+        refine_factors(ct, apart, bounded(1_000_000, 4_000_000)),
+        Some([2, 2, 1])
+    );
+    assert_eq!(refine_factors(ct, apart, bounded(1_000_000, 999_999)), None);
+    // Never coarser than the whole grid's cap makes it, however tight the view's bounds.
+    let tight = Within {
+        voxels: 1000,
+        splats: Some((1000, 1)),
+    };
+    assert_eq!(refine_factors([100; 3], [4.0; 3], tight), Some([3, 3, 3]));
     // Not a number: no refinement.
-    assert_eq!(refine_factors([10; 3], [f64::NAN; 3]), None);
+    assert_eq!(refine_factors([10; 3], [f64::NAN; 3], all), None);
 }
 
 #[test]
@@ -215,6 +251,7 @@ fn the_detail_goes_by_where_the_content_comes_nearest() {
                 full: [d; 3],
                 facing: [0; 3],
             }),
+            Within::WHOLE,
         ) {
             Detail::Level(l, _) => l[0],
             Detail::Refined(_) => 0,
@@ -1115,12 +1152,12 @@ fn bricks_that_follow_one_another_at_one_detail_run_as_one_where_their_box_is_fu
     assert_eq!(ends, [12, 14, 15, 16], "{runs:?}");
     assert_eq!(runs[1].detail, level);
     // Every brick lies in the run of its place: runs follow one another, each of one detail,
-    // and `bricks_in_runs` numbers them per detail.
+    // and `bricks_in_runs` gives each brick of a detail its run's place in the draw order.
     let in_level = bricks_in_runs(&mixed, &runs, [4, 4, 6], level);
     let at = |b: [u32; 3]| in_level[(b[0] + 4 * (b[1] + 4 * b[2])) as usize];
     assert_eq!(
         [[0, 0, 4], [1, 0, 4], [2, 0, 4], [3, 3, 0]].map(at),
-        [0, 0, 1, 2]
+        [1, 1, 2, 3]
     );
     assert_eq!(at([0, 0, 5]), u32::MAX);
 }
