@@ -377,7 +377,7 @@ impl Classified {
         let mut colors = Vec::with_capacity(self.colors.len() + other.colors.len());
         let (mut i, mut j) = (0usize, 0usize);
         // Word by word: a word with voxels of one side only takes its colours as a stretch.
-        for (&a, &b) in self.grid.words().iter().zip(other.grid.words()) {
+        for (a, b) in self.grid.word_pairs(&other.grid) {
             if b == 0 {
                 let n = a.count_ones() as usize;
                 colors.extend_from_slice(&self.colors[i..i + n]);

@@ -3,7 +3,8 @@
 //! A [`SparseGrid`] records which voxels of an `nx x ny x nz` grid are significant. Voxel ids are
 //! `x + nx * (y + ny * z)` as `u32`; a grid with more than 2^32 voxels is refused with
 //! [`GridError::TooLarge`] rather than wrapping. Besides a bitmap (with a rank index, so that the
-//! attributes of the significant voxels can be stored compactly), the grid keeps run-length rows
+//! attributes of the significant voxels can be stored compactly; held by pages, those with no
+//! significant voxel not stored), the grid keeps run-length rows
 //! along each of the three axes: the inner loop of every ordering walks runs, so empty space costs
 //! nothing there. An axis's rows are built the first time they are asked for (a view needs one
 //! or two of them), slabs of rows in parallel. A dense grid is the case where every voxel is significant.
@@ -11,6 +12,10 @@
 use std::sync::OnceLock;
 
 use thiserror::Error;
+
+mod pages;
+
+use pages::PagedBits;
 
 /// Problems with a grid's size or with a list of voxel ids.
 #[derive(Debug, Error, Clone, PartialEq, Eq)]
@@ -117,10 +122,8 @@ fn for_each_bit(words: &[u64], mut f: impl FnMut(usize)) {
 #[derive(Debug, Clone)]
 pub struct SparseGrid {
     dims: [u32; 3],
-    count: u64,
-    bits: Vec<u64>,
-    /// Number of set bits before each word of `bits`.
-    word_rank: Vec<u32>,
+    /// The bitmap, with its rank index: bit `id % 64` of word `id / 64` for voxel `id`.
+    bits: PagedBits,
     /// Per axis, its rows once asked for.
     rows: [OnceLock<AxisRows>; 3],
 }
@@ -167,7 +170,6 @@ impl SparseGrid {
         if count % 64 != 0 {
             bits[words - 1] = (1u64 << (count % 64)) - 1;
         }
-        let word_rank = (0..words).map(|w| (w * 64) as u32).collect();
         let rows = std::array::from_fn(|axis| {
             let (b, c) = other_axes(axis);
             let n_rows = dims[b] as usize * dims[c] as usize;
@@ -184,9 +186,7 @@ impl SparseGrid {
         });
         Ok(Self {
             dims,
-            count,
-            bits,
-            word_rank,
+            bits: PagedBits::from_flat(bits),
             rows,
         })
     }
@@ -203,7 +203,7 @@ impl SparseGrid {
                 bits[(id / 64) as usize] |= 1 << (id % 64);
             }
         }
-        Ok(Self::from_bits(dims, bits))
+        Ok(Self::from_paged(dims, PagedBits::from_flat(bits)))
     }
 
     /// The voxels listed in `ids`, which must be strictly increasing and inside the grid.
@@ -213,9 +213,10 @@ impl SparseGrid {
 
     /// The voxels listed in `parts` one after the other, which together must be strictly
     /// increasing and inside the grid (the per-slab lists of a classification), with no
-    /// copy of them joined: stretches of them are checked and set in parallel, each into the
-    /// words of the bitmap that it alone spans, and its first and last words (which the
-    /// stretches beside it may share) laid in afterwards.
+    /// copy of them joined and no flat bitmap of the whole grid: stretches of them are
+    /// checked and their pages listed in parallel, only those pages stored, and each stretch
+    /// set in parallel into the stored words that it alone spans, its first and last words
+    /// (which the stretches beside it may share) laid in afterwards.
     pub fn from_sorted_parts(dims: [u32; 3], parts: &[&[u32]]) -> Result<Self, GridError> {
         use rayon::prelude::*;
         let count = voxel_count(dims)?;
@@ -234,82 +235,100 @@ impl SparseGrid {
                 return Err(GridError::Unsorted(pair[1].0));
             }
         }
-        // Each stretch's ids span the words `first / 64 ..= last / 64`; the words strictly
-        // between those two are its own, set in place. Its first and last words may be
-        // shared with the stretches beside it, so they are set apart and laid in afterwards.
-        let mut bits = vec![0u64; count.div_ceil(64) as usize];
-        let mut owned = Vec::with_capacity(stretches.len());
-        let mut rest: &mut [u64] = &mut bits;
-        let mut taken = 0;
-        for &(_, ids) in &stretches {
-            let (Some(&first), Some(&last)) = (ids.first(), ids.last()) else {
-                owned.push(&mut [][..]);
-                continue;
-            };
-            let (lo, hi) = ((first / 64) as usize + 1, (last / 64) as usize);
-            if lo >= hi || lo < taken || hi > taken + rest.len() {
-                // No word of its own (or ids out of order or of range: refused below).
-                owned.push(&mut [][..]);
-                continue;
-            }
-            let (_, tail) = std::mem::take(&mut rest).split_at_mut(lo - taken);
-            let (own, tail) = tail.split_at_mut(hi - lo);
-            owned.push(own);
-            rest = tail;
-            taken = hi;
-        }
-        let ends = stretches
+        // Each stretch checked and the pages it sets listed; the lists joined in order, a
+        // page two stretches share once.
+        let listed = stretches
             .par_iter()
-            .zip(owned)
-            .map(|(&(at, ids), own)| {
-                let (Some(&first), Some(&last)) = (ids.first(), ids.last()) else {
-                    return Ok([(0, 0); 2]);
-                };
-                if u64::from(last) >= count {
-                    let id = ids.iter().copied().find(|&id| u64::from(id) >= count);
-                    return Err(GridError::IdOutOfRange {
-                        id: id.unwrap_or(last),
-                        dims,
-                    });
-                }
-                let (lo, hi) = ((first / 64) as usize, (last / 64) as usize);
-                let mut edge = [(lo, 0u64), (hi, 0u64)];
+            .map(|&(at, ids)| {
+                let mut pages: Vec<u32> = Vec::new();
                 for (i, &id) in ids.iter().enumerate() {
+                    if u64::from(id) >= count {
+                        return Err(GridError::IdOutOfRange { id, dims });
+                    }
                     if i > 0 && ids[i - 1] >= id {
                         return Err(GridError::Unsorted(at + i));
                     }
-                    let (word, bit) = ((id / 64) as usize, 1u64 << (id % 64));
-                    if word == lo {
-                        edge[0].1 |= bit;
-                    } else if word == hi {
-                        edge[1].1 |= bit;
-                    } else if let Some(w) = own.get_mut(word - lo - 1) {
-                        *w |= bit;
+                    let page = PagedBits::page_of(id);
+                    if pages.last() != Some(&page) {
+                        pages.push(page);
                     }
                 }
-                Ok(edge)
+                Ok(pages)
             })
             .collect::<Result<Vec<_>, GridError>>()?;
-        for (word, w) in ends.into_iter().flatten() {
-            if let Some(b) = bits.get_mut(word) {
-                *b |= w;
+        let mut pages: Vec<u32> = Vec::with_capacity(listed.iter().map(Vec::len).sum());
+        for page in listed.into_iter().flatten() {
+            if pages.last() != Some(&page) {
+                pages.push(page);
             }
         }
-        Ok(Self::from_bits(dims, bits))
+        let words = count.div_ceil(64) as usize;
+        let bits = PagedBits::with_pages(words, &pages, |stored, place| {
+            // Each stretch's ids span the stored words `place(first / 64) ..= place(last /
+            // 64)`; the words strictly between those two are its own, set in place.
+            let mut owned = Vec::with_capacity(stretches.len());
+            let mut rest: &mut [u64] = stored;
+            let mut taken = 0;
+            for &(_, ids) in &stretches {
+                let (Some(&first), Some(&last)) = (ids.first(), ids.last()) else {
+                    owned.push(&mut [][..]);
+                    continue;
+                };
+                let (lo, hi) = (
+                    place((first / 64) as usize) + 1,
+                    place((last / 64) as usize),
+                );
+                if lo >= hi || lo < taken || hi > taken + rest.len() {
+                    owned.push(&mut [][..]);
+                    continue;
+                }
+                let (_, tail) = std::mem::take(&mut rest).split_at_mut(lo - taken);
+                let (own, tail) = tail.split_at_mut(hi - lo);
+                owned.push(own);
+                rest = tail;
+                taken = hi;
+            }
+            let ends: Vec<[(usize, u64); 2]> = stretches
+                .par_iter()
+                .zip(owned)
+                .map(|(&(_, ids), own)| {
+                    let (Some(&first), Some(&last)) = (ids.first(), ids.last()) else {
+                        return [(0, 0); 2];
+                    };
+                    let (lo, hi) = (place((first / 64) as usize), place((last / 64) as usize));
+                    let mut edge = [(lo, 0u64), (hi, 0u64)];
+                    // The stored place of the last flat word met (ids increase).
+                    let (mut flat, mut word) = (usize::MAX, 0);
+                    for &id in ids {
+                        if (id / 64) as usize != flat {
+                            flat = (id / 64) as usize;
+                            word = place(flat);
+                        }
+                        let bit = 1u64 << (id % 64);
+                        if word == lo {
+                            edge[0].1 |= bit;
+                        } else if word == hi {
+                            edge[1].1 |= bit;
+                        } else if let Some(w) = own.get_mut(word - lo - 1) {
+                            *w |= bit;
+                        }
+                    }
+                    edge
+                })
+                .collect();
+            for (word, w) in ends.into_iter().flatten() {
+                if let Some(b) = stored.get_mut(word) {
+                    *b |= w;
+                }
+            }
+        });
+        Ok(Self::from_paged(dims, bits))
     }
 
-    fn from_bits(dims: [u32; 3], bits: Vec<u64>) -> Self {
-        let mut word_rank = Vec::with_capacity(bits.len());
-        let mut total = 0u64;
-        for w in &bits {
-            word_rank.push(total as u32);
-            total += u64::from(w.count_ones());
-        }
+    fn from_paged(dims: [u32; 3], bits: PagedBits) -> Self {
         Self {
             dims,
-            count: total,
             bits,
-            word_rank,
             rows: Default::default(),
         }
     }
@@ -499,11 +518,11 @@ impl SparseGrid {
         let start = nx * (y + ny * z);
         let (w0, shift) = (start / 64, (start % 64) as u32);
         for (i, o) in out.iter_mut().enumerate() {
-            let lo = self.bits.get(w0 + i).copied().unwrap_or(0);
+            let lo = self.bits.word(w0 + i);
             *o = if shift == 0 {
                 lo
             } else {
-                let hi = self.bits.get(w0 + i + 1).copied().unwrap_or(0);
+                let hi = self.bits.word(w0 + i + 1);
                 lo >> shift | hi << (64 - shift)
             };
         }
@@ -524,20 +543,23 @@ impl SparseGrid {
         if self.dims != other.dims {
             return Err(refused);
         }
-        let mut bits = Vec::with_capacity(self.bits.len());
-        for (&a, &b) in self.bits.iter().zip(&other.bits) {
-            if a & b != 0 {
-                return Err(refused);
-            }
-            bits.push(a | b);
-        }
-        Ok(Self::from_bits(self.dims, bits))
+        let bits = self.bits.union_of_disjoint(&other.bits).ok_or(refused)?;
+        Ok(Self::from_paged(self.dims, bits))
     }
 
-    /// The bitmap's words: voxel `id` is significant where bit `id % 64` of word `id / 64` is
-    /// set.
-    pub(crate) fn words(&self) -> &[u64] {
-        &self.bits
+    /// The bitmap words of this grid and of `other`, a grid of the same size, in pairs, in
+    /// id order, where either has a significant voxel among a word's page (other words are
+    /// left out): voxel `id` is significant where bit `id % 64` of its word is set.
+    pub(crate) fn word_pairs<'a>(
+        &'a self,
+        other: &'a SparseGrid,
+    ) -> impl Iterator<Item = (u64, u64)> + 'a {
+        self.bits.word_pairs(&other.bits)
+    }
+
+    /// Bytes the bitmap and its rank index hold.
+    pub fn bitmap_bytes(&self) -> usize {
+        self.bits.bytes()
     }
 
     /// Grid size in voxels along x, y and z.
@@ -552,37 +574,29 @@ impl SparseGrid {
 
     /// Number of significant voxels.
     pub fn len(&self) -> usize {
-        self.count as usize
+        self.bits.count() as usize
     }
 
     /// Whether no voxel is significant.
     pub fn is_empty(&self) -> bool {
-        self.count == 0
+        self.bits.count() == 0
     }
 
     /// Whether every voxel is significant.
     pub fn is_dense(&self) -> bool {
-        self.count == self.dims.iter().map(|&n| u64::from(n)).product::<u64>()
+        self.bits.count() == self.dims.iter().map(|&n| u64::from(n)).product::<u64>()
     }
 
     /// Whether voxel `id` is significant (false outside the grid).
     #[inline]
     pub fn contains(&self, id: u32) -> bool {
-        self.bits
-            .get((id / 64) as usize)
-            .is_some_and(|w| w >> (id % 64) & 1 == 1)
+        self.bits.contains(id)
     }
 
     /// Position of voxel `id` among the significant voxels in id order, if it is significant.
     #[inline]
     pub fn rank(&self, id: u32) -> Option<u32> {
-        let word = *self.bits.get((id / 64) as usize)?;
-        let bit = id % 64;
-        if word >> bit & 1 == 0 {
-            return None;
-        }
-        let below = word & ((1u64 << bit) - 1);
-        Some(self.word_rank[(id / 64) as usize] + below.count_ones())
+        self.bits.rank(id)
     }
 
     /// Index coordinates of voxel `id`.
@@ -627,13 +641,16 @@ impl SparseGrid {
 
     /// Significant voxel ids in increasing order.
     pub fn ids(&self) -> impl Iterator<Item = u32> + '_ {
-        self.bits.iter().enumerate().flat_map(|(w, &word)| {
-            let mut rest = word;
-            std::iter::from_fn(move || {
-                (rest != 0).then(|| {
-                    let bit = rest.trailing_zeros();
-                    rest &= rest - 1;
-                    w as u32 * 64 + bit
+        self.bits.pages().flat_map(|(first, words)| {
+            words.iter().enumerate().flat_map(move |(i, &word)| {
+                let w = (first + i) as u32;
+                let mut rest = word;
+                std::iter::from_fn(move || {
+                    (rest != 0).then(|| {
+                        let bit = rest.trailing_zeros();
+                        rest &= rest - 1;
+                        w * 64 + bit
+                    })
                 })
             })
         })
@@ -799,6 +816,49 @@ mod tests {
     }
 
     #[test]
+    fn a_sparse_grid_from_parts_stores_only_its_pages_and_ranks_as_a_list() {
+        // Clusters of ids with long empty stretches between them (pages of the bitmap not
+        // stored), parts cut inside words, inside pages and between clusters, some empty.
+        let dims = [1000u32, 300, 20];
+        let ids: Vec<u32> = (0..dims.iter().product::<u32>())
+            .filter(|&id| (id / 2500) % 7 == 0 && id.wrapping_mul(2654435761) >> 30 != 0)
+            .collect();
+        let cuts = [0, 1, 30, 700, 701, 5000, 90_000, 90_000, 200_000, ids.len()];
+        let parts: Vec<&[u32]> = cuts.windows(2).map(|c| &ids[c[0]..c[1]]).collect();
+        let grid = SparseGrid::from_sorted_parts(dims, &parts).unwrap();
+        assert_eq!(grid.len(), ids.len());
+        let mut flat = vec![0u64; (dims.iter().product::<u32>() as usize).div_ceil(64)];
+        for &id in &ids {
+            flat[id as usize / 64] |= 1 << (id % 64);
+        }
+        let words: Vec<u64> = (0..flat.len()).map(|w| grid.bits.word(w)).collect();
+        assert_eq!(words, flat);
+        // Far less than the flat bitmap and its rank a word (12 bytes a word).
+        assert!(
+            grid.bitmap_bytes() * 3 < flat.len() * 12,
+            "{} bytes",
+            grid.bitmap_bytes()
+        );
+        for (rank, &id) in ids.iter().enumerate().step_by(97) {
+            assert_eq!(grid.rank(id), Some(rank as u32));
+            assert!(grid.rank(id + 2500).is_none_or(|r| r as usize > rank));
+        }
+        assert_eq!(grid.rank(2500 * 3), None);
+        assert_eq!(grid.ids().collect::<Vec<_>>(), ids);
+        // Joined with the voxels it lacks in a cluster, the ids of both in order.
+        let more: Vec<u32> = (2500 * 7..2500 * 7 + 3000)
+            .filter(|id| ids.binary_search(id).is_err())
+            .collect();
+        let joined = grid
+            .joined_with(&SparseGrid::from_sorted_ids(dims, &more).unwrap())
+            .unwrap();
+        let mut all = [ids.clone(), more].concat();
+        all.sort_unstable();
+        assert_eq!(joined.ids().collect::<Vec<_>>(), all);
+        assert_eq!(joined.rank(all[40_000]), Some(40_000));
+    }
+
+    #[test]
     fn a_grid_from_parts_is_the_grid_of_its_ids_joined() {
         // Parts of every size around the 64-bit words and the stretches of 2^20 ids, empty
         // ones among them, sharing words where they meet: the same bitmap as a plain set of
@@ -827,7 +887,9 @@ mod tests {
         for &id in &ids {
             bits[id as usize / 64] |= 1 << (id % 64);
         }
-        assert_eq!(grid.bits, bits);
+        let words: Vec<u64> = (0..bits.len()).map(|w| grid.bits.word(w)).collect();
+        assert_eq!(words, bits);
+        assert_eq!(grid.bits.len(), bits.len());
         assert_eq!(grid.len(), ids.len());
         assert_eq!(grid.rank(ids[1 << 20]), Some(1 << 20));
         // An id repeated where two parts meet, past an empty part; one out of the grid in the

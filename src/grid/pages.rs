@@ -1,0 +1,294 @@
+//! A grid's bitmap held by pages: only the pages with a significant voxel are stored.
+//!
+//! A refinement is classified only within the bricks a view shows, and its significant voxels
+//! are a few percent of a grid of up to 2^31 voxels; a flat bitmap with a rank a word spanned
+//! the whole grid (384 MiB at 2^31 voxels, a third of a close-up's memory). Pages of
+//! [`PAGE_WORDS`] words with no bit set are not stored; a page table says where each stored
+//! one lies. (A general compressed bitmap crate such as `roaring` keeps containers of 2^16
+//! ids and ranks by scanning them; the orderings and texels ask for a voxel's rank once per
+//! run and per neighbour, so this keeps the flat bitmap's constant-time rank instead.)
+
+/// Words of 64 voxels a page.
+pub(super) const PAGE_WORDS: usize = 16;
+/// Voxels a page.
+const PAGE_BITS: u64 = 64 * PAGE_WORDS as u64;
+/// The page table's mark for a page with no bit set (not stored).
+const EMPTY: u32 = u32::MAX;
+
+/// Bits over ids `0..64 * len` in pages, with a rank index.
+#[derive(Debug, Clone, Default)]
+pub(super) struct PagedBits {
+    /// Words the bitmap spans (a flat bitmap's length).
+    len: usize,
+    /// Per page, its place among the stored pages, or [`EMPTY`].
+    table: Vec<u32>,
+    /// The stored pages' words, [`PAGE_WORDS`] each, in page order.
+    words: Vec<u64>,
+    /// Per stored page, the set bits of the pages before it.
+    page_rank: Vec<u32>,
+    /// Per stored word, the set bits of the words before it in its page.
+    word_rank: Vec<u16>,
+    /// Set bits in all.
+    count: u64,
+}
+
+impl PagedBits {
+    /// The bits of `words` (bit `i % 64` of word `i / 64` for id `i`), compacted in place: its
+    /// pages with no bit set are dropped and the others moved down over them.
+    pub(super) fn from_flat(mut words: Vec<u64>) -> Self {
+        let len = words.len();
+        let pages = len.div_ceil(PAGE_WORDS);
+        let mut table = vec![EMPTY; pages];
+        let mut stored = 0usize;
+        for (p, slot) in table.iter_mut().enumerate() {
+            let from = p * PAGE_WORDS;
+            let to = (from + PAGE_WORDS).min(len);
+            if words[from..to].iter().all(|&w| w == 0) {
+                continue;
+            }
+            // Stored pages move down (never up: `stored <= p`), the last one padded.
+            words.copy_within(from..to, stored * PAGE_WORDS);
+            let (tail, end) = (
+                stored * PAGE_WORDS + to - from,
+                ((stored + 1) * PAGE_WORDS).min(len),
+            );
+            if tail < end {
+                words[tail..end].fill(0);
+            }
+            *slot = stored as u32;
+            stored += 1;
+        }
+        words.resize(stored * PAGE_WORDS, 0);
+        words.shrink_to_fit();
+        Self::indexed(len, table, words)
+    }
+
+    /// Bits over `len` words with the pages `pages` (strictly increasing page numbers) stored,
+    /// all clear, and `fill` called to set them: with the stored words and the place of flat
+    /// word `w` among them (`w` in a stored page). The rank index is made afterwards.
+    pub(super) fn with_pages(
+        len: usize,
+        pages: &[u32],
+        fill: impl FnOnce(&mut [u64], &(dyn Fn(usize) -> usize + Sync)),
+    ) -> Self {
+        let mut table = vec![EMPTY; len.div_ceil(PAGE_WORDS)];
+        for (slot, &p) in pages.iter().enumerate() {
+            table[p as usize] = slot as u32;
+        }
+        let mut words = vec![0u64; pages.len() * PAGE_WORDS];
+        let place = |w: usize| table[w / PAGE_WORDS] as usize * PAGE_WORDS + w % PAGE_WORDS;
+        fill(&mut words, &place);
+        Self::indexed(len, table, words)
+    }
+
+    /// The page of voxel `id`.
+    pub(super) fn page_of(id: u32) -> u32 {
+        (u64::from(id) / PAGE_BITS) as u32
+    }
+
+    fn indexed(len: usize, table: Vec<u32>, words: Vec<u64>) -> Self {
+        let mut page_rank = Vec::with_capacity(words.len() / PAGE_WORDS);
+        let mut word_rank = Vec::with_capacity(words.len());
+        let mut total = 0u64;
+        for page in words.chunks(PAGE_WORDS) {
+            page_rank.push(total as u32);
+            let mut within = 0u16;
+            for w in page {
+                word_rank.push(within);
+                within += w.count_ones() as u16;
+            }
+            total += u64::from(within);
+        }
+        Self {
+            len,
+            table,
+            words,
+            page_rank,
+            word_rank,
+            count: total,
+        }
+    }
+
+    /// Set bits in all.
+    pub(super) fn count(&self) -> u64 {
+        self.count
+    }
+
+    /// Words the bitmap spans.
+    #[cfg(test)]
+    pub(super) fn len(&self) -> usize {
+        self.len
+    }
+
+    /// The stored place of flat word `w`, if its page is stored.
+    #[inline]
+    fn place(&self, w: usize) -> Option<usize> {
+        let slot = *self.table.get(w / PAGE_WORDS)?;
+        (slot != EMPTY).then(|| slot as usize * PAGE_WORDS + w % PAGE_WORDS)
+    }
+
+    /// Flat word `w` (0 past the end and in pages not stored).
+    #[inline]
+    pub(super) fn word(&self, w: usize) -> u64 {
+        self.place(w).map_or(0, |i| self.words[i])
+    }
+
+    /// Whether bit `id` is set.
+    #[inline]
+    pub(super) fn contains(&self, id: u32) -> bool {
+        self.word((id / 64) as usize) >> (id % 64) & 1 == 1
+    }
+
+    /// Set bits before bit `id`, if it is set.
+    #[inline]
+    pub(super) fn rank(&self, id: u32) -> Option<u32> {
+        let i = self.place((id / 64) as usize)?;
+        let word = self.words[i];
+        let bit = id % 64;
+        if word >> bit & 1 == 0 {
+            return None;
+        }
+        let below = word & ((1u64 << bit) - 1);
+        Some(self.page_rank[i / PAGE_WORDS] + u32::from(self.word_rank[i]) + below.count_ones())
+    }
+
+    /// The stored pages in order: the flat index of each one's first word, and its words (a
+    /// last page past the bitmap's end padded with zeros).
+    pub(super) fn pages(&self) -> impl Iterator<Item = (usize, &[u64])> + '_ {
+        self.table
+            .iter()
+            .enumerate()
+            .filter(|(_, s)| **s != EMPTY)
+            .map(|(p, &s)| {
+                let at = s as usize * PAGE_WORDS;
+                (p * PAGE_WORDS, &self.words[at..at + PAGE_WORDS])
+            })
+    }
+
+    /// Page `p`'s words, if it is stored.
+    fn page(&self, p: usize) -> Option<&[u64]> {
+        let s = *self.table.get(p)?;
+        (s != EMPTY).then(|| &self.words[s as usize * PAGE_WORDS..(s as usize + 1) * PAGE_WORDS])
+    }
+
+    /// The word pairs of this bitmap and `other` (of the same length) over the pages either
+    /// stores, in order; pages neither stores are left out.
+    pub(super) fn word_pairs<'a>(
+        &'a self,
+        other: &'a PagedBits,
+    ) -> impl Iterator<Item = (u64, u64)> + 'a {
+        const NONE: [u64; PAGE_WORDS] = [0; PAGE_WORDS];
+        (0..self.table.len().max(other.table.len())).flat_map(move |p| {
+            let (a, b) = (self.page(p), other.page(p));
+            let pair =
+                (a.is_some() || b.is_some()).then(|| (a.unwrap_or(&NONE), b.unwrap_or(&NONE)));
+            pair.into_iter()
+                .flat_map(|(a, b)| a.iter().copied().zip(b.iter().copied()))
+        })
+    }
+
+    /// The bits of this bitmap or `other` (of the same length), or `None` where the two share
+    /// a set bit.
+    pub(super) fn union_of_disjoint(&self, other: &PagedBits) -> Option<Self> {
+        let pages = self.table.len();
+        let mut table = vec![EMPTY; pages];
+        let mut words = Vec::new();
+        for (p, slot) in table.iter_mut().enumerate() {
+            let page = match (self.page(p), other.page(p)) {
+                (None, None) => continue,
+                (Some(a), None) | (None, Some(a)) => a.to_vec(),
+                (Some(a), Some(b)) => {
+                    if a.iter().zip(b).any(|(a, b)| a & b != 0) {
+                        return None;
+                    }
+                    a.iter().zip(b).map(|(a, b)| a | b).collect()
+                }
+            };
+            *slot = (words.len() / PAGE_WORDS) as u32;
+            words.extend_from_slice(&page);
+        }
+        Some(Self::indexed(self.len, table, words))
+    }
+
+    /// Bytes held (the page table, the stored pages and their ranks).
+    pub(super) fn bytes(&self) -> usize {
+        self.table.len() * 4
+            + self.words.len() * 8
+            + self.page_rank.len() * 4
+            + self.word_rank.len() * 2
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A flat bitmap with bits set at `ids`.
+    fn flat(len: usize, ids: &[u32]) -> Vec<u64> {
+        let mut words = vec![0u64; len];
+        for &id in ids {
+            words[id as usize / 64] |= 1 << (id % 64);
+        }
+        words
+    }
+
+    #[test]
+    fn pages_with_no_bit_are_not_stored_and_ranks_count_across_pages() {
+        // Clusters of bits with whole pages empty between them, a last page cut short, a
+        // page full: every id's membership and rank as a plain list's.
+        let len = 10 * PAGE_WORDS + 5;
+        let mut ids: Vec<u32> = Vec::new();
+        ids.extend([0, 1, 63, 64, 200]);
+        ids.extend((3 * PAGE_BITS as u32)..(4 * PAGE_BITS as u32));
+        ids.extend([7 * PAGE_BITS as u32 + 1000, 10 * PAGE_BITS as u32 + 319]);
+        let bits = PagedBits::from_flat(flat(len, &ids));
+        assert_eq!(bits.count(), ids.len() as u64);
+        assert_eq!(bits.len(), len);
+        let stored: Vec<usize> = bits.pages().map(|(w, _)| w / PAGE_WORDS).collect();
+        assert_eq!(stored, [0, 3, 7, 10]);
+        assert_eq!(bits.words.len(), 4 * PAGE_WORDS);
+        for id in 0..(len * 64) as u32 {
+            let rank = ids.iter().position(|&i| i == id).map(|r| r as u32);
+            assert_eq!(bits.rank(id), rank, "{id}");
+            assert_eq!(bits.contains(id), rank.is_some(), "{id}");
+        }
+        for w in 0..len + 3 {
+            assert_eq!(bits.word(w), flat(len, &ids).get(w).copied().unwrap_or(0));
+        }
+        // Made page by page from a list of its pages, the same bits.
+        let pages: Vec<u32> = stored.iter().map(|&p| p as u32).collect();
+        let made = PagedBits::with_pages(len, &pages, |words, place| {
+            for &id in &ids {
+                words[place(id as usize / 64)] |= 1 << (id % 64);
+            }
+        });
+        assert_eq!(made.words, bits.words);
+        assert_eq!(made.table, bits.table);
+        assert_eq!(made.word_rank, bits.word_rank);
+    }
+
+    #[test]
+    fn a_union_keeps_every_bit_and_refuses_a_shared_one() {
+        let len = 6 * PAGE_WORDS;
+        let a_ids = [5u32, 70, 2 * PAGE_BITS as u32 + 9];
+        let b_ids = [6u32, 5 * PAGE_BITS as u32 + 1];
+        let a = PagedBits::from_flat(flat(len, &a_ids));
+        let b = PagedBits::from_flat(flat(len, &b_ids));
+        let u = a.union_of_disjoint(&b).unwrap();
+        let mut all: Vec<u32> = a_ids.iter().chain(&b_ids).copied().collect();
+        all.sort_unstable();
+        for (r, &id) in all.iter().enumerate() {
+            assert_eq!(u.rank(id), Some(r as u32));
+        }
+        assert_eq!(u.count(), 5);
+        assert_eq!(u.pages().count(), 3);
+        assert!(a.union_of_disjoint(&a).is_none());
+        // The pairs cover the pages either stores, word for word.
+        let pairs: Vec<(u64, u64)> = a.word_pairs(&b).collect();
+        assert_eq!(pairs.len(), 3 * PAGE_WORDS);
+        assert_eq!(pairs[0], (1 << 5, 1 << 6));
+        assert_eq!(pairs[1], (1 << 6, 0));
+        let ones: u32 = pairs.iter().map(|(a, b)| (a | b).count_ones()).sum();
+        assert_eq!(ones, 5);
+    }
+}
