@@ -17,9 +17,11 @@ use crate::volume::CpuVolume;
 /// Bricks, since the draw order runs along any axis: within a brick the next voxel along y or
 /// z is as near as the next along x. Only significant voxels, since a frame reads the texel of
 /// every splat it projects, and packed, the texels of neighbouring splats share cache lines
-/// (the engine's 1.05M voxels with opacity, of 8.4M, take 8 MB of texels and 2 MB of bricks
-/// instead of 67 MB). A brick's significant voxels are a bit mask, and a voxel's texel is
-/// found by counting the bits before its own.
+/// (the engine's 1.05M voxels with opacity, of 8.4M, take 8 MB of texels instead of 67 MB).
+/// A brick's significant voxels are a bit mask, and a voxel's texel is found by counting the
+/// bits before its own. The bricks are held by pages of 4x4x4 bricks, only the pages with a
+/// significant voxel stored: a refinement classified within the bricks on the image holds
+/// no table of its whole grid.
 ///
 /// The texels of a classified grid take their normals from the volume's gradients as each
 /// brick is first read ([`SplatTexels::new`]): a frame reads the texels of the splats it
@@ -30,12 +32,14 @@ pub struct SplatTexels {
     pub(super) dims: [u32; 3],
     /// Bricks along x and y.
     pub(super) bricks: [usize; 2],
-    /// Which bricks hold a significant voxel, on the grid of bricks (x fastest): the rank of
-    /// one among them is its place in `table`. `None` for no grid.
-    occupied: Option<SparseGrid>,
-    /// Per brick that holds a significant voxel, in brick order. (A table of every brick took
-    /// 16 bytes a brick of the whole grid: 418 MB for a refinement of 1.7G voxels classified
-    /// in the few bricks on the image.)
+    /// Pages of [`PAGE`]^3 bricks along x, y and z.
+    pages: [usize; 3],
+    /// Per page (x fastest), its place among the stored pages, or [`EMPTY_PAGE`] where none of
+    /// its bricks holds a significant voxel.
+    page_table: Vec<u32>,
+    /// The stored pages' bricks, [`PAGE`]^3 a page (x fastest within it), in page order. (A
+    /// table of every brick took 16 bytes a brick of the whole grid: 418 MB for a refinement
+    /// of 1.7G voxels classified within the few bricks on the image.)
     pub(super) table: Vec<Brick>,
     /// The texels' 8 bytes each as a little-endian `u64`; atomic, so that the thread that
     /// first reads a brick can write its normals while others read other bricks.
@@ -75,6 +79,14 @@ pub(super) struct Brick {
 /// Brick side in voxels.
 pub(super) const BRICK: usize = 4;
 
+/// Page side in bricks: the brick table is held by pages of 16^3 voxels, those with no
+/// significant voxel not stored.
+const PAGE: usize = 4;
+/// Bricks a page.
+const PAGE_BRICKS: usize = PAGE * PAGE * PAGE;
+/// The page table's mark for a page not stored.
+const EMPTY_PAGE: u32 = u32::MAX;
+
 impl SplatTexels {
     /// The texels of a classified volume: its colours and densities, and the gradients of the
     /// volume it was classified from, on a grid `factors` times finer than the volume's
@@ -108,7 +120,7 @@ impl SplatTexels {
 
     /// Rows of bricks along x, all layers.
     fn brick_rows(&self) -> usize {
-        self.bricks[1] * self.occupied.as_ref().map_or(0, |o| o.dims()[2] as usize)
+        self.bricks[1] * self.dims[2].div_ceil(BRICK as u32) as usize
     }
 
     /// Units of [`NORMAL_UNIT`] bricks along x in a row of bricks.
@@ -126,83 +138,93 @@ impl SplatTexels {
         if layer == 0 || layers == 0 {
             return Self::default();
         }
-        // Which voxels are significant, a layer of bricks (four z-slices) a task, from the
-        // grid's x rows; each layer's bricks that hold one, with their masks.
+        let pages = [bricks[0], bricks[1], layers].map(|n| n.div_ceil(PAGE));
+        let page_layer = pages[0] * pages[1];
+        // Which voxels are significant, a layer of pages (sixteen z-slices) a task, from the
+        // grid's x rows; each layer's pages that hold one, with their bricks' masks.
         // The x rows are read from every task below: made first, not by the first task.
         grid.prepare_rows(0);
-        let per_layer: Vec<(Vec<u32>, Vec<u64>)> = (0..layers)
+        let per_layer: Vec<Vec<(usize, [u64; PAGE_BRICKS])>> = (0..pages[2])
             .into_par_iter()
-            .map(|bz| {
-                let mut masks = vec![0u64; layer];
-                for z in bz * BRICK..((bz + 1) * BRICK).min(nz) {
+            .map(|pz| {
+                let mut masks = vec![[0u64; PAGE_BRICKS]; page_layer];
+                for z in pz * PAGE * BRICK..((pz + 1) * PAGE * BRICK).min(nz) {
+                    let bz = z / BRICK % PAGE;
                     for y in 0..ny {
+                        let (py, by) = (y / BRICK / PAGE, y / BRICK % PAGE);
                         for run in grid.row(0, y as u32, z as u32) {
                             for x in run.start as usize..run.end() as usize {
-                                masks[(y / BRICK) * bricks[0] + x / BRICK] |=
+                                let (px, bx) = (x / BRICK / PAGE, x / BRICK % PAGE);
+                                masks[py * pages[0] + px][(bz * PAGE + by) * PAGE + bx] |=
                                     1 << within_brick(x, y, z);
                             }
                         }
                     }
                 }
                 masks
-                    .iter()
+                    .into_iter()
                     .enumerate()
-                    .filter(|(_, m)| **m != 0)
-                    .map(|(i, &m)| ((bz * layer + i) as u32, m))
-                    .unzip()
+                    .filter(|(_, m)| m.iter().any(|&b| b != 0))
+                    .map(|(i, m)| (pz * page_layer + i, m))
+                    .collect()
             })
             .collect();
-        let brick_dims = [bricks[0], bricks[1], layers].map(|n| n as u32);
-        let ids: Vec<&[u32]> = per_layer.iter().map(|(ids, _)| &ids[..]).collect();
-        // The ids increase within the grid of bricks, so this is not refused.
-        let Ok(occupied) = SparseGrid::from_sorted_parts(brick_dims, &ids) else {
-            return Self::default();
-        };
+        let mut page_table = vec![EMPTY_PAGE; page_layer * pages[2]];
         // Voxel ids are `u32`, so the count of significant voxels is too.
         let mut count = 0u32;
-        let mut table = Vec::with_capacity(occupied.len());
-        for &present in per_layer.iter().flat_map(|(_, masks)| masks) {
-            table.push(Brick {
-                present,
-                first: count,
-            });
-            count += present.count_ones();
+        let mut table = Vec::with_capacity(per_layer.iter().map(Vec::len).sum::<usize>());
+        for (slot, (page, masks)) in per_layer.iter().flatten().enumerate() {
+            page_table[*page] = slot as u32;
+            for &present in masks {
+                table.push(Brick {
+                    present,
+                    first: count,
+                });
+                count += present.count_ones();
+            }
         }
-        // The texels, brick by brick in the same layers: each layer's a contiguous stretch.
+        // The texels, page by page in the same layers: each layer's a contiguous stretch.
         // Atomics have no zeroed allocation in safe code: the zeros are written, in parallel.
         let mut texels: Vec<AtomicU64> = (0..count)
             .into_par_iter()
             .map(|_| AtomicU64::new(0))
             .collect();
-        let mut stretches = Vec::with_capacity(layers);
+        let mut stretches = Vec::with_capacity(pages[2]);
         let (mut rest, mut bricks_left) = (texels.as_mut_slice(), table.as_slice());
-        for (ids, _) in &per_layer {
-            let (of_layer, tail) = bricks_left.split_at(ids.len());
-            let n: u32 = of_layer.iter().map(|b| b.present.count_ones()).sum();
+        for of_layer in &per_layer {
+            let (own, tail) = bricks_left.split_at(of_layer.len() * PAGE_BRICKS);
+            let n: u32 = own.iter().map(|b| b.present.count_ones()).sum();
             let (stretch, rest_of) = std::mem::take(&mut rest).split_at_mut(n as usize);
-            stretches.push((stretch, of_layer, &ids[..]));
+            stretches.push((stretch, own, of_layer));
             rest = rest_of;
             bricks_left = tail;
         }
         stretches
             .into_par_iter()
-            .enumerate()
-            .for_each(|(bz, (stretch, bricks_of_layer, ids))| {
+            .for_each(|(stretch, bricks_of_layer, of_layer)| {
                 let mut slots = stretch.iter_mut();
-                for (brick, &id) in bricks_of_layer.iter().zip(ids) {
-                    let i = id as usize - bz * layer;
-                    let (bx, by) = (i % bricks[0], i / bricks[0]);
-                    let mut bits = brick.present;
-                    while bits != 0 {
-                        let bit = bits.trailing_zeros() as usize;
-                        bits &= bits - 1;
-                        let x = bx * BRICK + bit % BRICK;
-                        let y = by * BRICK + (bit / BRICK) % BRICK;
-                        let z = bz * BRICK + bit / (BRICK * BRICK);
-                        let k = [x, y, z].map(|c| c as u32);
-                        let id = (x + nx * (y + ny * z)) as u32;
-                        if let (Some(slot), Some(rank)) = (slots.next(), grid.rank(id)) {
-                            *slot.get_mut() = u64::from_le_bytes(texel(k, rank as usize));
+                for (page_bricks, (page, _)) in bricks_of_layer.chunks(PAGE_BRICKS).zip(of_layer) {
+                    let (px, py, pz) = (
+                        page % pages[0],
+                        page / pages[0] % pages[1],
+                        page / page_layer,
+                    );
+                    for (j, brick) in page_bricks.iter().enumerate() {
+                        let bx = px * PAGE + j % PAGE;
+                        let by = py * PAGE + j / PAGE % PAGE;
+                        let bz = pz * PAGE + j / (PAGE * PAGE);
+                        let mut bits = brick.present;
+                        while bits != 0 {
+                            let bit = bits.trailing_zeros() as usize;
+                            bits &= bits - 1;
+                            let x = bx * BRICK + bit % BRICK;
+                            let y = by * BRICK + (bit / BRICK) % BRICK;
+                            let z = bz * BRICK + bit / (BRICK * BRICK);
+                            let k = [x, y, z].map(|c| c as u32);
+                            let id = (x + nx * (y + ny * z)) as u32;
+                            if let (Some(slot), Some(rank)) = (slots.next(), grid.rank(id)) {
+                                *slot.get_mut() = u64::from_le_bytes(texel(k, rank as usize));
+                            }
                         }
                     }
                 }
@@ -210,7 +232,8 @@ impl SplatTexels {
         Self {
             dims,
             bricks,
-            occupied: Some(occupied),
+            pages,
+            page_table,
             table,
             texels,
             normals: None,
@@ -325,16 +348,27 @@ impl SplatTexels {
             return None;
         }
         let [x, y, z] = [x, y, z].map(|v| v as usize);
-        let b = ((z / BRICK) * self.bricks[1] + y / BRICK) * self.bricks[0] + x / BRICK;
-        let brick = self
-            .table
-            .get(self.occupied.as_ref()?.rank(b as u32)? as usize)?;
+        let (bx, by, bz) = (x / BRICK, y / BRICK, z / BRICK);
+        let b = (bz * self.bricks[1] + by) * self.bricks[0] + bx;
+        let brick = self.brick(bx, by, bz)?;
         let bit = within_brick(x, y, z);
         if brick.present >> bit & 1 == 0 {
             return None;
         }
         let before = (brick.present & ((1u64 << bit) - 1)).count_ones();
         Some((b, (brick.first + before) as usize))
+    }
+
+    /// Brick `(bx, by, bz)`, where its page is stored (its mask may still be empty).
+    #[inline(always)]
+    fn brick(&self, bx: usize, by: usize, bz: usize) -> Option<&Brick> {
+        let page = ((bz / PAGE) * self.pages[1] + by / PAGE) * self.pages[0] + bx / PAGE;
+        let slot = *self.page_table.get(page)?;
+        if slot == EMPTY_PAGE {
+            return None;
+        }
+        let within = ((bz % PAGE) * PAGE + by % PAGE) * PAGE + bx % PAGE;
+        self.table.get(slot as usize * PAGE_BRICKS + within)
     }
 
     /// Makes the normals of brick `b`'s unit where they are made lazily and not made yet.
@@ -378,13 +412,7 @@ impl SplatTexels {
         let (row, first) = (u / self.units_x(), u % self.units_x() * NORMAL_UNIT);
         let (by, bz) = (row % self.bricks[1], row / self.bricks[1]);
         for bx in first..(first + NORMAL_UNIT).min(self.bricks[0]) {
-            let b = row * self.bricks[0] + bx;
-            let Some(brick) = self
-                .occupied
-                .as_ref()
-                .and_then(|o| o.rank(b as u32))
-                .and_then(|slot| self.table.get(slot as usize))
-            else {
+            let Some(brick) = self.brick(bx, by, bz) else {
                 continue;
             };
             let mut bits = brick.present;
@@ -524,10 +552,10 @@ mod tests {
         // grid whose sides are no multiple of a brick: each voxel's texel (its coordinates
         // and rank written into it) where it is significant, none elsewhere, as a plain set of
         // the ids says.
-        let dims = [37u32, 22, 29];
+        let dims = [90u32, 45, 62];
         let [nx, ny, nz] = dims;
         let keep = |x: u32, y: u32, z: u32| {
-            (x / 9 + y / 7 + z / 10).is_multiple_of(4) && !(x * 5 + y * 3 + z).is_multiple_of(4)
+            (x / 20 + y / 20 + z / 20).is_multiple_of(3) && !(x * 5 + y * 3 + z).is_multiple_of(4)
         };
         let mut ids = Vec::new();
         for z in 0..nz {
@@ -551,9 +579,16 @@ mod tests {
             .collect();
         bricks.sort_unstable();
         bricks.dedup();
-        assert_eq!(texels.table.len(), bricks.len());
-        let all = (nx.div_ceil(4) * ny.div_ceil(4) * nz.div_ceil(4)) as usize;
-        assert!(bricks.len() * 3 < all * 2, "{} of {all}", bricks.len());
+        // Bricks held by pages of 4^3 bricks: the pages that hold one of these bricks, no more.
+        let mut pages: Vec<[u32; 3]> = bricks.iter().map(|b| b.map(|c| c / 4)).collect();
+        pages.dedup();
+        pages.sort_unstable();
+        pages.dedup();
+        assert_eq!(texels.table.len(), pages.len() * 64);
+        let held = texels.table.iter().filter(|b| b.present != 0).count();
+        assert_eq!(held, bricks.len());
+        let all = (nx.div_ceil(16) * ny.div_ceil(16) * nz.div_ceil(16)) as usize;
+        assert!(pages.len() < all, "{} of {all}", pages.len());
         for z in 0..nz + 2 {
             for y in 0..ny + 2 {
                 for x in 0..nx + 2 {
