@@ -2039,6 +2039,9 @@ impl Renderer {
             let Some(full) = self.volumes.get(&own) else {
                 continue;
             };
+            // The own grid's bricks on the image, where the factors counted them (kept for the
+            // refinement's region below).
+            let mut on_image_counted: Option<Option<Region>> = None;
             let wanted = if self.full_grid {
                 Detail::default()
             } else {
@@ -2054,11 +2057,10 @@ impl Renderer {
                 // whole grid ([`refine_factors`]).
                 let within = match (&full.occupied, dense || self.refine_whole) {
                     (Some(occupied), false) => {
-                        let (voxels, splats) = on_image_within(
-                            geometry.dims(),
-                            occupied,
-                            on_image(&geometry, view).as_ref(),
-                        );
+                        let shown = on_image(&geometry, view);
+                        let (voxels, splats) =
+                            on_image_within(geometry.dims(), occupied, shown.as_ref());
+                        on_image_counted = Some(shown);
                         Within {
                             voxels,
                             splats: Some((splats, most_refined_splats(view.size))),
@@ -2238,7 +2240,9 @@ impl Renderer {
                     } else {
                         let geometry = placed_geometry(&node.volume, world)
                             .map_err(|e| fail(e.to_string()))?;
-                        let shown = on_image(&geometry, view);
+                        let shown = on_image_counted
+                            .take()
+                            .unwrap_or_else(|| on_image(&geometry, view));
                         match &brick_wants {
                             // Drawn brick by brick: only the bricks that want refining.
                             Some(wants) => {
