@@ -107,9 +107,13 @@ pub const MAX_REFINE: u32 = 8;
 /// and count the whole grid's.
 pub const MAX_REFINED_VOXELS: u64 = 1 << 28;
 
-/// The most voxels a refined grid spans in all, classified or not (2^31): its significance
-/// bitmap and the bitmap's ranks take 3/16 of a byte a fine voxel, 384 MiB at most. The
-/// LIDC2 CT resampled to 0.7 mm (512 x 512 x 532) refined 2 x 2 x 3 spans 1.67G.
+/// The most voxels a refined grid spans in all, classified or not (2^31). What spans the
+/// whole refined grid is its tables' indexes (the significance bitmap's and the texels' page
+/// tables, the marks of the texels' normals, the rows' offsets): about 1/60 of a byte a fine
+/// voxel, some 36 MiB at 2^31; the bitmap and the texels are held only where a voxel is
+/// significant. (Before they were held by pages, the bitmap's ranks and the texels' bricks
+/// took 7/16 of a byte a fine voxel, and set this cap.) The LIDC2 CT resampled to 0.7 mm
+/// (512 x 512 x 532) refined 2 x 2 x 3 spans 1.67G.
 pub(super) const MAX_REFINED_GRID: u64 = 1 << 31;
 
 /// The most splats a refinement counted by the bricks on the image may hold, a pixel of the
