@@ -102,8 +102,11 @@ fn main() -> Result<()> {
             let stages = shot.report.tiles.unwrap_or_default();
             let ms_of = |d: std::time::Duration| d.as_secs_f64() * 1e3;
             println!(
-                "frame {f} {}: {ms:.0} ms (making {made:.0}; order {:.0}, project {:.0}, bin {:.0}, tiles {:.0}), {} splats, levels {:?}, refined {:?}, by brick {}",
+                "frame {f} {}: {ms:.0} ms (making {made:.0}: classify {:.0}, texels {:.0}; look {:.0}, order {:.0}, project {:.0}, bin {:.0}, tiles {:.0}), {} splats, levels {:?}, refined {:?}, by brick {}",
                 names[m],
+                ms_of(t.classify),
+                ms_of(t.texels),
+                ms_of(t.seen),
                 ms_of(t.order),
                 ms_of(stages.project),
                 ms_of(stages.bin),

@@ -450,7 +450,8 @@ impl SparseGrid {
     /// (z then y for axes x and y; z, then y within the range, for z). `starts` has bit `x`
     /// set where voxel `x` of the bitmap row starts a run along `axis` (significant, and its
     /// neighbour before it along `axis` is not or lies off the grid), `ends` where it ends
-    /// one, as words of 64 voxels.
+    /// one, as words of 64 voxels. Bitmap rows in pages not stored may be left out: they
+    /// start and end no run.
     fn slab_edges(
         &self,
         axis: usize,
@@ -464,6 +465,15 @@ impl SparseGrid {
         let [mut here, mut before, mut after, mut starts, mut ends] =
             std::array::from_fn(|_| vec![0u64; words]);
         let mut visit = |y: usize, z: usize| {
+            // A row in pages of the bitmap not stored starts and ends no run: skipped, its
+            // neighbours not read (most of a refinement classified within a few bricks).
+            let start = nx * (y + ny * z);
+            if self
+                .bits
+                .clear_between(start / 64, (start + nx).div_ceil(64))
+            {
+                return;
+            }
             self.bitmap_row(y, z, &mut here);
             if axis == 0 {
                 for i in 0..words {

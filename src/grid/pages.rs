@@ -139,6 +139,15 @@ impl PagedBits {
         self.word((id / 64) as usize) >> (id % 64) & 1 == 1
     }
 
+    /// Whether words `from..to` lie in pages not stored (so that all are 0); false where a
+    /// stored page overlaps them, whatever its words there.
+    #[inline]
+    pub(super) fn clear_between(&self, from: usize, to: usize) -> bool {
+        from >= to
+            || (from / PAGE_WORDS..=(to - 1) / PAGE_WORDS)
+                .all(|p| self.table.get(p).is_none_or(|&s| s == EMPTY))
+    }
+
     /// Set bits before bit `id`, if it is set.
     #[inline]
     pub(super) fn rank(&self, id: u32) -> Option<u32> {
@@ -283,6 +292,11 @@ mod tests {
         assert_eq!(u.count(), 5);
         assert_eq!(u.pages().count(), 3);
         assert!(a.union_of_disjoint(&a).is_none());
+        // Words in pages not stored, and stretches that reach into a stored one.
+        assert!(b.clear_between(PAGE_WORDS, 5 * PAGE_WORDS));
+        assert!(!b.clear_between(PAGE_WORDS, 5 * PAGE_WORDS + 1));
+        assert!(!b.clear_between(PAGE_WORDS - 1, 2 * PAGE_WORDS));
+        assert!(b.clear_between(3, 3) && b.clear_between(7 * PAGE_WORDS, 9 * PAGE_WORDS));
         // The pairs cover the pages either stores, word for word.
         let pairs: Vec<(u64, u64)> = a.word_pairs(&b).collect();
         assert_eq!(pairs.len(), 3 * PAGE_WORDS);
