@@ -1229,6 +1229,19 @@ impl Region {
     }
 
     /// Clears `open` (one byte a voxel of row `y` of slice `z`) outside the region.
+    /// Whether a brick covered holds a voxel of z-slices `z0..z1`.
+    fn covers_any_in_z(&self, z0: usize, z1: usize) -> bool {
+        let side = self.side as usize;
+        if z0 >= z1 {
+            return false;
+        }
+        let (b0, b1) = (z0 / side, (z1 - 1) / side);
+        let layer = (self.bricks[0] * self.bricks[1]) as usize;
+        self.covered
+            .get(b0 * layer..((b1 + 1) * layer).min(self.covered.len()))
+            .is_some_and(|marks| marks.iter().any(|&c| c))
+    }
+
     fn clear_outside(&self, open: &mut [u8], y: usize, z: usize) {
         let side = self.side as usize;
         let (by, bz) = ((y / side) as u32, (z / side) as u32);
@@ -1305,6 +1318,11 @@ fn classify_slab<T: Voxel>(
     let (mut ids, mut colors) = (Vec::new(), Vec::new());
     let z0 = slab * SLAB;
     let z1 = (z0 + SLAB).min(nz);
+    // A slab the region leaves out whole is not read (a refinement joined with the few bricks
+    // a turned view adds would else walk every slice of the grid).
+    if region.is_some_and(|r| !r.covers_any_in_z(z0, z1)) {
+        return (ids, colors);
+    }
     // Per z-slice of the slab, with the slices beside it: which voxels' cells lie in one clear
     // interval of the transfer function. A fine voxel's cell lies in the 3x3x3 voxels around
     // the coarse voxel it splits, and trilinear interpolation stays in the interval its
@@ -1331,8 +1349,11 @@ fn classify_slab<T: Voxel>(
                 region.clear_outside(row, y, z);
             }
         }
+        // The rows with a voxel to classify: the others are passed over once, not for every
+        // fine row they hold.
+        let rows_open: Vec<bool> = open.chunks(nx).map(|r| r.iter().any(|&o| o != 0)).collect();
         for jz in 0..fz {
-            for y in 0..ny {
+            for y in (0..ny).filter(|&y| rows_open[y]) {
                 let open = &open[nx * y..][..nx];
                 let inner =
                     by_rows && nx >= 3 && (1..ny - 1).contains(&y) && (1..nz - 1).contains(&z);
