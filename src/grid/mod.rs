@@ -3,11 +3,11 @@
 //! A [`SparseGrid`] records which voxels of an `nx x ny x nz` grid are significant. Voxel ids are
 //! `x + nx * (y + ny * z)` as `u32`; a grid with more than 2^32 voxels is refused with
 //! [`GridError::TooLarge`] rather than wrapping. Besides a bitmap (with a rank index, so that the
-//! attributes of the significant voxels can be stored compactly; held by pages, those with no
-//! significant voxel not stored), the grid keeps run-length rows
-//! along each of the three axes: the inner loop of every ordering walks runs, so empty space costs
-//! nothing there. An axis's rows are built the first time they are asked for (a view needs one
-//! or two of them), slabs of rows in parallel. A dense grid is the case where every voxel is significant.
+//! attributes of the significant voxels can be stored compactly; held by pages, the pages with
+//! no significant voxel not stored), the grid keeps run-length rows along each of the three
+//! axes: the inner loop of every ordering walks runs, so empty space costs nothing there. An
+//! axis's rows are built the first time they are asked for (a view needs one or two of them),
+//! slabs of rows in parallel. A dense grid is the case where every voxel is significant.
 
 use std::sync::OnceLock;
 
