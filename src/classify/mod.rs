@@ -1160,6 +1160,64 @@ impl Region {
         })
     }
 
+    /// [`Region::new`] decided block by block: `covered(lo, hi)` says whether every brick
+    /// from brick coordinates `lo` up to `hi` (exclusive) is covered (`Some(true)`), none is
+    /// (`Some(false)`), or it cannot tell (`None`): the block is then cut in halves along its
+    /// longest axis, down to single bricks, for which it must tell. A test that settles most
+    /// large blocks at once makes a region of many bricks at a small fraction of the tests
+    /// brick by brick. `None` for a side of 0.
+    pub fn by_blocks(
+        dims: [u32; 3],
+        side: u32,
+        covered: impl Fn([u32; 3], [u32; 3]) -> Option<bool>,
+    ) -> Option<Self> {
+        if side == 0 {
+            return None;
+        }
+        let bricks = dims.map(|n| n.div_ceil(side));
+        let mut marks = vec![false; bricks.iter().map(|&b| b as usize).product()];
+        // Blocks still to settle; a block is cut in two, so at most one entry per level of
+        // cutting (about 3 log2 of the bricks along an axis) waits beside the one in hand.
+        let mut blocks = vec![([0u32; 3], bricks)];
+        while let Some((lo, hi)) = blocks.pop() {
+            if (0..3).any(|a| lo[a] >= hi[a]) {
+                continue;
+            }
+            let single = (0..3).all(|a| hi[a] - lo[a] == 1);
+            match covered(lo, hi) {
+                Some(true) => {
+                    for z in lo[2]..hi[2] {
+                        for y in lo[1]..hi[1] {
+                            let row = ((z * bricks[1] + y) * bricks[0]) as usize;
+                            marks[row + lo[0] as usize..row + hi[0] as usize].fill(true);
+                        }
+                    }
+                }
+                Some(false) => {}
+                // A single brick the test cannot settle is kept: nothing is left out that
+                // the test does not leave out.
+                None if single => {
+                    marks[((lo[2] * bricks[1] + lo[1]) * bricks[0] + lo[0]) as usize] = true;
+                }
+                None => {
+                    let a = (0..3).max_by_key(|&a| hi[a] - lo[a]).unwrap_or(0);
+                    let mid = lo[a] + (hi[a] - lo[a]) / 2;
+                    let (mut first_hi, mut second_lo) = (hi, lo);
+                    first_hi[a] = mid;
+                    second_lo[a] = mid;
+                    blocks.push((lo, first_hi));
+                    blocks.push((second_lo, hi));
+                }
+            }
+        }
+        Some(Self {
+            dims,
+            side,
+            bricks,
+            covered: marks,
+        })
+    }
+
     /// Whether the brick at brick coordinates `b` is covered (no brick past the grid is).
     pub fn covers_brick(&self, b: [u32; 3]) -> bool {
         (0..3).all(|a| b[a] < self.bricks[a])

@@ -1489,3 +1489,52 @@ fn a_halved_grid_measures_each_block_spread_as_a_plain_variance() {
     // The grid's colours vary enough for the comparison to mean something.
     assert!(largest > 0.05, "{largest}");
 }
+
+#[test]
+fn a_region_settled_by_blocks_holds_the_bricks_settled_one_by_one() {
+    // Bricks whose centre lies within a ball, in a grid of odd size; a block is settled where
+    // its box lies wholly within the ball or wholly outside it.
+    let dims = [70, 45, 33];
+    let side = 4;
+    let (c, r) = ([30.0f64, 20.0, 14.0], 17.0f64);
+    let centre_in = |b: [u32; 3]| {
+        let d2: f64 = (0..3)
+            .map(|a| (f64::from(b[a] * side) + f64::from(side) / 2.0 - c[a]).powi(2))
+            .sum();
+        d2 <= r * r
+    };
+    let brick_by_brick = Region::new(dims, side, centre_in).unwrap();
+    let blocks = Region::by_blocks(dims, side, |lo, hi| {
+        if (0..3).all(|a| hi[a] - lo[a] == 1) {
+            return Some(centre_in(lo));
+        }
+        // The nearest and the farthest brick centre of the block from the ball's centre.
+        let (mut near, mut far) = (0.0, 0.0);
+        for a in 0..3 {
+            let first = f64::from(lo[a] * side) + f64::from(side) / 2.0;
+            let last = f64::from((hi[a] - 1) * side) + f64::from(side) / 2.0;
+            let n = (c[a].clamp(first, last) - c[a]).abs();
+            let f = (first - c[a]).abs().max((last - c[a]).abs());
+            near += n * n;
+            far += f * f;
+        }
+        if far <= r * r {
+            Some(true)
+        } else if near > r * r {
+            Some(false)
+        } else {
+            None
+        }
+    })
+    .unwrap();
+    assert_eq!(blocks, brick_by_brick);
+    assert!(brick_by_brick.bricks_covered() > 100 && !brick_by_brick.is_whole());
+    // A test that never settles a block is asked brick by brick; a single brick it cannot
+    // settle is kept.
+    let unsure = Region::by_blocks(dims, side, |lo, hi| {
+        ((0..3).all(|a| hi[a] - lo[a] == 1) && !centre_in(lo)).then_some(false)
+    })
+    .unwrap();
+    assert_eq!(unsure, brick_by_brick);
+    assert!(Region::by_blocks(dims, 0, |_, _| Some(true)).is_none());
+}

@@ -1,6 +1,8 @@
 //! Level of detail: how finely each volume is drawn in a view, from how many pixels apart its
 //! voxels fall (a coarser level of its pyramid, its own grid, or its grid refined).
 
+use rayon::prelude::*;
+
 use super::*;
 
 /// Fine voxel indices to coarse ones for a grid `factors` times finer
@@ -535,30 +537,52 @@ pub(super) const REGION_BRICK: u32 = 8;
 /// is grown by two of its voxels each way (a splat's footprint reaches past its voxel, and a
 /// fine voxel's cell samples the field a voxel around it) and by three pixels at its far side
 /// (the screen's low-pass), then tested against the image's edges ([`off_image`]).
+///
+/// Settled block by block ([`Region::by_blocks`]): a block of bricks is off the image where
+/// its box, grown by more than any of its bricks' boxes is, lies off it, and on it where its
+/// box (ungrown) lies wholly inside the image's edges; only the blocks across an edge are cut
+/// down to bricks. The bricks are the ones tested one by one give (a test checks this).
 pub(super) fn on_image(geometry: &VolumeGeometry, view: &ViewSetup) -> Option<Region> {
     let to_world = geometry.index_to_world();
     let m = to_world.matrix3;
     let abs = glam::DMat3::from_cols(m.x_axis.abs(), m.y_axis.abs(), m.z_axis.abs());
     let dims = geometry.dims();
     let eye = view.camera.eye;
-    let region = Region::new(dims, REGION_BRICK, |b| {
+    let region = Region::by_blocks(dims, REGION_BRICK, |lo_brick, hi_brick| {
         let lo = DVec3::from(std::array::from_fn::<f64, 3, _>(|a| {
-            f64::from(b[a] * REGION_BRICK) - 2.5
+            f64::from(lo_brick[a] * REGION_BRICK) - 2.5
         }));
         let hi = DVec3::from(std::array::from_fn::<f64, 3, _>(|a| {
-            f64::from(((b[a] + 1) * REGION_BRICK).min(dims[a])) + 1.5
+            f64::from((hi_brick[a] * REGION_BRICK).min(dims[a])) + 1.5
         }));
         let centre = to_world.transform_point3(0.5 * (lo + hi));
         let half = abs * (0.5 * (hi - lo));
+        let single = (0..3).all(|a| hi_brick[a] - lo_brick[a] == 1);
+        // A pixel's world size at the far side of the box; for a block, at least any of its
+        // bricks': a brick's centre lies within the block's half diagonal of the block's
+        // centre, and its offset plus its own half diagonal is at most sqrt 2 times the
+        // block's.
+        let reach = if single { 1.0 } else { 2.0 };
         let pixel = if view.is_orthographic() {
             1.0 / view.focal
         } else {
-            ((centre - eye).length() + half.length()) / view.focal
+            ((centre - eye).length() + reach * half.length()) / view.focal
         };
         let grown = half + DVec3::splat(3.0 * pixel);
         // A box that is not finite (a degenerate placement) is kept: nothing is left out
         // that cannot be shown to be off the image.
-        !(centre.is_finite() && grown.is_finite() && off_image(view, (centre, grown)))
+        let finite = centre.is_finite() && grown.is_finite();
+        if single {
+            Some(!(finite && off_image(view, (centre, grown))))
+        } else if !finite {
+            None
+        } else if off_image(view, (centre, grown)) {
+            Some(false)
+        } else if inside_image(view, (centre, half)) {
+            Some(true)
+        } else {
+            None
+        }
     })?;
     (!region.is_whole()).then_some(region)
 }
@@ -617,6 +641,31 @@ pub(super) fn off_image(view: &ViewSetup, (centre, half): (DVec3, DVec3)) -> boo
             || beyond(up - tan_y * forward, 0.0)
             || beyond(-up - tan_y * forward, 0.0)
             || beyond(-forward, 0.0)
+    }
+}
+
+/// Whether the world box `(centre, half size)` lies wholly inside what `view` sees: on the
+/// inner side of every plane [`off_image`] tests. A box inside is beyond none of them, nor is
+/// any box that meets it.
+pub(super) fn inside_image(view: &ViewSetup, (centre, half): (DVec3, DVec3)) -> bool {
+    let [right, up, forward] = [view.axes.x_axis, view.axes.y_axis, view.axes.z_axis];
+    let (w, h) = (f64::from(view.size.0), f64::from(view.size.1));
+    let (tan_x, tan_y) = (0.5 * w / view.focal, 0.5 * h / view.focal);
+    let to = centre - view.camera.eye;
+    // The box lies on the inner side of the plane of outward normal `n` at `offset`.
+    let within = |n: DVec3, offset: f64| n.dot(to) + n.abs().dot(half) <= offset;
+    if view.is_orthographic() {
+        within(right, tan_x)
+            && within(-right, tan_x)
+            && within(up, tan_y)
+            && within(-up, tan_y)
+            && within(-forward, 0.0)
+    } else {
+        within(right - tan_x * forward, 0.0)
+            && within(-right - tan_x * forward, 0.0)
+            && within(up - tan_y * forward, 0.0)
+            && within(-up - tan_y * forward, 0.0)
+            && within(-forward, 0.0)
     }
 }
 
@@ -728,11 +777,13 @@ pub(super) fn brick_details(
     // A brick with no splat of the own grid next to one that has can hold splats of a
     // refinement.
     let bricks = occupied.with_neighbours(dims);
+    // Tens of thousands of bricks on a thin-slice grid, every frame: on every core.
+    let boxes: Vec<(DVec3, DVec3)> = bricks.world_boxes(geometry).collect();
     bricks
         .bricks
-        .iter()
+        .par_iter()
         .zip(&bricks.splats)
-        .zip(bricks.world_boxes(geometry))
+        .zip(boxes)
         .filter_map(|((&brick, &splats), (centre, half))| {
             let apart = apart_in_box(geometry, view, (centre, half));
             let wanted = apart.map(|apart| {

@@ -1161,3 +1161,112 @@ fn bricks_that_follow_one_another_at_one_detail_run_as_one_where_their_box_is_fu
     );
     assert_eq!(at([0, 0, 5]), u32::MAX);
 }
+
+/// [`on_image`] as it tested bricks before blocks: each brick's grown box against the image's
+/// edges, one by one.
+fn on_image_brick_by_brick(geometry: &VolumeGeometry, view: &ViewSetup) -> Vec<bool> {
+    let to_world = geometry.index_to_world();
+    let dims = geometry.dims();
+    let bricks = dims.map(|n| n.div_ceil(REGION_BRICK));
+    let mut marks = Vec::new();
+    for z in 0..bricks[2] {
+        for y in 0..bricks[1] {
+            for x in 0..bricks[0] {
+                let b = [x, y, z];
+                // The box's eight corners in the world, the world box round them.
+                let lo: [f64; 3] = std::array::from_fn(|a| f64::from(b[a] * REGION_BRICK) - 2.5);
+                let hi: [f64; 3] = std::array::from_fn(|a| {
+                    f64::from(((b[a] + 1) * REGION_BRICK).min(dims[a])) + 1.5
+                });
+                let corners: Vec<DVec3> = (0..8)
+                    .map(|c| {
+                        let p = DVec3::from(std::array::from_fn::<f64, 3, _>(|a| {
+                            if c >> a & 1 == 0 { lo[a] } else { hi[a] }
+                        }));
+                        to_world.transform_point3(p)
+                    })
+                    .collect();
+                let (wlo, whi) = corners.iter().fold(
+                    (DVec3::splat(f64::MAX), DVec3::splat(f64::MIN)),
+                    |(l, h), &p| (l.min(p), h.max(p)),
+                );
+                let (centre, half) = (0.5 * (wlo + whi), 0.5 * (whi - wlo));
+                let pixel = if view.is_orthographic() {
+                    1.0 / view.focal
+                } else {
+                    ((centre - view.camera.eye).length() + half.length()) / view.focal
+                };
+                let grown = half + DVec3::splat(3.0 * pixel);
+                marks.push(!off_image(view, (centre, grown)));
+            }
+        }
+    }
+    marks
+}
+
+#[test]
+fn bricks_on_the_image_settled_by_blocks_are_the_bricks_tested_one_by_one() {
+    // A thin-slice grid's shape (odd sizes: bricks cut short at the far ends), turned off the
+    // world's axes so that its boxes are not its bricks' own.
+    let turn = glam::DMat3::from_euler(glam::EulerRot::ZYX, 0.4, -0.3, 0.2);
+    let placed = glam::DAffine3::from_mat3_translation(
+        turn * glam::DMat3::from_diagonal(DVec3::new(0.7, 0.7, 0.62)),
+        DVec3::new(-180.0, -150.0, -160.0),
+    );
+    let geometry = VolumeGeometry::new([203, 187, 171], placed).unwrap();
+    let centre = placed.transform_point3(DVec3::new(101.0, 93.0, 85.0));
+    let views = [
+        // Far: all of it on the image.
+        (centre + DVec3::new(0.0, 900.0, 100.0), centre, None),
+        // Close-ups of part of it, from two sides.
+        (
+            centre + DVec3::new(0.0, 120.0, 0.0),
+            centre + DVec3::X * 30.0,
+            None,
+        ),
+        (centre + DVec3::new(-90.0, -40.0, 60.0), centre, None),
+        // The eye inside the grid, looking along it.
+        (centre, centre + DVec3::new(10.0, 3.0, 80.0), None),
+        // Orthographic, a part of it.
+        (
+            centre + DVec3::new(300.0, 0.0, 0.0),
+            centre + DVec3::Y * 20.0,
+            Some(60.0),
+        ),
+    ];
+    let mut partial = 0;
+    for (eye, target, ortho) in views {
+        let camera = SceneCamera {
+            projection: match ortho {
+                Some(height) => crate::scene::Projection::Orthographic { height },
+                None => crate::scene::Projection::Perspective {
+                    fov_y_degrees: 35.0,
+                },
+            },
+            ..SceneCamera::look_at(eye, target)
+        };
+        let view = ViewSetup::new(&camera, (320, 200), WORLD).unwrap();
+        let want = on_image_brick_by_brick(&geometry, &view);
+        let bricks = geometry.dims().map(|n| n.div_ceil(REGION_BRICK));
+        let got: Vec<bool> = match on_image(&geometry, &view) {
+            None => vec![true; want.len()],
+            Some(region) => {
+                let mut got = Vec::new();
+                for z in 0..bricks[2] {
+                    for y in 0..bricks[1] {
+                        for x in 0..bricks[0] {
+                            got.push(region.covers_brick([x, y, z]));
+                        }
+                    }
+                }
+                got
+            }
+        };
+        assert_eq!(got, want, "eye {eye:?}, target {target:?}");
+        if want.iter().any(|&w| !w) && want.iter().any(|&w| w) {
+            partial += 1;
+        }
+    }
+    // The close-ups, the eye inside and the orthographic part leave bricks out.
+    assert!(partial >= 4, "{partial}");
+}

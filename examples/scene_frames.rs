@@ -1,0 +1,89 @@
+//! Frame times of a scene file, meshes included, the camera turning about the scene's up: each
+//! frame's stages on one line, then the median of the frames after the first (whose times
+//! include whatever they made). The measurement
+//! behind the viewer's full frames in BENCHMARKS.md ("Magnified bricks").
+//!
+//! ```sh
+//! cargo run --release --example scene_frames -- SCENE.toml WxH FRAMES TURN_DEGREES [full|preview|rest]
+//! ```
+//!
+//! Frames are drawn as the viewer draws them with the CPU tiles on a CPU adapter (lavapipe):
+//! meshes on the GPU adapter, splats by the tile compositor. `full` (the default) draws the
+//! viewer's full frames (no refinement of grids coarser than the pixels), `preview` its
+//! previews while the camera moves (at least one level of detail coarser; drawn here at the
+//! size given), `rest` the refined frame once the camera rests.
+
+use anyhow::{Context, Result, bail};
+use splatscene::render::{Compositor, FrameOptions, GpuContext, Renderer};
+use splatscene::scene::file::load_scene_file;
+
+const USAGE: &str = "usage: scene_frames SCENE.toml WxH FRAMES TURN_DEGREES [full|preview|rest]";
+
+fn main() -> Result<()> {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    if !(4..=5).contains(&args.len()) {
+        bail!("{USAGE}");
+    }
+    let loaded = load_scene_file(std::path::Path::new(&args[0]))?;
+    let (w, h) = args[1]
+        .split_once('x')
+        .and_then(|(w, h)| Some((w.parse::<u32>().ok()?, h.parse::<u32>().ok()?)))
+        .context("WxH")?;
+    let frames: usize = args[2].parse().context("FRAMES")?;
+    let turn: f64 = args[3].parse().context("TURN_DEGREES")?;
+    // The viewer's three kinds of frame: previews while the camera moves, full frames once
+    // it stops, and the refined frame once it rests.
+    let (preview, refined) = match args.get(4).map(String::as_str) {
+        None | Some("full") => (false, false),
+        Some("preview") => (true, false),
+        Some("rest") => (false, true),
+        Some(other) => bail!("{other:?}: full, preview or rest; {USAGE}"),
+    };
+    let camera = loaded.scene.camera.context("the scene has no camera")?;
+    let ctx = GpuContext::headless()?;
+    let mut renderer = Renderer::with_compositor(Compositor::Cpu);
+    renderer.set_refinement(refined);
+    let options = FrameOptions {
+        background: loaded.background,
+        preview,
+        ..FrameOptions::default()
+    };
+    let ms = |d: std::time::Duration| d.as_secs_f64() * 1e3;
+    let mut kept = Vec::new();
+    for f in 0..=frames {
+        let turned = camera.orbit_about(camera.up, turn * f as f64, 0.0);
+        let started = std::time::Instant::now();
+        let shot = renderer.screenshot(&ctx, &loaded.scene, &turned, (w, h), &options)?;
+        let total = ms(started.elapsed());
+        let t = shot.report.timings;
+        let made = ms(t.classify + t.levels + t.texels);
+        let s = shot.report.tiles.unwrap_or_default();
+        println!(
+            "frame {f}: {total:.0} ms (making {made:.0}: classify {:.0}, levels {:.0}, texels {:.0}; look {:.0}, order {:.0}, mesh pass {:.0}, readback {:.0}, project {:.0}, bin {:.0}, tiles {:.0}), {} splats, {} projected, {} drew, {} composited, levels {:?}, refined {:?}",
+            ms(t.classify),
+            ms(t.levels),
+            ms(t.texels),
+            ms(t.seen),
+            ms(t.order),
+            ms(t.mesh_pass),
+            ms(t.readback),
+            ms(s.project),
+            ms(s.bin),
+            ms(s.tiles),
+            shot.report.splats,
+            s.projected,
+            s.drew,
+            s.composited,
+            shot.report.levels,
+            shot.report.refined,
+        );
+        if f > 0 {
+            kept.push(total);
+        }
+    }
+    kept.sort_by(f64::total_cmp);
+    if let Some(median) = kept.get(kept.len() / 2) {
+        println!("median {median:.0} ms a frame");
+    }
+    Ok(())
+}
