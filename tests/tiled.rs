@@ -384,15 +384,11 @@ fn windowed_box() -> splatscene::volume::CpuVolume {
     }
 }
 
-#[test]
-fn a_close_up_is_drawn_the_same_whatever_came_before() {
-    // The windowed box close up in perspective, obliquely, the camera turning so that the
-    // refinement's factors change and change back. Whatever views a renderer drew before, a
-    // view's factors, splats and picture are a fresh renderer's.
-    let ctx = context();
-    let scene = shaded_scene(windowed_box(), TransferFunction::ct_bone());
+/// The windowed box close up in perspective, obliquely, the camera turned `turn` radians
+/// about the box's vertical axis: drawn refined.
+fn windowed_box_close_up(turn: f64) -> SceneCamera {
     let centre = glam::DVec3::new(35.25, 35.25, 35.25);
-    let camera = |turn: f64| SceneCamera {
+    SceneCamera {
         eye: centre + glam::DQuat::from_rotation_z(turn) * glam::DVec3::new(-20.0, -70.0, 12.0),
         target: centre,
         up: glam::DVec3::Z,
@@ -400,7 +396,17 @@ fn a_close_up_is_drawn_the_same_whatever_came_before() {
             fov_y_degrees: 40.0,
         },
         near: None,
-    };
+    }
+}
+
+#[test]
+fn a_close_up_is_drawn_the_same_whatever_came_before() {
+    // The windowed box close up in perspective, obliquely, the camera turning so that the
+    // refinement's factors change and change back. Whatever views a renderer drew before, a
+    // view's factors, splats and picture are a fresh renderer's.
+    let ctx = context();
+    let scene = shaded_scene(windowed_box(), TransferFunction::ct_bone());
+    let camera = windowed_box_close_up;
     let size = (96, 72);
     let shoot = |renderer: &mut Renderer, turn: f64| {
         renderer
@@ -421,6 +427,75 @@ fn a_close_up_is_drawn_the_same_whatever_came_before() {
     }
     // The path changes the refinement's factors on the way, and back.
     assert_ne!(factors[0], factors[2], "{factors:?}");
+}
+
+#[test]
+fn a_cancelled_frame_stops_and_the_next_is_a_fresh_renderers() {
+    // The windowed box close up (refined, its bricks looked for): a frame whose cancel flag
+    // is raised gives up with `Cancelled`; raised before the frame, it stops at the look's
+    // first batch. Raised at any moment of a frame from another thread, the frame either
+    // finishes or gives up, and the next frame, its flag lowered, is the picture a fresh
+    // renderer draws: nothing half made was kept.
+    use std::sync::Arc;
+    use std::sync::atomic::{AtomicBool, Ordering};
+    let ctx = context();
+    let scene = shaded_scene(windowed_box(), TransferFunction::ct_bone());
+    let camera = windowed_box_close_up;
+    let size = (160, 120);
+    let fresh = |turn: f64| {
+        Renderer::with_compositor(Compositor::Cpu)
+            .screenshot(&ctx, &scene, &camera(turn), size, &OPTIONS)
+            .unwrap()
+    };
+    let mut renderer = Renderer::with_compositor(Compositor::Cpu);
+    let raised = Arc::new(AtomicBool::new(true));
+    renderer.set_cancel(Some(Arc::clone(&raised)));
+    let cancelled = renderer.screenshot(&ctx, &scene, &camera(0.0), size, &OPTIONS);
+    assert!(
+        matches!(cancelled, Err(splatscene::render::RenderError::Cancelled)),
+        "{:?}",
+        cancelled.map(|s| s.report)
+    );
+    renderer.set_cancel(None);
+    let next = renderer
+        .screenshot(&ctx, &scene, &camera(0.0), size, &OPTIONS)
+        .unwrap();
+    assert!(next.report.refined.is_some(), "{:?}", next.report);
+    // The look was not kept from the cancelled frame: made in this one.
+    assert!(!next.report.timings.seen.is_zero(), "{:?}", next.report);
+    assert_eq!(next.frame.pixels, fresh(0.0).frame.pixels);
+    // Raised from another thread at moments spread over a frame, on views that change.
+    let mut outcomes = Vec::new();
+    for (i, delay_us) in [0u64, 200, 1000, 3000, 8000, 20000, 60000, 150000]
+        .into_iter()
+        .enumerate()
+    {
+        let turn = 0.1 * i as f64;
+        let flag = Arc::new(AtomicBool::new(false));
+        renderer.set_cancel(Some(Arc::clone(&flag)));
+        let raiser = std::thread::spawn(move || {
+            std::thread::sleep(std::time::Duration::from_micros(delay_us));
+            flag.store(true, Ordering::Relaxed);
+        });
+        let shot = renderer.screenshot(&ctx, &scene, &camera(turn), size, &OPTIONS);
+        raiser.join().unwrap();
+        outcomes.push(match shot {
+            Ok(_) => "finished",
+            Err(splatscene::render::RenderError::Cancelled) => "cancelled",
+            Err(e) => panic!("raised after {delay_us} us: {e}"),
+        });
+        renderer.set_cancel(None);
+        let next = renderer
+            .screenshot(&ctx, &scene, &camera(turn), size, &OPTIONS)
+            .unwrap();
+        assert_eq!(
+            next.frame.pixels,
+            fresh(turn).frame.pixels,
+            "after a frame raised at {delay_us} us ({outcomes:?})"
+        );
+    }
+    // Which frames gave up depends on the threads' timing; each outcome above is checked.
+    eprintln!("frames raised during: {outcomes:?}");
 }
 
 #[test]

@@ -1134,12 +1134,9 @@ fn row_profile(width: u32, values: &[f64]) -> Vec<f64> {
 /// LIDC2 placed as index times spacing, where +z is inferior: the scene says its up is -z. A
 /// drag of 2 px and one of 200 px orbit about that up, so the picture stays upright; the
 /// screenshot key saves the view as a scene file, and `render` of it draws the same picture.
-#[test]
-fn viewer_orbits_upright_and_saves_views_that_render_reproduces() {
-    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
-    if !x11_tools() {
-        return;
-    }
+/// The LIDC2 chest CT (256 x 256 x 133, u8) of the shared data (`SPLATSCENE_DATA`), or `None`
+/// with a note where it is missing (an error under CI, which has it).
+fn lidc2_ct() -> Option<PathBuf> {
     let data = std::env::var_os("SPLATSCENE_DATA")
         .filter(|v| !v.is_empty())
         .map_or_else(|| PathBuf::from("../shared/data"), PathBuf::from);
@@ -1151,8 +1148,20 @@ fn viewer_orbits_upright_and_saves_views_that_render_reproduces() {
             ct.display()
         );
         eprintln!("skipped: {} is missing (set SPLATSCENE_DATA)", ct.display());
+        return None;
+    }
+    Some(ct)
+}
+
+#[test]
+fn viewer_orbits_upright_and_saves_views_that_render_reproduces() {
+    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    if !x11_tools() {
         return;
     }
+    let Some(ct) = lidc2_ct() else {
+        return;
+    };
     let dir = scratch("viewer-views");
     std::fs::create_dir_all(&dir).unwrap();
     eprintln!("screenshots in {}", dir.display());
@@ -2412,4 +2421,99 @@ fn data_ramps_a_histogram_under_the_window_and_a_meshs_look_are_offered_and_save
     assert_eq!(file.meshes[0].opacity, Some(0.6));
     assert_eq!(file.meshes[0].color, Some(vec![0.89, 0.85, 0.76]));
     splatscene::scene::file::load_scene_file(&saved).unwrap();
+}
+
+#[test]
+fn a_drag_begun_while_the_refined_frame_is_drawn_gives_it_up_for_previews() {
+    // A close-up of the LIDC2 CT's bone, its 1.4 mm voxels several pixels apart: once the
+    // camera rests, the viewer draws the refined frame (seconds here) on a thread of its own.
+    // A drag begun meanwhile is answered with previews; the refined frame of the old view is
+    // never shown; once the camera rests again, the new view is refined.
+    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    if !x11_tools() {
+        return;
+    }
+    let Some(ct) = lidc2_ct() else {
+        return;
+    };
+    let dir = scratch("viewer-refining");
+    std::fs::create_dir_all(&dir).unwrap();
+    let (_xvfb, display) = start_xvfb();
+    let (_viewer, _lines, window) = open_viewer(
+        &display,
+        &[
+            "view",
+            ct.to_str().unwrap(),
+            "--dims",
+            "256,256,133",
+            "--scalar",
+            "u8",
+            "--spacing",
+            "1.40625,1.40625,2.5",
+            "--orientation",
+            "LAI",
+            "--window",
+            "130,235",
+            "--eye",
+            "-179.3,299.3,-165",
+            "--target",
+            "-179.3,179.3,-165",
+            "--fov",
+            "35",
+            "--size",
+            "800x600",
+            "--compositor",
+            "cpu",
+        ],
+    );
+    let first = title(&display, &window, "(refined ");
+    eprintln!("first: {first}");
+    let get = || xdo(&display, &["getwindowname", &window]).unwrap_or_default();
+    let press_and_move = |to: u32| {
+        xdo(
+            &display,
+            &[
+                "mousemove",
+                "--window",
+                &window,
+                "400",
+                "300",
+                "mousedown",
+                "1",
+            ],
+        )
+        .expect("press");
+        xdo(
+            &display,
+            &["mousemove", "--window", &window, &to.to_string(), "300"],
+        )
+        .expect("drag");
+    };
+    // Turn, release: the full frame says the refined frame is to come.
+    press_and_move(430);
+    xdo(&display, &["mouseup", "1"]).expect("release");
+    let resting = wait_for("the full frame before refining", 60, || {
+        Some(get()).filter(|t| t.contains("(refining)"))
+    });
+    // The refined frame starts a quarter of a second after the full frame: drag while it is
+    // drawn.
+    std::thread::sleep(Duration::from_millis(350));
+    press_and_move(470);
+    let mut seen = Vec::new();
+    let preview = wait_for("a preview while the refined frame was drawn", 60, || {
+        let t = get();
+        if seen.last() != Some(&t) {
+            seen.push(t.clone());
+        }
+        Some(t).filter(|t| t.contains("(preview"))
+    });
+    xdo(&display, &["mouseup", "1"]).expect("release");
+    assert!(
+        !seen.iter().any(|t| t.contains("(refined ")),
+        "the old view's refined frame was shown before the preview: {resting} then {seen:?}"
+    );
+    // At rest again, the new view is refined.
+    let refined = title(&display, &window, "(refined ");
+    eprintln!("resting: {resting}\nseen: {seen:?}\npreview: {preview}\nrefined: {refined}");
+    screen(&display, &window, &dir, "refined-after-drag");
 }

@@ -88,6 +88,10 @@ pub enum RenderError {
     /// Reading the image back failed.
     #[error("reading the frame back failed: {0}")]
     Readback(String),
+    /// The frame was given up before it was finished: its renderer's cancel flag was raised
+    /// ([`Renderer::set_cancel`]). What the renderer keeps between frames stays whole.
+    #[error("the frame was cancelled before it was finished")]
+    Cancelled,
     /// The adapter lacks something this needs (an OpenGL adapter cannot copy depth to memory).
     #[error(
         "the GPU adapter {adapter} cannot {what}; Mesa's software Vulkan driver can (apt-get install mesa-vulkan-drivers)"

@@ -168,6 +168,9 @@ impl App {
             measure: false,
             preview: false,
         };
+        // The renderer back from a refined frame under way (the frame is drawn again after).
+        self.cancel_sharp();
+        self.sharp_stale = true;
         let Some(gpu) = &mut self.gpu else {
             return Ok(());
         };

@@ -35,6 +35,7 @@ mod look;
 mod panes;
 pub mod plan;
 mod points;
+mod sharp;
 pub mod typed;
 mod view;
 
@@ -154,6 +155,9 @@ fn next_preview_divisor(divisor: u32, took: Duration) -> u32 {
 /// After the last wheel step of a zoom drawn as a preview, the full frame follows this late.
 const SETTLE: Duration = Duration::from_millis(250);
 
+/// How often the thread drawing a refined frame is looked at ([`sharp`]).
+const SHARP_POLL: Duration = Duration::from_millis(15);
+
 /// Opens a window on `scene` and runs until it is closed.
 pub fn run(scene: Scene, options: ViewerOptions) -> Result<(), ViewerError> {
     let event_loop = EventLoop::new().map_err(|e| ViewerError::Window(e.to_string()))?;
@@ -204,6 +208,9 @@ pub fn run(scene: Scene, options: ViewerOptions) -> Result<(), ViewerError> {
         settle: None,
         sharpen: None,
         sharp_at: None,
+        sharp_job: None,
+        sharp_frame: None,
+        sharp_stale: false,
         annotations_on: true,
         panes: None,
         contact_map: false,
@@ -217,12 +224,18 @@ pub fn run(scene: Scene, options: ViewerOptions) -> Result<(), ViewerError> {
     event_loop
         .run_app(&mut app)
         .map_err(|e| ViewerError::Window(e.to_string()))?;
+    // A refined frame under way is given up before the window's device goes.
+    app.cancel_sharp();
     app.error.map_or(Ok(()), Err)
 }
 
 struct Gpu {
     window: Arc<Window>,
-    ctx: GpuContext,
+    /// Shared with the thread that draws refined frames ([`sharp`]).
+    ctx: Arc<GpuContext>,
+    /// Whether the renderer composites its splats on the CPU (its compositor and the
+    /// adapter's kind, fixed for the session).
+    tiles_on_cpu: bool,
     surface: wgpu::Surface<'static>,
     config: wgpu::SurfaceConfiguration,
     target: RenderTarget,
@@ -302,6 +315,14 @@ struct App {
     sharpen: Option<Instant>,
     /// The camera refined frames are drawn at: the one the camera rested at.
     sharp_at: Option<SceneCamera>,
+    /// The refined frame being drawn on its own thread (CPU tiles, one pane), which holds
+    /// the renderer meanwhile.
+    sharp_job: Option<sharp::SharpJob>,
+    /// The refined frame drawn, until shown.
+    sharp_frame: Option<sharp::SharpFrame>,
+    /// Whether something the frame shows may have changed since the refined frame under way
+    /// began (an event handled asked for a redraw): it is then drawn again.
+    sharp_stale: bool,
     /// Whether the annotations show (the `A` key).
     annotations_on: bool,
     /// The four panes (the `V` key), when on.
@@ -364,13 +385,16 @@ impl App {
         let blit = Blit::new(&ctx, format);
         let overlay = overlay_texture(&ctx, config.width, config.height);
         let cpu_frame = (overlay_texture(&ctx, config.width, config.height), None);
+        let renderer = Renderer::with_compositor(self.options.compositor);
+        let tiles_on_cpu = renderer.composites_on_cpu(&ctx);
         self.gpu = Some(Gpu {
             window,
-            ctx,
+            ctx: Arc::new(ctx),
+            tiles_on_cpu,
             surface,
             config,
             target,
-            renderer: Renderer::with_compositor(self.options.compositor),
+            renderer,
             blit,
             overlay,
             cpu_frame,
@@ -823,10 +847,38 @@ impl App {
             }
             _ => return Ok(()),
         }
+        self.sharp_stale = true;
         if let Some(gpu) = &self.gpu {
             gpu.window.request_redraw();
         }
         Ok(())
+    }
+
+    /// Gives up the refined frame under way, if any, the renderer back from its thread.
+    pub(super) fn cancel_sharp(&mut self) {
+        if let Some(job) = self.sharp_job.take() {
+            let renderer = job.cancel();
+            if let Some(gpu) = &mut self.gpu {
+                gpu.renderer = renderer;
+            }
+        }
+    }
+
+    /// Takes the refined frame from its thread once drawn, to be shown.
+    fn collect_sharp(&mut self) {
+        if self
+            .sharp_job
+            .as_ref()
+            .is_some_and(sharp::SharpJob::is_finished)
+            && let Some(job) = self.sharp_job.take()
+        {
+            let (renderer, frame) = job.finish();
+            self.sharp_frame = Some(frame);
+            if let Some(gpu) = &mut self.gpu {
+                gpu.renderer = renderer;
+                gpu.window.request_redraw();
+            }
+        }
     }
 }
 
@@ -847,8 +899,25 @@ impl ApplicationHandler for App {
         }
     }
 
-    /// Draws the full frame once a zoom has settled.
+    /// Draws the full frame once a zoom has settled, and shows a refined frame once drawn.
     fn about_to_wait(&mut self, event_loop: &ActiveEventLoop) {
+        self.collect_sharp();
+        self.plan_wake(event_loop);
+        // While a refined frame is drawn, its thread is looked at every few milliseconds.
+        if self.sharp_job.is_some() {
+            let poll = Instant::now() + SHARP_POLL;
+            match event_loop.control_flow() {
+                ControlFlow::WaitUntil(at) if at <= poll => {}
+                _ => event_loop.set_control_flow(ControlFlow::WaitUntil(poll)),
+            }
+        }
+    }
+}
+
+impl App {
+    /// When the event loop wakes next: autosaves, the scene file's checks, a zoom's full
+    /// frame and the refined frame.
+    fn plan_wake(&mut self, event_loop: &ActiveEventLoop) {
         if self.autosave_due().is_some_and(|due| Instant::now() >= due) {
             self.autosave_now();
         }

@@ -8,7 +8,7 @@ use glam::DVec3;
 
 use super::action::{KEYS, STEP};
 use super::look::contact_ticks;
-use super::{App, PREVIEW_ABOVE, SETTLE, ViewerError, next_preview_divisor};
+use super::{App, PREVIEW_ABOVE, SETTLE, ViewerError, next_preview_divisor, sharp};
 use crate::annotate::{Anchor, Label, Painter, Rect, annotate_image_clear_of, colour_bar};
 use crate::pick::measure::{MarkerStyle, Measurement, annotate, draw_scene_measurements};
 use crate::pick::paint::value_colour;
@@ -52,12 +52,57 @@ impl App {
             preview,
         };
         let started = std::time::Instant::now();
-        self.refresh_contact_map();
-        let (drawn, labels) = self.drawn_scene();
+        // Time spent drawing this frame elsewhere (a refined frame's thread).
+        let mut drawn_before = Duration::ZERO;
+        // Volumes coarser than the pixels are drawn refined only once the camera rests: the
+        // refinement's classification and its splats cost more than a frame.
+        let sharp = !preview && self.sharp_at == Some(self.camera);
         let window_size = match &self.gpu {
             Some(gpu) => gpu.target.size,
             None => return Ok(()),
         };
+        // With the CPU tiles in one pane, the refined frame is drawn on a thread of its own:
+        // started here, shown here once drawn, given up for any other frame.
+        let on_thread =
+            sharp && self.panes.is_none() && self.gpu.as_ref().is_some_and(|g| g.tiles_on_cpu);
+        let stale = std::mem::take(&mut self.sharp_stale);
+        let key = sharp::SharpKey {
+            camera: self.camera,
+            generation: self.edit.scene.generation(),
+            size: view.size,
+        };
+        let mut sharp_frame = None;
+        if on_thread {
+            match self.sharp_frame.take() {
+                Some(frame) if !stale && frame.key == key => sharp_frame = Some(frame),
+                _ => {
+                    if !stale && self.sharp_job.as_ref().is_some_and(|j| j.key == key) {
+                        // Still being drawn: the frame on screen stays until it is.
+                        return Ok(());
+                    }
+                    self.cancel_sharp();
+                    self.refresh_contact_map();
+                    let (drawn, _) = self.drawn_scene();
+                    let Some(gpu) = &mut self.gpu else {
+                        return Ok(());
+                    };
+                    let renderer = std::mem::take(&mut gpu.renderer);
+                    self.sharp_job = Some(sharp::SharpJob::start(
+                        renderer,
+                        std::sync::Arc::clone(&gpu.ctx),
+                        drawn,
+                        key,
+                        options,
+                    ));
+                    return Ok(());
+                }
+            }
+        } else {
+            self.sharp_frame = None;
+            self.cancel_sharp();
+        }
+        self.refresh_contact_map();
+        let (drawn, labels) = self.drawn_scene();
         let slices = if self.panes.is_some() {
             self.draw_panes(window_size)
         } else {
@@ -73,9 +118,6 @@ impl App {
         let Some(gpu) = &mut self.gpu else {
             return Ok(());
         };
-        // Volumes coarser than the pixels are drawn refined only once the camera rests: the
-        // refinement's classification and its splats cost more than a frame.
-        let sharp = !preview && self.sharp_at == Some(self.camera);
         gpu.renderer.set_refinement(sharp);
         // Four panes are put together on the CPU: the 3D view drawn at a pane's size and read
         // back, the slices beside it.
@@ -122,9 +164,16 @@ impl App {
             } else {
                 view.size
             };
-            let shot = gpu
-                .renderer
-                .screenshot(&gpu.ctx, &drawn, &self.camera, size, &options)?;
+            let shot = match sharp_frame {
+                Some(frame) => {
+                    // The thread's time is the frame's.
+                    drawn_before += frame.took;
+                    frame.shot?
+                }
+                None => gpu
+                    .renderer
+                    .screenshot(&gpu.ctx, &drawn, &self.camera, size, &options)?,
+            };
             self.last = shot.report;
             let mut image = frame_to_rgba8(&shot.frame);
             if small {
@@ -161,7 +210,7 @@ impl App {
             annotate_3d(&mut overlay, &mut self.annotations_on);
         }
         // The on-screen text of this frame (its splats, its time to draw), not the last one's.
-        let drawn_in = started.elapsed();
+        let drawn_in = started.elapsed() + drawn_before;
         self.this_frame = drawn_in;
         let hud = self.hud_lines();
         let slices_window = self

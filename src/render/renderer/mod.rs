@@ -1280,6 +1280,24 @@ impl Renderer {
         Self::default()
     }
 
+    /// A flag that, raised from another thread, makes a screenshot drawn by the CPU tile
+    /// compositor give up with [`RenderError::Cancelled`]: checked between the frame's stages
+    /// and between the compositor's batches (the look for a refinement's bricks included), so
+    /// it stops within milliseconds of compositing, or once a classification under way ends.
+    /// What was made whole before (classifications, levels, texels, looks) is kept for the
+    /// next frame; nothing half made is. `None` (the default) for frames that always finish.
+    pub fn set_cancel(&mut self, flag: Option<Arc<std::sync::atomic::AtomicBool>>) {
+        self.tiles.cancel = flag;
+    }
+
+    /// Whether the cancel flag ([`Renderer::set_cancel`]) is raised.
+    fn cancelled(&self) -> bool {
+        self.tiles
+            .cancel
+            .as_ref()
+            .is_some_and(|c| c.load(std::sync::atomic::Ordering::Relaxed))
+    }
+
     /// A renderer whose screenshots composite their splats with `compositor`.
     pub fn with_compositor(compositor: Compositor) -> Self {
         Self {
@@ -1539,7 +1557,13 @@ impl Renderer {
         report.timings.classify = started
             .elapsed()
             .saturating_sub(report.timings.levels + report.timings.texels + report.timings.seen);
+        if self.cancelled() {
+            return Err(RenderError::Cancelled);
+        }
         let ordered = self.order_volumes(scene, &view, options, &mut report)?;
+        if self.cancelled() {
+            return Err(RenderError::Cancelled);
+        }
         // What lies under the splats: the meshes on the GPU, or the background alone.
         let has_meshes = scene.meshes().chain(scene.overlays()).next().is_some();
         let pixels = size.0 as usize * size.1 as usize;
@@ -1584,6 +1608,14 @@ impl Renderer {
         };
         let started = Instant::now();
         let (tiles, texels) = self.composite_tiles(scene, &view, &ordered, &depth, &mut frame);
+        if tiles.cancelled {
+            // The mesh layers' targets go back for the next frame.
+            if let Some((_, target)) = target {
+                self.layer_targets.insert(0, target);
+                self.layer_targets.truncate(2);
+            }
+            return Err(RenderError::Cancelled);
+        }
         report.tiles = Some(tiles);
         report.timings.texels += texels;
         report.timings.splat_pass = started.elapsed();
@@ -2313,6 +2345,10 @@ impl Renderer {
                                             region.as_ref(),
                                         )
                                         .map_err(fail)?;
+                                        // A look cut short is not a look: not kept.
+                                        if self.cancelled() {
+                                            return Err(RenderError::Cancelled);
+                                        }
                                         report.timings.seen += started.elapsed();
                                         seen
                                     }

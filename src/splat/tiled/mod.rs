@@ -42,6 +42,7 @@ mod tests;
 mod texels;
 mod tile;
 
+use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
 use std::time::Duration;
 
@@ -92,6 +93,9 @@ pub struct TileStats {
     pub skipped_opaque: usize,
     /// Tiles whose pixels all turned opaque.
     pub tiles_opaque: usize,
+    /// Whether the compositing stopped before its last batch because the compositor's cancel
+    /// flag was raised ([`TiledCompositor::cancel`]): the image is then unfinished.
+    pub cancelled: bool,
 }
 
 /// The compositor, with its buffers kept between frames.
@@ -104,6 +108,9 @@ pub struct TiledCompositor {
     /// and groups of splats whose footprints all lie off the image (on by default; the image
     /// is the same either way, see [`TiledCompositor::composite`]).
     pub cull_hidden: bool,
+    /// Raised from another thread, the compositing stops before its next batch (within a
+    /// batch's time: milliseconds) and reports [`TileStats::cancelled`].
+    pub cancel: Option<Arc<AtomicBool>>,
     projected: Vec<Projected>,
     bins: Vec<ChunkBins>,
     tiles: Vec<TilePixels>,
@@ -126,6 +133,7 @@ impl Default for TiledCompositor {
         Self {
             opaque: OPAQUE,
             cull_hidden: true,
+            cancel: None,
             projected: Vec::new(),
             bins: Vec::new(),
             tiles: Vec::new(),
@@ -223,6 +231,14 @@ impl TiledCompositor {
         let mut pieces: Vec<(usize, &[u32], usize)> = Vec::new();
         let mut work: Vec<(usize, &[u32], usize, usize)> = Vec::new();
         loop {
+            if self
+                .cancel
+                .as_ref()
+                .is_some_and(|c| c.load(std::sync::atomic::Ordering::Relaxed))
+            {
+                stats.cancelled = true;
+                break;
+            }
             pieces.clear();
             let mut wanted = batch;
             while wanted > 0 && run > 0 {
