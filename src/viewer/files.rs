@@ -169,8 +169,8 @@ impl App {
             preview: false,
         };
         // The renderer back from a refined frame under way (the frame is drawn again after).
-        self.cancel_sharp();
-        self.sharp_stale = true;
+        self.cancel_frame();
+        self.frame_stale = true;
         let Some(gpu) = &mut self.gpu else {
             return Ok(());
         };

@@ -35,9 +35,9 @@ mod look;
 mod panes;
 pub mod plan;
 mod points;
-mod sharp;
 pub mod typed;
 mod view;
+mod worker;
 
 pub use action::{KEYS, keys_help};
 use files::modified;
@@ -155,8 +155,8 @@ fn next_preview_divisor(divisor: u32, took: Duration) -> u32 {
 /// After the last wheel step of a zoom drawn as a preview, the full frame follows this late.
 const SETTLE: Duration = Duration::from_millis(250);
 
-/// How often the thread drawing a refined frame is looked at ([`sharp`]).
-const SHARP_POLL: Duration = Duration::from_millis(15);
+/// How often the thread drawing a frame is looked at ([`worker`]).
+const FRAME_POLL: Duration = Duration::from_millis(15);
 
 /// Opens a window on `scene` and runs until it is closed.
 pub fn run(scene: Scene, options: ViewerOptions) -> Result<(), ViewerError> {
@@ -208,9 +208,9 @@ pub fn run(scene: Scene, options: ViewerOptions) -> Result<(), ViewerError> {
         settle: None,
         sharpen: None,
         sharp_at: None,
-        sharp_job: None,
-        sharp_frame: None,
-        sharp_stale: false,
+        frame_job: None,
+        drawn_frame: None,
+        frame_stale: false,
         annotations_on: true,
         panes: None,
         contact_map: false,
@@ -224,14 +224,14 @@ pub fn run(scene: Scene, options: ViewerOptions) -> Result<(), ViewerError> {
     event_loop
         .run_app(&mut app)
         .map_err(|e| ViewerError::Window(e.to_string()))?;
-    // A refined frame under way is given up before the window's device goes.
-    app.cancel_sharp();
+    // A frame under way on its thread is given up before the window's device goes.
+    app.cancel_frame();
     app.error.map_or(Ok(()), Err)
 }
 
 struct Gpu {
     window: Arc<Window>,
-    /// Shared with the thread that draws refined frames ([`sharp`]).
+    /// Shared with the thread that draws full and refined frames ([`worker`]).
     ctx: Arc<GpuContext>,
     /// Whether the renderer composites its splats on the CPU (its compositor and the
     /// adapter's kind, fixed for the session).
@@ -315,14 +315,14 @@ struct App {
     sharpen: Option<Instant>,
     /// The camera refined frames are drawn at: the one the camera rested at.
     sharp_at: Option<SceneCamera>,
-    /// The refined frame being drawn on its own thread (CPU tiles, one pane), which holds
-    /// the renderer meanwhile.
-    sharp_job: Option<sharp::SharpJob>,
-    /// The refined frame drawn, until shown.
-    sharp_frame: Option<sharp::SharpFrame>,
-    /// Whether something the frame shows may have changed since the refined frame under way
-    /// began (an event handled asked for a redraw): it is then drawn again.
-    sharp_stale: bool,
+    /// The full or refined frame being drawn on its own thread (CPU tiles, one pane), which
+    /// holds the renderer meanwhile.
+    frame_job: Option<worker::FrameJob>,
+    /// The frame drawn on its own thread, until shown.
+    drawn_frame: Option<worker::DrawnFrame>,
+    /// Whether something the frame shows may have changed since the frame under way on its
+    /// thread began (an event handled asked for a redraw): it is then drawn again.
+    frame_stale: bool,
     /// Whether the annotations show (the `A` key).
     annotations_on: bool,
     /// The four panes (the `V` key), when on.
@@ -847,16 +847,16 @@ impl App {
             }
             _ => return Ok(()),
         }
-        self.sharp_stale = true;
+        self.frame_stale = true;
         if let Some(gpu) = &self.gpu {
             gpu.window.request_redraw();
         }
         Ok(())
     }
 
-    /// Gives up the refined frame under way, if any, the renderer back from its thread.
-    pub(super) fn cancel_sharp(&mut self) {
-        if let Some(job) = self.sharp_job.take() {
+    /// Gives up the frame under way on its thread, if any, the renderer back.
+    pub(super) fn cancel_frame(&mut self) {
+        if let Some(job) = self.frame_job.take() {
             let renderer = job.cancel();
             if let Some(gpu) = &mut self.gpu {
                 gpu.renderer = renderer;
@@ -864,16 +864,16 @@ impl App {
         }
     }
 
-    /// Takes the refined frame from its thread once drawn, to be shown.
-    fn collect_sharp(&mut self) {
+    /// Takes the frame from its thread once drawn, to be shown.
+    fn collect_frame(&mut self) {
         if self
-            .sharp_job
+            .frame_job
             .as_ref()
-            .is_some_and(sharp::SharpJob::is_finished)
-            && let Some(job) = self.sharp_job.take()
+            .is_some_and(worker::FrameJob::is_finished)
+            && let Some(job) = self.frame_job.take()
         {
             let (renderer, frame) = job.finish();
-            self.sharp_frame = Some(frame);
+            self.drawn_frame = Some(frame);
             if let Some(gpu) = &mut self.gpu {
                 gpu.renderer = renderer;
                 gpu.window.request_redraw();
@@ -899,13 +899,13 @@ impl ApplicationHandler for App {
         }
     }
 
-    /// Draws the full frame once a zoom has settled, and shows a refined frame once drawn.
+    /// Draws the full frame once a zoom has settled, and shows a frame drawn on its thread.
     fn about_to_wait(&mut self, event_loop: &ActiveEventLoop) {
-        self.collect_sharp();
+        self.collect_frame();
         self.plan_wake(event_loop);
-        // While a refined frame is drawn, its thread is looked at every few milliseconds.
-        if self.sharp_job.is_some() {
-            let poll = Instant::now() + SHARP_POLL;
+        // While a frame is drawn on its thread, the thread is looked at every few milliseconds.
+        if self.frame_job.is_some() {
+            let poll = Instant::now() + FRAME_POLL;
             match event_loop.control_flow() {
                 ControlFlow::WaitUntil(at) if at <= poll => {}
                 _ => event_loop.set_control_flow(ControlFlow::WaitUntil(poll)),

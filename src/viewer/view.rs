@@ -8,7 +8,7 @@ use glam::DVec3;
 
 use super::action::{KEYS, STEP};
 use super::look::contact_ticks;
-use super::{App, PREVIEW_ABOVE, SETTLE, ViewerError, next_preview_divisor, sharp};
+use super::{App, PREVIEW_ABOVE, SETTLE, ViewerError, next_preview_divisor, worker};
 use crate::annotate::{Anchor, Label, Painter, Rect, annotate_image_clear_of, colour_bar};
 use crate::pick::measure::{MarkerStyle, Measurement, annotate, draw_scene_measurements};
 use crate::pick::paint::value_colour;
@@ -61,33 +61,34 @@ impl App {
             Some(gpu) => gpu.target.size,
             None => return Ok(()),
         };
-        // With the CPU tiles in one pane, the refined frame is drawn on a thread of its own:
-        // started here, shown here once drawn, given up for any other frame.
+        // With the CPU tiles in one pane, full and refined frames are drawn on a thread of
+        // their own: started here, shown here once drawn, given up for any other frame.
         let on_thread =
-            sharp && self.panes.is_none() && self.gpu.as_ref().is_some_and(|g| g.tiles_on_cpu);
-        let stale = std::mem::take(&mut self.sharp_stale);
-        let key = sharp::SharpKey {
+            !preview && self.panes.is_none() && self.gpu.as_ref().is_some_and(|g| g.tiles_on_cpu);
+        let stale = std::mem::take(&mut self.frame_stale);
+        let key = worker::FrameKey {
             camera: self.camera,
             generation: self.edit.scene.generation(),
             size: view.size,
+            refined: sharp,
         };
-        let mut sharp_frame = None;
+        let mut drawn_frame = None;
         if on_thread {
-            match self.sharp_frame.take() {
-                Some(frame) if !stale && frame.key == key => sharp_frame = Some(frame),
+            match self.drawn_frame.take() {
+                Some(frame) if !stale && frame.key == key => drawn_frame = Some(frame),
                 _ => {
-                    if !stale && self.sharp_job.as_ref().is_some_and(|j| j.key == key) {
+                    if !stale && self.frame_job.as_ref().is_some_and(|j| j.key == key) {
                         // Still being drawn: the frame on screen stays until it is.
                         return Ok(());
                     }
-                    self.cancel_sharp();
+                    self.cancel_frame();
                     self.refresh_contact_map();
                     let (drawn, _) = self.drawn_scene();
                     let Some(gpu) = &mut self.gpu else {
                         return Ok(());
                     };
                     let renderer = std::mem::take(&mut gpu.renderer);
-                    self.sharp_job = Some(sharp::SharpJob::start(
+                    self.frame_job = Some(worker::FrameJob::start(
                         renderer,
                         std::sync::Arc::clone(&gpu.ctx),
                         drawn,
@@ -98,8 +99,8 @@ impl App {
                 }
             }
         } else {
-            self.sharp_frame = None;
-            self.cancel_sharp();
+            self.drawn_frame = None;
+            self.cancel_frame();
         }
         self.refresh_contact_map();
         let (drawn, labels) = self.drawn_scene();
@@ -164,7 +165,7 @@ impl App {
             } else {
                 view.size
             };
-            let shot = match sharp_frame {
+            let shot = match drawn_frame {
                 Some(frame) => {
                     // The thread's time is the frame's.
                     drawn_before += frame.took;
@@ -259,7 +260,7 @@ impl App {
         let elapsed = drawn_in;
         // Whether moving draws previews goes by the whole frame, presenting included.
         if !preview && !sharp {
-            self.full_frame = started.elapsed();
+            self.full_frame = started.elapsed() + drawn_before;
         }
         // The size this preview was drawn at (the title's), and the next one's.
         let preview_divisor = self.preview_divisor;

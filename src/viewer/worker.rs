@@ -1,6 +1,8 @@
-//! The refined frame, drawn on a thread of its own once the camera rests, so that the window
-//! keeps answering while it is drawn (a close-up's refinement takes a second or more): a drag
-//! or a key pressed meanwhile gives it up within a batch of the compositor's time.
+//! Full and refined frames of the CPU tiles, drawn on a thread of its own so that the window
+//! keeps answering while they are drawn (a full frame of a thin-slice CT at the window's size
+//! takes 0.1-0.3 s, a close-up's refinement a second or more): a drag or a key pressed
+//! meanwhile gives the frame up within a batch of the compositor's time. Previews, which are
+//! short, are drawn on the window's thread.
 //!
 //! The renderer goes to the thread with the frame and comes back with it: one renderer, so
 //! that the classifications, levels and texels it keeps are made once, whichever thread draws.
@@ -13,47 +15,49 @@ use std::time::{Duration, Instant};
 use crate::render::{Compositor, FrameOptions, GpuContext, RenderError, Renderer, Screenshot};
 use crate::scene::{Scene, SceneCamera};
 
-/// What a refined frame was drawn for: the camera, the scene's generation and the size.
+/// What a frame was drawn for: the camera, the scene's generation, the size and whether
+/// volumes coarser than the pixels are refined.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub(super) struct SharpKey {
+pub(super) struct FrameKey {
     pub(super) camera: SceneCamera,
     pub(super) generation: u64,
     pub(super) size: (u32, u32),
+    pub(super) refined: bool,
 }
 
 /// What the thread gives back: the renderer, the frame (or why not) and how long it took.
 type Outcome = (Renderer, Result<Screenshot, RenderError>, Duration);
 
-/// A refined frame being drawn on its own thread.
-pub(super) struct SharpJob {
-    pub(super) key: SharpKey,
+/// A frame being drawn on its own thread.
+pub(super) struct FrameJob {
+    pub(super) key: FrameKey,
     cancel: Arc<AtomicBool>,
     /// The renderer's compositor, for a fresh renderer should the thread panic.
     compositor: Compositor,
     handle: JoinHandle<Outcome>,
 }
 
-/// A refined frame drawn, waiting to be shown.
-pub(super) struct SharpFrame {
-    pub(super) key: SharpKey,
+/// A frame drawn, waiting to be shown.
+pub(super) struct DrawnFrame {
+    pub(super) key: FrameKey,
     pub(super) shot: Result<Screenshot, RenderError>,
     /// How long the thread took to draw it.
     pub(super) took: Duration,
 }
 
-impl SharpJob {
-    /// Starts drawing `scene` from `key`'s camera at its size with `renderer` (refinement on)
-    /// on a thread of its own.
+impl FrameJob {
+    /// Starts drawing `scene` from `key`'s camera at its size with `renderer` (refining as
+    /// the key says) on a thread of its own.
     pub(super) fn start(
         mut renderer: Renderer,
         ctx: Arc<GpuContext>,
         scene: Scene,
-        key: SharpKey,
+        key: FrameKey,
         options: FrameOptions,
     ) -> Self {
         let cancel = Arc::new(AtomicBool::new(false));
         let compositor = renderer.compositor();
-        renderer.set_refinement(true);
+        renderer.set_refinement(key.refined);
         renderer.set_cancel(Some(Arc::clone(&cancel)));
         let handle = std::thread::spawn(move || {
             let started = Instant::now();
@@ -75,18 +79,18 @@ impl SharpJob {
     }
 
     /// Waits for the thread: the renderer back and the frame.
-    pub(super) fn finish(self) -> (Renderer, SharpFrame) {
+    pub(super) fn finish(self) -> (Renderer, DrawnFrame) {
         let (renderer, shot, took) = match self.handle.join() {
             Ok(outcome) => outcome,
             Err(_) => (
                 Renderer::with_compositor(self.compositor),
                 Err(RenderError::Device(
-                    "drawing the refined frame failed (its thread panicked)".into(),
+                    "drawing the frame failed (its thread panicked)".into(),
                 )),
                 Duration::ZERO,
             ),
         };
-        let frame = SharpFrame {
+        let frame = DrawnFrame {
             key: self.key,
             shot,
             took,
