@@ -52,7 +52,7 @@ impl App {
             preview,
         };
         let started = std::time::Instant::now();
-        // Time spent drawing this frame elsewhere (a refined frame's thread).
+        // Time spent drawing this frame on the frame thread ([`worker`]).
         let mut drawn_before = Duration::ZERO;
         // Volumes coarser than the pixels are drawn refined only once the camera rests: the
         // refinement's classification and its splats cost more than a frame.
