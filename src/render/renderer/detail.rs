@@ -623,49 +623,45 @@ pub(super) fn on_image_within(
 /// one of the planes through the image's edges (for perspective, through the eye), or
 /// behind the eye.
 pub(super) fn off_image(view: &ViewSetup, (centre, half): (DVec3, DVec3)) -> bool {
-    let [right, up, forward] = [view.axes.x_axis, view.axes.y_axis, view.axes.z_axis];
-    let (w, h) = (f64::from(view.size.0), f64::from(view.size.1));
-    let (tan_x, tan_y) = (0.5 * w / view.focal, 0.5 * h / view.focal);
     let to = centre - view.camera.eye;
     // The box lies beyond the plane of outward normal `n` at `offset` from the eye.
-    let beyond = |n: DVec3, offset: f64| n.dot(to) - n.abs().dot(half) > offset;
-    if view.is_orthographic() {
-        beyond(right, tan_x)
-            || beyond(-right, tan_x)
-            || beyond(up, tan_y)
-            || beyond(-up, tan_y)
-            || beyond(-forward, 0.0)
-    } else {
-        beyond(right - tan_x * forward, 0.0)
-            || beyond(-right - tan_x * forward, 0.0)
-            || beyond(up - tan_y * forward, 0.0)
-            || beyond(-up - tan_y * forward, 0.0)
-            || beyond(-forward, 0.0)
-    }
+    image_planes(view)
+        .iter()
+        .any(|&(n, offset)| n.dot(to) - n.abs().dot(half) > offset)
 }
 
 /// Whether the world box `(centre, half size)` lies wholly inside what `view` sees: on the
 /// inner side of every plane [`off_image`] tests. A box inside is beyond none of them, nor is
 /// any box that meets it.
 pub(super) fn inside_image(view: &ViewSetup, (centre, half): (DVec3, DVec3)) -> bool {
+    let to = centre - view.camera.eye;
+    image_planes(view)
+        .iter()
+        .all(|&(n, offset)| n.dot(to) + n.abs().dot(half) <= offset)
+}
+
+/// The planes that bound what `view` sees, as outward normals and offsets from the eye: the
+/// planes through the image's edges (for perspective, through the eye) and the eye's own.
+fn image_planes(view: &ViewSetup) -> [(DVec3, f64); 5] {
     let [right, up, forward] = [view.axes.x_axis, view.axes.y_axis, view.axes.z_axis];
     let (w, h) = (f64::from(view.size.0), f64::from(view.size.1));
     let (tan_x, tan_y) = (0.5 * w / view.focal, 0.5 * h / view.focal);
-    let to = centre - view.camera.eye;
-    // The box lies on the inner side of the plane of outward normal `n` at `offset`.
-    let within = |n: DVec3, offset: f64| n.dot(to) + n.abs().dot(half) <= offset;
     if view.is_orthographic() {
-        within(right, tan_x)
-            && within(-right, tan_x)
-            && within(up, tan_y)
-            && within(-up, tan_y)
-            && within(-forward, 0.0)
+        [
+            (right, tan_x),
+            (-right, tan_x),
+            (up, tan_y),
+            (-up, tan_y),
+            (-forward, 0.0),
+        ]
     } else {
-        within(right - tan_x * forward, 0.0)
-            && within(-right - tan_x * forward, 0.0)
-            && within(up - tan_y * forward, 0.0)
-            && within(-up - tan_y * forward, 0.0)
-            && within(-forward, 0.0)
+        [
+            (right - tan_x * forward, 0.0),
+            (-right - tan_x * forward, 0.0),
+            (up - tan_y * forward, 0.0),
+            (-up - tan_y * forward, 0.0),
+            (-forward, 0.0),
+        ]
     }
 }
 
