@@ -2428,7 +2428,8 @@ fn a_drag_begun_while_the_refined_frame_is_drawn_gives_it_up_for_previews() {
     // A close-up of the LIDC2 CT's bone, its 1.4 mm voxels several pixels apart: once the
     // camera rests, the viewer draws the refined frame (seconds here) on a thread of its own.
     // A drag begun meanwhile is answered with previews; the refined frame of the old view is
-    // never shown; once the camera rests again, the new view is refined.
+    // never shown; once the camera rests again, the new view is refined. The help, pressed then,
+    // shows over that frame without drawing it again.
     let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     if !x11_tools() {
         return;
@@ -2439,7 +2440,7 @@ fn a_drag_begun_while_the_refined_frame_is_drawn_gives_it_up_for_previews() {
     let dir = scratch("viewer-refining");
     std::fs::create_dir_all(&dir).unwrap();
     let (_xvfb, display) = start_xvfb();
-    let (_viewer, _lines, window) = open_viewer(
+    let (viewer, _lines, window) = open_viewer(
         &display,
         &[
             "view",
@@ -2515,5 +2516,42 @@ fn a_drag_begun_while_the_refined_frame_is_drawn_gives_it_up_for_previews() {
     // At rest again, the new view is refined.
     let refined = title(&display, &window, "(refined ");
     eprintln!("resting: {resting}\nseen: {seen:?}\npreview: {preview}\nrefined: {refined}");
-    screen(&display, &window, &dir, "refined-after-drag");
+    let rested = screen(&display, &window, &dir, "refined-after-drag");
+
+    // The help (H) is text over the picture: shown over the refined frame on screen, which is
+    // not drawn again (it took seconds).
+    let help_keys = |s: &Shot| {
+        s.pixels(
+            Rect {
+                x0: 0,
+                y0: 0,
+                x1: s.w,
+                y1: s.h,
+            },
+            &anywhere,
+        )
+        .iter()
+        .filter(|&&(_, _, p)| !differs(p, [255, 200, 90], 40))
+        .count()
+    };
+    let before = help_keys(&rested);
+    // Keys go to the focused window (no window manager runs here).
+    xdo(&display, &["windowfocus", "--sync", &window]).expect("focus");
+    std::thread::sleep(Duration::from_millis(200));
+    let busy = cpu_seconds(viewer.0.id());
+    xdo(&display, &["key", "h"]).expect("key h");
+    screen_until(&display, &window, &dir, "help", |s| {
+        let n = help_keys(s);
+        (n > before + 300)
+            .then_some(())
+            .ok_or(format!("{n} pixels of the keys' amber, {before} before"))
+    });
+    std::thread::sleep(Duration::from_millis(1500));
+    let spent = cpu_seconds(viewer.0.id()) - busy;
+    let after = xdo(&display, &["getwindowname", &window]).unwrap_or_default();
+    assert_eq!(after, refined, "the help drew a new frame");
+    assert!(
+        spent < 0.5,
+        "showing the help took {spent:.2} s of processor time: the frame was drawn again"
+    );
 }

@@ -211,6 +211,8 @@ pub fn run(scene: Scene, options: ViewerOptions) -> Result<(), ViewerError> {
         frame_job: None,
         drawn_frame: None,
         frame_stale: false,
+        shown_frame: None,
+        text_only: false,
         annotations_on: true,
         panes: None,
         contact_map: false,
@@ -323,6 +325,12 @@ struct App {
     /// Whether something the frame shows may have changed since the frame under way on its
     /// thread began (an event handled asked for a redraw): it is then drawn again.
     frame_stale: bool,
+    /// What the frame on screen was drawn for, when it came from the frame thread: shown
+    /// again under new on-screen text while nothing it shows has changed.
+    shown_frame: Option<worker::FrameKey>,
+    /// Whether the event being handled changed the on-screen text alone (the help, a prompt, a
+    /// line being typed, a plan saved): the frame on screen stays, and one under way goes on.
+    text_only: bool,
     /// Whether the annotations show (the `A` key).
     annotations_on: bool,
     /// The four panes (the `V` key), when on.
@@ -520,7 +528,11 @@ impl App {
         key: &Key,
         text: Option<&str>,
     ) -> Result<(), ViewerError> {
+        // Answers to a prompt change the text on screen, bar restoring an autosave.
+        let restoring = matches!(self.prompt, Some(guard::Prompt::Restore(_)))
+            && matches!(key, Key::Character(c) if c.eq_ignore_ascii_case("r"));
         if self.answer(event_loop, key) {
+            self.text_only = !restoring;
             return Ok(());
         }
         // A line being typed (a placement, a label) takes the keys first.
@@ -530,12 +542,16 @@ impl App {
             Key::Named(NamedKey::Backspace) => LabelKey::Backspace,
             _ => LabelKey::Text(text),
         };
+        // Keys typed into a line change it alone, until Enter applies it.
+        let typing = !matches!(typed, LabelKey::Enter);
         if self.edit.placing.is_some() {
+            self.text_only = typing;
             let notice = self.edit.place_key(typed);
             self.tell(notice);
             return Ok(());
         }
         if self.edit.labelling.is_some() {
+            self.text_only = typing;
             let notice = self.edit.label_key(typed);
             self.tell(notice);
             return Ok(());
@@ -548,12 +564,22 @@ impl App {
                 Cancelled::Done(notice) => self.tell(notice),
                 Cancelled::Nothing => self.quit(event_loop),
             },
-            Action::Quit => self.quit(event_loop),
+            Action::Quit => {
+                // Unsaved edits: a question on screen.
+                self.text_only = true;
+                self.quit(event_loop);
+            }
             Action::Reload => self.reload(),
-            Action::SavePlan => self.save_plan(),
+            Action::SavePlan => {
+                self.text_only = true;
+                self.save_plan();
+            }
             Action::Screenshot => self.screenshot()?,
             Action::NextPreset => self.next_preset(),
-            Action::ToggleHelp => self.help = !self.help,
+            Action::ToggleHelp => {
+                self.text_only = true;
+                self.help = !self.help;
+            }
             Action::ToggleAnnotations => {
                 if self.options.annotations.is_none() {
                     self.options.annotations = Some(Annotations::default());
@@ -699,6 +725,7 @@ impl App {
         event_loop: &ActiveEventLoop,
         event: WindowEvent,
     ) -> Result<(), ViewerError> {
+        self.text_only = false;
         match event {
             WindowEvent::CloseRequested => self.quit(event_loop),
             WindowEvent::Resized(size) => self.resize(size)?,
@@ -847,7 +874,10 @@ impl App {
             }
             _ => return Ok(()),
         }
-        self.frame_stale = true;
+        // Whatever else an event changed may be in the picture: it is drawn again.
+        if !std::mem::take(&mut self.text_only) {
+            self.frame_stale = true;
+        }
         if let Some(gpu) = &self.gpu {
             gpu.window.request_redraw();
         }

@@ -73,14 +73,25 @@ impl App {
             refined: sharp,
         };
         let mut drawn_frame = None;
+        // The frame on screen shown again, under the text on screen now: when nothing it shows
+        // has changed, or the frame under way (the refined one) is of the same view.
+        let mut reshown = false;
         if on_thread {
+            let shown = self.shown_frame;
+            let same_view = shown.is_some_and(|s| {
+                s.camera == key.camera && s.generation == key.generation && s.size == key.size
+            });
             match self.drawn_frame.take() {
                 Some(frame) if !stale && frame.key == key => drawn_frame = Some(frame),
-                _ => {
-                    if !stale && self.frame_job.as_ref().is_some_and(|j| j.key == key) {
+                _ if !stale && shown == Some(key) => reshown = true,
+                _ if !stale && self.frame_job.as_ref().is_some_and(|j| j.key == key) => {
+                    if !same_view {
                         // Still being drawn: the frame on screen stays until it is.
                         return Ok(());
                     }
+                    reshown = true;
+                }
+                _ => {
                     self.cancel_frame();
                     self.refresh_contact_map();
                     let (drawn, _) = self.drawn_scene();
@@ -102,6 +113,7 @@ impl App {
             self.drawn_frame = None;
             self.cancel_frame();
         }
+        let thread_frame = drawn_frame.as_ref().map(|f| f.key);
         self.refresh_contact_map();
         let (drawn, labels) = self.drawn_scene();
         let slices = if self.panes.is_some() {
@@ -122,7 +134,8 @@ impl App {
         gpu.renderer.set_refinement(sharp);
         // Four panes are put together on the CPU: the 3D view drawn at a pane's size and read
         // back, the slices beside it.
-        let on_cpu = gpu.renderer.composites_on_cpu(&gpu.ctx) || self.panes.is_some();
+        // (A frame shown again is the tiles' frame, whichever thread holds the renderer.)
+        let on_cpu = reshown || gpu.renderer.composites_on_cpu(&gpu.ctx) || self.panes.is_some();
         let annotate_3d = |image: &mut image::RgbaImage, annotations_on: &mut bool| {
             if let (Some(parts), true) = (&self.options.annotations, *annotations_on)
                 && let Err(e) = annotate_image_clear_of(
@@ -157,7 +170,10 @@ impl App {
         // third or a quarter, where previews are slow) and scaled up: a quarter of the pixels
         // or fewer to composite, read back and convert, and coarser splats.
         let small = preview && on_cpu && self.panes.is_none();
-        if on_cpu {
+        if reshown {
+            // The picture is in the texture still: the text over it is drawn anew.
+            annotate_3d(&mut overlay, &mut self.annotations_on);
+        } else if on_cpu {
             // The tile compositor's frame, shown through the present pass like the GPU's.
             let size = if small {
                 let d = self.preview_divisor.max(1);
@@ -210,9 +226,14 @@ impl App {
             gpu.cpu_frame.1 = None;
             annotate_3d(&mut overlay, &mut self.annotations_on);
         }
+        if !reshown {
+            self.shown_frame = thread_frame;
+        }
         // The on-screen text of this frame (its splats, its time to draw), not the last one's.
         let drawn_in = started.elapsed() + drawn_before;
-        self.this_frame = drawn_in;
+        if !reshown {
+            self.this_frame = drawn_in;
+        }
         let hud = self.hud_lines();
         let slices_window = self
             .panes
@@ -257,6 +278,10 @@ impl App {
             .copy(&gpu.ctx, source, overlay.as_ref(), &surface_view);
         gpu.window.pre_present_notify();
         gpu.ctx.queue.present(frame);
+        if reshown {
+            // The frame, its times and the title are the ones shown before.
+            return Ok(());
+        }
         let elapsed = drawn_in;
         // Whether moving draws previews goes by the whole frame, presenting included.
         if !preview && !sharp {
