@@ -2,6 +2,7 @@
 //! voxels that are not (nearly) transparent become splats.
 
 use rayon::prelude::*;
+use std::sync::atomic::{AtomicBool, Ordering as AtomicOrdering};
 
 use crate::grid::{GridError, SparseGrid};
 use crate::volume::voxels::dispatch;
@@ -1095,19 +1096,22 @@ pub fn classify_refined(
     options: &ClassifyOptions,
     factors: [u32; 3],
 ) -> Result<Classified, GridError> {
-    classify_refined_in(volume, tf, options, factors, None)
+    classify_refined_in(volume, tf, options, factors, None, None)
 }
 
 /// [`classify_refined`], within `region` alone where one is given: the fine voxels of the
 /// volume's voxels outside it are left out, never classified (a close-up's refinement
 /// classifies only what lies on the image). A region made for a grid of other dimensions is
-/// an error.
+/// an error. Where `cancel` is given, the classification looks at it between fine z-slices
+/// and gives up with [`GridError::Cancelled`] once it is raised (a viewer's refinement of a
+/// close-up takes up to a second, and a drag meanwhile wants the cores).
 pub fn classify_refined_in(
     volume: &CpuVolume,
     tf: &TransferFunction,
     options: &ClassifyOptions,
     factors: [u32; 3],
     region: Option<&Region>,
+    cancel: Option<&AtomicBool>,
 ) -> Result<Classified, GridError> {
     if let Some(region) = region
         && region.dims != volume.dims
@@ -1120,7 +1124,7 @@ pub fn classify_refined_in(
     // Rows are sampled whole where the shell (which samples each cell's neighbours) is not
     // asked for.
     let by_rows = options.shell.is_none();
-    classify_cells(volume, tf, options, factors, by_rows, region)
+    classify_cells(volume, tf, options, factors, by_rows, region, cancel)
 }
 
 /// Which voxels of a grid a classification covers, by bricks of `side`^3 voxels.
@@ -1320,6 +1324,7 @@ fn classify_cells(
     factors: [u32; 3],
     by_rows: bool,
     region: Option<&Region>,
+    cancel: Option<&AtomicBool>,
 ) -> Result<Classified, GridError> {
     let count = crate::grid::voxel_count(volume.dims)? as usize;
     if volume.values.len() < count {
@@ -1347,11 +1352,14 @@ fn classify_cells(
             .into_par_iter()
             .map(|slab| {
                 classify_slab(
-                    values, volume.dims, factors, slab, &clear, &cells, by_rows, region,
+                    values, volume.dims, factors, slab, &clear, &cells, by_rows, region, cancel,
                 )
             })
             .collect()
     });
+    if cancel.is_some_and(|c| c.load(AtomicOrdering::Relaxed)) {
+        return Err(GridError::Cancelled);
+    }
     Classified::joined(fine, slabs)
 }
 
@@ -1369,6 +1377,7 @@ fn classify_slab<T: Voxel>(
     cells: &Cells,
     by_rows: bool,
     region: Option<&Region>,
+    cancel: Option<&AtomicBool>,
 ) -> (Vec<u32>, Vec<SplatColor>) {
     let [nx, ny, nz] = dims.map(|n| n as usize);
     let [fx, fy, fz] = factors.map(|f| f as usize);
@@ -1411,6 +1420,10 @@ fn classify_slab<T: Voxel>(
         // fine row they hold.
         let rows_open: Vec<bool> = open.chunks(nx).map(|r| r.iter().any(|&o| o != 0)).collect();
         for jz in 0..fz {
+            // What a cancelled classification made is dropped whole by the caller.
+            if cancel.is_some_and(|c| c.load(AtomicOrdering::Relaxed)) {
+                return (Vec::new(), Vec::new());
+            }
             for y in (0..ny).filter(|&y| rows_open[y]) {
                 let open = &open[nx * y..][..nx];
                 let inner =

@@ -292,8 +292,10 @@ fn rows_sampled_whole_classify_as_voxels_one_at_a_time() {
                 (&three, [2, 1, 3]),
             ] {
                 let options = ClassifyOptions::default();
-                let whole = classify_cells(&volume, tf, &options, factors, true, None).unwrap();
-                let blocks = classify_cells(&volume, tf, &options, factors, false, None).unwrap();
+                let whole =
+                    classify_cells(&volume, tf, &options, factors, true, None, None).unwrap();
+                let blocks =
+                    classify_cells(&volume, tf, &options, factors, false, None, None).unwrap();
                 assert!(!whole.grid.is_empty(), "{dims:?}: no splat");
                 assert_eq!(
                     whole.grid.ids().collect::<Vec<_>>(),
@@ -570,8 +572,16 @@ fn a_region_leaves_out_the_fine_voxels_of_the_bricks_it_does_not_cover() {
     assert!(!want.is_empty() && want.len() < whole.colors.len());
     for by_rows in [true, false] {
         let options = ClassifyOptions::default();
-        let within =
-            classify_cells(&volume, &tf, &options, factors, by_rows, Some(&region)).unwrap();
+        let within = classify_cells(
+            &volume,
+            &tf,
+            &options,
+            factors,
+            by_rows,
+            Some(&region),
+            None,
+        )
+        .unwrap();
         let got: Vec<(u32, [u8; 3])> = within
             .grid
             .ids()
@@ -588,7 +598,8 @@ fn a_region_leaves_out_the_fine_voxels_of_the_bricks_it_does_not_cover() {
             &tf,
             &ClassifyOptions::default(),
             factors,
-            Some(&elsewhere)
+            Some(&elsewhere),
+            None
         ),
         Err(GridError::RegionMismatch { .. })
     ));
@@ -604,6 +615,34 @@ fn a_region_leaves_out_the_fine_voxels_of_the_bricks_it_does_not_cover() {
             .union(&Region::new(dims, 2, |_| true).unwrap())
             .is_none()
     );
+}
+
+#[test]
+fn a_refinement_whose_cancel_flag_is_raised_gives_up_and_one_left_lowered_is_unchanged() {
+    use std::sync::atomic::AtomicBool;
+    let dims = [19u32, 13, 11];
+    let volume = folded_ramp(dims, [5, 11, 3], 190.0);
+    let tf = TransferFunction::ramp(40.0, 160.0, [1.0, 0.5, 0.25, 0.8]);
+    let options = ClassifyOptions::default();
+    let factors = [2u32, 1, 3];
+    let region = Region::new(dims, 4, |b| b[0] <= b[2]).unwrap();
+    for region in [None, Some(&region)] {
+        let plain = classify_refined_in(&volume, &tf, &options, factors, region, None).unwrap();
+        assert!(!plain.colors.is_empty());
+        let lowered = AtomicBool::new(false);
+        let kept =
+            classify_refined_in(&volume, &tf, &options, factors, region, Some(&lowered)).unwrap();
+        assert_eq!(
+            kept.grid.ids().collect::<Vec<_>>(),
+            plain.grid.ids().collect::<Vec<_>>()
+        );
+        assert_eq!(kept.colors, plain.colors);
+        let raised = AtomicBool::new(true);
+        assert!(matches!(
+            classify_refined_in(&volume, &tf, &options, factors, region, Some(&raised)),
+            Err(GridError::Cancelled)
+        ));
+    }
 }
 
 #[test]
@@ -633,8 +672,8 @@ fn a_refinement_joined_with_the_bricks_it_lacked_is_the_union_classified_at_once
             .collect()
     };
     let want = listed(&whole, &|id| union.covers(coarse(id)));
-    let a = classify_refined_in(&volume, &tf, &options, factors, Some(&first)).unwrap();
-    let b = classify_refined_in(&volume, &tf, &options, factors, Some(&added)).unwrap();
+    let a = classify_refined_in(&volume, &tf, &options, factors, Some(&first), None).unwrap();
+    let b = classify_refined_in(&volume, &tf, &options, factors, Some(&added), None).unwrap();
     assert!(!a.colors.is_empty() && !b.colors.is_empty());
     let joined = a.clone().joined_with(b.clone()).unwrap();
     assert_eq!(listed(&joined, &|_| true), want);
@@ -647,7 +686,7 @@ fn a_refinement_joined_with_the_bricks_it_lacked_is_the_union_classified_at_once
         a.clone().joined_with(a.clone()),
         Err(GridError::NotDisjoint { .. })
     ));
-    let small = classify_refined_in(&volume, &tf, &options, [1, 1, 1], None).unwrap();
+    let small = classify_refined_in(&volume, &tf, &options, [1, 1, 1], None, None).unwrap();
     assert!(matches!(
         a.clone().joined_with(small),
         Err(GridError::NotDisjoint { .. })

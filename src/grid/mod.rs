@@ -69,6 +69,9 @@ pub enum GridError {
         /// Significant voxels of its grid.
         voxels: usize,
     },
+    /// The classification was given up: its cancel flag was raised while it ran.
+    #[error("the classification was cancelled before it was finished")]
+    Cancelled,
     /// Two grids joined into one are of different sizes, or share a voxel.
     #[error(
         "grids of {a:?} and {b:?} voxels cannot be joined: they must be of one size and share no voxel"

@@ -1282,10 +1282,11 @@ impl Renderer {
 
     /// A flag that, raised from another thread, makes a screenshot drawn by the CPU tile
     /// compositor give up with [`RenderError::Cancelled`]: checked between the frame's stages
-    /// and between the compositor's batches (the look for a refinement's bricks included), so
-    /// it stops within milliseconds of compositing, or once a classification under way ends.
-    /// What was made whole before (classifications, levels, texels, looks) is kept for the
-    /// next frame; nothing half made is. `None` (the default) for frames that always finish.
+    /// between the compositor's batches (the look for a refinement's bricks included) and
+    /// between the fine slices of a refinement's classification, so it stops within
+    /// milliseconds, or once the own grid's classification or a level under way ends. What
+    /// was made whole before (classifications, levels, texels, looks) is kept for the next
+    /// frame; nothing half made is. `None` (the default) for frames that always finish.
     pub fn set_cancel(&mut self, flag: Option<Arc<std::sync::atomic::AtomicBool>>) {
         self.tiles.cancel = flag;
     }
@@ -2397,6 +2398,9 @@ impl Renderer {
                         // anew.
                         self.volumes
                             .retain(|(v, d), _| *v != id || matches!(d, Detail::Level(..)));
+                        // Given up when the frame is (a close-up's refinement takes up to a
+                        // second); nothing of it is kept.
+                        let cancel = self.tiles.cancel.clone();
                         let classify = |region: Option<&Region>| {
                             classify_refined_in(
                                 &node.volume,
@@ -2404,11 +2408,15 @@ impl Renderer {
                                 &options,
                                 factors,
                                 region,
+                                cancel.as_deref(),
                             )
-                            .map_err(|e| fail(e.to_string()))
+                            .map_err(|e| match e {
+                                crate::grid::GridError::Cancelled => RenderError::Cancelled,
+                                e => fail(e.to_string()),
+                            })
                         };
                         let (result, orderer, ids) = match (previous, extra) {
-                            (Some((previous, _)), Some(extra)) => {
+                            (Some((previous, made)), Some(extra)) => {
                                 let VolumeState {
                                     classified,
                                     orderer,
@@ -2419,7 +2427,23 @@ impl Renderer {
                                 } = previous;
                                 // Made anew for the joined grid.
                                 drop((texels, gpu));
-                                let more = classify(Some(&extra))?;
+                                let more = match classify(Some(&extra)) {
+                                    Err(RenderError::Cancelled) => {
+                                        // Given up: the refinement made before stays.
+                                        let mut state = VolumeState::new(
+                                            key,
+                                            Arc::clone(&node.volume),
+                                            factors,
+                                            classified,
+                                            orderer,
+                                            ids,
+                                        );
+                                        state.region = Some(made);
+                                        self.volumes.insert(refined, state);
+                                        return Err(RenderError::Cancelled);
+                                    }
+                                    more => more?,
+                                };
                                 afford(&more)?;
                                 let joined = classified
                                     .joined_with(more)
