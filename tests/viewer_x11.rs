@@ -2424,12 +2424,13 @@ fn data_ramps_a_histogram_under_the_window_and_a_meshs_look_are_offered_and_save
 }
 
 #[test]
-fn a_drag_begun_while_the_refined_frame_is_drawn_gives_it_up_for_previews() {
+fn a_refined_close_up_gives_way_to_drags_and_edits_and_stays_under_new_text() {
     // A close-up of the LIDC2 CT's bone, its 1.4 mm voxels several pixels apart: once the
     // camera rests, the viewer draws the refined frame (seconds here) on a thread of its own.
     // A drag begun meanwhile is answered with previews; the refined frame of the old view is
     // never shown; once the camera rests again, the new view is refined. The help, pressed then,
-    // shows over that frame without drawing it again.
+    // shows over that frame without drawing it again. Edits keyed faster than a refined frame
+    // is drawn are shown as full frames while they come.
     let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     if !x11_tools() {
         return;
@@ -2554,4 +2555,32 @@ fn a_drag_begun_while_the_refined_frame_is_drawn_gives_it_up_for_previews() {
         spent < 0.5,
         "showing the help took {spent:.2} s of processor time: the frame was drawn again"
     );
+
+    // A clip plane moved key by key, faster than a refined frame is drawn: each change is
+    // shown as a full frame while the keys come, and the refined frame follows once they stop.
+    xdo(&display, &["key", "c"]).expect("key c");
+    let keys = {
+        let display = display.clone();
+        std::thread::spawn(move || {
+            for _ in 0..8 {
+                std::thread::sleep(Duration::from_millis(200));
+                xdo(&display, &["key", "bracketright"]).expect("key ]");
+            }
+        })
+    };
+    let mut while_keyed = Vec::new();
+    while !keys.is_finished() {
+        let t = get();
+        if t != refined && while_keyed.last() != Some(&t) {
+            while_keyed.push(t);
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    keys.join().unwrap();
+    assert!(
+        while_keyed.iter().any(|t| !t.contains("(refined ")),
+        "no full frame was shown while the clip plane moved: {while_keyed:?}"
+    );
+    let clipped = title(&display, &window, "(refined ");
+    eprintln!("while keyed: {while_keyed:?}\nclipped: {clipped}");
 }

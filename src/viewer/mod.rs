@@ -557,6 +557,8 @@ impl App {
             return Ok(());
         }
         let Some(action) = key_action(key, self.modifiers) else {
+            // A key that does nothing (a modifier alone) changes nothing drawn.
+            self.text_only = true;
             return Ok(());
         };
         match action {
@@ -874,9 +876,13 @@ impl App {
             }
             _ => return Ok(()),
         }
-        // Whatever else an event changed may be in the picture: it is drawn again.
+        // Whatever else an event changed may be in the picture: it is drawn again, first as a
+        // full frame (a close-up's refined frame takes a second or more); the refined frame
+        // follows once nothing has changed for a moment, as after a camera move.
         if !std::mem::take(&mut self.text_only) {
             self.frame_stale = true;
+            self.sharp_at = None;
+            self.sharpen = None;
         }
         if let Some(gpu) = &self.gpu {
             gpu.window.request_redraw();

@@ -73,39 +73,61 @@ impl App {
             refined: sharp,
         };
         let mut drawn_frame = None;
-        // The frame on screen shown again, under the text on screen now: when nothing it shows
-        // has changed, or the frame under way (the refined one) is of the same view.
+        // The frame on screen shown again, under the text on screen now, while a frame of the
+        // same view is drawn or when nothing it shows has changed.
         let mut reshown = false;
         if on_thread {
+            // A frame of this view: the same camera and size, whatever changed in the scene.
+            let of_this_view = |k: &worker::FrameKey| k.camera == key.camera && k.size == key.size;
+            let current = |k: &worker::FrameKey| !stale && *k == key;
             let shown = self.shown_frame;
-            let same_view = shown.is_some_and(|s| {
-                s.camera == key.camera && s.generation == key.generation && s.size == key.size
-            });
+            let running = self.frame_job.as_ref().map(|j| j.key);
+            let mut start = false;
             match self.drawn_frame.take() {
-                Some(frame) if !stale && frame.key == key => drawn_frame = Some(frame),
-                _ if !stale && shown == Some(key) => reshown = true,
-                _ if !stale && self.frame_job.as_ref().is_some_and(|j| j.key == key) => {
-                    if !same_view {
-                        // Still being drawn: the frame on screen stays until it is.
-                        return Ok(());
-                    }
-                    reshown = true;
+                Some(frame) if current(&frame.key) => drawn_frame = Some(frame),
+                // Drawn before the latest change to the scene: shown while the frame for it is
+                // drawn.
+                Some(frame) if of_this_view(&frame.key) && running.is_none() => {
+                    drawn_frame = Some(frame);
+                    start = true;
                 }
-                _ => {
-                    self.cancel_frame();
-                    self.refresh_contact_map();
-                    let (drawn, _) = self.drawn_scene();
-                    let Some(gpu) = &mut self.gpu else {
-                        return Ok(());
-                    };
-                    let renderer = std::mem::take(&mut gpu.renderer);
-                    self.frame_job = Some(worker::FrameJob::start(
-                        renderer,
-                        std::sync::Arc::clone(&gpu.ctx),
-                        drawn,
-                        key,
-                        options,
-                    ));
+                _ if running.is_none() && shown.is_some_and(|s| current(&s)) => reshown = true,
+                _ => match running {
+                    // Under way: the frame for this very state, or a full frame of this view,
+                    // shown once drawn, the change drawn after it (a key held down would else
+                    // give up frame after frame, and show none).
+                    Some(r) if current(&r) || (!r.refined && of_this_view(&r)) => {
+                        if !current(&r) {
+                            self.frame_stale = true;
+                        }
+                        if !shown.is_some_and(|s| of_this_view(&s)) {
+                            return Ok(());
+                        }
+                        reshown = true;
+                    }
+                    _ => {
+                        start = true;
+                        // The frame on screen stays until the new one is drawn.
+                        reshown = shown.is_some_and(|s| of_this_view(&s));
+                    }
+                },
+            }
+            if start {
+                self.cancel_frame();
+                self.refresh_contact_map();
+                let (drawn, _) = self.drawn_scene();
+                let Some(gpu) = &mut self.gpu else {
+                    return Ok(());
+                };
+                let renderer = std::mem::take(&mut gpu.renderer);
+                self.frame_job = Some(worker::FrameJob::start(
+                    renderer,
+                    std::sync::Arc::clone(&gpu.ctx),
+                    drawn,
+                    key,
+                    options,
+                ));
+                if drawn_frame.is_none() && !reshown {
                     return Ok(());
                 }
             }
@@ -134,8 +156,9 @@ impl App {
         gpu.renderer.set_refinement(sharp);
         // Four panes are put together on the CPU: the 3D view drawn at a pane's size and read
         // back, the slices beside it.
-        // (A frame shown again is the tiles' frame, whichever thread holds the renderer.)
-        let on_cpu = reshown || gpu.renderer.composites_on_cpu(&gpu.ctx) || self.panes.is_some();
+        // (A frame of the frame thread is the tiles' frame, whichever thread holds the
+        // renderer now.)
+        let on_cpu = on_thread || gpu.renderer.composites_on_cpu(&gpu.ctx) || self.panes.is_some();
         let annotate_3d = |image: &mut image::RgbaImage, annotations_on: &mut bool| {
             if let (Some(parts), true) = (&self.options.annotations, *annotations_on)
                 && let Err(e) = annotate_image_clear_of(
@@ -298,7 +321,9 @@ impl App {
                 .saturating_sub(t.classify + t.levels + t.texels);
             self.preview_divisor = next_preview_divisor(self.preview_divisor, steady);
         }
-        self.sharpen = (!preview && self.last.unrefined).then(|| Instant::now() + SETTLE);
+        // (Not while the frame for a later change is drawn: it is shown first.)
+        self.sharpen = (!preview && self.last.unrefined && self.frame_job.is_none())
+            .then(|| Instant::now() + SETTLE);
         let preset = self.transfer_label();
         let Some(gpu) = &self.gpu else {
             return Ok(());
