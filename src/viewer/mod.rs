@@ -13,7 +13,7 @@ use glam::{DMat4, DVec3};
 use winit::application::ApplicationHandler;
 use winit::dpi::{PhysicalPosition, PhysicalSize};
 use winit::event::{ElementState, MouseButton, MouseScrollDelta, WindowEvent};
-use winit::event_loop::{ActiveEventLoop, ControlFlow, EventLoop};
+use winit::event_loop::{ActiveEventLoop, ControlFlow, EventLoop, EventLoopProxy};
 use winit::keyboard::{Key, ModifiersState, NamedKey};
 use winit::window::{Window, WindowId};
 
@@ -155,9 +155,6 @@ fn next_preview_divisor(divisor: u32, took: Duration) -> u32 {
 /// After the last wheel step of a zoom drawn as a preview, the full frame follows this late.
 const SETTLE: Duration = Duration::from_millis(250);
 
-/// How often the thread drawing a frame is looked at ([`worker`]).
-const FRAME_POLL: Duration = Duration::from_millis(15);
-
 /// Opens a window on `scene` and runs until it is closed.
 pub fn run(scene: Scene, options: ViewerOptions) -> Result<(), ViewerError> {
     let event_loop = EventLoop::new().map_err(|e| ViewerError::Window(e.to_string()))?;
@@ -209,6 +206,7 @@ pub fn run(scene: Scene, options: ViewerOptions) -> Result<(), ViewerError> {
         sharpen: None,
         sharp_at: None,
         frame_job: None,
+        wake: event_loop.create_proxy(),
         drawn_frame: None,
         frame_stale: false,
         shown_frame: None,
@@ -320,6 +318,8 @@ struct App {
     /// The full or refined frame being drawn on its own thread (CPU tiles, one pane), which
     /// holds the renderer meanwhile.
     frame_job: Option<worker::FrameJob>,
+    /// Wakes the event loop once the frame thread is done, to show its frame.
+    wake: EventLoopProxy<()>,
     /// The frame drawn on its own thread, until shown.
     drawn_frame: Option<worker::DrawnFrame>,
     /// Whether something the frame shows may have changed since the frame under way on its
@@ -935,18 +935,11 @@ impl ApplicationHandler for App {
         }
     }
 
-    /// Draws the full frame once a zoom has settled, and shows a frame drawn on its thread.
+    /// Draws the full frame once a zoom has settled, and shows a frame drawn on its thread
+    /// (which wakes the loop with a user event when it is done).
     fn about_to_wait(&mut self, event_loop: &ActiveEventLoop) {
         self.collect_frame();
         self.plan_wake(event_loop);
-        // While a frame is drawn on its thread, the thread is looked at every few milliseconds.
-        if self.frame_job.is_some() {
-            let poll = Instant::now() + FRAME_POLL;
-            match event_loop.control_flow() {
-                ControlFlow::WaitUntil(at) if at <= poll => {}
-                _ => event_loop.set_control_flow(ControlFlow::WaitUntil(poll)),
-            }
-        }
     }
 }
 

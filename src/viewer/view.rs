@@ -126,6 +126,7 @@ impl App {
                     drawn,
                     key,
                     options,
+                    self.wake.clone(),
                 ));
                 if drawn_frame.is_none() && !reshown {
                     return Ok(());
