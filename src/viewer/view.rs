@@ -784,13 +784,13 @@ pub(super) fn draw_hud(image: &mut image::RgbaImage, lines: &[String], help: boo
             (HUD_LEFT + key_width + widest + 6.0).min(w as f32),
             (top + HUD_STEP * rows.len() as f32 + 4.0).min(h as f32),
         ];
-        shade(
-            image,
-            panel[0] as u32,
-            panel[1] as u32,
-            panel[2] as u32,
-            panel[3] as u32,
-        );
+        // Over whatever the overlay holds there (the annotations' letters and scale bar):
+        // the keys are read on a plain panel.
+        for y in (panel[1] as u32).min(h)..(panel[3] as u32).min(h) {
+            for x in (panel[0] as u32).min(w)..(panel[2] as u32).min(w) {
+                image.put_pixel(x, y, image::Rgba([0, 0, 0, 200]));
+            }
+        }
         panel[0] = key_width;
     }
     let Ok(mut painter) = Painter::new(image) else {
