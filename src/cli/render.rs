@@ -613,7 +613,7 @@ pub(crate) fn describe(r: &FrameReport) -> String {
         None => format!("splat pass {:.1} ms", ms(r.timings.splat_pass)),
     };
     format!(
-        "{} meshes ({} triangles), {} splats{}; classify {:.0} ms{}{}{}, order {:.1} ms, upload {:.1} ms, mesh pass {:.1} ms, {splats}, readback {:.1} ms{}",
+        "{} meshes ({} triangles), {} splats{}; classify {:.0} ms ({} classified){}{}{}, order {:.1} ms, upload {:.1} ms, mesh pass {:.1} ms, {splats}, readback {:.1} ms{}",
         r.meshes,
         r.triangles,
         r.splats,
@@ -642,6 +642,7 @@ pub(crate) fn describe(r: &FrameReport) -> String {
             }
         },
         ms(r.timings.classify),
+        r.classified,
         if r.timings.levels.is_zero() {
             String::new()
         } else {

@@ -729,7 +729,11 @@ impl App {
     ) -> Result<(), ViewerError> {
         self.text_only = false;
         match event {
-            WindowEvent::CloseRequested => self.quit(event_loop),
+            WindowEvent::CloseRequested => {
+                // Unsaved edits: a question on screen.
+                self.text_only = true;
+                self.quit(event_loop);
+            }
             WindowEvent::Resized(size) => self.resize(size)?,
             WindowEvent::RedrawRequested => return self.redraw(),
             WindowEvent::KeyboardInput { event, .. } if event.state == ElementState::Pressed => {
