@@ -2416,7 +2416,16 @@ impl Renderer {
                             })
                         };
                         let (result, orderer, ids) = match (previous, extra) {
-                            (Some((previous, made)), Some(extra)) => {
+                            (Some((mut previous, made)), Some(extra)) => {
+                                let more = match classify(Some(&extra)) {
+                                    Err(RenderError::Cancelled) => {
+                                        // Given up: the refinement made before stays whole.
+                                        previous.region = Some(made);
+                                        self.volumes.insert(refined, previous);
+                                        return Err(RenderError::Cancelled);
+                                    }
+                                    more => more?,
+                                };
                                 let VolumeState {
                                     classified,
                                     orderer,
@@ -2427,23 +2436,6 @@ impl Renderer {
                                 } = previous;
                                 // Made anew for the joined grid.
                                 drop((texels, gpu));
-                                let more = match classify(Some(&extra)) {
-                                    Err(RenderError::Cancelled) => {
-                                        // Given up: the refinement made before stays.
-                                        let mut state = VolumeState::new(
-                                            key,
-                                            Arc::clone(&node.volume),
-                                            factors,
-                                            classified,
-                                            orderer,
-                                            ids,
-                                        );
-                                        state.region = Some(made);
-                                        self.volumes.insert(refined, state);
-                                        return Err(RenderError::Cancelled);
-                                    }
-                                    more => more?,
-                                };
                                 afford(&more)?;
                                 let joined = classified
                                     .joined_with(more)
