@@ -4,24 +4,29 @@
 //! behind the viewer's full frames in BENCHMARKS.md ("Magnified bricks").
 //!
 //! ```sh
-//! cargo run --release --example scene_frames -- SCENE.toml WxH FRAMES TURN_DEGREES [full|preview|rest]
+//! cargo run --release --example scene_frames -- SCENE.toml WxH FRAMES TURN_DEGREES [full|preview|rest|window] [copies|no-copies]
 //! ```
 //!
 //! Frames are drawn as the viewer draws them with the CPU tiles on a CPU adapter (lavapipe):
 //! meshes on the GPU adapter, splats by the tile compositor. `full` (the default) draws the
 //! viewer's full frames (no refinement of grids coarser than the pixels), `preview` its
 //! previews while the camera moves (at least one level of detail coarser; drawn here at the
-//! size given), `rest` the refined frame once the camera rests.
+//! size given), `rest` the refined frame once the camera rests, `window` the previews while a
+//! window is dragged over the values (the camera still, each volume's transfer function
+//! windowed one value further each frame, TURN_DEGREES then ignored). `no-copies`
+//! draws previews without coarse copies (`Renderer::set_preview_copies`).
 
 use anyhow::{Context, Result, bail};
 use splatscene::render::{Compositor, FrameOptions, GpuContext, Renderer};
+use splatscene::scene::NodeContent;
 use splatscene::scene::file::load_scene_file;
+use std::sync::Arc;
 
-const USAGE: &str = "usage: scene_frames SCENE.toml WxH FRAMES TURN_DEGREES [full|preview|rest]";
+const USAGE: &str = "usage: scene_frames SCENE.toml WxH FRAMES TURN_DEGREES [full|preview|rest|window] [copies|no-copies]";
 
 fn main() -> Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    if !(4..=5).contains(&args.len()) {
+    if !(4..=6).contains(&args.len()) {
         bail!("{USAGE}");
     }
     let loaded = load_scene_file(std::path::Path::new(&args[0]))?;
@@ -33,16 +38,34 @@ fn main() -> Result<()> {
     let turn: f64 = args[3].parse().context("TURN_DEGREES")?;
     // The viewer's three kinds of frame: previews while the camera moves, full frames once
     // it stops, and the refined frame once it rests.
+    let windowing = args.get(4).is_some_and(|a| a == "window");
     let (preview, refined) = match args.get(4).map(String::as_str) {
         None | Some("full") => (false, false),
-        Some("preview") => (true, false),
+        Some("preview" | "window") => (true, false),
         Some("rest") => (false, true),
-        Some(other) => bail!("{other:?}: full, preview or rest; {USAGE}"),
+        Some(other) => bail!("{other:?}: full, preview, rest or window; {USAGE}"),
     };
-    let camera = loaded.scene.camera.context("the scene has no camera")?;
+    let mut scene = loaded.scene;
+    // Each volume's function and the window its points span, for `window`.
+    let own: Vec<_> = scene
+        .volumes()
+        .map(|(id, v, _)| {
+            let (lo, hi) = v.transfer.points().iter().fold(
+                (f32::INFINITY, f32::NEG_INFINITY),
+                |(lo, hi), (value, _)| (lo.min(*value), hi.max(*value)),
+            );
+            (id, Arc::clone(&v.transfer), (lo + hi) / 2.0, hi - lo)
+        })
+        .collect();
+    let camera = scene.camera.context("the scene has no camera")?;
     let ctx = GpuContext::headless()?;
     let mut renderer = Renderer::with_compositor(Compositor::Cpu);
     renderer.set_refinement(refined);
+    match args.get(5).map(String::as_str) {
+        None | Some("copies") => {}
+        Some("no-copies") => renderer.set_preview_copies(false),
+        Some(other) => bail!("{other:?}: copies or no-copies; {USAGE}"),
+    }
     let options = FrameOptions {
         background: loaded.background,
         preview,
@@ -51,15 +74,29 @@ fn main() -> Result<()> {
     let ms = |d: std::time::Duration| d.as_secs_f64() * 1e3;
     let mut kept = Vec::new();
     for f in 0..=frames {
-        let turned = camera.orbit_about(camera.up, turn * f as f64, 0.0);
+        let turned = if windowing {
+            for (id, transfer, level, width) in &own {
+                let windowed = Arc::new(transfer.windowed(level + f as f32, width.max(1.0)));
+                if let Ok(node) = scene.node(*id)
+                    && let NodeContent::Volume(v) = &node.content
+                {
+                    let mut v = v.clone();
+                    v.transfer = windowed;
+                    scene.set_content(*id, NodeContent::Volume(v))?;
+                }
+            }
+            camera
+        } else {
+            camera.orbit_about(camera.up, turn * f as f64, 0.0)
+        };
         let started = std::time::Instant::now();
-        let shot = renderer.screenshot(&ctx, &loaded.scene, &turned, (w, h), &options)?;
+        let shot = renderer.screenshot(&ctx, &scene, &turned, (w, h), &options)?;
         let total = ms(started.elapsed());
         let t = shot.report.timings;
         let made = ms(t.classify + t.levels + t.texels);
         let s = shot.report.tiles.unwrap_or_default();
         println!(
-            "frame {f}: {total:.0} ms (making {made:.0}: classify {:.0}, levels {:.0}, texels {:.0}; look {:.0}, order {:.0}, mesh pass {:.0}, readback {:.0}, project {:.0}, bin {:.0}, tiles {:.0}), {} splats, {} projected, {} drew, {} composited, levels {:?}, refined {:?}",
+            "frame {f}: {total:.0} ms (making {made:.0}: classify {:.0}, levels {:.0}, texels {:.0}; look {:.0}, order {:.0}, mesh pass {:.0}, readback {:.0}, project {:.0}, bin {:.0}, tiles {:.0}), {} splats, {} projected, {} drew, {} composited, levels {:?}, refined {:?}, coarse copies {}",
             ms(t.classify),
             ms(t.levels),
             ms(t.texels),
@@ -76,6 +113,7 @@ fn main() -> Result<()> {
             s.composited,
             shot.report.levels,
             shot.report.refined,
+            shot.report.coarse_copies,
         );
         if f > 0 {
             kept.push(total);

@@ -432,8 +432,8 @@ fn a_close_up_is_drawn_the_same_whatever_came_before() {
 #[test]
 fn a_cancelled_frame_stops_and_the_next_is_a_fresh_renderers() {
     // The windowed box close up (refined, its bricks looked for): a frame whose cancel flag
-    // is raised gives up with `Cancelled`; raised before the frame, it stops in the
-    // refinement's classification. Raised at any moment of a frame from another thread, the frame either
+    // is raised gives up with `Cancelled`; raised before the frame, it stops in the own grid's
+    // classification. Raised at any moment of a frame from another thread, the frame either
     // finishes or gives up, and the next frame, its flag lowered, is the picture a fresh
     // renderer draws: nothing half made was kept.
     use std::sync::Arc;

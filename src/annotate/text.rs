@@ -288,15 +288,22 @@ fn segments_mask(segments: &[([f32; 2], [f32; 2])], width: f32) -> Option<Mask> 
     let w = ((hi[0] + half + 1.0).ceil() as i64 - x0).max(1) as usize;
     let h = ((hi[1] + half + 1.0).ceil() as i64 - y0).max(1) as usize;
     let mut mask = Mask::new(x0, y0, w, h);
-    for j in 0..h {
-        for i in 0..w {
-            let p = [(x0 + i as i64) as f32 + 0.5, (y0 + j as i64) as f32 + 0.5];
-            let d = segments
-                .iter()
-                .map(|(a, b)| segment_distance(p, *a, *b))
-                .fold(f32::INFINITY, f32::min);
-            let c = (half + 0.5 - d).clamp(0.0, 1.0);
-            mask.cover[j * w + i] = c;
+    // Each segment covers the pixels of its own box alone: the coverage `half + 0.5 - d`,
+    // clamped, falls with the distance, so the most any segment gives a pixel is what the
+    // nearest gives. (Taken over every segment for every pixel of the mark's box, a histogram's
+    // curve of a thousand segments took a third of a second a frame.)
+    for (a, b) in segments {
+        let lo = |k: usize| (a[k].min(b[k]) - half - 1.0).floor() as i64;
+        let hi = |k: usize| (a[k].max(b[k]) + half + 1.0).ceil() as i64;
+        let (i0, i1) = ((lo(0) - x0).max(0) as usize, ((hi(0) - x0) as usize).min(w));
+        let (j0, j1) = ((lo(1) - y0).max(0) as usize, ((hi(1) - y0) as usize).min(h));
+        for j in j0..j1 {
+            for i in i0..i1 {
+                let p = [(x0 + i as i64) as f32 + 0.5, (y0 + j as i64) as f32 + 0.5];
+                let c = (half + 0.5 - segment_distance(p, *a, *b)).clamp(0.0, 1.0);
+                let cell = &mut mask.cover[j * w + i];
+                *cell = cell.max(c);
+            }
         }
     }
     Some(mask)
@@ -351,5 +358,55 @@ mod tests {
         assert_eq!(at(10, 7), 0.0);
         assert!(segments_mask(&[([f32::NAN, 0.0], [1.0, 1.0])], 2.0).is_none());
         assert!(segments_mask(&[], 2.0).is_none());
+    }
+
+    #[test]
+    fn many_segments_cover_each_pixel_as_their_nearest_does() {
+        // A wavy polyline and a few long strokes across it: each pixel of the mark's box as the
+        // distance to the nearest segment, over all of them, says.
+        let mut segments: Vec<([f32; 2], [f32; 2])> = (0..200)
+            .map(|i| {
+                let y = |i: i32| 40.0 + 25.0 * (i as f32 * 0.13).sin();
+                ([i as f32 * 0.7, y(i)], [(i + 1) as f32 * 0.7, y(i + 1)])
+            })
+            .collect();
+        segments.push(([3.3, 90.2], [131.0, 2.5]));
+        segments.push(([60.0, 10.0], [60.0, 10.0]));
+        for width in [1.0, 1.5, 4.0] {
+            let mask = segments_mask(&segments, width).unwrap();
+            let half = width / 2.0;
+            let mut lit = 0;
+            for j in 0..mask.height {
+                for i in 0..mask.width {
+                    let (x, y) = ((mask.x0 + i as i64) as f32, (mask.y0 + j as i64) as f32);
+                    // The distance to each segment sampled every twentieth of a pixel: the
+                    // true one lies within half a step below the sampled one.
+                    let (mut near_lo, mut near_hi) = (f32::INFINITY, f32::INFINITY);
+                    for (a, b) in &segments {
+                        let length = ((b[0] - a[0]).powi(2) + (b[1] - a[1]).powi(2)).sqrt();
+                        let steps = (length * 20.0).ceil().max(1.0) as usize;
+                        let sampled = (0..=steps)
+                            .map(|s| {
+                                let t = s as f32 / steps as f32;
+                                let q = [a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1])];
+                                ((x + 0.5 - q[0]).powi(2) + (y + 0.5 - q[1]).powi(2)).sqrt()
+                            })
+                            .fold(f32::INFINITY, f32::min);
+                        near_hi = near_hi.min(sampled);
+                        near_lo = near_lo.min(sampled - length / steps as f32 / 2.0);
+                    }
+                    let cover = |d: f32| (half + 0.5 - d).clamp(0.0, 1.0);
+                    let got = mask.cover[j * mask.width + i];
+                    assert!(
+                        got >= cover(near_hi) - 1e-4 && got <= cover(near_lo) + 1e-4,
+                        "{width}: ({x}, {y}) {got} outside {} to {}",
+                        cover(near_hi),
+                        cover(near_lo)
+                    );
+                    lit += usize::from(got > 0.0);
+                }
+            }
+            assert!(lit > 300, "{lit}");
+        }
     }
 }

@@ -22,8 +22,8 @@ pub use depth_image::{DepthImage, DepthMode};
 pub use output::{encode_png, encode_png_with_text, frame_to_rgba8};
 pub use renderer::{
     Compositor, Detail, FrameOptions, FrameReport, FrameTimings, LevelOfDetail, MAX_DEPTH_LEVELS,
-    MAX_LEVEL, MAX_REFINE, MAX_REFINED_VOXELS, REFINE_TO, Renderer, Screenshot, detail_for,
-    pixels_apart,
+    MAX_LEVEL, MAX_REFINE, MAX_REFINED_VOXELS, PREVIEW_COPY_SPACING_MM, REFINE_TO, Renderer,
+    Screenshot, detail_for, pixels_apart,
 };
 pub use target::{DEPTH_FORMAT, RenderTarget, color_format, read_texture};
 pub use view::ViewSetup;

@@ -820,11 +820,10 @@ impl App {
                         return Ok(());
                     }
                     if self.windowing.take().is_some() {
+                        // (The frame that classifies the volume for it follows; the title
+                        // says what each frame's classification took.)
                         if let Some((level, width)) = self.window {
-                            self.say(format!(
-                                "window level {level:.0} width {width:.0} (classified in {:.0} ms)",
-                                self.last.timings.classify.as_secs_f64() * 1e3
-                            ));
+                            self.say(format!("window level {level:.0} width {width:.0}"));
                         }
                         self.request_redraw();
                         return Ok(());

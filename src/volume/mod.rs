@@ -93,32 +93,17 @@ impl CpuVolume {
     }
 
     /// The volume at half the resolution along every axis of more than one voxel: each value
-    /// the mean of a 2x2x2 block (fewer at an odd end), each voxel at the centre of its whole
-    /// block, the spacing doubled. A volume drawn from this has about an eighth of the splats,
-    /// each twice as large: a preview for frames while the camera moves.
+    /// the mean of a 2x2x2 block (fewer at an odd end), held in the volume's own type (rounded
+    /// to the nearest for integers), each voxel at the centre of its whole block, the spacing
+    /// doubled. A volume drawn from this has about an eighth of the splats, each twice as
+    /// large, and classifies eight times faster: the renderer's previews of a large volume
+    /// whose transfer function has just changed are drawn from it. Blocks of output z-slices
+    /// on every core; no temporary larger than a slice's sums.
     pub fn halved(&self) -> CpuVolume {
-        let [nx, ny, nz] = self.dims.map(|n| n as usize);
         let step = self.dims.map(|n| if n > 1 { 2usize } else { 1 });
         let out = [0, 1, 2].map(|a| self.dims[a].div_ceil(step[a] as u32));
-        let [ox, oy, oz] = out.map(|n| n as usize);
-        let mut values = Vec::with_capacity(ox * oy * oz);
-        voxels::dispatch!(&self.values, held => {
-            for k in 0..oz {
-                for j in 0..oy {
-                    for i in 0..ox {
-                        let (mut sum, mut count) = (0.0f64, 0u32);
-                        for z in k * step[2]..((k + 1) * step[2]).min(nz) {
-                            for y in j * step[1]..((j + 1) * step[1]).min(ny) {
-                                for x in i * step[0]..((i + 1) * step[0]).min(nx) {
-                                    sum += f64::from(held[x + nx * (y + ny * z)].to_f32());
-                                    count += 1;
-                                }
-                            }
-                        }
-                        values.push((sum / f64::from(count)) as f32);
-                    }
-                }
-            }
+        let values = voxels::dispatch!(&self.values, held => {
+            Voxels::from(halve(held, self.dims.map(|n| n as usize), step))
         });
         let spacing = [0, 1, 2].map(|a| self.spacing[a] * step[a] as f64);
         // The first block's centre: half a fine voxel along each halved axis.
@@ -130,9 +115,63 @@ impl CpuVolume {
             spacing,
             origin: origin.into(),
             direction: self.direction,
-            values: values.into(),
+            values,
         }
     }
+}
+
+/// The means of the `step[0] x step[1] x step[2]` blocks of `held`, a grid of `dims` (the
+/// blocks at an odd end hold fewer voxels; each step 1 or 2), output z-slice by z-slice on
+/// every core. Sums of at most 8 values are taken in `f32`, exact for the integer types.
+/// (Written here: a box filter over a stored type, which the image crates do in 2-D and over
+/// their own pixel types.)
+fn halve<T: Voxel>(held: &[T], [nx, ny, nz]: [usize; 3], step: [usize; 3]) -> Vec<T> {
+    use rayon::prelude::*;
+    let [ox, oy, oz] = [
+        nx.div_ceil(step[0]),
+        ny.div_ceil(step[1]),
+        nz.div_ceil(step[2]),
+    ];
+    let mut out = vec![T::nearest(0.0); ox * oy * oz];
+    if out.is_empty() || held.len() < nx * ny * nz {
+        return out;
+    }
+    out.par_chunks_mut(ox * oy).enumerate().for_each_init(
+        Vec::new,
+        |sums: &mut Vec<f32>, (k, slice)| {
+            sums.clear();
+            sums.resize(ox * oy, 0.0);
+            let zs = k * step[2]..((k + 1) * step[2]).min(nz);
+            let depth = zs.len();
+            for z in zs {
+                for y in 0..ny {
+                    let row = &held[nx * (y + ny * z)..][..nx];
+                    let into = &mut sums[ox * (y / step[1])..][..ox];
+                    if step[0] == 2 {
+                        let pairs = row.chunks_exact(2);
+                        let odd = pairs.remainder().first().map(|v| v.to_f32());
+                        for (sum, pair) in into.iter_mut().zip(pairs) {
+                            *sum += pair[0].to_f32() + pair[1].to_f32();
+                        }
+                        if let (Some(v), Some(last)) = (odd, into.last_mut()) {
+                            *last += v;
+                        }
+                    } else {
+                        for (sum, v) in into.iter_mut().zip(row) {
+                            *sum += v.to_f32();
+                        }
+                    }
+                }
+            }
+            for (j, (value, sum)) in slice.iter_mut().zip(sums.iter()).enumerate() {
+                let (i, j) = (j % ox, j / ox);
+                let width = ((i + 1) * step[0]).min(nx) - i * step[0];
+                let height = ((j + 1) * step[1]).min(ny) - j * step[1];
+                *value = T::nearest(f64::from(*sum) / (width * height * depth) as f64);
+            }
+        },
+    );
+    out
 }
 
 #[cfg(test)]
@@ -166,5 +205,41 @@ mod tests {
             / 4.0;
         let at = coarse.index_to_world_point(DVec3::ZERO);
         assert!(at.distance(mean) < 1e-12, "{at} against {mean}");
+    }
+
+    #[test]
+    fn halved_integers_keep_their_type_and_round_each_blocks_mean() {
+        // 3 x 3 x 3 bytes, value x + 3 y + 9 z with (2, 2, 2) at 255: the odd ends' blocks hold
+        // 4, 2 and 1 voxels.
+        let mut bytes: Vec<u8> = (0..27u8).collect();
+        bytes[26] = 255;
+        let volume = CpuVolume {
+            dims: [3, 3, 3],
+            spacing: [1.0; 3],
+            origin: [0.0; 3],
+            direction: DMat3::IDENTITY,
+            values: Voxels::U8(bytes.clone()),
+        };
+        let half = volume.halved();
+        let Voxels::U8(held) = &half.values else {
+            panic!("held as {:?}", half.values.scalar_type());
+        };
+        assert_eq!(half.dims, [2, 2, 2]);
+        let value = |x: usize, y: usize, z: usize| f64::from(bytes[x + 3 * y + 9 * z]);
+        for (i, &got) in held.iter().enumerate() {
+            let [bx, by, bz] = [i % 2, (i / 2) % 2, i / 4];
+            let block = |b: usize| (2 * b..(2 * b + 2).min(3)).collect::<Vec<_>>();
+            let mut all = Vec::new();
+            for z in block(bz) {
+                for y in block(by) {
+                    for x in block(bx) {
+                        all.push(value(x, y, z));
+                    }
+                }
+            }
+            let mean = all.iter().sum::<f64>() / all.len() as f64;
+            assert_eq!(f64::from(got), mean.round(), "block {i}: {all:?}");
+        }
+        assert_eq!(held[7], 255);
     }
 }

@@ -18,6 +18,9 @@ use super::ScalarType;
 pub trait Voxel: Copy + Send + Sync + bytemuck::Pod + 'static {
     /// The value as `f32` (exact for every implementing type).
     fn to_f32(self) -> f32;
+    /// The value of this type nearest `v`: rounded to the nearest integer and held to the
+    /// type's range for the integer types (a mean of stored values is within it).
+    fn nearest(v: f64) -> Self;
 }
 
 macro_rules! voxel {
@@ -27,10 +30,26 @@ macro_rules! voxel {
             fn to_f32(self) -> f32 {
                 f32::from(self)
             }
+            #[inline(always)]
+            fn nearest(v: f64) -> Self {
+                // `as` saturates at the type's ends.
+                v.round() as $t
+            }
         }
     )*};
 }
-voxel!(u8, i8, u16, i16, f32);
+voxel!(u8, i8, u16, i16);
+
+impl Voxel for f32 {
+    #[inline(always)]
+    fn to_f32(self) -> f32 {
+        self
+    }
+    #[inline(always)]
+    fn nearest(v: f64) -> Self {
+        v as f32
+    }
+}
 
 /// One value per voxel, x fastest, in the type the file stored them in (see the
 /// [module documentation](self)).

@@ -14,9 +14,7 @@ use super::target::{PixelRect, RenderTarget};
 use super::tile_pass::TilePass;
 use super::view::ViewSetup;
 use super::{GpuContext, RenderError};
-use crate::classify::{
-    Classified, ClassifyOptions, Front, Opacity, Region, classify_refined_in, classify_with,
-};
+use crate::classify::{Classified, ClassifyOptions, Front, Opacity, Region, classify_refined_in};
 use crate::geometry::{GeometryError, VolumeGeometry};
 use crate::order::{OrderOptions, Orderer, Ordering, ViewCase};
 use crate::scene::{
@@ -125,6 +123,10 @@ pub struct FrameReport {
     pub levels_not_made: bool,
     /// Volumes drawn brick by brick at more than one level ([`Renderer::set_levels_by_brick`]).
     pub bricks_by_level: usize,
+    /// Volumes a preview drew from a coarse copy of their values
+    /// ([`Renderer::set_preview_copies`]), their own grids not classified for their
+    /// transfer functions.
+    pub coarse_copies: usize,
     /// Volumes classified this frame (0 when nothing changed).
     pub classified: usize,
     /// Levels of detail made this frame from a classification (0 when every level drawn was
@@ -1260,7 +1262,30 @@ pub struct Renderer {
     /// The targets the CPU tile compositor's screenshots draw their meshes into, kept from
     /// frame to frame for the last two sizes drawn, the latest first.
     layer_targets: Vec<RenderTarget>,
+    /// Each large volume's coarse copy, for previews while its own grid is not classified.
+    coarse_copies: HashMap<NodeId, CoarseCopy>,
+    /// Previews never drawn from coarse copies ([`Renderer::set_preview_copies`]).
+    no_preview_copies: bool,
 }
+
+/// A volume's values averaged over blocks of 2^3, 4^3, ... voxels ([`CpuVolume::halved`] once,
+/// twice, ...), made as previews first ask for them.
+struct CoarseCopy {
+    /// The volume they were made from (the node's, while it stays the same).
+    of: std::sync::Weak<CpuVolume>,
+    /// The copy halved `i + 1` times at `i`, with its halvings along each axis (an axis of one
+    /// voxel is not halved).
+    halved: Vec<([u8; 3], Arc<CpuVolume>)>,
+}
+
+/// The coarsest spacing, in millimetres, of a preview's coarse copy of a volume
+/// ([`Renderer::set_preview_copies`]): about the 1.4 mm of a thick-slice CT, whose picture the
+/// one opacity per millimetre keeps within 0.03 (RMSE) of a 0.7 mm grid's. Averaged coarser,
+/// thin bright structures fall below a bone window: the ribs of the 0.7 mm LIDC2 CT all but
+/// vanished from a copy averaged over 4^3 voxels (2.8 mm), which the own grid's level of
+/// that spacing keeps, since it averages the classified opacities (BENCHMARKS.md, "Previews
+/// while the values are windowed").
+pub const PREVIEW_COPY_SPACING_MM: f64 = 1.5;
 
 impl std::fmt::Debug for Renderer {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
@@ -1332,6 +1357,18 @@ impl Renderer {
     /// draw order of one level after another, far to near, as the CPU tiles do.
     pub fn set_levels_by_brick(&mut self, on: bool) {
         self.one_level = !on;
+    }
+
+    /// Whether previews of a volume whose own grid is not classified for its transfer
+    /// function (a window dragged over the values) are drawn from a copy of its values
+    /// averaged over blocks of 2^3 voxels (4^3, ... where the level the preview draws is that
+    /// coarse), classified anew (on by default): a thin-slice CT's classification takes most
+    /// of a second, its copy's a few tens of milliseconds. Only a volume whose copy's voxels
+    /// are at most [`PREVIEW_COPY_SPACING_MM`] apart is copied; the own grid is classified by
+    /// the next frame that is not a preview. The copy's picture is the preview's within about
+    /// what two grids of one CT differ by (tested against the own grid's preview).
+    pub fn set_preview_copies(&mut self, on: bool) {
+        self.no_preview_copies = !on;
     }
 
     /// Splats the GPU tile compositor ([`Compositor::GpuTiles`]) projects and composites in
@@ -2051,9 +2088,48 @@ impl Renderer {
                 .map_err(|e| fail(e.to_string()))
             };
             let own = (id, Detail::default());
-            if self.volumes.get(&own).is_none_or(|v| v.key != key) {
-                let result = classify_with(&node.volume, &node.transfer, &options)
-                    .map_err(|e| fail(e.to_string()))?;
+            let stale = self.volumes.get(&own).is_none_or(|v| v.key != key);
+            if preview && stale && !self.full_grid && !self.no_preview_copies {
+                // The level the preview would draw of the own grid, the same for every axis:
+                // the least it wants along any (where its content lay before, or its box).
+                let geometry =
+                    placed_geometry(&node.volume, world).map_err(|e| fail(e.to_string()))?;
+                let occupied = self.volumes.get(&own).and_then(|s| s.occupied.as_ref());
+                let apart = apart_near(&geometry, view, occupied);
+                let least = match detail_at(geometry.dims(), apart, Within::WHOLE) {
+                    Detail::Level(levels, _) => levels.into_iter().min().unwrap_or(0),
+                    Detail::Refined(_) => 0,
+                };
+                let halvings = copy_halvings(geometry.spacing(), geometry.dims(), least);
+                if halvings > 0 {
+                    let (detail, classified) =
+                        self.classify_coarse_copy(id, node, (key, &options), halvings, &fail)?;
+                    if let Some(state) = self.volumes.get(&(id, detail)) {
+                        afford(&state.classified)?;
+                    }
+                    made += usize::from(classified);
+                    report.coarse_copies += 1;
+                    self.levels.insert(id, detail);
+                    continue;
+                }
+            }
+            // A coarse copy's grid drawn by earlier previews goes once the own grid is drawn.
+            self.volumes
+                .retain(|(v, _), state| *v != id || Arc::ptr_eq(&state.volume, &node.volume));
+            if stale {
+                // Given up when the frame is (139M voxels take about 0.4 s).
+                let result = classify_refined_in(
+                    &node.volume,
+                    &node.transfer,
+                    &options,
+                    [1; 3],
+                    None,
+                    self.tiles.cancel.as_deref(),
+                )
+                .map_err(|e| match e {
+                    crate::grid::GridError::Cancelled => RenderError::Cancelled,
+                    e => fail(e.to_string()),
+                })?;
                 afford(&result)?;
                 made += 1;
                 // The other levels of the old classification go with it; its order buffers
@@ -2520,7 +2596,78 @@ impl Renderer {
             self.levels.insert(id, drawn);
         }
         self.volumes.retain(|(id, _), _| live.contains(id));
+        self.coarse_copies.retain(|id, _| live.contains(id));
         Ok(made)
+    }
+
+    /// For a preview of volume `id` whose own grid is not classified for `key`, its coarse
+    /// copy halved `halvings` times (at least once), classified for `key` (the copy made now
+    /// where it was not): the detail its grid is held at in `volumes`, and whether it was
+    /// classified now.
+    fn classify_coarse_copy(
+        &mut self,
+        id: NodeId,
+        node: &VolumeNode,
+        (key, options): (ClassKey, &ClassifyOptions),
+        halvings: u8,
+        fail: &dyn Fn(String) -> RenderError,
+    ) -> Result<(Detail, bool), RenderError> {
+        let halvings = usize::from(halvings.max(1));
+        let copies = self.coarse_copies.entry(id).or_insert_with(|| CoarseCopy {
+            of: Arc::downgrade(&node.volume),
+            halved: Vec::new(),
+        });
+        if !std::ptr::eq(copies.of.as_ptr(), Arc::as_ptr(&node.volume)) {
+            copies.of = Arc::downgrade(&node.volume);
+            copies.halved.clear();
+        }
+        // Each copy halved from the one before.
+        while copies.halved.len() < halvings {
+            let (levels, above) = match copies.halved.last() {
+                Some((levels, volume)) => (*levels, Arc::clone(volume)),
+                None => ([0; 3], Arc::clone(&node.volume)),
+            };
+            let dims = above.dims.map(|n| u64::from(n.div_ceil(2)));
+            crate::budget::check_memory(
+                "a coarse copy of the volume for previews",
+                dims.iter().product(),
+                crate::volume::Voxels::held_bytes(above.values.scalar_type()) as u64,
+            )
+            .map_err(|e| fail(e.to_string()))?;
+            let levels = [0, 1, 2].map(|a| levels[a] + u8::from(above.dims[a] > 1));
+            copies.halved.push((levels, Arc::new(above.halved())));
+        }
+        let Some((levels, copy)) = copies.halved.get(halvings - 1) else {
+            return Err(fail("no coarse copy was made".into()));
+        };
+        let (detail, copy) = (Detail::Level(*levels, [0; 3]), Arc::clone(copy));
+        if self
+            .volumes
+            .get(&(id, detail))
+            .is_some_and(|s| s.key == key && Arc::ptr_eq(&s.volume, &copy))
+        {
+            return Ok((detail, false));
+        }
+        let classified = classify_refined_in(
+            &copy,
+            &node.transfer,
+            options,
+            [1; 3],
+            None,
+            self.tiles.cancel.as_deref(),
+        )
+        .map_err(|e| match e {
+            crate::grid::GridError::Cancelled => RenderError::Cancelled,
+            e => fail(e.to_string()),
+        })?;
+        let (orderer, ids) = self
+            .volumes
+            .remove(&(id, detail))
+            .map(|o| (o.orderer, o.ids))
+            .unwrap_or_default();
+        let state = VolumeState::new(key, copy, [1; 3], classified, orderer, ids);
+        self.volumes.insert((id, detail), state);
+        Ok((detail, true))
     }
 
     /// Orders every volume's splats for this view; returns the volumes far to near.
@@ -2986,6 +3133,20 @@ fn begin_with<'e>(
             multiview_mask: None,
         })
         .forget_lifetime()
+}
+
+/// How many times a volume of `dims` voxels `spacing` millimetres apart is halved
+/// ([`CpuVolume::halved`]) for a preview's coarse copy: as often as the level the preview
+/// draws, `least` (at least once), while the copy's voxels stay at most
+/// [`PREVIEW_COPY_SPACING_MM`] apart along every axis it halves; 0 where once is too coarse.
+fn copy_halvings(spacing: [f64; 3], dims: [u32; 3], least: u8) -> u8 {
+    let fine_enough = |h: u8| {
+        (0..3).all(|a| dims[a] <= 1 || spacing[a] * f64::from(1u32 << h) <= PREVIEW_COPY_SPACING_MM)
+    };
+    (1..=least.clamp(1, MAX_LEVEL))
+        .take_while(|&h| fine_enough(h))
+        .last()
+        .unwrap_or(0)
 }
 
 fn class_key(node: &VolumeNode) -> ClassKey {

@@ -1270,3 +1270,162 @@ fn bricks_on_the_image_settled_by_blocks_are_the_bricks_tested_one_by_one() {
     // The close-ups, the eye inside and the orthographic part leave bricks out.
     assert!(partial >= 4, "{partial}");
 }
+
+#[test]
+fn a_copy_is_halved_to_the_previews_level_while_its_voxels_stay_fine() {
+    let ct = ([0.7017, 0.7017, 0.6215], [512, 512, 532]);
+    // The 0.7 mm LIDC2 CT: halved once (1.4 mm), never twice (2.8 mm).
+    assert_eq!(copy_halvings(ct.0, ct.1, 0), 1);
+    assert_eq!(copy_halvings(ct.0, ct.1, 1), 1);
+    assert_eq!(copy_halvings(ct.0, ct.1, 3), 1);
+    // Its 1.4 x 1.4 x 2.5 mm grid is not copied.
+    assert_eq!(
+        copy_halvings([1.40625, 1.40625, 2.5], [256, 256, 133], 1),
+        0
+    );
+    // A 0.1 mm micro-CT as the preview's level says, up to MAX_LEVEL.
+    assert_eq!(copy_halvings([0.1; 3], [1024; 3], 2), 2);
+    assert_eq!(copy_halvings([0.05; 3], [1024; 3], 9), MAX_LEVEL);
+    // An axis of one voxel is not halved, whatever its spacing.
+    assert_eq!(copy_halvings([0.5, 0.5, 9.0], [300, 300, 1], 1), 1);
+}
+
+#[test]
+fn previews_of_a_volume_windowed_anew_draw_a_coarse_copy_until_a_full_frame() {
+    // The wavy field of 96^3 voxels 0.5 mm apart, whose previews copy it once its own grid is
+    // not classified for its function: halved once, 48^3 voxels 1 mm apart (the level the
+    // preview draws; twice would be past PREVIEW_COPY_SPACING_MM).
+    let (mut scene, id) = wavy_field(96);
+    let mut half_mm = node_of(&scene, id);
+    let mut volume = (*half_mm.volume).clone();
+    volume.spacing = [0.5; 3];
+    half_mm.volume = Arc::new(volume);
+    scene
+        .set_content(id, crate::scene::NodeContent::Volume(half_mm))
+        .unwrap();
+    let camera = SceneCamera {
+        projection: crate::scene::Projection::Perspective {
+            fov_y_degrees: 40.0,
+        },
+        ..SceneCamera::look_at(DVec3::new(10.0, 35.0, -75.0), DVec3::splat(24.0))
+    };
+    let node = |scene: &Scene| node_of(scene, id);
+    let own_transfer = Arc::clone(&node(&scene).transfer);
+    let window = |scene: &mut Scene, shift: f32| {
+        let mut v = node(scene);
+        v.transfer = Arc::new(own_transfer.windowed(350.0 + shift, 200.0));
+        scene
+            .set_content(id, crate::scene::NodeContent::Volume(v))
+            .unwrap();
+    };
+    let (full, preview) = (
+        FrameOptions::default(),
+        FrameOptions {
+            preview: true,
+            ..FrameOptions::default()
+        },
+    );
+    let shoot = |r: &mut Renderer, scene: &Scene, options: &FrameOptions| {
+        r.screenshot_without_gpu(scene, &camera, (64, 64), options)
+            .unwrap()
+    };
+    let fresh = |scene: &Scene, options: &FrameOptions| {
+        shoot(
+            &mut Renderer::with_compositor(super::super::Compositor::Cpu),
+            scene,
+            options,
+        )
+    };
+    // The preview drawn from the own grid's levels: after a full frame.
+    let own_preview = |scene: &Scene| {
+        let mut r = Renderer::with_compositor(super::super::Compositor::Cpu);
+        shoot(&mut r, scene, &full);
+        shoot(&mut r, scene, &preview)
+    };
+    let mut renderer = Renderer::with_compositor(super::super::Compositor::Cpu);
+    let first = shoot(&mut renderer, &scene, &full);
+    assert_eq!(
+        (first.report.classified, first.report.coarse_copies),
+        (1, 0)
+    );
+    // A window moved: the preview classifies the copy, not the own grid.
+    window(&mut scene, 0.0);
+    let copied = shoot(&mut renderer, &scene, &preview);
+    assert_eq!(copied.report.coarse_copies, 1, "{:?}", copied.report);
+    assert_eq!(copied.report.classified, 1);
+    assert_eq!(copied.report.levels, [1, 1, 1]);
+    let stale_own = |r: &Renderer| r.volumes.get(&(id, Detail::default())).map(|s| s.key);
+    assert_ne!(stale_own(&renderer), Some(class_key(&node(&scene))));
+    // The same picture as the own grid's preview, within what two grids of one field differ
+    // by, and not that picture (the copy was drawn).
+    let from_own = own_preview(&scene);
+    assert_eq!(from_own.report.coarse_copies, 0);
+    let error = lit_rmse(&copied.frame, &from_own.frame);
+    assert!(error < 0.02 && error > 0.0, "{error}");
+    // Drawn again, the copy's classification is kept; a new window classifies the copy
+    // again, the copy itself kept.
+    let again = shoot(&mut renderer, &scene, &preview);
+    assert_eq!(
+        (again.report.classified, again.report.coarse_copies),
+        (0, 1)
+    );
+    assert_eq!(again.frame.pixels, copied.frame.pixels);
+    let copy = |r: &Renderer| Arc::as_ptr(&r.coarse_copies[&id].halved[0].1);
+    let made = copy(&renderer);
+    window(&mut scene, 20.0);
+    let moved = shoot(&mut renderer, &scene, &preview);
+    assert_eq!(
+        (moved.report.classified, moved.report.coarse_copies),
+        (1, 1)
+    );
+    assert_eq!(copy(&renderer), made);
+    assert_eq!(moved.frame.pixels, fresh(&scene, &preview).frame.pixels);
+    // A full frame whose flag is raised gives up in the own grid's classification and keeps
+    // nothing of it.
+    let raised = Arc::new(std::sync::atomic::AtomicBool::new(true));
+    renderer.set_cancel(Some(raised));
+    let cancelled = renderer.screenshot_without_gpu(&scene, &camera, (64, 64), &full);
+    assert!(matches!(cancelled, Err(RenderError::Cancelled)));
+    assert_ne!(stale_own(&renderer), Some(class_key(&node(&scene))));
+    renderer.set_cancel(None);
+    // The next full frame classifies the own grid and is a fresh renderer's picture; the
+    // copy's grid goes, and the previews after it draw the own grid's levels.
+    let whole = shoot(&mut renderer, &scene, &full);
+    assert_eq!(
+        (whole.report.classified, whole.report.coarse_copies),
+        (1, 0)
+    );
+    assert_eq!(whole.frame.pixels, fresh(&scene, &full).frame.pixels);
+    let own_volume = node(&scene).volume;
+    assert!(
+        renderer
+            .volumes
+            .values()
+            .all(|s| Arc::ptr_eq(&s.volume, &own_volume))
+    );
+    let after = shoot(&mut renderer, &scene, &preview);
+    assert_eq!(after.report.coarse_copies, 0);
+    assert_eq!(after.frame.pixels, own_preview(&scene).frame.pixels);
+}
+
+/// The RMSE of two frames' premultiplied colours over the pixels either covers (alpha over
+/// 0.02), of which there must be a hundred.
+fn lit_rmse(a: &Frame, b: &Frame) -> f64 {
+    let lit: Vec<usize> = (0..a.pixels.len())
+        .filter(|&i| a.pixels[i][3].max(b.pixels[i][3]) > 0.02)
+        .collect();
+    assert!(lit.len() > 100, "{} pixels lit", lit.len());
+    let squared: f64 = (lit.iter())
+        .flat_map(|&i| (0..3).map(move |c| (i, c)))
+        .map(|(i, c)| f64::from(a.pixels[i][c] - b.pixels[i][c]).powi(2))
+        .sum();
+    (squared / (3 * lit.len()) as f64).sqrt()
+}
+
+/// Volume node `id` of `scene`.
+fn node_of(scene: &Scene, id: NodeId) -> VolumeNode {
+    match &scene.node(id).unwrap().content {
+        crate::scene::NodeContent::Volume(v) => v.clone(),
+        _ => panic!("node {id:?} is no volume"),
+    }
+}
