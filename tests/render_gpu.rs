@@ -747,3 +747,58 @@ fn a_target_too_large_to_read_back_is_refused_before_anything_is_made() {
         other => panic!("{side}x{side}: {:?}", other.map(|t| t.size)),
     }
 }
+
+#[test]
+fn a_preview_after_a_new_transfer_function_draws_a_coarse_copy_on_every_compositor() {
+    // A 0.5 mm ball of shells, windowed anew: each compositor's preview draws the copy
+    // averaged to 1 mm, as near the full frame as the preview of the own grid's level is
+    // (on lavapipe, 0.027 against 0.067 with the splat pass).
+    use splatscene::render::Compositor;
+    let ctx = context();
+    let scene = volume_scene(shells(48, [0.5; 3]), Ordering::IpPbtfImplicit);
+    let (id, node, _) = scene.volumes().next().unwrap();
+    let mut windowed = node.clone();
+    windowed.transfer = Arc::new(TransferFunction::ct_bone().windowed(700.0, 900.0));
+    let camera = SceneCamera::look_at(DVec3::new(40.0, -20.0, -60.0), DVec3::splat(12.0));
+    let size = (96, 96);
+    let (full, preview) = (
+        TRANSPARENT,
+        FrameOptions {
+            preview: true,
+            ..TRANSPARENT
+        },
+    );
+    for compositor in [Compositor::Gpu, Compositor::GpuTiles, Compositor::Cpu] {
+        let mut before = scene.clone();
+        let mut renderer = Renderer::with_compositor(compositor);
+        renderer
+            .screenshot(&ctx, &before, &camera, size, &full)
+            .unwrap();
+        before
+            .set_content(id, NodeContent::Volume(windowed.clone()))
+            .unwrap();
+        let copied = renderer
+            .screenshot(&ctx, &before, &camera, size, &preview)
+            .unwrap();
+        assert_eq!(copied.report.coarse_copies, 1, "{compositor:?}");
+        let mut own = Renderer::with_compositor(compositor);
+        own.screenshot(&ctx, &before, &camera, size, &full).unwrap();
+        let from_own = own
+            .screenshot(&ctx, &before, &camera, size, &preview)
+            .unwrap();
+        assert_eq!(from_own.report.coarse_copies, 0);
+        let whole = own.screenshot(&ctx, &before, &camera, size, &full).unwrap();
+        let d = compare(&copied.frame, &from_own.frame).unwrap();
+        let copy_full = compare(&copied.frame, &whole.frame).unwrap();
+        let own_full = compare(&from_own.frame, &whole.frame).unwrap();
+        eprintln!(
+            "{compositor:?}: copy against the own grid's preview {d:?}; against the full frame: copy {copy_full:?}, own preview {own_full:?}"
+        );
+        // Not the own grid's preview, and as near the full frame as that preview is.
+        assert!(d.rmse > 0.0, "{compositor:?}");
+        assert!(
+            copy_full.rmse < 0.04 && copy_full.rmse <= own_full.rmse + 0.01,
+            "{compositor:?}: {copy_full:?} against {own_full:?}"
+        );
+    }
+}
