@@ -462,6 +462,20 @@ impl Classified {
         front: Option<Front>,
         spread_mm: Option<f32>,
     ) -> Result<(Classified, Vec<f32>), GridError> {
+        self.halved_unless_cancelled(axes, front, spread_mm, None)
+    }
+
+    /// [`Classified::halved_measured`], giving up with [`GridError::Cancelled`] once `cancel`
+    /// is raised, looked at between output z-slices (a viewer's frame making a level of a
+    /// thin-slice CT takes a few hundred milliseconds, and a drag meanwhile wants the cores).
+    pub fn halved_unless_cancelled(
+        &self,
+        axes: [bool; 3],
+        front: Option<Front>,
+        spread_mm: Option<f32>,
+        cancel: Option<&AtomicBool>,
+    ) -> Result<(Classified, Vec<f32>), GridError> {
+        let cancelled = || cancel.is_some_and(|c| c.load(AtomicOrdering::Relaxed));
         let dims = self.grid.dims();
         let step: [u32; 3] = std::array::from_fn(|a| if axes[a] && dims[a] > 1 { 2 } else { 1 });
         // A front along the one axis halved; else none.
@@ -499,6 +513,10 @@ impl Classified {
             .into_par_iter()
             .map(|k| {
                 let (mut ids, mut colors, mut spreads) = (Vec::new(), Vec::new(), Vec::new());
+                // What a cancelled halving made is dropped whole below.
+                if cancelled() {
+                    return (ids, colors, spreads);
+                }
                 // Per output voxel of the row: the density, and the weight and weighted colour
                 // of its voxels (with a front, of its nearer voxel, then of its farther).
                 let mut sums = vec![Pair::default(); ox];
@@ -584,6 +602,9 @@ impl Classified {
                 (ids, colors, spreads)
             })
             .collect();
+        if cancelled() {
+            return Err(GridError::Cancelled);
+        }
         let mut spreads = Vec::new();
         let parts = slices
             .into_iter()

@@ -1490,6 +1490,18 @@ fn a_halved_grid_measures_each_block_spread_as_a_plain_variance() {
         let step = axes.map(|h| if h { 2 } else { 1 });
         let (coarse, spreads) = fine.halved_measured(axes, None, Some(mm)).unwrap();
         assert_eq!(spreads.len(), coarse.grid.len());
+        // A raised cancel flag gives the halving up; a lowered one changes nothing.
+        let flag = |raised| std::sync::atomic::AtomicBool::new(raised);
+        assert_eq!(
+            fine.halved_unless_cancelled(axes, None, Some(mm), Some(&flag(true)))
+                .err(),
+            Some(GridError::Cancelled)
+        );
+        let (kept, kept_spreads) = fine
+            .halved_unless_cancelled(axes, None, Some(mm), Some(&flag(false)))
+            .unwrap();
+        assert!(kept.grid.ids().eq(coarse.grid.ids()));
+        assert_eq!(kept_spreads, spreads);
         // The same splats as the halving that measures nothing.
         let plain = fine.halved_along(axes, None).unwrap();
         assert!(plain.grid.ids().eq(coarse.grid.ids()));

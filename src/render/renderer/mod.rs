@@ -437,16 +437,25 @@ fn lay_over(frame: &mut [[f32; 4]], layer: &[[f32; 4]], rect: PixelRect, width: 
 /// its classification combined ([`Classified::halved_along`]) and its texels made from the
 /// level below's ([`SplatTexels::halved`]; where the level below has none yet, from its
 /// texels made one by one from the volume and not held, [`SplatTexels::halved_from`]).
-/// `None` where the level would have no splat.
+/// `None` where the level would have no splat. Gives up with
+/// [`crate::grid::GridError::Cancelled`] once `cancel` is raised: looked at within the
+/// classification's halving, before the texels' and after the normals of the level below
+/// are made.
 fn make_level(
     below: &VolumeState,
     axes: [bool; 3],
     front: Option<Front>,
     levels: [u8; 3],
+    cancel: Option<&std::sync::atomic::AtomicBool>,
 ) -> Result<Option<VolumeState>, crate::grid::GridError> {
-    let classified = below.classified.halved_along(axes, front)?;
+    let (classified, _) = below
+        .classified
+        .halved_unless_cancelled(axes, front, None, cancel)?;
     if classified.grid.is_empty() {
         return Ok(None);
+    }
+    if cancel.is_some_and(|c| c.load(std::sync::atomic::Ordering::Relaxed)) {
+        return Err(crate::grid::GridError::Cancelled);
     }
     let step = axes.map(|h| if h { 2 } else { 1 });
     // From the level below's texels where it has them; else each made as it is asked for,
@@ -456,6 +465,9 @@ fn make_level(
             // Every texel below is read: their normals made brick by brick in parallel first,
             // in the bricks' own order.
             fine.complete();
+            if cancel.is_some_and(|c| c.load(std::sync::atomic::Ordering::Relaxed)) {
+                return Err(crate::grid::GridError::Cancelled);
+            }
             fine.halved(&classified, step, front)
         }
         None => {
@@ -1306,12 +1318,14 @@ impl Renderer {
     }
 
     /// A flag that, raised from another thread, makes a screenshot drawn by the CPU tile
-    /// compositor give up with [`RenderError::Cancelled`]: checked between the frame's stages
-    /// between the compositor's batches (the look for a refinement's bricks included) and
-    /// between the fine slices of a refinement's classification, so it stops within
-    /// milliseconds, or once the own grid's classification or a level under way ends. What
-    /// was made whole before (classifications, levels, texels, looks) is kept for the next
-    /// frame; nothing half made is. `None` (the default) for frames that always finish.
+    /// compositor give up with [`RenderError::Cancelled`]: checked between the frame's stages,
+    /// between the compositor's batches (the look for a refinement's bricks included), between
+    /// the z-slices of a classification (the own grid's, a coarse copy's, a refinement's) and
+    /// of the halving that makes a level or measures its spread, and before a level's texels,
+    /// so it stops within milliseconds, or once a level's texels or a preview's coarse copy
+    /// under way are made. What was made whole before (classifications, levels, texels,
+    /// looks) is kept for the next frame; nothing half made is. `None` (the default) for
+    /// frames that always finish.
     pub fn set_cancel(&mut self, flag: Option<Arc<std::sync::atomic::AtomicBool>>) {
         self.tiles.cancel = flag;
     }
@@ -1957,6 +1971,7 @@ impl Renderer {
         spacing: [f64; 3],
         report: &mut FrameReport,
     ) -> Result<Option<Arc<BrickSpread>>, crate::grid::GridError> {
+        let cancel = self.tiles.cancel.clone();
         let Some(state) = self.volumes.get_mut(&key) else {
             return Ok(None);
         };
@@ -1969,7 +1984,10 @@ impl Renderer {
             .map(|a| spacing[a] * f64::from(1u32 << state.levels[a]))
             .product::<f64>()
             .cbrt() as f32;
-        let (halved, spreads) = state.classified.halved_measured(axes, None, Some(mm))?;
+        let (halved, spreads) =
+            state
+                .classified
+                .halved_unless_cancelled(axes, None, Some(mm), cancel.as_deref())?;
         let levels = std::array::from_fn(|a| state.levels[a] + u8::from(axes[a]));
         let spread = Arc::new(BrickSpread::of(&halved, levels, &spreads));
         state.spread = Some(Arc::clone(&spread));
@@ -1993,6 +2011,7 @@ impl Renderer {
         report: &mut FrameReport,
     ) -> Result<Detail, crate::grid::GridError> {
         let frame = self.frame;
+        let cancel = self.tiles.cancel.clone();
         let mut level = [0u8; 3];
         let mut key = Detail::default();
         while let Some(state) = self.volumes.get_mut(&(id, key)) {
@@ -2022,7 +2041,7 @@ impl Renderer {
                     break;
                 };
                 let started = Instant::now();
-                let made_level = make_level(state, axes, front, next)?;
+                let made_level = make_level(state, axes, front, next, cancel.as_deref())?;
                 report.timings.levels += started.elapsed();
                 let Some(made_level) = made_level else {
                     break;
@@ -2126,10 +2145,7 @@ impl Renderer {
                     None,
                     self.tiles.cancel.as_deref(),
                 )
-                .map_err(|e| match e {
-                    crate::grid::GridError::Cancelled => RenderError::Cancelled,
-                    e => fail(e.to_string()),
-                })?;
+                .map_err(|e| grid_failure(e, &fail))?;
                 afford(&result)?;
                 made += 1;
                 // The other levels of the old classification go with it; its order buffers
@@ -2304,7 +2320,7 @@ impl Renderer {
                     && share(&coarsest, None) * MIX_SAVING <= share(wants, Some(wanted))
                 {
                     self.draw_smooth_coarser(id, spacing, wants, report)
-                        .map_err(|e| fail(e.to_string()))?;
+                        .map_err(|e| grid_failure(e, &fail))?;
                 }
             }
             // Levels few bricks want are not made for them.
@@ -2341,7 +2357,7 @@ impl Renderer {
             let drawn = match wanted {
                 Detail::Level(wanted, facing) => self
                     .make_levels(id, spacing, wanted, facing, report)
-                    .map_err(|e| fail(e.to_string()))?,
+                    .map_err(|e| grid_failure(e, &fail))?,
                 Detail::Refined(factors) => {
                     let refined = (id, wanted);
                     let region = if self.refine_whole {
@@ -2562,7 +2578,7 @@ impl Renderer {
                         (None, Detail::Level(levels, facing)) if want != drawn => {
                             let got = self
                                 .make_levels(id, spacing, levels, facing, report)
-                                .map_err(|e| fail(e.to_string()))?;
+                                .map_err(|e| grid_failure(e, &fail))?;
                             reached.insert(want, got);
                             got
                         }
@@ -2656,10 +2672,7 @@ impl Renderer {
             None,
             self.tiles.cancel.as_deref(),
         )
-        .map_err(|e| match e {
-            crate::grid::GridError::Cancelled => RenderError::Cancelled,
-            e => fail(e.to_string()),
-        })?;
+        .map_err(|e| grid_failure(e, fail))?;
         let (orderer, ids) = self
             .volumes
             .remove(&(id, detail))
@@ -3147,6 +3160,15 @@ fn copy_halvings(spacing: [f64; 3], dims: [u32; 3], least: u8) -> u8 {
         .take_while(|&h| fine_enough(h))
         .last()
         .unwrap_or(0)
+}
+
+/// A grid's error as a frame's: [`RenderError::Cancelled`] for a classification or level given
+/// up, else `fail`'s message.
+fn grid_failure(e: crate::grid::GridError, fail: &dyn Fn(String) -> RenderError) -> RenderError {
+    match e {
+        crate::grid::GridError::Cancelled => RenderError::Cancelled,
+        e => fail(e.to_string()),
+    }
 }
 
 fn class_key(node: &VolumeNode) -> ClassKey {

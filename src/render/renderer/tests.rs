@@ -1429,3 +1429,45 @@ fn node_of(scene: &Scene, id: NodeId) -> VolumeNode {
         _ => panic!("node {id:?} is no volume"),
     }
 }
+
+#[test]
+fn a_frame_cancelled_while_it_makes_a_level_keeps_no_part_of_it() {
+    // The wavy field seen small wants levels of detail its own grid's frame did not make; a frame whose
+    // flag is raised gives up in the halving (the own grid's classification kept from the
+    // frame before) and keeps no new level; the next frame, the flag lowered, makes them and
+    // is a fresh renderer's picture.
+    let (scene, id) = wavy_field(96);
+    let far = SceneCamera::look_at(DVec3::new(48.0, 48.0, -900.0), DVec3::splat(48.0));
+    let size = (48, 48);
+    let options = FrameOptions::default();
+    let mut renderer = Renderer::with_compositor(super::super::Compositor::Cpu);
+    // The own grid alone first.
+    renderer.set_level_of_detail(false);
+    let first = renderer
+        .screenshot_without_gpu(&scene, &far, size, &options)
+        .unwrap();
+    assert_eq!(first.report.classified, 1);
+    renderer.set_level_of_detail(true);
+    let levels = |r: &Renderer| {
+        let mut made: Vec<Detail> = (r.volumes.keys())
+            .filter(|(v, d)| *v == id && *d != Detail::default())
+            .map(|(_, d)| *d)
+            .collect();
+        made.sort_by_key(|d| format!("{d:?}"));
+        made
+    };
+    let before = levels(&renderer);
+    renderer.set_cancel(Some(Arc::new(std::sync::atomic::AtomicBool::new(true))));
+    let cancelled = renderer.screenshot_without_gpu(&scene, &far, size, &options);
+    assert!(matches!(cancelled, Err(RenderError::Cancelled)));
+    assert_eq!(levels(&renderer), before);
+    renderer.set_cancel(None);
+    let next = renderer
+        .screenshot_without_gpu(&scene, &far, size, &options)
+        .unwrap();
+    assert!(next.report.levels_made > 0, "{:?}", next.report);
+    let fresh = Renderer::with_compositor(super::super::Compositor::Cpu)
+        .screenshot_without_gpu(&scene, &far, size, &options)
+        .unwrap();
+    assert_eq!(next.frame.pixels, fresh.frame.pixels);
+}
