@@ -1274,7 +1274,7 @@ pub struct Renderer {
     /// The targets the CPU tile compositor's screenshots draw their meshes into, kept from
     /// frame to frame for the last two sizes drawn, the latest first.
     layer_targets: Vec<RenderTarget>,
-    /// Each large volume's coarse copy, for previews while its own grid is not classified.
+    /// Each volume's coarse copies, for previews while its own grid is not classified.
     coarse_copies: HashMap<NodeId, CoarseCopy>,
     /// Previews never drawn from coarse copies ([`Renderer::set_preview_copies`]).
     no_preview_copies: bool,
