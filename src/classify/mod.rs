@@ -509,12 +509,15 @@ impl Classified {
         };
         // The x rows are read from every task below: made first, not by the first task.
         self.grid.prepare_rows(0);
+        // Whether a slice was left unmade: the flag may be lowered again before the end.
+        let skipped = AtomicBool::new(false);
         let slices: Vec<(Vec<u32>, Vec<SplatColor>, Vec<f32>)> = (0..oz)
             .into_par_iter()
             .map(|k| {
                 let (mut ids, mut colors, mut spreads) = (Vec::new(), Vec::new(), Vec::new());
                 // What a cancelled halving made is dropped whole below.
                 if cancelled() {
+                    skipped.store(true, AtomicOrdering::Relaxed);
                     return (ids, colors, spreads);
                 }
                 // Per output voxel of the row: the density, and the weight and weighted colour
@@ -602,7 +605,7 @@ impl Classified {
                 (ids, colors, spreads)
             })
             .collect();
-        if cancelled() {
+        if skipped.into_inner() {
             return Err(GridError::Cancelled);
         }
         let mut spreads = Vec::new();
@@ -1368,7 +1371,9 @@ fn classify_cells(
         least_mean: least_mean(options.min_opacity),
         scale: options.opacity.scale() as f32,
     };
-    let slabs: Vec<(Vec<u32>, Vec<SplatColor>)> = dispatch!(&volume.values, values => {
+    // A slab given up (`None`) gives the whole classification up: what the others made is
+    // dropped.
+    let slabs: Option<Vec<(Vec<u32>, Vec<SplatColor>)>> = dispatch!(&volume.values, values => {
         (0..nz.div_ceil(SLAB))
             .into_par_iter()
             .map(|slab| {
@@ -1378,9 +1383,9 @@ fn classify_cells(
             })
             .collect()
     });
-    if cancel.is_some_and(|c| c.load(AtomicOrdering::Relaxed)) {
+    let Some(slabs) = slabs else {
         return Err(GridError::Cancelled);
-    }
+    };
     Classified::joined(fine, slabs)
 }
 
@@ -1399,7 +1404,7 @@ fn classify_slab<T: Voxel>(
     by_rows: bool,
     region: Option<&Region>,
     cancel: Option<&AtomicBool>,
-) -> (Vec<u32>, Vec<SplatColor>) {
+) -> Option<(Vec<u32>, Vec<SplatColor>)> {
     let [nx, ny, nz] = dims.map(|n| n as usize);
     let [fx, fy, fz] = factors.map(|f| f as usize);
     let plane = nx * ny;
@@ -1409,7 +1414,7 @@ fn classify_slab<T: Voxel>(
     // A slab the region leaves out whole is not read (a refinement joined with the few bricks
     // a turned view adds would else walk every slice of the grid).
     if region.is_some_and(|r| !r.covers_any_in_z(z0, z1)) {
-        return (ids, colors);
+        return Some((ids, colors));
     }
     // Per z-slice of the slab, with the slices beside it: which voxels' cells lie in one clear
     // interval of the transfer function. A fine voxel's cell lies in the 3x3x3 voxels around
@@ -1441,9 +1446,8 @@ fn classify_slab<T: Voxel>(
         // fine row they hold.
         let rows_open: Vec<bool> = open.chunks(nx).map(|r| r.iter().any(|&o| o != 0)).collect();
         for jz in 0..fz {
-            // What a cancelled classification made is dropped whole by the caller.
             if cancel.is_some_and(|c| c.load(AtomicOrdering::Relaxed)) {
-                return (Vec::new(), Vec::new());
+                return None;
             }
             for y in (0..ny).filter(|&y| rows_open[y]) {
                 let open = &open[nx * y..][..nx];
@@ -1505,7 +1509,7 @@ fn classify_slab<T: Voxel>(
             }
         }
     }
-    (ids, colors)
+    Some((ids, colors))
 }
 
 /// Per voxel of a slice: 1 where its 3x3x3 neighbourhood is not all in one clear interval

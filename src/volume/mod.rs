@@ -100,33 +100,55 @@ impl CpuVolume {
     /// whose transfer function has just changed are drawn from it. Blocks of output z-slices
     /// on every core; no temporary larger than a slice's sums.
     pub fn halved(&self) -> CpuVolume {
+        match self.halved_unless_cancelled(None) {
+            Some(volume) => volume,
+            None => unreachable!("a halving with no cancel flag is never given up"),
+        }
+    }
+
+    /// [`CpuVolume::halved`], given up (`None`, nothing kept) once `cancel` is raised: looked
+    /// at before each output z-slice. (A viewer's first preview of a thin-slice CT windowed
+    /// anew makes this copy, 100-250 ms of both cores, and a drag meanwhile wants them.)
+    pub fn halved_unless_cancelled(
+        &self,
+        cancel: Option<&std::sync::atomic::AtomicBool>,
+    ) -> Option<CpuVolume> {
         let step = self.dims.map(|n| if n > 1 { 2usize } else { 1 });
         let out = [0, 1, 2].map(|a| self.dims[a].div_ceil(step[a] as u32));
         let values = voxels::dispatch!(&self.values, held => {
-            Voxels::from(halve(held, self.dims.map(|n| n as usize), step))
+            Voxels::from(halve(held, self.dims.map(|n| n as usize), step, cancel)?)
         });
         let spacing = [0, 1, 2].map(|a| self.spacing[a] * step[a] as f64);
         // The first block's centre: half a fine voxel along each halved axis.
         let shift =
             glam::DVec3::from([0, 1, 2].map(|a| self.spacing[a] * (step[a] as f64 - 1.0) / 2.0));
         let origin = glam::DVec3::from(self.origin) + self.direction * shift;
-        CpuVolume {
+        Some(CpuVolume {
             dims: out,
             spacing,
             origin: origin.into(),
             direction: self.direction,
             values,
-        }
+        })
     }
 }
 
 /// The means of the `step[0] x step[1] x step[2]` blocks of `held`, a grid of `dims` (the
 /// blocks at an odd end hold fewer voxels; each step 1 or 2), output z-slice by z-slice on
 /// every core. Sums of at most 8 values are taken in `f32`, exact for the integer types.
-/// (Written here: a box filter over a stored type, which the image crates do in 2-D and over
-/// their own pixel types.)
-fn halve<T: Voxel>(held: &[T], [nx, ny, nz]: [usize; 3], step: [usize; 3]) -> Vec<T> {
+/// `None` once `cancel` is raised, looked at before each output slice. (Written here: a box
+/// filter over a stored type, which the image crates do in 2-D and over their own pixel
+/// types.)
+fn halve<T: Voxel>(
+    held: &[T],
+    [nx, ny, nz]: [usize; 3],
+    step: [usize; 3],
+    cancel: Option<&std::sync::atomic::AtomicBool>,
+) -> Option<Vec<T>> {
     use rayon::prelude::*;
+    let cancelled = || cancel.is_some_and(|c| c.load(std::sync::atomic::Ordering::Relaxed));
+    // Whether a slice was left unmade: the flag may be lowered again before the end.
+    let skipped = std::sync::atomic::AtomicBool::new(false);
     let [ox, oy, oz] = [
         nx.div_ceil(step[0]),
         ny.div_ceil(step[1]),
@@ -134,11 +156,16 @@ fn halve<T: Voxel>(held: &[T], [nx, ny, nz]: [usize; 3], step: [usize; 3]) -> Ve
     ];
     let mut out = vec![T::nearest(0.0); ox * oy * oz];
     if out.is_empty() || held.len() < nx * ny * nz {
-        return out;
+        return Some(out);
     }
     out.par_chunks_mut(ox * oy).enumerate().for_each_init(
         Vec::new,
         |sums: &mut Vec<f32>, (k, slice)| {
+            // What a cancelled halving made is dropped whole below.
+            if cancelled() {
+                skipped.store(true, std::sync::atomic::Ordering::Relaxed);
+                return;
+            }
             sums.clear();
             sums.resize(ox * oy, 0.0);
             let zs = k * step[2]..((k + 1) * step[2]).min(nz);
@@ -171,7 +198,7 @@ fn halve<T: Voxel>(held: &[T], [nx, ny, nz]: [usize; 3], step: [usize; 3]) -> Ve
             }
         },
     );
-    out
+    (!skipped.into_inner()).then_some(out)
 }
 
 #[cfg(test)]
@@ -205,6 +232,31 @@ mod tests {
             / 4.0;
         let at = coarse.index_to_world_point(DVec3::ZERO);
         assert!(at.distance(mean) < 1e-12, "{at} against {mean}");
+    }
+
+    #[test]
+    fn a_halving_under_a_raised_flag_is_given_up_and_a_lowered_one_changes_nothing() {
+        let dims = [9u32, 6, 7];
+        let values: Vec<u16> = (0..dims.iter().product::<u32>())
+            .map(|i| (i * 97 % 1000) as u16)
+            .collect();
+        let volume = CpuVolume {
+            dims,
+            spacing: [0.5, 0.7, 1.1],
+            origin: [3.0, -2.0, 1.0],
+            direction: glam::DMat3::IDENTITY,
+            values: values.into(),
+        };
+        let raised = std::sync::atomic::AtomicBool::new(true);
+        let lowered = std::sync::atomic::AtomicBool::new(false);
+        assert!(volume.halved_unless_cancelled(Some(&raised)).is_none());
+        let plain = volume.halved();
+        let under_lowered = volume.halved_unless_cancelled(Some(&lowered)).unwrap();
+        assert_eq!(plain.dims, [5, 3, 4]);
+        assert_eq!(under_lowered.dims, plain.dims);
+        assert_eq!(under_lowered.origin, plain.origin);
+        assert_eq!(under_lowered.spacing, plain.spacing);
+        assert!((0..5 * 3 * 4).all(|i| under_lowered.values.get(i) == plain.values.get(i)));
     }
 
     #[test]

@@ -439,8 +439,8 @@ fn lay_over(frame: &mut [[f32; 4]], layer: &[[f32; 4]], rect: PixelRect, width: 
 /// texels made one by one from the volume and not held, [`SplatTexels::halved_from`]).
 /// `None` where the level would have no splat. Gives up with
 /// [`crate::grid::GridError::Cancelled`] once `cancel` is raised: looked at within the
-/// classification's halving, before the texels' and after the normals of the level below
-/// are made.
+/// classification's halving, before the texels, within the making of the normals of the
+/// level below and within the texels' own making.
 fn make_level(
     below: &VolumeState,
     axes: [bool; 3],
@@ -464,11 +464,10 @@ fn make_level(
         Some(fine) => {
             // Every texel below is read: their normals made brick by brick in parallel first,
             // in the bricks' own order.
-            fine.complete();
-            if cancel.is_some_and(|c| c.load(std::sync::atomic::Ordering::Relaxed)) {
+            if !fine.complete_unless_cancelled(cancel) {
                 return Err(crate::grid::GridError::Cancelled);
             }
-            fine.halved(&classified, step, front)
+            fine.halved(&classified, step, front, cancel)
         }
         None => {
             let grid = &below.classified.grid;
@@ -480,8 +479,11 @@ fn make_level(
                 let rank = grid.rank(x + nx * (y + ny * z))?;
                 Some(below.texel([x, y, z], rank as usize))
             };
-            SplatTexels::halved_from(fine, &classified, step, front)
+            SplatTexels::halved_from(fine, &classified, step, front, cancel)
         }
+    };
+    let Some(texels) = texels else {
+        return Err(crate::grid::GridError::Cancelled);
     };
     let mut state = VolumeState::new(
         below.key,
@@ -2651,7 +2653,10 @@ impl Renderer {
             )
             .map_err(|e| fail(e.to_string()))?;
             let levels = [0, 1, 2].map(|a| levels[a] + u8::from(above.dims[a] > 1));
-            copies.halved.push((levels, Arc::new(above.halved())));
+            let halved = above
+                .halved_unless_cancelled(self.tiles.cancel.as_deref())
+                .ok_or(RenderError::Cancelled)?;
+            copies.halved.push((levels, Arc::new(halved)));
         }
         let Some((levels, copy)) = copies.halved.get(halvings - 1) else {
             return Err(fail("no coarse copy was made".into()));

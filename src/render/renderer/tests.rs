@@ -1348,8 +1348,17 @@ fn previews_of_a_volume_windowed_anew_draw_a_coarse_copy_until_a_full_frame() {
         (first.report.classified, first.report.coarse_copies),
         (1, 0)
     );
-    // A window moved: the preview classifies the copy, not the own grid.
+    // A window moved: the preview classifies the copy, not the own grid. Under a raised
+    // flag it gives up while it makes the copy, and keeps none.
     window(&mut scene, 0.0);
+    renderer.set_cancel(Some(Arc::new(std::sync::atomic::AtomicBool::new(true))));
+    let given_up = renderer.screenshot_without_gpu(&scene, &camera, (64, 64), &preview);
+    assert!(matches!(given_up, Err(RenderError::Cancelled)));
+    assert!(
+        (renderer.coarse_copies.get(&id)).is_none_or(|c| c.halved.is_empty()),
+        "no copy kept"
+    );
+    renderer.set_cancel(None);
     let copied = shoot(&mut renderer, &scene, &preview);
     assert_eq!(copied.report.coarse_copies, 1, "{:?}", copied.report);
     assert_eq!(copied.report.classified, 1);

@@ -1,7 +1,7 @@
 //! The splats' data as the compositor reads it: 8 bytes a significant voxel, brick by brick.
 
 use std::sync::Arc;
-use std::sync::atomic::{AtomicU8, AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU8, AtomicU64, Ordering};
 
 use rayon::prelude::*;
 
@@ -111,11 +111,25 @@ impl SplatTexels {
     /// Makes every brick's normals not made yet, in parallel: for a whole grid's texels read
     /// at once.
     pub fn complete(&self) {
+        self.complete_unless_cancelled(None);
+    }
+
+    /// [`SplatTexels::complete`], stopping once `cancel` is raised (looked at before each
+    /// unit of bricks): whether every brick's normals are made. The normals made stay; the
+    /// others are made when their bricks are first read, as before.
+    pub fn complete_unless_cancelled(&self, cancel: Option<&AtomicBool>) -> bool {
+        let cancelled = || cancel.is_some_and(|c| c.load(Ordering::Relaxed));
+        let skipped = AtomicBool::new(false);
         if let Some(lazy) = &self.normals {
-            (0..lazy.state.len())
-                .into_par_iter()
-                .for_each(|u| self.ensure_unit(u, lazy));
+            (0..lazy.state.len()).into_par_iter().for_each(|u| {
+                if cancelled() {
+                    skipped.store(true, Ordering::Relaxed);
+                } else {
+                    self.ensure_unit(u, lazy);
+                }
+            });
         }
+        !skipped.into_inner()
     }
 
     /// Rows of bricks along x, all layers.
@@ -130,13 +144,37 @@ impl SplatTexels {
 
     /// The texels of `grid`'s voxels, each given by `texel(voxel, rank)`.
     pub fn build(grid: &SparseGrid, texel: impl Fn([u32; 3], usize) -> [u8; 8] + Sync) -> Self {
+        match Self::build_unless_cancelled(grid, texel, None) {
+            Some(texels) => texels,
+            None => unreachable!("texels built with no cancel flag are never given up"),
+        }
+    }
+
+    /// [`SplatTexels::build`], given up (`None`, nothing kept) once `cancel` is raised:
+    /// looked at before each layer of pages is surveyed and before each page's texels are
+    /// written.
+    fn build_unless_cancelled(
+        grid: &SparseGrid,
+        texel: impl Fn([u32; 3], usize) -> [u8; 8] + Sync,
+        cancel: Option<&AtomicBool>,
+    ) -> Option<Self> {
+        let cancelled = || cancel.is_some_and(|c| c.load(Ordering::Relaxed));
+        // Whether a part was left unmade: the flag may be lowered again before the end.
+        let skipped = AtomicBool::new(false);
+        let skip = || {
+            let now = cancelled();
+            if now {
+                skipped.store(true, Ordering::Relaxed);
+            }
+            now
+        };
         let dims = grid.dims();
         let [nx, ny, nz] = dims.map(|n| n as usize);
         let bricks = [nx.div_ceil(BRICK), ny.div_ceil(BRICK)];
         let layer = bricks[0] * bricks[1];
         let layers = nz.div_ceil(BRICK);
         if layer == 0 || layers == 0 {
-            return Self::default();
+            return Some(Self::default());
         }
         let pages = [bricks[0], bricks[1], layers].map(|n| n.div_ceil(PAGE));
         let page_layer = pages[0] * pages[1];
@@ -147,6 +185,9 @@ impl SplatTexels {
         let per_layer: Vec<Vec<(usize, [u64; PAGE_BRICKS])>> = (0..pages[2])
             .into_par_iter()
             .map(|pz| {
+                if skip() {
+                    return Vec::new();
+                }
                 let mut masks = vec![[0u64; PAGE_BRICKS]; page_layer];
                 for z in pz * PAGE * BRICK..((pz + 1) * PAGE * BRICK).min(nz) {
                     let bz = z / BRICK % PAGE;
@@ -169,6 +210,9 @@ impl SplatTexels {
                     .collect()
             })
             .collect();
+        if skipped.load(Ordering::Relaxed) {
+            return None;
+        }
         let mut page_table = vec![EMPTY_PAGE; page_layer * pages[2]];
         // Voxel ids are `u32`, so the count of significant voxels is too.
         let mut count = 0u32;
@@ -204,6 +248,9 @@ impl SplatTexels {
             .for_each(|(stretch, bricks_of_layer, of_layer)| {
                 let mut slots = stretch.iter_mut();
                 for (page_bricks, (page, _)) in bricks_of_layer.chunks(PAGE_BRICKS).zip(of_layer) {
+                    if skip() {
+                        return;
+                    }
                     let (px, py, pz) = (
                         page % pages[0],
                         page / pages[0] % pages[1],
@@ -229,7 +276,7 @@ impl SplatTexels {
                     }
                 }
             });
-        Self {
+        (!skipped.into_inner()).then_some(Self {
             dims,
             bricks,
             pages,
@@ -237,7 +284,7 @@ impl SplatTexels {
             table,
             texels,
             normals: None,
-        }
+        })
     }
 
     /// The texels of the level above these texels' grid: `above` is the classification
@@ -248,9 +295,16 @@ impl SplatTexels {
     /// `front`, the opacities as a ray composites them), taken into the coarser
     /// grid's index space (a gradient's component along an axis halved doubles) and made unit
     /// again: the block's surface, with no volume resampled for it. No normal where the
-    /// block's cancel.
-    pub fn halved(&self, above: &Classified, step: [u32; 3], front: Option<Front>) -> Self {
-        Self::halved_from(|x, y, z| self.get(x, y, z), above, step, front)
+    /// block's cancel. Given up (`None`, nothing kept) once `cancel` is raised, looked at
+    /// page by page.
+    pub fn halved(
+        &self,
+        above: &Classified,
+        step: [u32; 3],
+        front: Option<Front>,
+        cancel: Option<&AtomicBool>,
+    ) -> Option<Self> {
+        Self::halved_from(|x, y, z| self.get(x, y, z), above, step, front, cancel)
     }
 
     /// [`SplatTexels::halved`] from the texels `fine(x, y, z)` of the level below (`None`
@@ -260,7 +314,8 @@ impl SplatTexels {
         above: &Classified,
         step: [u32; 3],
         front: Option<Front>,
-    ) -> Self {
+        cancel: Option<&AtomicBool>,
+    ) -> Option<Self> {
         let scale = glam::Vec3::from(step.map(|s| s as f32));
         // As in the colours: a front along the one axis halved, else none.
         let front = front.filter(|f| f.axis < 3 && (0..3).all(|a| (step[a] == 2) == (a == f.axis)));
@@ -283,7 +338,7 @@ impl SplatTexels {
                 f32::from(t[5] as i8),
             )
         };
-        Self::build(&above.grid, |k, rank| {
+        let texel = |k: [u32; 3], rank: usize| {
             let c = above.colors.get(rank).copied().unwrap_or_default();
             let fine = |d: [u32; 3]| {
                 let [x, y, z] = std::array::from_fn(|a| k[a] * step[a] + d[a]);
@@ -324,7 +379,8 @@ impl SplatTexels {
             let n = snorm8(sum * scale).unwrap_or([0; 3]);
             let d = c.density.to_bits().to_le_bytes();
             [c.rgb[0], c.rgb[1], c.rgb[2], n[0], n[1], n[2], d[0], d[1]]
-        })
+        };
+        Self::build_unless_cancelled(&above.grid, texel, cancel)
     }
 
     /// The texel of voxel `(x, y, z)`: straight RGB8, the gradient as snorm8, the density's
@@ -771,7 +827,9 @@ mod tests {
             let coarse = fine
                 .halved_along([false, true, false], Some(front))
                 .unwrap();
-            let halved = texels.halved(&coarse, [1, 2, 1], Some(front));
+            let halved = texels
+                .halved(&coarse, [1, 2, 1], Some(front), None)
+                .expect("no cancel flag");
             for id in coarse.grid.ids() {
                 let k = coarse.grid.coords(id);
                 let t = halved.get(k[0], k[1], k[2]).unwrap();
@@ -796,6 +854,91 @@ mod tests {
                     lit(n, 1)
                 );
             }
+        }
+    }
+
+    #[test]
+    fn texels_made_under_a_raised_flag_are_given_up_and_a_lowered_one_changes_nothing() {
+        // A field with structure along every axis, two thirds of its voxels significant. A
+        // raised flag stops the normals' completion before any unit (every texel then still
+        // read right, its normals made on the read) and gives the halved texels up; a lowered
+        // flag gives what no flag gives.
+        let dims = [21u32, 19, 17];
+        let values: Vec<f32> = (0..dims.iter().product::<u32>())
+            .map(|i| {
+                let [x, y, z] = [i % dims[0], i / dims[0] % dims[1], i / dims[0] / dims[1]];
+                ((x * 37 + y * y * 11 + z * z * z * 3) % 500) as f32
+            })
+            .collect();
+        let volume = Arc::new(CpuVolume {
+            dims,
+            spacing: [1.0; 3],
+            origin: [0.0; 3],
+            direction: glam::DMat3::IDENTITY,
+            values: values.into(),
+        });
+        let ids: Vec<u32> = (0..dims.iter().product::<u32>())
+            .filter(|id| id % 3 != 0)
+            .collect();
+        let classified = Classified {
+            grid: SparseGrid::from_sorted_ids(dims, &ids).unwrap(),
+            colors: ids
+                .iter()
+                .map(|&id| SplatColor {
+                    rgb: [id as u8, (id / 7) as u8, 90],
+                    density: half::f16::from_f32(0.1 + (id % 5) as f32),
+                })
+                .collect(),
+        };
+        let (raised, lowered) = (AtomicBool::new(true), AtomicBool::new(false));
+        let texels = SplatTexels::new(&classified, &volume, [1; 3]);
+        assert!(!texels.complete_unless_cancelled(Some(&raised)));
+        assert!(
+            texels
+                .texels
+                .iter()
+                .all(|t| t.load(Ordering::Relaxed).to_le_bytes()[3..6] == [0; 3]),
+            "no normal made under a raised flag"
+        );
+        for &id in &ids {
+            let k = classified.grid.coords(id);
+            let rank = classified.grid.rank(id).unwrap() as usize;
+            assert_eq!(
+                texels.get(k[0], k[1], k[2]),
+                Some(texel(&volume, [1; 3], &classified, k, rank)),
+                "{k:?}"
+            );
+        }
+        let fresh = SplatTexels::new(&classified, &volume, [1; 3]);
+        assert!(fresh.complete_unless_cancelled(Some(&lowered)));
+        assert!(
+            fresh
+                .texels
+                .iter()
+                .any(|t| t.load(Ordering::Relaxed).to_le_bytes()[3..6] != [0; 3]),
+            "normals made under a lowered flag"
+        );
+        for (axes, front) in [([true; 3], None), ([false, false, true], None)] {
+            let step = axes.map(|h| if h { 2 } else { 1 });
+            let above = classified.halved_along(axes, front).unwrap();
+            assert!(
+                texels.halved(&above, step, front, Some(&raised)).is_none(),
+                "{axes:?}"
+            );
+            let read = |t: &SplatTexels| -> Vec<Option<[u8; 8]>> {
+                above
+                    .grid
+                    .ids()
+                    .map(|id| {
+                        let k = above.grid.coords(id);
+                        t.get(k[0], k[1], k[2])
+                    })
+                    .collect()
+            };
+            let plain = texels.halved(&above, step, front, None).unwrap();
+            let under_lowered = texels.halved(&above, step, front, Some(&lowered)).unwrap();
+            assert!(read(&plain).iter().all(Option::is_some));
+            assert_eq!(read(&plain), read(&under_lowered), "{axes:?}");
         }
     }
 }
