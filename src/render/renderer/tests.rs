@@ -891,15 +891,8 @@ fn a_grid_seen_small_pays_for_its_levels_in_its_first_frame() {
     );
     // Over the pixels away from the background's colour (the corner's).
     let background = full.frame.pixels[0];
-    let lit: Vec<usize> = (0..full.frame.pixels.len())
-        .filter(|&i| (0..3).any(|c| (full.frame.pixels[i][c] - background[c]).abs() > 0.05))
-        .collect();
-    assert!(lit.len() > 100, "{} pixels lit", lit.len());
-    let squared: f64 = (lit.iter())
-        .flat_map(|&i| (0..3).map(move |c| (i, c)))
-        .map(|(i, c)| f64::from(once.frame.pixels[i][c] - full.frame.pixels[i][c]).powi(2))
-        .sum();
-    let rmse = (squared / (3 * lit.len()) as f64).sqrt();
+    let lit = |i: usize| (0..3).any(|c| (full.frame.pixels[i][c] - background[c]).abs() > 0.05);
+    let rmse = rmse_where(&once.frame, &full.frame, lit);
     assert!(rmse < 0.03, "{rmse}");
 }
 
@@ -1420,9 +1413,13 @@ fn previews_of_a_volume_windowed_anew_draw_a_coarse_copy_until_a_full_frame() {
 /// The RMSE of two frames' premultiplied colours over the pixels either covers (alpha over
 /// 0.02), of which there must be a hundred.
 fn lit_rmse(a: &Frame, b: &Frame) -> f64 {
-    let lit: Vec<usize> = (0..a.pixels.len())
-        .filter(|&i| a.pixels[i][3].max(b.pixels[i][3]) > 0.02)
-        .collect();
+    rmse_where(a, b, |i| a.pixels[i][3].max(b.pixels[i][3]) > 0.02)
+}
+
+/// The RMSE of two frames' colour channels over the pixels `lit` chooses by index, of which
+/// there must be a hundred.
+fn rmse_where(a: &Frame, b: &Frame, lit: impl Fn(usize) -> bool) -> f64 {
+    let lit: Vec<usize> = (0..a.pixels.len()).filter(|&i| lit(i)).collect();
     assert!(lit.len() > 100, "{} pixels lit", lit.len());
     let squared: f64 = (lit.iter())
         .flat_map(|&i| (0..3).map(move |c| (i, c)))

@@ -659,6 +659,42 @@ mod tests {
         }
     }
 
+    /// A field with structure along every axis, `dims` voxels 1 apart.
+    fn structured_field(dims: [u32; 3]) -> Arc<CpuVolume> {
+        let values: Vec<f32> = (0..dims.iter().product::<u32>())
+            .map(|i| {
+                let [x, y, z] = [i % dims[0], i / dims[0] % dims[1], i / dims[0] / dims[1]];
+                ((x * 37 + y * y * 11 + z * z * z * 3) % 500) as f32
+            })
+            .collect();
+        Arc::new(CpuVolume {
+            dims,
+            spacing: [1.0; 3],
+            origin: [0.0; 3],
+            direction: glam::DMat3::IDENTITY,
+            values: values.into(),
+        })
+    }
+
+    /// A classification of a grid of `fine` voxels with two thirds of them significant, each
+    /// with a colour and density of its own; and their ids.
+    fn two_thirds_classified(fine: [u32; 3]) -> (Classified, Vec<u32>) {
+        let ids: Vec<u32> = (0..fine.iter().product::<u32>())
+            .filter(|id| id % 3 != 0)
+            .collect();
+        let classified = Classified {
+            grid: SparseGrid::from_sorted_ids(fine, &ids).unwrap(),
+            colors: ids
+                .iter()
+                .map(|&id| SplatColor {
+                    rgb: [id as u8, (id / 7) as u8, 90],
+                    density: half::f16::from_f32(0.1 + (id % 5) as f32),
+                })
+                .collect(),
+        };
+        (classified, ids)
+    }
+
     #[test]
     fn normals_made_as_their_bricks_are_read_are_the_volumes_gradients() {
         // A field with structure along every axis, its grid at its own spacing and refined
@@ -666,34 +702,10 @@ mod tests {
         // parallel reading each brick many times over, equals the texel made voxel by voxel
         // from the volume; none of a brick's normals is made before the brick is read.
         let dims = [13u32, 11, 9];
-        let values: Vec<f32> = (0..dims.iter().product::<u32>())
-            .map(|i| {
-                let [x, y, z] = [i % dims[0], i / dims[0] % dims[1], i / dims[0] / dims[1]];
-                ((x * 37 + y * y * 11 + z * z * z * 3) % 500) as f32
-            })
-            .collect();
-        let volume = Arc::new(CpuVolume {
-            dims,
-            spacing: [1.0; 3],
-            origin: [0.0; 3],
-            direction: glam::DMat3::IDENTITY,
-            values: values.into(),
-        });
+        let volume = structured_field(dims);
         for factors in [[1, 1, 1], [2, 2, 1]] {
             let fine: [u32; 3] = std::array::from_fn(|a| dims[a] * factors[a]);
-            let ids: Vec<u32> = (0..fine.iter().product::<u32>())
-                .filter(|id| id % 3 != 0)
-                .collect();
-            let classified = Classified {
-                grid: SparseGrid::from_sorted_ids(fine, &ids).unwrap(),
-                colors: ids
-                    .iter()
-                    .map(|&id| SplatColor {
-                        rgb: [id as u8, (id / 7) as u8, 90],
-                        density: half::f16::from_f32(0.1 + (id % 5) as f32),
-                    })
-                    .collect(),
-            };
+            let (classified, ids) = two_thirds_classified(fine);
             let texels = SplatTexels::new(&classified, &volume, factors);
             assert!(
                 texels
@@ -864,32 +876,8 @@ mod tests {
         // read right, its normals made on the read) and gives the halved texels up; a lowered
         // flag gives what no flag gives.
         let dims = [21u32, 19, 17];
-        let values: Vec<f32> = (0..dims.iter().product::<u32>())
-            .map(|i| {
-                let [x, y, z] = [i % dims[0], i / dims[0] % dims[1], i / dims[0] / dims[1]];
-                ((x * 37 + y * y * 11 + z * z * z * 3) % 500) as f32
-            })
-            .collect();
-        let volume = Arc::new(CpuVolume {
-            dims,
-            spacing: [1.0; 3],
-            origin: [0.0; 3],
-            direction: glam::DMat3::IDENTITY,
-            values: values.into(),
-        });
-        let ids: Vec<u32> = (0..dims.iter().product::<u32>())
-            .filter(|id| id % 3 != 0)
-            .collect();
-        let classified = Classified {
-            grid: SparseGrid::from_sorted_ids(dims, &ids).unwrap(),
-            colors: ids
-                .iter()
-                .map(|&id| SplatColor {
-                    rgb: [id as u8, (id / 7) as u8, 90],
-                    density: half::f16::from_f32(0.1 + (id % 5) as f32),
-                })
-                .collect(),
-        };
+        let volume = structured_field(dims);
+        let (classified, ids) = two_thirds_classified(dims);
         let (raised, lowered) = (AtomicBool::new(true), AtomicBool::new(false));
         let texels = SplatTexels::new(&classified, &volume, [1; 3]);
         assert!(!texels.complete_unless_cancelled(Some(&raised)));
