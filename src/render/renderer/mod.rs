@@ -1441,7 +1441,9 @@ impl Renderer {
     /// Whether a refinement is classified only within the own grid's bricks whose splats can
     /// land on the image (on by default): a close-up refines what it shows, not the whole
     /// grid. A view that shows a brick the refinement left out classifies it anew. Off, the
-    /// whole grid is refined, the same picture at a higher cost.
+    /// whole grid is refined, the same picture at a higher cost. The same holds for the
+    /// coarse copies that previews draw while the values are windowed
+    /// ([`Renderer::set_preview_copies`]).
     pub fn set_refinement_on_image_only(&mut self, on: bool) {
         self.refine_whole = !on;
     }
@@ -2123,8 +2125,13 @@ impl Renderer {
                 };
                 let halvings = copy_halvings(geometry.spacing(), geometry.dims(), least);
                 if halvings > 0 {
-                    let (detail, classified) =
-                        self.classify_coarse_copy(id, node, (key, &options), halvings, &fail)?;
+                    let (detail, classified) = self.classify_coarse_copy(
+                        (id, node, world),
+                        view,
+                        (key, &options),
+                        halvings,
+                        &fail,
+                    )?;
                     if let Some(state) = self.volumes.get(&(id, detail)) {
                         afford(&state.classified)?;
                     }
@@ -2618,14 +2625,17 @@ impl Renderer {
         Ok(made)
     }
 
-    /// For a preview of volume `id` whose own grid is not classified for `key`, its coarse
-    /// copy halved `halvings` times (at least once), classified for `key` (the copy made now
-    /// where it was not): the detail its grid is held at in `volumes`, and whether it was
-    /// classified now.
+    /// For a preview of volume `id` (placed by `world`) whose own grid is not classified for
+    /// `key`, its coarse copy halved `halvings` times (at least once), classified for `key`
+    /// (the copy made now where it was not): the detail its grid is held at in `volumes`, and
+    /// whether it was classified now. The copy is classified only within its bricks whose
+    /// splats can land on `view`'s image ([`on_image`]), unless refinements are classified
+    /// whole ([`Renderer::set_refinement_on_image_only`]); a view that shows a brick the
+    /// classification left out classifies it anew.
     fn classify_coarse_copy(
         &mut self,
-        id: NodeId,
-        node: &VolumeNode,
+        (id, node, world): (NodeId, &VolumeNode, DMat4),
+        view: &ViewSetup,
         (key, options): (ClassKey, &ClassifyOptions),
         halvings: u8,
         fail: &dyn Fn(String) -> RenderError,
@@ -2662,11 +2672,24 @@ impl Renderer {
             return Err(fail("no coarse copy was made".into()));
         };
         let (detail, copy) = (Detail::Level(*levels, [0; 3]), Arc::clone(copy));
-        if self
-            .volumes
-            .get(&(id, detail))
-            .is_some_and(|s| s.key == key && Arc::ptr_eq(&s.volume, &copy))
-        {
+        // While the values are windowed the camera stands: each preview classifies the copy
+        // anew, and a view that shows part of the volume (a shoulder close up) pays for that
+        // part alone.
+        let region = if self.refine_whole {
+            None
+        } else {
+            let geometry = placed_geometry(&copy, world).map_err(|e| fail(e.to_string()))?;
+            on_image(&geometry, view)
+        };
+        if self.volumes.get(&(id, detail)).is_some_and(|s| {
+            s.key == key
+                && Arc::ptr_eq(&s.volume, &copy)
+                && match (&s.region, &region) {
+                    (None, _) => true,
+                    (Some(made), Some(wanted)) => made.contains(wanted),
+                    (Some(_), None) => false,
+                }
+        }) {
             return Ok((detail, false));
         }
         let classified = classify_refined_in(
@@ -2674,7 +2697,7 @@ impl Renderer {
             &node.transfer,
             options,
             [1; 3],
-            None,
+            region.as_ref(),
             self.tiles.cancel.as_deref(),
         )
         .map_err(|e| grid_failure(e, fail))?;
@@ -2683,7 +2706,8 @@ impl Renderer {
             .remove(&(id, detail))
             .map(|o| (o.orderer, o.ids))
             .unwrap_or_default();
-        let state = VolumeState::new(key, copy, [1; 3], classified, orderer, ids);
+        let mut state = VolumeState::new(key, copy, [1; 3], classified, orderer, ids);
+        state.region = region;
         self.volumes.insert((id, detail), state);
         Ok((detail, true))
     }

@@ -1410,6 +1410,77 @@ fn previews_of_a_volume_windowed_anew_draw_a_coarse_copy_until_a_full_frame() {
     assert_eq!(after.frame.pixels, own_preview(&scene).frame.pixels);
 }
 
+#[test]
+fn a_previews_coarse_copy_is_classified_within_the_bricks_on_the_image() {
+    // The wavy field of 96^3 voxels 0.5 mm apart seen close up, a part of it on the image. A
+    // preview after a new window classifies its coarse copy within the copy's bricks on the
+    // image: fewer splats, the picture of the copy classified whole. A turned view that shows
+    // bricks it left out classifies it anew; the same view drawn again does not.
+    let (mut scene, id) = wavy_field(96);
+    let mut half_mm = node_of(&scene, id);
+    let mut volume = (*half_mm.volume).clone();
+    volume.spacing = [0.5; 3];
+    half_mm.volume = Arc::new(volume);
+    scene
+        .set_content(id, crate::scene::NodeContent::Volume(half_mm))
+        .unwrap();
+    let close = |eye: DVec3| SceneCamera {
+        projection: crate::scene::Projection::Perspective {
+            fov_y_degrees: 20.0,
+        },
+        ..SceneCamera::look_at(eye, DVec3::splat(24.0))
+    };
+    let (front, turned) = (
+        close(DVec3::new(24.0, 24.0, -10.0)),
+        close(DVec3::new(-10.0, 24.0, 24.0)),
+    );
+    let preview = FrameOptions {
+        preview: true,
+        ..FrameOptions::default()
+    };
+    let shoot = |r: &mut Renderer, scene: &Scene, camera: &SceneCamera, options: &FrameOptions| {
+        r.screenshot_without_gpu(scene, camera, (64, 64), options)
+            .unwrap()
+    };
+    // The own grid never classified: previews draw the copy from the first.
+    let mut whole = Renderer::with_compositor(super::super::Compositor::Cpu);
+    whole.set_refinement_on_image_only(false);
+    let mut shown = Renderer::with_compositor(super::super::Compositor::Cpu);
+    let mut v = node_of(&scene, id);
+    v.transfer = Arc::new(v.transfer.windowed(350.0, 200.0));
+    scene
+        .set_content(id, crate::scene::NodeContent::Volume(v))
+        .unwrap();
+    let copy_splats = |r: &Renderer| {
+        let copy = &r.coarse_copies[&id].halved[0].1;
+        (r.volumes.values())
+            .find(|s| Arc::ptr_eq(&s.volume, copy))
+            .map(|s| s.classified.grid.len())
+            .unwrap()
+    };
+    let (a, b) = (
+        shoot(&mut whole, &scene, &front, &preview),
+        shoot(&mut shown, &scene, &front, &preview),
+    );
+    for s in [&a, &b] {
+        assert_eq!((s.report.coarse_copies, s.report.classified), (1, 1));
+    }
+    assert_eq!(a.frame.pixels, b.frame.pixels);
+    let (all, part) = (copy_splats(&whole), copy_splats(&shown));
+    assert!(part * 2 < all, "{part} of {all} splats");
+    // Turned: the bricks now on the image were partly left out.
+    let (a, b) = (
+        shoot(&mut whole, &scene, &turned, &preview),
+        shoot(&mut shown, &scene, &turned, &preview),
+    );
+    assert_eq!(a.report.classified, 0);
+    assert_eq!(b.report.classified, 1);
+    assert_eq!(a.frame.pixels, b.frame.pixels);
+    let again = shoot(&mut shown, &scene, &turned, &preview);
+    assert_eq!(again.report.classified, 0);
+    assert_eq!(again.frame.pixels, b.frame.pixels);
+}
+
 /// The RMSE of two frames' premultiplied colours over the pixels either covers (alpha over
 /// 0.02), of which there must be a hundred.
 fn lit_rmse(a: &Frame, b: &Frame) -> f64 {
