@@ -1288,14 +1288,7 @@ fn previews_of_a_volume_windowed_anew_draw_a_coarse_copy_until_a_full_frame() {
     // The wavy field of 96^3 voxels 0.5 mm apart, whose previews copy it once its own grid is
     // not classified for its function: halved once, 48^3 voxels 1 mm apart (the level the
     // preview draws; twice would be past PREVIEW_COPY_SPACING_MM).
-    let (mut scene, id) = wavy_field(96);
-    let mut half_mm = node_of(&scene, id);
-    let mut volume = (*half_mm.volume).clone();
-    volume.spacing = [0.5; 3];
-    half_mm.volume = Arc::new(volume);
-    scene
-        .set_content(id, crate::scene::NodeContent::Volume(half_mm))
-        .unwrap();
+    let (mut scene, id) = wavy_field_half_mm();
     let camera = SceneCamera {
         projection: crate::scene::Projection::Perspective {
             fov_y_degrees: 40.0,
@@ -1416,14 +1409,7 @@ fn a_previews_coarse_copy_is_classified_within_the_bricks_on_the_image() {
     // preview after a new window classifies its coarse copy within the copy's bricks on the
     // image: fewer splats, the picture of the copy classified whole. A turned view that shows
     // bricks it left out classifies it anew; the same view drawn again does not.
-    let (mut scene, id) = wavy_field(96);
-    let mut half_mm = node_of(&scene, id);
-    let mut volume = (*half_mm.volume).clone();
-    volume.spacing = [0.5; 3];
-    half_mm.volume = Arc::new(volume);
-    scene
-        .set_content(id, crate::scene::NodeContent::Volume(half_mm))
-        .unwrap();
+    let (mut scene, id) = wavy_field_half_mm();
     let close = |eye: DVec3| SceneCamera {
         projection: crate::scene::Projection::Perspective {
             fov_y_degrees: 20.0,
@@ -1497,6 +1483,19 @@ fn rmse_where(a: &Frame, b: &Frame, lit: impl Fn(usize) -> bool) -> f64 {
         .map(|(i, c)| f64::from(a.pixels[i][c] - b.pixels[i][c]).powi(2))
         .sum();
     (squared / (3 * lit.len()) as f64).sqrt()
+}
+
+/// [`wavy_field`] of 96^3 voxels 0.5 mm apart.
+fn wavy_field_half_mm() -> (Scene, NodeId) {
+    let (mut scene, id) = wavy_field(96);
+    let mut half_mm = node_of(&scene, id);
+    let mut volume = (*half_mm.volume).clone();
+    volume.spacing = [0.5; 3];
+    half_mm.volume = Arc::new(volume);
+    scene
+        .set_content(id, crate::scene::NodeContent::Volume(half_mm))
+        .unwrap();
+    (scene, id)
 }
 
 /// Volume node `id` of `scene`.
