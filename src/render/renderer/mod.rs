@@ -416,6 +416,16 @@ impl VolumeState {
     }
 }
 
+/// Whether a classification made within `made` (`None`: the whole grid) holds every brick of
+/// `wanted` (`None`: the whole grid).
+fn region_covers(made: Option<&Region>, wanted: Option<&Region>) -> bool {
+    match (made, wanted) {
+        (None, _) => true,
+        (Some(made), Some(wanted)) => made.contains(wanted),
+        (Some(made), None) => made.is_whole(),
+    }
+}
+
 /// Lays the premultiplied `layer`, the pixels of `rect` row by row, over `frame` (`width`
 /// pixels a row).
 fn lay_over(frame: &mut [[f32; 4]], layer: &[[f32; 4]], rect: PixelRect, width: u32) {
@@ -2396,13 +2406,8 @@ impl Renderer {
                     };
                     // Whether a refinement made covers the bricks this view shows (else the
                     // bricks it lacks are classified and joined to it, below).
-                    let covered = |made: &VolumeState, region: &Option<Region>| match (
-                        &made.region,
-                        region,
-                    ) {
-                        (None, _) => true,
-                        (Some(made), Some(wanted)) => made.contains(wanted),
-                        (Some(made), None) => made.is_whole(),
+                    let covered = |made: &VolumeState, region: &Option<Region>| {
+                        region_covers(made.region.as_ref(), region.as_ref())
                     };
                     // Where refinements go where the own grid shows, each view has the
                     // bricks on the image that the own grid drawn alone shows looked for (once
@@ -2684,11 +2689,7 @@ impl Renderer {
         if self.volumes.get(&(id, detail)).is_some_and(|s| {
             s.key == key
                 && Arc::ptr_eq(&s.volume, &copy)
-                && match (&s.region, &region) {
-                    (None, _) => true,
-                    (Some(made), Some(wanted)) => made.contains(wanted),
-                    (Some(_), None) => false,
-                }
+                && region_covers(s.region.as_ref(), region.as_ref())
         }) {
             return Ok((detail, false));
         }
