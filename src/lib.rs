@@ -34,6 +34,7 @@
 pub mod annotate;
 pub mod budget;
 pub mod camera;
+pub mod cancel;
 pub mod classify;
 #[cfg(feature = "annotate")]
 pub mod figure;

@@ -475,7 +475,6 @@ impl Classified {
         spread_mm: Option<f32>,
         cancel: Option<&AtomicBool>,
     ) -> Result<(Classified, Vec<f32>), GridError> {
-        let cancelled = || cancel.is_some_and(|c| c.load(AtomicOrdering::Relaxed));
         let dims = self.grid.dims();
         let step: [u32; 3] = std::array::from_fn(|a| if axes[a] && dims[a] > 1 { 2 } else { 1 });
         // A front along the one axis halved; else none.
@@ -509,15 +508,13 @@ impl Classified {
         };
         // The x rows are read from every task below: made first, not by the first task.
         self.grid.prepare_rows(0);
-        // Whether a slice was left unmade: the flag may be lowered again before the end.
-        let skipped = AtomicBool::new(false);
+        let parts = crate::cancel::Parts::new(cancel);
         let slices: Vec<(Vec<u32>, Vec<SplatColor>, Vec<f32>)> = (0..oz)
             .into_par_iter()
             .map(|k| {
                 let (mut ids, mut colors, mut spreads) = (Vec::new(), Vec::new(), Vec::new());
                 // What a cancelled halving made is dropped whole below.
-                if cancelled() {
-                    skipped.store(true, AtomicOrdering::Relaxed);
+                if parts.skip() {
                     return (ids, colors, spreads);
                 }
                 // Per output voxel of the row: the density, and the weight and weighted colour
@@ -605,9 +602,9 @@ impl Classified {
                 (ids, colors, spreads)
             })
             .collect();
-        if skipped.into_inner() {
+        let Some(slices) = parts.whole(slices) else {
             return Err(GridError::Cancelled);
-        }
+        };
         let mut spreads = Vec::new();
         let parts = slices
             .into_iter()

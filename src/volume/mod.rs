@@ -146,9 +146,7 @@ fn halve<T: Voxel>(
     cancel: Option<&std::sync::atomic::AtomicBool>,
 ) -> Option<Vec<T>> {
     use rayon::prelude::*;
-    let cancelled = || cancel.is_some_and(|c| c.load(std::sync::atomic::Ordering::Relaxed));
-    // Whether a slice was left unmade: the flag may be lowered again before the end.
-    let skipped = std::sync::atomic::AtomicBool::new(false);
+    let parts = crate::cancel::Parts::new(cancel);
     let [ox, oy, oz] = [
         nx.div_ceil(step[0]),
         ny.div_ceil(step[1]),
@@ -162,8 +160,7 @@ fn halve<T: Voxel>(
         Vec::new,
         |sums: &mut Vec<f32>, (k, slice)| {
             // What a cancelled halving made is dropped whole below.
-            if cancelled() {
-                skipped.store(true, std::sync::atomic::Ordering::Relaxed);
+            if parts.skip() {
                 return;
             }
             sums.clear();
@@ -198,7 +195,7 @@ fn halve<T: Voxel>(
             }
         },
     );
-    (!skipped.into_inner()).then_some(out)
+    parts.whole(out)
 }
 
 #[cfg(test)]

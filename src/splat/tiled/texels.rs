@@ -5,6 +5,7 @@ use std::sync::atomic::{AtomicBool, AtomicU8, AtomicU64, Ordering};
 
 use rayon::prelude::*;
 
+use crate::cancel::Parts;
 use crate::classify::{Classified, Front, RefinedGradients, refined_gradient_snorm8, snorm8};
 use crate::grid::SparseGrid;
 use crate::volume::CpuVolume;
@@ -118,18 +119,15 @@ impl SplatTexels {
     /// unit of bricks): whether every brick's normals are made. The normals made stay; the
     /// others are made when their bricks are first read, as before.
     pub fn complete_unless_cancelled(&self, cancel: Option<&AtomicBool>) -> bool {
-        let cancelled = || cancel.is_some_and(|c| c.load(Ordering::Relaxed));
-        let skipped = AtomicBool::new(false);
+        let parts = Parts::new(cancel);
         if let Some(lazy) = &self.normals {
             (0..lazy.state.len()).into_par_iter().for_each(|u| {
-                if cancelled() {
-                    skipped.store(true, Ordering::Relaxed);
-                } else {
+                if !parts.skip() {
                     self.ensure_unit(u, lazy);
                 }
             });
         }
-        !skipped.into_inner()
+        !parts.skipped()
     }
 
     /// Rows of bricks along x, all layers.
@@ -158,16 +156,7 @@ impl SplatTexels {
         texel: impl Fn([u32; 3], usize) -> [u8; 8] + Sync,
         cancel: Option<&AtomicBool>,
     ) -> Option<Self> {
-        let cancelled = || cancel.is_some_and(|c| c.load(Ordering::Relaxed));
-        // Whether a part was left unmade: the flag may be lowered again before the end.
-        let skipped = AtomicBool::new(false);
-        let skip = || {
-            let now = cancelled();
-            if now {
-                skipped.store(true, Ordering::Relaxed);
-            }
-            now
-        };
+        let parts = Parts::new(cancel);
         let dims = grid.dims();
         let [nx, ny, nz] = dims.map(|n| n as usize);
         let bricks = [nx.div_ceil(BRICK), ny.div_ceil(BRICK)];
@@ -185,7 +174,7 @@ impl SplatTexels {
         let per_layer: Vec<Vec<(usize, [u64; PAGE_BRICKS])>> = (0..pages[2])
             .into_par_iter()
             .map(|pz| {
-                if skip() {
+                if parts.skip() {
                     return Vec::new();
                 }
                 let mut masks = vec![[0u64; PAGE_BRICKS]; page_layer];
@@ -210,7 +199,7 @@ impl SplatTexels {
                     .collect()
             })
             .collect();
-        if skipped.load(Ordering::Relaxed) {
+        if parts.skipped() {
             return None;
         }
         let mut page_table = vec![EMPTY_PAGE; page_layer * pages[2]];
@@ -248,7 +237,7 @@ impl SplatTexels {
             .for_each(|(stretch, bricks_of_layer, of_layer)| {
                 let mut slots = stretch.iter_mut();
                 for (page_bricks, (page, _)) in bricks_of_layer.chunks(PAGE_BRICKS).zip(of_layer) {
-                    if skip() {
+                    if parts.skip() {
                         return;
                     }
                     let (px, py, pz) = (
@@ -276,7 +265,7 @@ impl SplatTexels {
                     }
                 }
             });
-        (!skipped.into_inner()).then_some(Self {
+        parts.whole(Self {
             dims,
             bricks,
             pages,
