@@ -2686,13 +2686,15 @@ impl Renderer {
             let geometry = placed_geometry(&copy, world).map_err(|e| fail(e.to_string()))?;
             on_image(&geometry, view)
         };
-        if self.volumes.get(&(id, detail)).is_some_and(|s| {
-            s.key == key
-                && Arc::ptr_eq(&s.volume, &copy)
-                && region_covers(s.region.as_ref(), region.as_ref())
-        }) {
+        let same_function = (self.volumes.get(&(id, detail)))
+            .filter(|s| s.key == key && Arc::ptr_eq(&s.volume, &copy));
+        if same_function.is_some_and(|s| region_covers(s.region.as_ref(), region.as_ref())) {
             return Ok((detail, false));
         }
+        // The function stands and the camera moves (the camera turned before the own grid was
+        // classified): the next views would want other bricks again, and the whole copy,
+        // classified once, serves them all.
+        let region = region.filter(|_| same_function.is_none());
         let classified = classify_refined_in(
             &copy,
             &node.transfer,

@@ -1408,7 +1408,8 @@ fn a_previews_coarse_copy_is_classified_within_the_bricks_on_the_image() {
     // The wavy field of 96^3 voxels 0.5 mm apart seen close up, a part of it on the image. A
     // preview after a new window classifies its coarse copy within the copy's bricks on the
     // image: fewer splats, the picture of the copy classified whole. A turned view that shows
-    // bricks it left out classifies it anew; the same view drawn again does not.
+    // bricks it left out classifies it anew, whole, since the camera moves under one function:
+    // neither the same view drawn again nor a view turned further classifies it.
     let (mut scene, id) = wavy_field_half_mm();
     let close = |eye: DVec3| SceneCamera {
         projection: crate::scene::Projection::Perspective {
@@ -1462,9 +1463,30 @@ fn a_previews_coarse_copy_is_classified_within_the_bricks_on_the_image() {
     assert_eq!(a.report.classified, 0);
     assert_eq!(b.report.classified, 1);
     assert_eq!(a.frame.pixels, b.frame.pixels);
+    assert_eq!(copy_splats(&shown), all);
     let again = shoot(&mut shown, &scene, &turned, &preview);
     assert_eq!(again.report.classified, 0);
     assert_eq!(again.frame.pixels, b.frame.pixels);
+    let further = close(DVec3::new(24.0, 58.0, 24.0));
+    let (a, b) = (
+        shoot(&mut whole, &scene, &further, &preview),
+        shoot(&mut shown, &scene, &further, &preview),
+    );
+    assert_eq!((a.report.classified, b.report.classified), (0, 0));
+    assert_eq!(a.frame.pixels, b.frame.pixels);
+    // A new window classifies within the bricks on the image again.
+    let mut v = node_of(&scene, id);
+    v.transfer = Arc::new(v.transfer.windowed(360.0, 200.0));
+    scene
+        .set_content(id, crate::scene::NodeContent::Volume(v))
+        .unwrap();
+    assert_eq!(
+        shoot(&mut shown, &scene, &further, &preview)
+            .report
+            .classified,
+        1
+    );
+    assert!(copy_splats(&shown) * 2 < all);
 }
 
 /// The RMSE of two frames' premultiplied colours over the pixels either covers (alpha over
