@@ -844,6 +844,11 @@ impl<V: std::ops::Deref<Target = CpuVolume>> RefinedGradients<V> {
         }
     }
 
+    /// Whether `other` gives the same gradients: the same volume, refined by the same factors.
+    pub fn same_field(&self, other: &Self) -> bool {
+        std::ptr::eq(&*self.volume, &*other.volume) && self.factors == other.factors
+    }
+
     /// [`refined_gradient_snorm8`] at fine voxel `k`.
     pub fn snorm8(&self, k: [u32; 3]) -> Option<[u8; 3]> {
         if self.factors == [1, 1, 1] {

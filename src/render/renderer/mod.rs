@@ -177,6 +177,9 @@ struct VolumeState {
     gpu: Option<GpuVolume>,
     /// The colours and normals of the CPU tile compositor, made on its first frame.
     texels: Option<SplatTexels>,
+    /// The texels of the refinement this one was joined from, until this one's are made:
+    /// they take over its normals ([`SplatTexels::adopt_normals`]).
+    adopted: Option<SplatTexels>,
     orderer: Orderer,
     ids: Vec<u32>,
     /// The view class `ids` was ordered for, where a view of the same class may reuse it.
@@ -315,6 +318,7 @@ impl VolumeState {
             classified,
             gpu: None,
             texels: None,
+            adopted: None,
             orderer,
             ids,
             ordered_for: None,
@@ -358,11 +362,11 @@ impl VolumeState {
             return Duration::ZERO;
         }
         let started = Instant::now();
-        self.texels = Some(SplatTexels::new(
-            &self.classified,
-            &self.volume,
-            self.factors,
-        ));
+        let texels = SplatTexels::new(&self.classified, &self.volume, self.factors);
+        if let Some(previous) = self.adopted.take() {
+            texels.adopt_normals(&previous);
+        }
+        self.texels = Some(texels);
         started.elapsed()
     }
 
@@ -2521,7 +2525,7 @@ impl Renderer {
                                 e => fail(e.to_string()),
                             })
                         };
-                        let (result, orderer, ids) = match (previous, extra) {
+                        let (result, orderer, ids, adopted) = match (previous, extra) {
                             (Some((mut previous, made)), Some(extra)) => {
                                 let more = match classify(Some(&extra)) {
                                     Err(RenderError::Cancelled) => {
@@ -2540,23 +2544,24 @@ impl Renderer {
                                     gpu,
                                     ..
                                 } = previous;
-                                // Made anew for the joined grid.
-                                drop((texels, gpu));
+                                // Made anew for the joined grid, the texels taking over the
+                                // normals made for this one.
+                                drop(gpu);
                                 afford(&more)?;
                                 let joined = classified
                                     .joined_with(more)
                                     .map_err(|e| fail(e.to_string()))?;
                                 ids.clear();
                                 if afford(&joined).is_ok() {
-                                    (joined, orderer, ids)
+                                    (joined, orderer, ids, texels)
                                 } else {
                                     // Past the budget joined: the view's bricks alone.
-                                    drop(joined);
+                                    drop((joined, texels));
                                     region = view_region;
-                                    (classify(region.as_ref())?, orderer, ids)
+                                    (classify(region.as_ref())?, orderer, ids, None)
                                 }
                             }
-                            _ => (classify(region.as_ref())?, Orderer::new(), Vec::new()),
+                            _ => (classify(region.as_ref())?, Orderer::new(), Vec::new(), None),
                         };
                         afford(&result)?;
                         made += 1;
@@ -2569,6 +2574,7 @@ impl Renderer {
                             ids,
                         );
                         state.region = region;
+                        state.adopted = adopted;
                         self.volumes.insert(refined, state);
                     }
                     if let Some(state) = self.volumes.get_mut(&refined) {
