@@ -476,10 +476,16 @@ impl SplatTexels {
 
     /// Whether a brick of unit `u` holds a significant voxel.
     fn unit_holds_any(&self, u: usize) -> bool {
+        let (xs, by, bz) = self.unit_bricks(u);
+        xs.into_iter()
+            .any(|bx| self.brick(bx, by, bz).is_some_and(|b| b.present != 0))
+    }
+
+    /// The bricks of unit `u`: their range along x, and their row's y and z.
+    fn unit_bricks(&self, u: usize) -> (std::ops::Range<usize>, usize, usize) {
         let (row, first) = (u / self.units_x(), u % self.units_x() * NORMAL_UNIT);
         let (by, bz) = (row % self.bricks[1], row / self.bricks[1]);
-        (first..(first + NORMAL_UNIT).min(self.bricks[0]))
-            .any(|bx| self.brick(bx, by, bz).is_some_and(|b| b.present != 0))
+        (first..(first + NORMAL_UNIT).min(self.bricks[0]), by, bz)
     }
 
     /// Writes the normals of unit `u`, each voxel's from `normal` (none: left all zero,
@@ -503,9 +509,8 @@ impl SplatTexels {
             }
             return;
         }
-        let (row, first) = (u / self.units_x(), u % self.units_x() * NORMAL_UNIT);
-        let (by, bz) = (row % self.bricks[1], row / self.bricks[1]);
-        for bx in first..(first + NORMAL_UNIT).min(self.bricks[0]) {
+        let (xs, by, bz) = self.unit_bricks(u);
+        for bx in xs {
             let Some(brick) = self.brick(bx, by, bz) else {
                 continue;
             };
