@@ -12,13 +12,20 @@ use crate::render::{Compositor, DepthMode, GpuContext, RenderError, Screenshot, 
 use crate::scene::patient::NamedView;
 use crate::scene::{Projection, Scene, SceneCamera};
 
-/// The GPU context for drawing `scene`, or none where there is no adapter and the CPU can draw
-/// the whole scene (volumes only, with a compositor other than the GPU's); that fallback is
-/// said on stderr.
+/// The GPU context for drawing `scene`, or none where the CPU can draw the whole scene (volumes
+/// only, with a compositor other than the GPU's) and either the CPU tile compositor is asked
+/// for or there is no adapter (that fallback is said on stderr). Where the CPU tiles are asked
+/// for, no adapter is looked for: Mesa's lavapipe, once loaded, holds about 80 MB and takes 50
+/// ms to start. ([`Compositor::Auto`] must look, to learn whether the adapter is a CPU: the
+/// look alone loads lavapipe.)
 pub fn context_for(
     compositor: Compositor,
     scene: &Scene,
 ) -> Result<Option<GpuContext>, RenderError> {
+    let volumes_only = scene.meshes().chain(scene.overlays()).next().is_none();
+    if volumes_only && compositor == Compositor::Cpu {
+        return Ok(None);
+    }
     match GpuContext::headless() {
         Ok(ctx) => Ok(Some(ctx)),
         Err(e @ RenderError::NoAdapter(_))

@@ -667,6 +667,32 @@ fn a_volume_renders_without_any_gpu_adapter_and_meshes_say_what_they_need() {
     let image = image::open(&out).unwrap().to_rgba8();
     let bright = image.pixels().filter(|p| p[0] > 100).count();
     assert!(bright > 100, "the block shows: {bright} bright pixels");
+    // With the CPU tiles asked for, a scene of volumes looks for no adapter at all: nothing
+    // said of one, and the same picture.
+    let asked = dir.join("asked.png");
+    let cpu = run(&[
+        "render",
+        raw.to_str().unwrap(),
+        "--dims",
+        "16,16,16",
+        "--scalar",
+        "u8",
+        "--window",
+        "100,200",
+        "--size",
+        "64x48",
+        "--compositor",
+        "cpu",
+        "--out",
+        asked.to_str().unwrap(),
+    ]);
+    let said = String::from_utf8_lossy(&cpu.stderr);
+    assert!(cpu.status.success(), "{said}");
+    assert!(
+        !said.contains("GPU adapter") && said.contains("on the CPU alone"),
+        "{said}"
+    );
+    assert_eq!(image::open(&asked).unwrap().to_rgba8(), image);
     // The built-in scene has meshes: they need an adapter, and the error says so.
     let meshes = run(&["render", "--size", "64x48", "--out", out.to_str().unwrap()]);
     let said = String::from_utf8_lossy(&meshes.stderr);

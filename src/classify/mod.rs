@@ -4,7 +4,7 @@
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicBool, Ordering as AtomicOrdering};
 
-use crate::grid::{GridError, SparseGrid};
+use crate::grid::{BitsPart, GridError, SparseGrid};
 use crate::volume::voxels::dispatch;
 use crate::volume::{CpuVolume, Voxel, Voxels};
 
@@ -365,8 +365,8 @@ impl Classified {
     /// colour does not depend on the region it was classified within. Refused
     /// ([`GridError::NotDisjoint`]) where the grids differ in size or share a voxel, and
     /// ([`GridError::ColorsMismatch`]) where either holds other than a colour a voxel.
-    pub fn joined_with(self, other: Classified) -> Result<Self, GridError> {
-        for c in [&self, &other] {
+    pub fn joined_with(&self, other: Classified) -> Result<Self, GridError> {
+        for c in [self, &other] {
             if c.colors.len() != c.grid.len() {
                 return Err(GridError::ColorsMismatch {
                     colors: c.colors.len(),
@@ -407,14 +407,22 @@ impl Classified {
 
     /// The significant voxels of a `dims` grid and their colours from per-slice lists, the
     /// slices in increasing id order.
-    fn joined(dims: [u32; 3], parts: Vec<(Vec<u32>, Vec<SplatColor>)>) -> Result<Self, GridError> {
-        let ids: Vec<&[u32]> = parts.iter().map(|(ids, _)| &ids[..]).collect();
-        let grid = SparseGrid::from_sorted_parts(dims, &ids)?;
-        // The colours laid end to end, each slice's lists freed as they are taken, so that
-        // no more than one slice's lists are held twice.
-        let mut colors = Vec::with_capacity(parts.iter().map(|(_, c)| c.len()).sum());
-        for (ids, c) in parts {
-            drop(ids);
+    fn joined(dims: [u32; 3], parts: Vec<(BitsPart, Vec<SplatColor>)>) -> Result<Self, GridError> {
+        for (bits, c) in &parts {
+            if bits.len() != c.len() {
+                return Err(GridError::ColorsMismatch {
+                    colors: c.len(),
+                    voxels: bits.len(),
+                });
+            }
+        }
+        let (bits, parts): (Vec<BitsPart>, Vec<Vec<SplatColor>>) = parts.into_iter().unzip();
+        let grid = SparseGrid::from_bit_parts(dims, bits)?;
+        // The colours laid end to end, each part's freed as it is taken: the whole list's
+        // room is reserved at once, and its pages are touched only as they are written, so
+        // that the colours are held about once, not twice.
+        let mut colors = Vec::with_capacity(parts.iter().map(Vec::len).sum());
+        for c in parts {
             colors.extend_from_slice(&c);
         }
         Ok(Self { grid, colors })
@@ -509,10 +517,11 @@ impl Classified {
         // The x rows are read from every task below: made first, not by the first task.
         self.grid.prepare_rows(0);
         let parts = crate::cancel::Parts::new(cancel);
-        let slices: Vec<(Vec<u32>, Vec<SplatColor>, Vec<f32>)> = (0..oz)
+        let slices: Vec<(BitsPart, Vec<SplatColor>, Vec<f32>)> = (0..oz)
             .into_par_iter()
             .map(|k| {
-                let (mut ids, mut colors, mut spreads) = (Vec::new(), Vec::new(), Vec::new());
+                let (mut ids, mut colors, mut spreads) =
+                    (BitsPart::default(), Vec::new(), Vec::new());
                 // What a cancelled halving made is dropped whole below.
                 if parts.skip() {
                     return (ids, colors, spreads);
@@ -599,6 +608,9 @@ impl Classified {
                         s.fill([0.0; 5]);
                     }
                 }
+                ids.shrink_to_fit();
+                colors.shrink_to_fit();
+                spreads.shrink_to_fit();
                 (ids, colors, spreads)
             })
             .collect();
@@ -1375,7 +1387,7 @@ fn classify_cells(
     };
     // A slab given up (`None`) gives the whole classification up: what the others made is
     // dropped.
-    let slabs: Option<Vec<(Vec<u32>, Vec<SplatColor>)>> = dispatch!(&volume.values, values => {
+    let slabs: Option<Vec<(BitsPart, Vec<SplatColor>)>> = dispatch!(&volume.values, values => {
         (0..nz.div_ceil(SLAB))
             .into_par_iter()
             .map(|slab| {
@@ -1406,11 +1418,11 @@ fn classify_slab<T: Voxel>(
     by_rows: bool,
     region: Option<&Region>,
     cancel: Option<&AtomicBool>,
-) -> Option<(Vec<u32>, Vec<SplatColor>)> {
+) -> Option<(BitsPart, Vec<SplatColor>)> {
     let [nx, ny, nz] = dims.map(|n| n as usize);
     let [fx, fy, fz] = factors.map(|f| f as usize);
     let plane = nx * ny;
-    let (mut ids, mut colors) = (Vec::new(), Vec::new());
+    let (mut ids, mut colors) = (BitsPart::default(), Vec::new());
     let z0 = slab * SLAB;
     let z1 = (z0 + SLAB).min(nz);
     // A slab the region leaves out whole is not read (a refinement joined with the few bricks
@@ -1459,7 +1471,7 @@ fn classify_slab<T: Voxel>(
                     let by_block =
                         |x: usize,
                          block: &mut Block,
-                         ids: &mut Vec<u32>,
+                         ids: &mut BitsPart,
                          colors: &mut Vec<SplatColor>| {
                             block.load(values, dims, [x, y, z]);
                             for jx in 0..fx {
@@ -1511,6 +1523,9 @@ fn classify_slab<T: Voxel>(
             }
         }
     }
+    // The slab's lists are held until all are joined: the room past their length freed.
+    ids.shrink_to_fit();
+    colors.shrink_to_fit();
     Some((ids, colors))
 }
 

@@ -307,7 +307,7 @@ pub fn run_render(args: RenderArgs) -> Result<()> {
     renderer.set_lod(args.lod);
     let device = ctx
         .as_ref()
-        .map_or("no GPU adapter".into(), GpuContext::describe);
+        .map_or("the CPU alone".into(), GpuContext::describe);
     for ((name, camera), (out, depth)) in cameras.iter().zip(outputs.iter().zip(&depths)) {
         let shot = match &ctx {
             Some(ctx) => renderer.screenshot(ctx, &drawn, camera, render_size, &options)?,

@@ -15,6 +15,7 @@ use thiserror::Error;
 
 mod pages;
 
+pub use pages::BitsPart;
 use pages::PagedBits;
 
 /// Problems with a grid's size or with a list of voxel ids.
@@ -212,6 +213,32 @@ impl SparseGrid {
     /// The voxels listed in `ids`, which must be strictly increasing and inside the grid.
     pub fn from_sorted_ids(dims: [u32; 3], ids: &[u32]) -> Result<Self, GridError> {
         Self::from_sorted_parts(dims, &[ids])
+    }
+
+    /// The voxels set in `parts` one after the other (a classification's slabs), which
+    /// together must be strictly increasing and inside the grid; the parts are freed as they
+    /// are taken. No flat bitmap of the whole grid is made: the pages the parts hold are the
+    /// grid's.
+    pub fn from_bit_parts(dims: [u32; 3], parts: Vec<BitsPart>) -> Result<Self, GridError> {
+        let count = voxel_count(dims)?;
+        let (mut before, mut last) = (0usize, None::<u32>);
+        for part in &parts {
+            if let Some(at) = part.unsorted() {
+                return Err(GridError::Unsorted(before + at));
+            }
+            if let Some(first) = part.first() {
+                if last.is_some_and(|l| first <= l) {
+                    return Err(GridError::Unsorted(before));
+                }
+                last = part.last();
+            }
+            if let Some(id) = part.last().filter(|&id| u64::from(id) >= count) {
+                return Err(GridError::IdOutOfRange { id, dims });
+            }
+            before += part.len();
+        }
+        let words = count.div_ceil(64) as usize;
+        Ok(Self::from_paged(dims, PagedBits::from_parts(words, parts)))
     }
 
     /// The voxels listed in `parts` one after the other, which together must be strictly
@@ -921,5 +948,105 @@ mod tests {
             SparseGrid::from_sorted_parts(dims, &[&ids[..5], &ids[7..9], &ids[8..9]]).unwrap_err(),
             GridError::Unsorted(7)
         );
+    }
+
+    /// The ids of `ids` cut at `cuts` into bit parts.
+    fn bit_parts(ids: &[u32], cuts: &[usize]) -> Vec<BitsPart> {
+        cuts.windows(2)
+            .map(|c| {
+                let mut part = BitsPart::default();
+                for &id in &ids[c[0]..c[1]] {
+                    part.push(id);
+                }
+                part
+            })
+            .collect()
+    }
+
+    #[test]
+    fn a_grid_from_bit_parts_is_the_grid_of_its_ids() {
+        // Parts cut inside pages (1024 voxels) and words and at their edges, empty ones among
+        // them: the bitmap of a plain set of bits, word for word, and its ranks.
+        let dims = [300u32, 200, 40];
+        let ids: Vec<u32> = (0..dims.iter().product::<u32>())
+            .filter(|&id| (id.wrapping_mul(2654435761) >> 27) < 3 || id % 1000 == 999)
+            .collect();
+        let cuts = [
+            0,
+            0,
+            1,
+            63,
+            64,
+            65,
+            700,
+            1500,
+            1500,
+            123_456,
+            ids.len() - 1,
+            ids.len(),
+        ];
+        let grid = SparseGrid::from_bit_parts(dims, bit_parts(&ids, &cuts)).unwrap();
+        let mut bits = vec![0u64; (dims.iter().product::<u32>() as usize).div_ceil(64)];
+        for &id in &ids {
+            bits[id as usize / 64] |= 1 << (id % 64);
+        }
+        let words: Vec<u64> = (0..bits.len()).map(|w| grid.bits.word(w)).collect();
+        assert_eq!(words, bits);
+        assert_eq!(grid.len(), ids.len());
+        for i in [0, 1, 64, 1000, ids.len() / 2, ids.len() - 1] {
+            assert_eq!(grid.rank(ids[i]), Some(i as u32));
+        }
+        // Only the pages holding an id are stored, as from the list.
+        let listed = SparseGrid::from_sorted_ids(dims, &ids).unwrap();
+        assert_eq!(grid.bitmap_bytes(), listed.bitmap_bytes());
+        // An empty grid, from no part and from empty parts.
+        assert!(
+            SparseGrid::from_bit_parts(dims, Vec::new())
+                .unwrap()
+                .is_empty()
+        );
+        assert!(
+            SparseGrid::from_bit_parts(dims, vec![BitsPart::default(); 3])
+                .unwrap()
+                .is_empty()
+        );
+    }
+
+    #[test]
+    fn bit_parts_out_of_order_or_past_the_grid_are_refused() {
+        let dims = [40u32, 30, 20];
+        let ids: Vec<u32> = (0..dims.iter().product::<u32>()).step_by(7).collect();
+        // An id repeated where two parts meet, past an empty part.
+        let mut parts = bit_parts(&ids, &[0, 100, 100]);
+        let mut again = BitsPart::default();
+        for &id in &ids[99..200] {
+            again.push(id);
+        }
+        parts.push(again);
+        assert_eq!(
+            SparseGrid::from_bit_parts(dims, parts).unwrap_err(),
+            GridError::Unsorted(100)
+        );
+        // Within a part: the place of the id, which is not set.
+        let mut part = BitsPart::default();
+        for id in [3, 9, 9, 12] {
+            part.push(id);
+        }
+        assert_eq!(
+            (part.len(), part.unsorted(), part.last()),
+            (3, Some(2), Some(12))
+        );
+        let first = bit_parts(&ids, &[0, 5]).remove(0);
+        assert_eq!(
+            SparseGrid::from_bit_parts(dims, vec![first, part]).unwrap_err(),
+            GridError::Unsorted(7)
+        );
+        // Past the grid's last voxel.
+        let mut far = BitsPart::default();
+        far.push(dims.iter().product::<u32>());
+        assert!(matches!(
+            SparseGrid::from_bit_parts(dims, vec![BitsPart::default(), far]).unwrap_err(),
+            GridError::IdOutOfRange { .. }
+        ));
     }
 }

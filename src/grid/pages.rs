@@ -81,6 +81,32 @@ impl PagedBits {
         Self::indexed(len, table, words)
     }
 
+    /// The bits of `parts` laid end to end over `len` words: each part's ids must lie past
+    /// the ones before it ([`BitsPart::first`] above the last part's [`BitsPart::last`]), and
+    /// only a part's first page may be the page the part before it ended in. The parts are
+    /// freed as they are taken.
+    pub(super) fn from_parts(len: usize, parts: Vec<BitsPart>) -> Self {
+        let stored: usize = parts.iter().map(|p| p.pages.len()).sum();
+        let mut table = vec![EMPTY; len.div_ceil(PAGE_WORDS)];
+        let mut pages: Vec<u32> = Vec::with_capacity(stored);
+        let mut words: Vec<u64> = Vec::with_capacity(stored * PAGE_WORDS);
+        for part in parts {
+            for (page, from) in part.pages.iter().zip(part.words.chunks_exact(PAGE_WORDS)) {
+                if pages.last() == Some(page) {
+                    let at = words.len() - PAGE_WORDS;
+                    for (w, f) in words[at..].iter_mut().zip(from) {
+                        *w |= f;
+                    }
+                } else if let Some(slot) = table.get_mut(*page as usize) {
+                    *slot = pages.len() as u32;
+                    pages.push(*page);
+                    words.extend_from_slice(from);
+                }
+            }
+        }
+        Self::indexed(len, table, words)
+    }
+
     /// The page of voxel `id`.
     pub(super) fn page_of(id: u32) -> u32 {
         (u64::from(id) / PAGE_BITS) as u32
@@ -304,5 +330,81 @@ mod tests {
         assert_eq!(pairs[1], (1 << 6, 0));
         let ones: u32 = pairs.iter().map(|(a, b)| (a | b).count_ones()).sum();
         assert_eq!(ones, 5);
+    }
+}
+
+/// Voxel ids given one at a time in increasing order, held as the bitmap pages they fall in: a
+/// stretch of a grid made piece by piece, as a classification's slabs make theirs, joined by
+/// [`crate::grid::SparseGrid::from_bit_parts`]. A page (1024 voxels) takes 132 bytes however
+/// many of its voxels are set, where a list takes 4 bytes an id: the 0.75 mm abdomen CT with
+/// a window of soft tissue sets 41M of 86.5M voxels, 165 MB of ids against 11 MB of pages.
+/// (The final grid stores the same pages; see the module's note on `roaring`.)
+#[derive(Debug, Clone, Default)]
+pub struct BitsPart {
+    /// The pages set, increasing.
+    pages: Vec<u32>,
+    /// Their words, [`PAGE_WORDS`] a page.
+    words: Vec<u64>,
+    /// The first id and the last.
+    ends: Option<(u32, u32)>,
+    /// Ids set.
+    count: usize,
+    /// The place of the first id that was not past the one before it (and was not set).
+    unsorted: Option<usize>,
+}
+
+impl BitsPart {
+    /// Sets `id`, which must lie past the ids set before (one that does not is not set, and
+    /// [`BitsPart::unsorted`] tells where it came).
+    #[inline]
+    pub fn push(&mut self, id: u32) {
+        match &mut self.ends {
+            Some((_, last)) if id <= *last => {
+                self.unsorted.get_or_insert(self.count);
+                return;
+            }
+            Some((_, last)) => *last = id,
+            None => self.ends = Some((id, id)),
+        }
+        let page = PagedBits::page_of(id);
+        if self.pages.last() != Some(&page) {
+            self.pages.push(page);
+            self.words.resize(self.words.len() + PAGE_WORDS, 0);
+        }
+        let at = self.words.len() - PAGE_WORDS + (u64::from(id) % PAGE_BITS / 64) as usize;
+        self.words[at] |= 1 << (id % 64);
+        self.count += 1;
+    }
+
+    /// Ids set.
+    pub fn len(&self) -> usize {
+        self.count
+    }
+
+    /// Whether no id is set.
+    pub fn is_empty(&self) -> bool {
+        self.count == 0
+    }
+
+    /// The first id set.
+    pub fn first(&self) -> Option<u32> {
+        self.ends.map(|(first, _)| first)
+    }
+
+    /// The last id set.
+    pub fn last(&self) -> Option<u32> {
+        self.ends.map(|(_, last)| last)
+    }
+
+    /// Where the first id not past the one before it was given (counting the ids set before
+    /// it), if one was.
+    pub fn unsorted(&self) -> Option<usize> {
+        self.unsorted
+    }
+
+    /// Frees the room its lists hold past their length.
+    pub fn shrink_to_fit(&mut self) {
+        self.pages.shrink_to_fit();
+        self.words.shrink_to_fit();
     }
 }

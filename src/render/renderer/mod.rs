@@ -172,13 +172,16 @@ struct VolumeState {
     /// axes more than others are dropped, least recently used first, past
     /// [`KEPT_UNEVEN_LEVELS`]).
     used: u64,
-    classified: Classified,
+    /// Its classification, shared with its texels, which write their colours from it as
+    /// their bricks are first read.
+    classified: Arc<Classified>,
     /// The GPU copy, made on the first frame the splat pass draws it.
     gpu: Option<GpuVolume>,
     /// The colours and normals of the CPU tile compositor, made on its first frame.
     texels: Option<SplatTexels>,
     /// The texels of the refinement this one was joined from, until this one's are made:
-    /// they take over its normals ([`SplatTexels::adopt_normals`]).
+    /// they take over its normals ([`SplatTexels::adopt_normals`]). They hold that
+    /// refinement's classification too, for the colours of the bricks they never wrote.
     adopted: Option<SplatTexels>,
     orderer: Orderer,
     ids: Vec<u32>,
@@ -315,7 +318,7 @@ impl VolumeState {
             factors,
             levels: [0; 3],
             used: 0,
-            classified,
+            classified: Arc::new(classified),
             gpu: None,
             texels: None,
             adopted: None,
