@@ -154,8 +154,7 @@ mod tests {
 
     #[test]
     fn only_regular_files_open() {
-        let dir = std::env::temp_dir().join(format!("splatscene-input-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
+        let dir = crate::scratch::scratch("input");
         let file = dir.join("a.txt");
         std::fs::write(&file, "text").unwrap();
         assert_eq!(read_regular_text(&file, 10).unwrap(), "text");
@@ -174,6 +173,5 @@ mod tests {
         assert!(e.contains("character device"), "{e}");
         let e = open_regular(&dir).unwrap_err().to_string();
         assert!(e.contains("a folder"), "{e}");
-        std::fs::remove_dir_all(dir).ok();
     }
 }

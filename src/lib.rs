@@ -50,6 +50,8 @@ pub mod render;
 #[cfg(feature = "report")]
 pub mod report;
 pub mod scene;
+#[cfg(test)]
+mod scratch;
 pub mod simd;
 pub mod slice;
 pub mod splat;

@@ -177,12 +177,7 @@ mod tests {
                         usemtl red\nf 1 2 3 4\n";
 
     /// A fresh scratch directory for one test.
-    fn scratch(test: &str) -> std::path::PathBuf {
-        let dir =
-            std::env::temp_dir().join(format!("splatscene-obj-{}-{test}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        dir
-    }
+    use crate::scratch::scratch;
 
     #[test]
     fn missing_mtllib_is_a_warning_with_default_material() {

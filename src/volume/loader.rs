@@ -676,17 +676,7 @@ pub(super) mod tests {
         assert!(e.contains("skipping unreadable files"), "{e}");
     }
 
-    /// A fresh directory per test, so that parallel tests and earlier runs never collide.
-    pub fn scratch(tag: &str) -> PathBuf {
-        let nanos = std::time::SystemTime::now()
-            .duration_since(std::time::UNIX_EPOCH)
-            .unwrap()
-            .as_nanos();
-        let dir =
-            std::env::temp_dir().join(format!("splatscene-{tag}-{}-{nanos}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        dir
-    }
+    pub(crate) use crate::scratch::scratch;
 
     /// Gzip-compresses `bytes`.
     pub fn gzip(bytes: &[u8]) -> Vec<u8> {

@@ -267,18 +267,7 @@ mod tests {
     use crate::grid::GridError;
 
     /// A fresh directory per test, so that parallel tests and earlier runs never collide.
-    fn scratch(tag: &str) -> PathBuf {
-        let nanos = std::time::SystemTime::now()
-            .duration_since(std::time::UNIX_EPOCH)
-            .unwrap()
-            .as_nanos();
-        let dir = std::env::temp_dir().join(format!(
-            "splatscene-raw-{tag}-{}-{nanos}",
-            std::process::id()
-        ));
-        std::fs::create_dir_all(&dir).unwrap();
-        dir
-    }
+    use crate::scratch::scratch;
 
     fn format(s: &str) -> ScalarFormat {
         s.parse().unwrap()
