@@ -34,7 +34,7 @@ pub const MAX_PIXELS: u64 = 1 << 26;
 pub const DRAW_BYTES_PER_VOXEL: u64 = 1;
 
 /// Bytes a significant voxel costs once classified, on top of [`DRAW_BYTES_PER_VOXEL`]: its
-/// colour (6, twice while the slabs' lists are joined), its texel for the CPU tiles (8, its
+/// colour (5, twice while the slabs' lists are joined), its texel for the CPU tiles (8, its
 /// memory touched only where its brick is read), its place in the draw order (4), and an
 /// eighth of that again for the coarser levels of detail; rounded up. Measured, the 0.75 mm
 /// abdomen CT with a window of soft tissue (41.2M splats of 86.5M voxels, one view from

@@ -319,8 +319,12 @@ impl Histogram {
 }
 
 /// A splat's colour as every compositor reads it: the transfer function's straight colour in
-/// 8 bits a channel, and its density in half precision (see [`Opacity`]). Six bytes a splat.
+/// 8 bits a channel, and its density in half precision (see [`Opacity`]). Five bytes a splat,
+/// packed: a classification holds one for each significant voxel (41M, 206 MB, for the
+/// 0.75 mm abdomen CT with a window of soft tissue, where the 2-byte alignment of the density
+/// would make them six).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
+#[repr(C, packed)]
 pub struct SplatColor {
     /// Straight (not premultiplied) red, green and blue.
     pub rgb: [u8; 3],
