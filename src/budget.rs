@@ -38,8 +38,8 @@ pub const DRAW_BYTES_PER_VOXEL: u64 = 1;
 /// memory touched only where its brick is read), its place in the draw order (4), and an
 /// eighth of that again for the coarser levels of detail; rounded up. Measured, the 0.75 mm
 /// abdomen CT with a window of soft tissue (41.2M splats of 86.5M voxels, one view from
-/// behind, 7M of them read) peaked at 14 bytes a splat over its 8-bit values (BENCHMARKS.md,
-/// "Texels written as they are read"); a view that reads every texel holds 8 more.
+/// behind, 7M of them read) peaked at 13.5 bytes a splat over its 8-bit values (BENCHMARKS.md,
+/// "Texels written as they are read"); a view that reads every texel holds about 6 more.
 pub const SPLAT_BYTES: u64 = 30;
 
 /// The environment variable that sets the memory budget in bytes.

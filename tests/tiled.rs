@@ -644,20 +644,26 @@ fn a_volume_renders_without_any_gpu_adapter_and_meshes_say_what_they_need() {
             .output()
             .unwrap()
     };
-    let volume = run(&[
-        "render",
-        raw.to_str().unwrap(),
-        "--dims",
-        "16,16,16",
-        "--scalar",
-        "u8",
-        "--window",
-        "100,200",
-        "--size",
-        "64x48",
-        "--out",
-        out.to_str().unwrap(),
-    ]);
+    // The block rendered into `out`, with `more` arguments.
+    let block = |out: &std::path::Path, more: &[&str]| {
+        let mut args = vec![
+            "render",
+            raw.to_str().unwrap(),
+            "--dims",
+            "16,16,16",
+            "--scalar",
+            "u8",
+            "--window",
+            "100,200",
+            "--size",
+            "64x48",
+            "--out",
+            out.to_str().unwrap(),
+        ];
+        args.extend_from_slice(more);
+        run(&args)
+    };
+    let volume = block(&out, &[]);
     let said = String::from_utf8_lossy(&volume.stderr);
     assert!(volume.status.success(), "{said}");
     assert!(
@@ -670,22 +676,7 @@ fn a_volume_renders_without_any_gpu_adapter_and_meshes_say_what_they_need() {
     // With the CPU tiles asked for, a scene of volumes looks for no adapter at all: nothing
     // said of one, and the same picture.
     let asked = dir.join("asked.png");
-    let cpu = run(&[
-        "render",
-        raw.to_str().unwrap(),
-        "--dims",
-        "16,16,16",
-        "--scalar",
-        "u8",
-        "--window",
-        "100,200",
-        "--size",
-        "64x48",
-        "--compositor",
-        "cpu",
-        "--out",
-        asked.to_str().unwrap(),
-    ]);
+    let cpu = block(&asked, &["--compositor", "cpu"]);
     let said = String::from_utf8_lossy(&cpu.stderr);
     assert!(cpu.status.success(), "{said}");
     assert!(

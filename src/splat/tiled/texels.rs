@@ -226,20 +226,20 @@ impl SplatTexels {
         }
         // The texels, page by page in the same layers: each layer's a contiguous stretch.
         // Allocated zeroed: pages of memory no texel is written to are never touched.
-        let mut texels: Vec<AtomicU64> = bytemuck::zeroed_vec(count as usize);
+        let mut laid = Self {
+            dims,
+            bricks,
+            pages,
+            page_table,
+            table,
+            texels: bytemuck::zeroed_vec(count as usize),
+            normals: None,
+        };
         let Some(texel) = texel else {
-            return parts.whole(Self {
-                dims,
-                bricks,
-                pages,
-                page_table,
-                table,
-                texels,
-                normals: None,
-            });
+            return parts.whole(laid);
         };
         let mut stretches = Vec::with_capacity(pages[2]);
-        let (mut rest, mut bricks_left) = (texels.as_mut_slice(), table.as_slice());
+        let (mut rest, mut bricks_left) = (laid.texels.as_mut_slice(), laid.table.as_slice());
         for of_layer in &per_layer {
             let (own, tail) = bricks_left.split_at(of_layer.len() * PAGE_BRICKS);
             let n: u32 = own.iter().map(|b| b.present.count_ones()).sum();
@@ -281,15 +281,7 @@ impl SplatTexels {
                     }
                 }
             });
-        parts.whole(Self {
-            dims,
-            bricks,
-            pages,
-            page_table,
-            table,
-            texels,
-            normals: None,
-        })
+        parts.whole(laid)
     }
 
     /// The texels of the level above these texels' grid: `above` is the classification
