@@ -212,7 +212,11 @@ impl SparseGrid {
 
     /// The voxels listed in `ids`, which must be strictly increasing and inside the grid.
     pub fn from_sorted_ids(dims: [u32; 3], ids: &[u32]) -> Result<Self, GridError> {
-        Self::from_sorted_parts(dims, &[ids])
+        let mut part = BitsPart::default();
+        for &id in ids {
+            part.push(id);
+        }
+        Self::from_bit_parts(dims, vec![part])
     }
 
     /// The voxels set in `parts` one after the other (a classification's slabs), which
@@ -239,120 +243,6 @@ impl SparseGrid {
         }
         let words = count.div_ceil(64) as usize;
         Ok(Self::from_paged(dims, PagedBits::from_parts(words, parts)))
-    }
-
-    /// The voxels listed in `parts` one after the other, which together must be strictly
-    /// increasing and inside the grid (the per-slab lists of a classification), with no
-    /// copy of them joined and no flat bitmap of the whole grid: stretches of them are
-    /// checked and their pages listed in parallel, only those pages stored, and each stretch
-    /// set in parallel into the stored words that it alone spans, its first and last words
-    /// (which the stretches beside it may share) laid in afterwards.
-    pub fn from_sorted_parts(dims: [u32; 3], parts: &[&[u32]]) -> Result<Self, GridError> {
-        use rayon::prelude::*;
-        let count = voxel_count(dims)?;
-        // Each stretch with the index of its first id in the parts joined.
-        let mut stretches: Vec<(usize, &[u32])> = Vec::new();
-        let mut at = 0;
-        for stretch in parts.iter().flat_map(|p| p.chunks(1 << 20)) {
-            stretches.push((at, stretch));
-            at += stretch.len();
-        }
-        // Where two stretches meet, the second must start past the first's end.
-        for pair in stretches.windows(2) {
-            if let (Some(&last), Some(&first)) = (pair[0].1.last(), pair[1].1.first())
-                && first <= last
-            {
-                return Err(GridError::Unsorted(pair[1].0));
-            }
-        }
-        // Each stretch checked and the pages it sets listed; the lists joined in order, a
-        // page two stretches share once.
-        let listed = stretches
-            .par_iter()
-            .map(|&(at, ids)| {
-                let mut pages: Vec<u32> = Vec::new();
-                for (i, &id) in ids.iter().enumerate() {
-                    if u64::from(id) >= count {
-                        return Err(GridError::IdOutOfRange { id, dims });
-                    }
-                    if i > 0 && ids[i - 1] >= id {
-                        return Err(GridError::Unsorted(at + i));
-                    }
-                    let page = PagedBits::page_of(id);
-                    if pages.last() != Some(&page) {
-                        pages.push(page);
-                    }
-                }
-                Ok(pages)
-            })
-            .collect::<Result<Vec<_>, GridError>>()?;
-        let mut pages: Vec<u32> = Vec::with_capacity(listed.iter().map(Vec::len).sum());
-        for page in listed.into_iter().flatten() {
-            if pages.last() != Some(&page) {
-                pages.push(page);
-            }
-        }
-        let words = count.div_ceil(64) as usize;
-        let bits = PagedBits::with_pages(words, &pages, |stored, place| {
-            // Each stretch's ids span the stored words `place(first / 64) ..= place(last /
-            // 64)`; the words strictly between those two are its own, set in place.
-            let mut owned = Vec::with_capacity(stretches.len());
-            let mut rest: &mut [u64] = stored;
-            let mut taken = 0;
-            for &(_, ids) in &stretches {
-                let (Some(&first), Some(&last)) = (ids.first(), ids.last()) else {
-                    owned.push(&mut [][..]);
-                    continue;
-                };
-                let (lo, hi) = (
-                    place((first / 64) as usize) + 1,
-                    place((last / 64) as usize),
-                );
-                if lo >= hi || lo < taken || hi > taken + rest.len() {
-                    owned.push(&mut [][..]);
-                    continue;
-                }
-                let (_, tail) = std::mem::take(&mut rest).split_at_mut(lo - taken);
-                let (own, tail) = tail.split_at_mut(hi - lo);
-                owned.push(own);
-                rest = tail;
-                taken = hi;
-            }
-            let ends: Vec<[(usize, u64); 2]> = stretches
-                .par_iter()
-                .zip(owned)
-                .map(|(&(_, ids), own)| {
-                    let (Some(&first), Some(&last)) = (ids.first(), ids.last()) else {
-                        return [(0, 0); 2];
-                    };
-                    let (lo, hi) = (place((first / 64) as usize), place((last / 64) as usize));
-                    let mut edge = [(lo, 0u64), (hi, 0u64)];
-                    // The stored place of the last flat word met (ids increase).
-                    let (mut flat, mut word) = (usize::MAX, 0);
-                    for &id in ids {
-                        if (id / 64) as usize != flat {
-                            flat = (id / 64) as usize;
-                            word = place(flat);
-                        }
-                        let bit = 1u64 << (id % 64);
-                        if word == lo {
-                            edge[0].1 |= bit;
-                        } else if word == hi {
-                            edge[1].1 |= bit;
-                        } else if let Some(w) = own.get_mut(word - lo - 1) {
-                            *w |= bit;
-                        }
-                    }
-                    edge
-                })
-                .collect();
-            for (word, w) in ends.into_iter().flatten() {
-                if let Some(b) = stored.get_mut(word) {
-                    *b |= w;
-                }
-            }
-        });
-        Ok(Self::from_paged(dims, bits))
     }
 
     fn from_paged(dims: [u32; 3], bits: PagedBits) -> Self {
@@ -864,8 +754,7 @@ mod tests {
             .filter(|&id| (id / 2500) % 7 == 0 && id.wrapping_mul(2654435761) >> 30 != 0)
             .collect();
         let cuts = [0, 1, 30, 700, 701, 5000, 90_000, 90_000, 200_000, ids.len()];
-        let parts: Vec<&[u32]> = cuts.windows(2).map(|c| &ids[c[0]..c[1]]).collect();
-        let grid = SparseGrid::from_sorted_parts(dims, &parts).unwrap();
+        let grid = SparseGrid::from_bit_parts(dims, bit_parts(&ids, &cuts)).unwrap();
         assert_eq!(grid.len(), ids.len());
         let mut flat = vec![0u64; (dims.iter().product::<u32>() as usize).div_ceil(64)];
         for &id in &ids {
@@ -896,58 +785,6 @@ mod tests {
         all.sort_unstable();
         assert_eq!(joined.ids().collect::<Vec<_>>(), all);
         assert_eq!(joined.rank(all[40_000]), Some(40_000));
-    }
-
-    #[test]
-    fn a_grid_from_parts_is_the_grid_of_its_ids_joined() {
-        // Parts of every size around the 64-bit words and the stretches of 2^20 ids, empty
-        // ones among them, sharing words where they meet: the same bitmap as a plain set of
-        // bits, and the joined list's errors.
-        let dims = [300u32, 200, 40];
-        let ids: Vec<u32> = (0..dims.iter().product::<u32>())
-            .filter(|&id| (id.wrapping_mul(2654435761) >> 29) != 0 || id % 64 == 63)
-            .collect();
-        assert!(ids.len() > 1 << 21);
-        let cuts = [
-            0,
-            0,
-            1,
-            63,
-            64,
-            65,
-            5000,
-            1 << 20,
-            (1 << 20) + 7,
-            2_000_000,
-            ids.len(),
-        ];
-        let parts: Vec<&[u32]> = cuts.windows(2).map(|c| &ids[c[0]..c[1]]).collect();
-        let grid = SparseGrid::from_sorted_parts(dims, &parts).unwrap();
-        let mut bits = vec![0u64; (dims.iter().product::<u32>() as usize).div_ceil(64)];
-        for &id in &ids {
-            bits[id as usize / 64] |= 1 << (id % 64);
-        }
-        let words: Vec<u64> = (0..bits.len()).map(|w| grid.bits.word(w)).collect();
-        assert_eq!(words, bits);
-        assert_eq!(grid.bits.len(), bits.len());
-        assert_eq!(grid.len(), ids.len());
-        assert_eq!(grid.rank(ids[1 << 20]), Some(1 << 20));
-        // An id repeated where two parts meet, past an empty part; one out of the grid in the
-        // last part.
-        let (a, b) = (&ids[..100], &ids[99..200]);
-        assert_eq!(
-            SparseGrid::from_sorted_parts(dims, &[a, &[], b]).unwrap_err(),
-            GridError::Unsorted(100)
-        );
-        let far = [ids[0], dims.iter().product::<u32>()];
-        assert!(matches!(
-            SparseGrid::from_sorted_parts(dims, &[&ids[..5], &[], &far[1..]]).unwrap_err(),
-            GridError::IdOutOfRange { .. }
-        ));
-        assert_eq!(
-            SparseGrid::from_sorted_parts(dims, &[&ids[..5], &ids[7..9], &ids[8..9]]).unwrap_err(),
-            GridError::Unsorted(7)
-        );
     }
 
     /// The ids of `ids` cut at `cuts` into bit parts.
@@ -996,9 +833,12 @@ mod tests {
         for i in [0, 1, 64, 1000, ids.len() / 2, ids.len() - 1] {
             assert_eq!(grid.rank(ids[i]), Some(i as u32));
         }
-        // Only the pages holding an id are stored, as from the list.
-        let listed = SparseGrid::from_sorted_ids(dims, &ids).unwrap();
-        assert_eq!(grid.bitmap_bytes(), listed.bitmap_bytes());
+        // Only the pages (1024 voxels) holding an id are stored: their words and their ranks
+        // (8 and 2 bytes a word), a rank each, and the table of every page.
+        let mut pages: Vec<u32> = ids.iter().map(|id| id / 1024).collect();
+        pages.dedup();
+        let table = (dims.iter().product::<u32>() as usize).div_ceil(1024);
+        assert_eq!(grid.bitmap_bytes(), pages.len() * (16 * 10 + 4) + table * 4);
         // An empty grid, from no part and from empty parts.
         assert!(
             SparseGrid::from_bit_parts(dims, Vec::new())

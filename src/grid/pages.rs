@@ -63,24 +63,6 @@ impl PagedBits {
         Self::indexed(len, table, words)
     }
 
-    /// Bits over `len` words with the pages `pages` (strictly increasing page numbers) stored,
-    /// all clear, and `fill` called to set them: with the stored words and the place of flat
-    /// word `w` among them (`w` in a stored page). The rank index is made afterwards.
-    pub(super) fn with_pages(
-        len: usize,
-        pages: &[u32],
-        fill: impl FnOnce(&mut [u64], &(dyn Fn(usize) -> usize + Sync)),
-    ) -> Self {
-        let mut table = vec![EMPTY; len.div_ceil(PAGE_WORDS)];
-        for (slot, &p) in pages.iter().enumerate() {
-            table[p as usize] = slot as u32;
-        }
-        let mut words = vec![0u64; pages.len() * PAGE_WORDS];
-        let place = |w: usize| table[w / PAGE_WORDS] as usize * PAGE_WORDS + w % PAGE_WORDS;
-        fill(&mut words, &place);
-        Self::indexed(len, table, words)
-    }
-
     /// The bits of `parts` laid end to end over `len` words: each part's ids must lie past
     /// the ones before it ([`BitsPart::first`] above the last part's [`BitsPart::last`]), and
     /// only a part's first page may be the page the part before it ended in. The parts are
@@ -290,13 +272,16 @@ mod tests {
         for w in 0..len + 3 {
             assert_eq!(bits.word(w), flat(len, &ids).get(w).copied().unwrap_or(0));
         }
-        // Made page by page from a list of its pages, the same bits.
-        let pages: Vec<u32> = stored.iter().map(|&p| p as u32).collect();
-        let made = PagedBits::with_pages(len, &pages, |words, place| {
-            for &id in &ids {
-                words[place(id as usize / 64)] |= 1 << (id % 64);
+        // Made from parts, one of them cut inside a page, the same bits.
+        let parts = [&ids[..2], &ids[2..]].map(|ids| {
+            let mut part = BitsPart::default();
+            for &id in ids {
+                part.push(id);
             }
+            part
         });
+        assert_eq!(PagedBits::page_of(ids[1]), PagedBits::page_of(ids[2]));
+        let made = PagedBits::from_parts(len, parts.into());
         assert_eq!(made.words, bits.words);
         assert_eq!(made.table, bits.table);
         assert_eq!(made.word_rank, bits.word_rank);
