@@ -166,7 +166,8 @@ struct VolumeState {
     /// How many times finer than `volume`'s the grid is along each axis.
     factors: [u32; 3],
     /// How many times the grid was halved along each axis (a level of detail above the own
-    /// grid, whose texels are made from the level below's when the level is).
+    /// grid, whose texels are made from the level below's as their bricks are first read or
+    /// drawn).
     levels: [u8; 3],
     /// The frame that last drew this grid or made a level from it (levels halved along some
     /// axes more than others are dropped, least recently used first, past
@@ -177,12 +178,14 @@ struct VolumeState {
     classified: Arc<Classified>,
     /// The GPU copy, made on the first frame the splat pass draws it.
     gpu: Option<GpuVolume>,
-    /// The colours and normals of the CPU tile compositor, made on its first frame.
-    texels: Option<SplatTexels>,
+    /// The colours and normals of the CPU tile compositor, laid out on its first frame (or
+    /// when a level is made from this grid) and written as their bricks are first read;
+    /// shared with the texels of the levels made from them.
+    texels: Option<Arc<SplatTexels>>,
     /// The texels of the refinement this one was joined from, until this one's are made:
     /// they take over its normals ([`SplatTexels::adopt_normals`]). They hold that
     /// refinement's classification too, for the colours of the bricks they never wrote.
-    adopted: Option<SplatTexels>,
+    adopted: Option<Arc<SplatTexels>>,
     orderer: Orderer,
     ids: Vec<u32>,
     /// The view class `ids` was ordered for, where a view of the same class may reuse it.
@@ -369,7 +372,7 @@ impl VolumeState {
         if let Some(previous) = self.adopted.take() {
             texels.adopt_normals(&previous);
         }
-        self.texels = Some(texels);
+        self.texels = Some(Arc::new(texels));
         started.elapsed()
     }
 
@@ -451,15 +454,13 @@ fn lay_over(frame: &mut [[f32; 4]], layer: &[[f32; 4]], rect: PixelRect, width: 
 
 /// The level above `below` made by halving its grid along `axes` (its levels then `levels`;
 /// `front` where the one axis halved runs along the view):
-/// its classification combined ([`Classified::halved_along`]) and its texels made from the
-/// level below's ([`SplatTexels::halved`]; where the level below has none yet, from its
-/// texels made one by one from the volume and not held, [`SplatTexels::halved_from`]).
-/// `None` where the level would have no splat. Gives up with
-/// [`crate::grid::GridError::Cancelled`] once `cancel` is raised: looked at within the
-/// classification's halving, before the texels, within the making of the normals of the
-/// level below and within the texels' own making.
+/// its classification combined ([`Classified::halved_along`]) and its texels laid out, to be
+/// made from the level below's as their bricks are first read ([`SplatTexels::halved`]; the
+/// level below's texels laid out first where they are not yet). `None` where the level would
+/// have no splat. Gives up with [`crate::grid::GridError::Cancelled`] once `cancel` is raised:
+/// looked at within the classification's halving and within the texels' layout.
 fn make_level(
-    below: &VolumeState,
+    below: &mut VolumeState,
     axes: [bool; 3],
     front: Option<Front>,
     levels: [u8; 3],
@@ -475,33 +476,7 @@ fn make_level(
         return Err(crate::grid::GridError::Cancelled);
     }
     let step = axes.map(|h| if h { 2 } else { 1 });
-    // From the level below's texels where it has them; else each made as it is asked for,
-    // from the volume, none held (the level below's are made once it is drawn itself).
-    let texels = match &below.texels {
-        Some(fine) => {
-            // Every texel below is read: their normals made brick by brick in parallel first,
-            // in the bricks' own order.
-            if !fine.complete_unless_cancelled(cancel) {
-                return Err(crate::grid::GridError::Cancelled);
-            }
-            fine.halved(&classified, step, front, cancel)
-        }
-        None => {
-            let grid = &below.classified.grid;
-            let [nx, ny, nz] = grid.dims();
-            let fine = |x: u32, y: u32, z: u32| {
-                if x >= nx || y >= ny || z >= nz {
-                    return None;
-                }
-                let rank = grid.rank(x + nx * (y + ny * z))?;
-                Some(below.texel([x, y, z], rank as usize))
-            };
-            SplatTexels::halved_from(fine, &classified, step, front, cancel)
-        }
-    };
-    let Some(texels) = texels else {
-        return Err(crate::grid::GridError::Cancelled);
-    };
+    below.make_texels();
     let mut state = VolumeState::new(
         below.key,
         Arc::clone(&below.volume),
@@ -510,8 +485,14 @@ fn make_level(
         Orderer::new(),
         Vec::new(),
     );
+    let Some(fine) = &below.texels else {
+        unreachable!("the level below's texels were just laid out")
+    };
+    let Some(texels) = fine.halved(&state.classified, step, front, cancel) else {
+        return Err(crate::grid::GridError::Cancelled);
+    };
     state.levels = levels;
-    state.texels = Some(texels);
+    state.texels = Some(Arc::new(texels));
     Ok(Some(state))
 }
 
@@ -1777,6 +1758,55 @@ impl Renderer {
                     texels += state.make_texels();
                 }
             }
+            // The texels of the bricks drawn at a level, made in parallel before the frame
+            // composites where they are not made yet (a level made for this view, or a brick
+            // come to want a level): made as the projection reads them, the two threads
+            // wait at each batch's end for whichever met more of them, and a level's
+            // bricks took 2-3 times as long (BENCHMARKS.md, "Levels' texels made for the
+            // bricks drawn at them"). The own grid's are still made as they are read: most
+            // of a dense volume's are hidden.
+            let Some(mix) = mixes.get(id) else {
+                let level = levels.get(id).copied().unwrap_or_default();
+                if let (Detail::Level(..), Some(state)) = (level, volumes.get(&(*id, level)))
+                    && let Some(level_texels) = &state.texels
+                {
+                    let started = Instant::now();
+                    let whole = state.classified.grid.dims().map(|n| (0, n));
+                    if level_texels.complete_within(&[whole]) > 0 {
+                        texels += started.elapsed();
+                    }
+                }
+                continue;
+            };
+            {
+                let (started, mut made) = (Instant::now(), 0);
+                for detail in mix.details() {
+                    let Detail::Level(halvings, _) = detail else {
+                        continue;
+                    };
+                    let Some(level_texels) =
+                        volumes.get(&(*id, detail)).and_then(|s| s.texels.as_ref())
+                    else {
+                        continue;
+                    };
+                    let boxes: Vec<[(u32, u32); 3]> = (mix.bricks.iter())
+                        .filter(|(_, d)| *d == detail)
+                        .map(|(b, _)| {
+                            std::array::from_fn(|a| {
+                                let step = 1u32 << halvings[a];
+                                (
+                                    (b[a] * BRICK).div_ceil(step),
+                                    ((b[a] + 1) * BRICK).div_ceil(step),
+                                )
+                            })
+                        })
+                        .collect();
+                    made += level_texels.complete_within(&boxes);
+                }
+                if made > 0 {
+                    texels += started.elapsed();
+                }
+            }
         }
         // Sources (a grid's projection and texels) and runs of splats, far to near.
         let mut sources = Vec::new();
@@ -1791,7 +1821,8 @@ impl Renderer {
                 let Some(state) = volumes.get(&(*id, detail)) else {
                     continue;
                 };
-                let (Some(texels), Ok(geometry)) = (&state.texels, state.geometry(world)) else {
+                let (Some(texels), Ok(geometry)) = (state.texels.as_deref(), state.geometry(world))
+                else {
                     continue;
                 };
                 let projection = projection(&geometry, view, &node.splats, &scene.clipping);
@@ -1908,9 +1939,8 @@ impl Renderer {
     }
 
     /// Makes the texels of volume `id`'s own grid, where they are not made yet, for a frame
-    /// that draws it: before levels are halved from it, since a level halved from a grid
-    /// without texels makes each of the grid's texels one by one from the volume, about 8
-    /// times slower (1 s against 0.5 s for a level of the 0.5 mm CT head).
+    /// that draws it. (A level halved from a grid lays out that grid's texels itself, and
+    /// reads them as its own bricks are made.)
     fn make_own_texels(&mut self, id: NodeId, report: &mut FrameReport) {
         if let Some(state) = self.volumes.get_mut(&(id, Detail::default())) {
             report.timings.texels += state.make_texels();

@@ -53,13 +53,104 @@ pub struct SplatTexels {
 }
 
 /// The texels of a grid, made a unit of bricks at a time as the unit is first read: their
-/// colours and densities from the classification, their normals from the gradients.
+/// colours and densities from the classification, their normals from `source`.
 #[derive(Debug)]
 struct LazyNormals {
     classified: Arc<Classified>,
-    gradients: RefinedGradients,
+    source: NormalSource,
     /// Per unit of [`NORMAL_UNIT`] bricks along x: [`NOT_MADE`], [`MAKING`] or [`MADE`].
     state: Vec<AtomicU8>,
+}
+
+/// Where the normals of texels made as they are read come from.
+#[derive(Debug)]
+enum NormalSource {
+    /// The gradients of the volume the grid was classified from ([`SplatTexels::new`]).
+    Gradients(RefinedGradients),
+    /// The texels of the level below, block by block ([`SplatTexels::halved`]).
+    Halved(HalvedFrom),
+}
+
+/// The level below a level's texels, and how a block of it becomes one of the level's
+/// normals ([`SplatTexels::halved`]).
+#[derive(Debug)]
+struct HalvedFrom {
+    /// The level below's texels; the bricks of them a block reads are made as they are read
+    /// in turn, so a chain of levels makes only what the bricks drawn need. A brick's unit
+    /// of the level is made while the units below it are, never the other way round, so the
+    /// threads waiting on each other's units never wait in a circle.
+    fine: Arc<SplatTexels>,
+    /// 2 along each axis halved, else 1.
+    step: [u32; 3],
+    /// A front along the one axis halved, else none.
+    front: Option<Front>,
+    /// With a front, each voxel's opacity along it by the bits of its density.
+    alphas: Vec<f32>,
+}
+
+impl HalvedFrom {
+    /// The normal of voxel `k` of the level: the mean of its block's normals with the weights
+    /// its colour had, as [`SplatTexels::halved`] says; `None` where they cancel.
+    fn normal(&self, k: [u32; 3]) -> Option<[u8; 3]> {
+        let step = self.step;
+        let bits = |t: &[u8; 8]| u16::from_le_bytes([t[6], t[7]]);
+        let alpha = |t: &[u8; 8]| {
+            (self.alphas.get(usize::from(bits(t))))
+                .copied()
+                .unwrap_or(0.0)
+        };
+        let normal = |t: &[u8; 8]| {
+            glam::Vec3::new(
+                f32::from(t[3] as i8),
+                f32::from(t[4] as i8),
+                f32::from(t[5] as i8),
+            )
+        };
+        let fine = |d: [u32; 3]| {
+            let [x, y, z] = std::array::from_fn(|a| k[a] * step[a] + d[a]);
+            self.fine.get(x, y, z)
+        };
+        let sum = match self.front {
+            Some(front) => {
+                // The pair along the axis, nearer first, weighted as a ray composites them.
+                let mut ends = [[0; 3]; 2];
+                ends[usize::from(!front.larger_nearer)][front.axis] = 1;
+                let [near, far] = ends.map(&fine);
+                let near_alpha = near.as_ref().map_or(0.0, alpha);
+                let mut normals = [(0.0, glam::Vec3::ZERO); 2];
+                if let Some(t) = &near {
+                    normals[0] = (near_alpha, normal(t));
+                }
+                if let Some(t) = &far {
+                    normals[1] = ((1.0 - near_alpha) * alpha(t), normal(t));
+                }
+                shading_normal(&normals, front.axis)
+            }
+            None => {
+                let mut weighted = [(0.0, glam::Vec3::ZERO); 8];
+                let mut n = 0;
+                for dz in 0..step[2] {
+                    for dy in 0..step[1] {
+                        for dx in 0..step[0] {
+                            if let Some(t) = fine([dx, dy, dz]) {
+                                weighted[n] = (texel_density(bits(&t)), normal(&t));
+                                n += 1;
+                            }
+                        }
+                    }
+                }
+                one_sided_sum(&weighted[..n])
+            }
+        };
+        snorm8(sum * glam::Vec3::from(step.map(|s| s as f32)))
+    }
+}
+
+/// A texel's density from its f16 bits, as the colours' halving takes it: opaque voxels
+/// count as the largest half, and a NaN as nothing.
+fn texel_density(bits: u16) -> f32 {
+    let d = half::f16::from_bits(bits).to_f32();
+    if d.is_nan() { 0.0 } else { d.min(65504.0) }
 }
 
 /// Bricks along x whose normals are made together: neighbouring bricks along x read the
@@ -109,7 +200,7 @@ impl SplatTexels {
         };
         texels.normals = Some(LazyNormals {
             classified: Arc::clone(classified),
-            gradients: RefinedGradients::new(Arc::clone(volume), factors),
+            source: NormalSource::Gradients(RefinedGradients::new(Arc::clone(volume), factors)),
             state: (0..texels.brick_rows() * texels.units_x())
                 .map(|_| AtomicU8::new(NOT_MADE))
                 .collect(),
@@ -136,6 +227,48 @@ impl SplatTexels {
             });
         }
         !parts.skipped()
+    }
+
+    /// Makes, in parallel, the normals not made yet of the units of bricks that hold a voxel
+    /// of any of `boxes` (each a half-open range of voxels along each axis): the bricks a
+    /// frame is about to read, made before it rather than as its projection reads them.
+    /// Returns how many units it made.
+    pub fn complete_within(&self, boxes: &[[(u32, u32); 3]]) -> usize {
+        let Some(lazy) = &self.normals else {
+            return 0;
+        };
+        let brick_dims = [
+            self.bricks[0],
+            self.bricks[1],
+            self.dims[2].div_ceil(BRICK as u32) as usize,
+        ];
+        let units_x = self.units_x();
+        let made = |u: usize| {
+            lazy.state
+                .get(u)
+                .is_none_or(|s| s.load(Ordering::Acquire) == MADE)
+        };
+        let mut units: Vec<usize> = boxes
+            .par_iter()
+            .flat_map_iter(|b| {
+                let range = |a: usize| {
+                    let (lo, hi) = (b[a].0 as usize / BRICK, (b[a].1 as usize).div_ceil(BRICK));
+                    lo..hi.min(brick_dims[a])
+                };
+                let (xs, ys, zs) = (range(0), range(1), range(2));
+                let units = xs.start / NORMAL_UNIT..xs.end.div_ceil(NORMAL_UNIT);
+                zs.flat_map(move |bz| ys.clone().map(move |by| (by, bz)))
+                    .flat_map(move |(by, bz)| {
+                        let row = bz * brick_dims[1] + by;
+                        units.clone().map(move |ux| row * units_x + ux)
+                    })
+                    .filter(|&u| !made(u))
+            })
+            .collect();
+        units.par_sort_unstable();
+        units.dedup();
+        units.par_iter().for_each(|&u| self.ensure_unit(u, lazy));
+        units.len()
     }
 
     /// Rows of bricks along x, all layers.
@@ -292,92 +425,42 @@ impl SplatTexels {
     /// `front`, the opacities as a ray composites them), taken into the coarser
     /// grid's index space (a gradient's component along an axis halved doubles) and made unit
     /// again: the block's surface, with no volume resampled for it. No normal where the
-    /// block's cancel. Given up (`None`, nothing kept) once `cancel` is raised, looked at
-    /// page by page.
+    /// block's cancel.
+    ///
+    /// Laid out at once and written as each brick is first read, like the texels of
+    /// [`SplatTexels::new`]: a brick's texels read the texels below of its blocks, which are
+    /// then made in turn where they are not made yet. A level made for a turned view then
+    /// makes only the bricks it draws and does not hide, and none of the grid below that
+    /// those do not cover. Given up (`None`, nothing kept) once `cancel` is raised, looked at
+    /// while the layout is surveyed.
     pub fn halved(
-        &self,
-        above: &Classified,
+        self: &Arc<Self>,
+        above: &Arc<Classified>,
         step: [u32; 3],
         front: Option<Front>,
         cancel: Option<&AtomicBool>,
     ) -> Option<Self> {
-        Self::halved_from(|x, y, z| self.get(x, y, z), above, step, front, cancel)
-    }
-
-    /// [`SplatTexels::halved`] from the texels `fine(x, y, z)` of the level below (`None`
-    /// where a voxel is not significant), made as they are asked for rather than held.
-    pub fn halved_from(
-        fine: impl Fn(u32, u32, u32) -> Option<[u8; 8]> + Sync,
-        above: &Classified,
-        step: [u32; 3],
-        front: Option<Front>,
-        cancel: Option<&AtomicBool>,
-    ) -> Option<Self> {
-        let scale = glam::Vec3::from(step.map(|s| s as f32));
         // As in the colours: a front along the one axis halved, else none.
         let front = front.filter(|f| f.axis < 3 && (0..3).all(|a| (step[a] == 2) == (a == f.axis)));
-        let density = |bits: u16| {
-            let d = half::f16::from_bits(bits).to_f32();
-            // Opaque voxels count as the largest half, as in the colours.
-            if d.is_nan() { 0.0 } else { d.min(65504.0) }
-        };
-        let bits = |t: &[u8; 8]| u16::from_le_bytes([t[6], t[7]]);
         // The opacity along the front by the density's bits, tabulated once.
         let alphas: Vec<f32> = match front {
-            Some(f) => (0..=u16::MAX).map(|b| f.alpha(density(b))).collect(),
+            Some(f) => (0..=u16::MAX).map(|b| f.alpha(texel_density(b))).collect(),
             None => Vec::new(),
         };
-        let alpha = |t: &[u8; 8]| alphas.get(usize::from(bits(t))).copied().unwrap_or(0.0);
-        let normal = |t: &[u8; 8]| {
-            glam::Vec3::new(
-                f32::from(t[3] as i8),
-                f32::from(t[4] as i8),
-                f32::from(t[5] as i8),
-            )
-        };
-        let texel = |k: [u32; 3], rank: usize| {
-            let c = above.colors.get(rank).copied().unwrap_or_default();
-            let fine = |d: [u32; 3]| {
-                let [x, y, z] = std::array::from_fn(|a| k[a] * step[a] + d[a]);
-                fine(x, y, z)
-            };
-            let sum = match front {
-                Some(front) => {
-                    // The pair along the axis, nearer first, weighted as a ray composites them.
-                    let mut ends = [[0; 3]; 2];
-                    ends[usize::from(!front.larger_nearer)][front.axis] = 1;
-                    let [near, far] = ends.map(&fine);
-                    let near_alpha = near.as_ref().map_or(0.0, alpha);
-                    let mut normals = [(0.0, glam::Vec3::ZERO); 2];
-                    if let Some(t) = &near {
-                        normals[0] = (near_alpha, normal(t));
-                    }
-                    if let Some(t) = &far {
-                        normals[1] = ((1.0 - near_alpha) * alpha(t), normal(t));
-                    }
-                    shading_normal(&normals, front.axis)
-                }
-                None => {
-                    let mut weighted = [(0.0, glam::Vec3::ZERO); 8];
-                    let mut n = 0;
-                    for dz in 0..step[2] {
-                        for dy in 0..step[1] {
-                            for dx in 0..step[0] {
-                                if let Some(t) = fine([dx, dy, dz]) {
-                                    weighted[n] = (density(bits(&t)), normal(&t));
-                                    n += 1;
-                                }
-                            }
-                        }
-                    }
-                    one_sided_sum(&weighted[..n])
-                }
-            };
-            let n = snorm8(sum * scale).unwrap_or([0; 3]);
-            let d = c.density.to_bits().to_le_bytes();
-            [c.rgb[0], c.rgb[1], c.rgb[2], n[0], n[1], n[2], d[0], d[1]]
-        };
-        Self::build_unless_cancelled(&above.grid, Some(texel), cancel)
+        let mut texels = Self::build_unless_cancelled(&above.grid, None::<Texel>, cancel)?;
+        texels.normals = Some(LazyNormals {
+            classified: Arc::clone(above),
+            source: NormalSource::Halved(HalvedFrom {
+                fine: Arc::clone(self),
+                step,
+                front,
+                alphas,
+            }),
+            state: (0..texels.brick_rows() * texels.units_x())
+                .map(|_| AtomicU8::new(NOT_MADE))
+                .collect(),
+        });
+        Some(texels)
     }
 
     /// The texel of voxel `(x, y, z)`: straight RGB8, the gradient as snorm8, the density's
@@ -386,8 +469,15 @@ impl SplatTexels {
     #[inline]
     pub fn get(&self, x: u32, y: u32, z: u32) -> Option<[u8; 8]> {
         let (brick, i) = self.index(x, y, z)?;
-        self.ensure_normals(brick);
         let texel = self.texels.get(i)?;
+        // A texel written is never zero (a significant voxel's density is not), and is
+        // written whole by one store: read first, its unit's state is looked at only while
+        // it is zero.
+        let read = texel.load(Ordering::Relaxed);
+        if read != 0 {
+            return Some(read.to_le_bytes());
+        }
+        self.ensure_normals(brick);
         Some(texel.load(Ordering::Relaxed).to_le_bytes())
     }
 
@@ -449,7 +539,10 @@ impl SplatTexels {
     /// bricks), or waits while another thread makes them.
     #[cold]
     fn make_normals(&self, u: usize, lazy: &LazyNormals) {
-        self.fill_unit(u, lazy, |k| lazy.gradients.snorm8(k));
+        match &lazy.source {
+            NormalSource::Gradients(gradients) => self.fill_unit(u, lazy, |k| gradients.snorm8(k)),
+            NormalSource::Halved(below) => self.fill_unit(u, lazy, |k| below.normal(k)),
+        }
     }
 
     /// Takes over the normals that `previous` made, where this grid was joined from
@@ -459,19 +552,24 @@ impl SplatTexels {
     /// and any other (of the bricks joined) having its own made, so that a joined refinement
     /// does not make its gradients again (on the LIDC2 CT refined 2 x 2 x 3, a hundred
     /// milliseconds of each turned frame). Nothing where the two grids differ in size, in
-    /// volume or in factors, or where either makes no normals lazily.
+    /// volume or in factors, or where either makes no normals lazily from a volume's gradients.
     pub fn adopt_normals(&self, previous: &SplatTexels) {
         let (Some(lazy), Some(old)) = (&self.normals, &previous.normals) else {
             return;
         };
-        if previous.dims != self.dims || !lazy.gradients.same_field(&old.gradients) {
+        let (NormalSource::Gradients(gradients), NormalSource::Gradients(old_gradients)) =
+            (&lazy.source, &old.source)
+        else {
+            return;
+        };
+        if previous.dims != self.dims || !gradients.same_field(old_gradients) {
             return;
         }
         let normal = |k: [u32; 3]| match previous.index(k[0], k[1], k[2]) {
             Some((_, i)) => (previous.texels.get(i))
                 .map(|t| t.load(Ordering::Relaxed).to_le_bytes())
                 .and_then(|t| (t[3..6] != [0; 3]).then(|| [t[3], t[4], t[5]])),
-            None => lazy.gradients.snorm8(k),
+            None => gradients.snorm8(k),
         };
         (0..lazy.state.len()).into_par_iter().for_each(|u| {
             if (old.state.get(u)).is_some_and(|s| s.load(Ordering::Acquire) == MADE)
@@ -877,6 +975,135 @@ mod tests {
         }
     }
 
+    #[test]
+    fn a_levels_texels_are_made_as_read_from_the_bricks_below_them_alone() {
+        // A field with structure along every axis, two thirds of its voxels significant; a
+        // level halved along every axis from its lazily made texels, and one above that
+        // halved along z with a front. Nothing of any of the three is written before a read;
+        // a read of the top level's last layer of bricks makes no texel of the grids below
+        // outside the blocks under that layer; texels read by threads in parallel, in a
+        // scattered order, from nothing made equal those read after every grid below was
+        // completed first; and the first level's normals are the one-sided, density-weighted
+        // sums of their blocks' normals, computed plainly here.
+        let dims = [21u32, 19, 40];
+        let volume = structured_field(dims);
+        let (classified, _) = two_thirds_classified(dims);
+        let front = Front {
+            axis: 2,
+            larger_nearer: false,
+            step_mm: 2.0,
+        };
+        let chain = || {
+            let own = Arc::new(SplatTexels::new(&classified, &volume, [1; 3]));
+            let one = Arc::new(classified.halved_along([true; 3], None).unwrap());
+            let two = Arc::new(one.halved_along([false, false, true], Some(front)).unwrap());
+            let first = Arc::new(own.halved(&one, [2; 3], None, None).unwrap());
+            let second = first.halved(&two, [1, 1, 2], Some(front), None).unwrap();
+            (own, first, second, one, two)
+        };
+        let written = |t: &SplatTexels, k: [u32; 3]| {
+            t.index(k[0], k[1], k[2])
+                .is_some_and(|(_, i)| t.texels[i].load(Ordering::Relaxed) != 0)
+        };
+        let (own, first, second, one, two) = chain();
+        for t in [&*own, &*first, &second] {
+            assert!(t.texels.iter().all(|t| t.load(Ordering::Relaxed) == 0));
+        }
+        // The top level is 11 x 10 x 10 voxels: its last layer of bricks holds z 8 and 9,
+        // over z 16-19 of the first level and z 32-39 of the own grid.
+        let top: Vec<[u32; 3]> = two
+            .grid
+            .ids()
+            .map(|id| two.grid.coords(id))
+            .filter(|k| k[2] >= 8)
+            .collect();
+        assert!(!top.is_empty());
+        for k in &top {
+            assert!(second.get(k[0], k[1], k[2]).is_some());
+        }
+        let own_written: Vec<[u32; 3]> = (classified.grid.ids())
+            .map(|id| classified.grid.coords(id))
+            .filter(|&k| written(&own, k))
+            .collect();
+        assert!(
+            !own_written.is_empty(),
+            "the blocks under the layer were made"
+        );
+        assert!(
+            own_written.iter().all(|k| k[2] >= 32),
+            "{:?}",
+            own_written[0]
+        );
+        assert!(
+            (one.grid.ids())
+                .map(|id| one.grid.coords(id))
+                .all(|k| !written(&first, k) || k[2] >= 16)
+        );
+        // From nothing, in parallel and scattered; and after completing every grid below.
+        let (own_a, first_a, second_a, _, _) = chain();
+        let ids: Vec<u32> = two.grid.ids().collect();
+        let scattered: Vec<u32> = (0..ids.len() * 4)
+            .map(|i| ids[(i * 7919) % ids.len()])
+            .collect();
+        let read = |t: &SplatTexels, id: u32| {
+            let k = two.grid.coords(id);
+            t.get(k[0], k[1], k[2])
+        };
+        let in_parallel: Vec<_> = scattered
+            .par_iter()
+            .map(|&id| read(&second_a, id))
+            .collect();
+        own.complete();
+        first.complete();
+        for (&id, got) in scattered.iter().zip(&in_parallel) {
+            assert_eq!(*got, read(&second, id), "{:?}", two.grid.coords(id));
+        }
+        drop((own_a, first_a));
+        // The first level's normals, plainly.
+        let mut with_normals = 0;
+        for id in one.grid.ids() {
+            let k = one.grid.coords(id);
+            let t = first.get(k[0], k[1], k[2]).unwrap();
+            let mut block = Vec::new();
+            for d in 0..8u32 {
+                let c = [
+                    k[0] * 2 + (d & 1),
+                    k[1] * 2 + (d >> 1 & 1),
+                    k[2] * 2 + (d >> 2),
+                ];
+                if let Some(f) = own.get(c[0], c[1], c[2]) {
+                    let n = Vec3::new(f[3] as i8 as f32, f[4] as i8 as f32, f[5] as i8 as f32);
+                    let density = half::f16::from_bits(u16::from_le_bytes([f[6], f[7]]));
+                    block.push((density.to_f32(), n));
+                }
+            }
+            // The heaviest normal; of two as heavy, the later one.
+            let heaviest = block
+                .iter()
+                .fold((0.0f32, Vec3::ZERO), |best, &(w, n)| {
+                    if w * n.length() >= best.0 {
+                        (w * n.length(), n)
+                    } else {
+                        best
+                    }
+                })
+                .1;
+            let sum: Vec3 = block
+                .iter()
+                .map(|&(w, n)| w * n * n.dot(heaviest).signum())
+                .sum::<Vec3>()
+                * 2.0;
+            let got = Vec3::new(t[3] as i8 as f32, t[4] as i8 as f32, t[5] as i8 as f32);
+            if sum.length() < 1e-3 {
+                continue;
+            }
+            with_normals += 1;
+            let want = sum.normalize() * 127.0;
+            assert!((got - want).length() < 2.0, "{k:?}: {got} against {want}");
+        }
+        assert!(with_normals * 2 > one.grid.len(), "{with_normals}");
+    }
+
     /// The shading a normal gets from a headlight along `axis`, as the compositors shade.
     fn lit(n: Vec3, axis: usize) -> f32 {
         n.try_normalize().map_or(1.0, |n| n[axis].abs())
@@ -956,22 +1183,23 @@ mod tests {
                 })
                 .collect(),
         };
-        let texels = SplatTexels::build(&fine.grid, |k, rank| {
+        let texels = Arc::new(SplatTexels::build(&fine.grid, |k, rank| {
             let n = normal(k)
                 .to_array()
                 .map(|v| (v * 127.0).round() as i8 as u8);
             let d = fine.colors[rank].density.to_bits().to_le_bytes();
             [0, 0, 0, n[0], n[1], n[2], d[0], d[1]]
-        });
+        }));
         for larger_nearer in [true, false] {
             let front = Front {
                 axis: 1,
                 larger_nearer,
                 step_mm: 0.7,
             };
-            let coarse = fine
-                .halved_along([false, true, false], Some(front))
-                .unwrap();
+            let coarse = Arc::new(
+                fine.halved_along([false, true, false], Some(front))
+                    .unwrap(),
+            );
             let halved = texels
                 .halved(&coarse, [1, 2, 1], Some(front), None)
                 .expect("no cancel flag");
@@ -1012,7 +1240,7 @@ mod tests {
         let volume = structured_field(dims);
         let (classified, ids) = two_thirds_classified(dims);
         let (raised, lowered) = (AtomicBool::new(true), AtomicBool::new(false));
-        let texels = SplatTexels::new(&classified, &volume, [1; 3]);
+        let texels = Arc::new(SplatTexels::new(&classified, &volume, [1; 3]));
         assert!(!texels.complete_unless_cancelled(Some(&raised)));
         assert!(
             texels.texels.iter().all(|t| t.load(Ordering::Relaxed) == 0),
@@ -1038,7 +1266,7 @@ mod tests {
         );
         for (axes, front) in [([true; 3], None), ([false, false, true], None)] {
             let step = axes.map(|h| if h { 2 } else { 1 });
-            let above = classified.halved_along(axes, front).unwrap();
+            let above = Arc::new(classified.halved_along(axes, front).unwrap());
             assert!(
                 texels.halved(&above, step, front, Some(&raised)).is_none(),
                 "{axes:?}"
