@@ -744,9 +744,7 @@ fn order_mix(
         let geometry = state.geometry(world).map_err(|e| e.to_string())?;
         let case = ViewCase::new(&geometry, eye, target).map_err(|e| e.to_string())?;
         let (halvings, factors) = brick_scale(detail);
-        // A level's voxel `k` lies in brick `floor(k 2^l / BRICK)`, a refinement's in brick
-        // `floor(k / (f BRICK))`: the voxels of brick `b` are those from `ceil(b side / step)`.
-        // A run is walked over the least box of bricks that holds it.
+        // A run is walked over the least box of bricks that holds it ([`bricks_voxels`]).
         let (places, level_runs): (Vec<u32>, Vec<&BrickRun>) = runs
             .iter()
             .enumerate()
@@ -755,16 +753,7 @@ fn order_mix(
             .unzip();
         let boxes: Vec<[(u32, u32); 3]> = level_runs
             .iter()
-            .map(|run| {
-                std::array::from_fn(|a| {
-                    let side = BRICK * factors[a];
-                    let step = 1u32 << halvings[a];
-                    (
-                        (run.lo[a] * side).div_ceil(step),
-                        ((run.hi[a] + 1) * side).div_ceil(step),
-                    )
-                })
-            })
+            .map(|run| bricks_voxels(run.lo, run.hi, (halvings, factors)))
             .collect();
         let (mut ids, mut ends) = (Vec::new(), Vec::new());
         let walked = Orderer::order_boxes(
@@ -823,6 +812,25 @@ fn order_mix(
         }
     }
     Ok(())
+}
+
+/// The voxels of a grid drawn at a detail of `(halvings, factors)` ([`brick_scale`]) that lie
+/// in the own grid's bricks `lo..=hi`, as a half-open range along each axis: a level's voxel
+/// `k` lies in brick `floor(k 2^l / BRICK)`, a refinement's in brick `floor(k / (f BRICK))`,
+/// so the voxels of brick `b` are those from `ceil(b side / step)`.
+fn bricks_voxels(
+    lo: [u32; 3],
+    hi: [u32; 3],
+    (halvings, factors): ([u32; 3], [u32; 3]),
+) -> [(u32, u32); 3] {
+    std::array::from_fn(|a| {
+        let side = BRICK * factors[a];
+        let step = 1u32 << halvings[a];
+        (
+            (lo[a] * side).div_ceil(step),
+            ((hi[a] + 1) * side).div_ceil(step),
+        )
+    })
 }
 
 /// Leaves out of `ids` (voxel ids of a grid of `dims`, refined by `factors` from the own
@@ -1791,15 +1799,7 @@ impl Renderer {
                     };
                     let boxes: Vec<[(u32, u32); 3]> = (mix.bricks.iter())
                         .filter(|(_, d)| *d == detail)
-                        .map(|(b, _)| {
-                            std::array::from_fn(|a| {
-                                let step = 1u32 << halvings[a];
-                                (
-                                    (b[a] * BRICK).div_ceil(step),
-                                    ((b[a] + 1) * BRICK).div_ceil(step),
-                                )
-                            })
-                        })
+                        .map(|(b, _)| bricks_voxels(*b, *b, (halvings.map(u32::from), [1; 3])))
                         .collect();
                     made += level_texels.complete_within(&boxes);
                 }
