@@ -14,16 +14,22 @@ use crate::scene::{Projection, Scene, SceneCamera};
 
 /// The GPU context for drawing `scene`, or none where the CPU can draw the whole scene (volumes
 /// only, with a compositor other than the GPU's) and either the CPU tile compositor is asked
-/// for or there is no adapter (that fallback is said on stderr). Where the CPU tiles are asked
-/// for, no adapter is looked for: Mesa's lavapipe, once loaded, holds about 80 MB and takes 50
-/// ms to start. ([`Compositor::Auto`] must look, to learn whether the adapter is a CPU: the
-/// look alone loads lavapipe.)
+/// for, or [`Compositor::Auto`] is and the machine has no GPU device
+/// ([`GpuContext::hardware_may_exist`]), or there is no adapter (that fallback is said on
+/// stderr). In the first two cases no adapter is looked for: Mesa's lavapipe, once loaded,
+/// holds about 80 MB and takes 50 ms to start. (Where a GPU device exists,
+/// [`Compositor::Auto`] must look, to learn whether the adapter is a CPU.)
 pub fn context_for(
     compositor: Compositor,
     scene: &Scene,
 ) -> Result<Option<GpuContext>, RenderError> {
     let volumes_only = scene.meshes().chain(scene.overlays()).next().is_none();
-    if volumes_only && compositor == Compositor::Cpu {
+    let cpu_alone = match compositor {
+        Compositor::Cpu => true,
+        Compositor::Auto => !GpuContext::hardware_may_exist(),
+        _ => false,
+    };
+    if volumes_only && cpu_alone {
         return Ok(None);
     }
     match GpuContext::headless() {

@@ -65,6 +65,17 @@ impl GpuContext {
         })
     }
 
+    /// Whether this machine may hold a hardware GPU for wgpu to find. On Linux a GPU driver is
+    /// reached through device files (DRM's `/dev/dri/*`, NVIDIA's `/dev/nvidia*`, WSL's
+    /// `/dev/dxg`); where none exists, the only adapter wgpu could find is a CPU (Mesa's
+    /// lavapipe or llvmpipe), so the CPU tiles can be chosen without looking: the look loads
+    /// lavapipe, which then holds about 50 MB of LLVM's code for the rest of the run, even
+    /// with every wgpu object dropped. Elsewhere, and where a device file exists, true: the
+    /// adapter must be looked at.
+    pub fn hardware_may_exist() -> bool {
+        cfg!(not(target_os = "linux")) || gpu_device_files_in(std::path::Path::new("/dev"))
+    }
+
     /// Adapter name, backend and device type, for reports.
     pub fn describe(&self) -> String {
         let info = self.adapter.get_info();
@@ -87,5 +98,58 @@ impl GpuContext {
         Err(RenderError::Device(
             "the GPU did not finish within 10 hours".into(),
         ))
+    }
+}
+
+/// Whether folder `dev` (a Linux `/dev`) holds a device file through which a GPU driver is
+/// reached: anything in `dri/` (DRM's render and card nodes: AMD, Intel, NVIDIA's open and
+/// virtual GPUs), an `nvidia*` file (NVIDIA's driver), `dxg` (WSL's GPU) or `kfd` (AMD's
+/// compute). A folder that cannot be read counts as holding one, so that the adapter is
+/// looked at.
+fn gpu_device_files_in(dev: &std::path::Path) -> bool {
+    let Ok(entries) = std::fs::read_dir(dev) else {
+        return true;
+    };
+    entries.flatten().any(|entry| {
+        let name = entry.file_name();
+        let name = name.to_string_lossy();
+        match name.as_ref() {
+            "dri" => std::fs::read_dir(entry.path()).map_or(true, |mut d| d.next().is_some()),
+            "dxg" | "kfd" => true,
+            other => other.starts_with("nvidia"),
+        }
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::gpu_device_files_in;
+    use crate::scratch::scratch;
+
+    #[test]
+    fn a_gpu_is_looked_for_where_a_gpu_device_file_exists() {
+        let dev = scratch("dev");
+        // A container's /dev: no GPU.
+        for name in ["null", "zero", "tty", "shm", "pts", "nvme0n1", "fuse"] {
+            std::fs::write(dev.join(name), b"").unwrap();
+        }
+        assert!(!gpu_device_files_in(&dev));
+        // An empty dri folder (a display left with no node) holds no GPU.
+        std::fs::create_dir(dev.join("dri")).unwrap();
+        assert!(!gpu_device_files_in(&dev));
+        std::fs::write(dev.join("dri/renderD128"), b"").unwrap();
+        assert!(gpu_device_files_in(&dev));
+        for (name, gpu) in [
+            ("nvidiactl", true),
+            ("nvidia0", true),
+            ("dxg", true),
+            ("kfd", true),
+        ] {
+            let other = scratch("dev");
+            std::fs::write(other.join(name), b"").unwrap();
+            assert_eq!(gpu_device_files_in(&other), gpu, "{name}");
+        }
+        // A folder that cannot be read: looked at.
+        assert!(gpu_device_files_in(&dev.join("no-such-folder")));
     }
 }
