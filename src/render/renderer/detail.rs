@@ -34,9 +34,10 @@ pub enum Detail {
     /// ([`Classified::halved_along`]); `[0, 0, 0]` is the volume's own grid. Levels differ
     /// between axes where the voxels fall nearer together on the screen along one axis than
     /// along another: most along the view direction, whose voxels lie on top of each other.
-    /// The second array tells, for an axis halved more than the others, which of its ends
-    /// faces the eye (1: the larger indices, -1: the smaller; 0 for the other axes): a ray
-    /// meets the voxels of each pair along it in that order ([`crate::classify::Front`]).
+    /// The second array tells, for the axis halved more than both others where one is, which
+    /// of its ends faces the eye (1: the larger indices, -1: the smaller; 0 for the other
+    /// axes): a ray meets the voxels of each pair along it in that order
+    /// ([`crate::classify::Front`]).
     Level([u8; 3], [i8; 3]),
     /// Its trilinear field classified on a grid `factors[a]` times finer along each axis `a`
     /// ([`crate::classify::classify_refined`]), for a grid whose voxels are more than
@@ -233,15 +234,22 @@ fn detail_within(dims: [u32; 3], apart: Option<Apart>, within: Within, coarsen_t
     )
 }
 
-/// The level of `levels` halvings along each axis, with which end of each axis halved more
-/// than the least faces the eye (`facing`, as [`Apart::facing`]). Such an axis whose sight
-/// lines run both ways (a grid finer along it than across) is halved as the others are, its
-/// voxels weighted by density alone.
+/// The level of `levels` halvings along each axis, with which end of the axis halved more
+/// than both others faces the eye (`facing`, as [`Apart::facing`]), where one is. Such an
+/// axis whose sight lines run both ways (a grid finer along it than across) is halved as the
+/// others are, its voxels weighted by density alone.
+///
+/// Only that axis's end tells levels apart: the steps from the own grid halve every axis
+/// still short of its level together, so a step halves one axis alone, merging its pairs
+/// nearer over farther, only past the other axes' levels, and only the axis halved most
+/// takes such steps. A level halved as much along two axes ([1, 1, 0]) has no pairs merged
+/// by their ends and is the same level from either side: keyed by its ends, a camera turning
+/// about the volume made it again each time the view crossed an axis.
 pub(super) fn level_facing(levels: [u8; 3], facing: [i8; 3]) -> Detail {
-    let least = levels.into_iter().min().unwrap_or(0);
+    let most = |a: usize| (0..3).all(|b| b == a || levels[a] > levels[b]);
     Detail::Level(
         levels,
-        std::array::from_fn(|a| if levels[a] > least { facing[a] } else { 0 }),
+        std::array::from_fn(|a| if most(a) { facing[a] } else { 0 }),
     )
 }
 

@@ -171,7 +171,7 @@ struct VolumeState {
     levels: [u8; 3],
     /// The frame that last drew this grid or made a level from it (levels halved along some
     /// axes more than others are dropped, least recently used first, past
-    /// [`KEPT_UNEVEN_LEVELS`]).
+    /// [`KEPT_UNEVEN_SPLATS`]).
     used: u64,
     /// Its classification, shared with its texels, which write their colours from it as
     /// their bricks are first read.
@@ -1160,9 +1160,35 @@ fn levels_that_pay(
 /// splats in 164 ms against 263 ms (BENCHMARKS.md, "Smooth bricks a level coarser").
 const MIX_SAVING: f64 = 1.5;
 
-/// The most levels of detail a volume keeps that are halved along some axes more than others
-/// (a camera orbiting a volume wants one for each axis its view runs along).
-const KEPT_UNEVEN_LEVELS: usize = 2;
+/// The splats, in own-grid splats, that a volume's levels of detail halved along some axes
+/// more than others keep between frames together, least recently used dropped first. A camera
+/// orbiting a volume wants one for each axis its view runs along and each pair of axes across
+/// it, and each end of each axis along the view: the dense ball 512^3 turned 7 degrees a
+/// frame wants six in 20 frames, 27M splats against its own grid's 14.75M. Keeping two
+/// levels, as this rule replaced, made a level again in every third frame of that path
+/// (BENCHMARKS.md, "Uneven levels kept by their splats").
+const KEPT_UNEVEN_SPLATS: f64 = 2.0;
+
+/// Of a volume's uneven levels (each with the frame that last drew it or made a level from it
+/// and its splats), those dropped after frame `frame`: least recently used first, until the
+/// rest hold at most [`KEPT_UNEVEN_SPLATS`] times `own_splats`; none that `frame` used.
+fn uneven_levels_dropped(
+    mut uneven: Vec<(Detail, u64, usize)>,
+    own_splats: usize,
+    frame: u64,
+) -> Vec<Detail> {
+    uneven.sort_by_key(|&(_, used, _)| std::cmp::Reverse(used));
+    let allowed = KEPT_UNEVEN_SPLATS * own_splats as f64;
+    let mut kept = 0.0;
+    uneven
+        .into_iter()
+        .filter(|&(_, used, splats)| {
+            kept += splats as f64;
+            used != frame && kept > allowed
+        })
+        .map(|(d, _, _)| d)
+        .collect()
+}
 
 /// Who composites the splats of screenshots.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -2645,22 +2671,21 @@ impl Renderer {
                     self.mixes.insert(id, mix);
                 }
             }
-            // Uneven levels past the few kept go, least recently used first.
-            let mut uneven: Vec<(Detail, u64)> = self
+            // Uneven levels past the splats kept go, least recently used first.
+            let uneven: Vec<(Detail, u64, usize)> = self
                 .volumes
                 .iter()
                 .filter_map(|((v, d), state)| match d {
                     Detail::Level(l, _) if *v == id && (l[0] != l[1] || l[1] != l[2]) => {
-                        Some((*d, state.used))
+                        Some((*d, state.used, state.classified.grid.len()))
                     }
                     _ => None,
                 })
                 .collect();
-            uneven.sort_by_key(|(_, used)| std::cmp::Reverse(*used));
-            for (d, used) in uneven.into_iter().skip(KEPT_UNEVEN_LEVELS) {
-                if used != frame {
-                    self.volumes.remove(&(id, d));
-                }
+            let own_splats = (self.volumes.get(&(id, Detail::default())))
+                .map_or(0, |own| own.classified.grid.len());
+            for d in uneven_levels_dropped(uneven, own_splats, frame) {
+                self.volumes.remove(&(id, d));
             }
             self.levels.insert(id, drawn);
         }

@@ -1569,3 +1569,110 @@ fn a_frame_cancelled_while_it_makes_a_level_keeps_no_part_of_it() {
         .unwrap();
     assert_eq!(next.frame.pixels, fresh.frame.pixels);
 }
+
+#[test]
+fn a_levels_key_holds_the_end_of_the_one_axis_whose_pairs_it_merges() {
+    // The steps from the own grid to a level, walked here as `Renderer::make_levels` takes
+    // them: each step halves every axis still short of its level, and a step that halves one
+    // axis alone merges that axis's pairs nearer over farther, by the end facing the eye. The
+    // key keeps that axis's end and no other: two keys for one level's content would make it
+    // twice.
+    for code in 0..64u32 {
+        let levels = [code % 4, code / 4 % 4, code / 16].map(|l| l as u8);
+        for f in 0..27i32 {
+            let facing = [f % 3 - 1, f / 3 % 3 - 1, f / 9 - 1].map(|v| v as i8);
+            let mut merged_by_ends = [false; 3];
+            let mut level = [0u8; 3];
+            while level != levels {
+                let short: Vec<usize> = (0..3).filter(|&a| level[a] < levels[a]).collect();
+                if let [a] = short[..] {
+                    merged_by_ends[a] = facing[a] != 0;
+                }
+                for a in short {
+                    level[a] += 1;
+                }
+            }
+            let expected = std::array::from_fn(|a| if merged_by_ends[a] { facing[a] } else { 0 });
+            assert_eq!(
+                level_facing(levels, facing),
+                Detail::Level(levels, expected),
+                "{levels:?} {facing:?}"
+            );
+        }
+    }
+}
+
+#[test]
+fn uneven_levels_are_dropped_least_recently_used_first_past_the_splats_kept() {
+    let level = |x: u8| Detail::Level([x, 1, 0], [0; 3]);
+    let (a, b, c, d, e) = (
+        level(1),
+        level(2),
+        level(3),
+        level(4),
+        Detail::Level([0, 1, 0], [0, 1, 0]),
+    );
+    // Own grid of 100 splats: 200 kept. By last use, 5, 5, 4 come to 170; 3 and 1 go.
+    let uneven = vec![(c, 3, 60), (a, 5, 60), (e, 1, 10), (b, 4, 60), (d, 5, 50)];
+    let mut dropped = uneven_levels_dropped(uneven, 100, 5);
+    dropped.sort_by_key(|d| format!("{d:?}"));
+    let mut expected = vec![c, e];
+    expected.sort_by_key(|d| format!("{d:?}"));
+    assert_eq!(dropped, expected);
+    // Levels the frame used stay, however many splats they hold, and push the others out.
+    let uneven = vec![(a, 7, 150), (b, 7, 150), (c, 6, 1)];
+    assert_eq!(uneven_levels_dropped(uneven, 100, 7), vec![c]);
+    // Within the splats kept, nothing goes.
+    let uneven = vec![(a, 1, 100), (b, 2, 99)];
+    assert!(uneven_levels_dropped(uneven, 100, 9).is_empty());
+}
+
+#[test]
+fn a_level_halved_most_along_two_axes_is_made_once_for_a_camera_crossing_one() {
+    // The wavy field with slices 4 mm apart, seen from far across the diagonal of x and y
+    // and then across the other diagonal: its x and y voxels fall under a pixel apart, its z
+    // voxels over half a pixel, so both views draw the grid halved along x and y alone. The
+    // view's end of y turns round between them, but that level merges no pair along an axis
+    // by its ends: the second frame makes nothing and draws what a fresh renderer draws.
+    let (mut scene, id) = wavy_field(96);
+    let mut thick = node_of(&scene, id);
+    let mut volume = (*thick.volume).clone();
+    volume.spacing = [1.0, 1.0, 4.0];
+    thick.volume = Arc::new(volume);
+    scene
+        .set_content(id, crate::scene::NodeContent::Volume(thick))
+        .unwrap();
+    let centre = DVec3::new(48.0, 48.0, 192.0);
+    let seen = |dir: DVec3| SceneCamera {
+        projection: crate::scene::Projection::Perspective {
+            fov_y_degrees: 20.0,
+        },
+        ..SceneCamera::look_at(centre + 1400.0 * dir.normalize(), centre)
+    };
+    let (first, second) = (
+        seen(DVec3::new(1.0, 1.0, 0.0)),
+        seen(DVec3::new(1.0, -1.0, 0.0)),
+    );
+    let size = (48, 48);
+    let options = FrameOptions::default();
+    let mut renderer = Renderer::with_compositor(super::super::Compositor::Cpu);
+    renderer.set_levels_by_brick(false);
+    let a = renderer
+        .screenshot_without_gpu(&scene, &first, size, &options)
+        .unwrap();
+    let [x, y, z] = a.report.levels;
+    assert!(x == y && x > z, "{:?}", a.report);
+    assert!(a.report.levels_made > 0, "{:?}", a.report);
+    let b = renderer
+        .screenshot_without_gpu(&scene, &second, size, &options)
+        .unwrap();
+    assert_eq!(b.report.levels, a.report.levels, "{:?}", b.report);
+    assert_eq!(b.report.levels_made, 0, "{:?}", b.report);
+    let mut fresh = Renderer::with_compositor(super::super::Compositor::Cpu);
+    fresh.set_levels_by_brick(false);
+    let c = fresh
+        .screenshot_without_gpu(&scene, &second, size, &options)
+        .unwrap();
+    assert_eq!(c.report.levels, b.report.levels);
+    assert_eq!(c.frame.pixels, b.frame.pixels);
+}
