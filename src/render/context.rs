@@ -67,7 +67,7 @@ impl GpuContext {
 
     /// Whether this machine may hold a hardware GPU for wgpu to find. On Linux a GPU driver is
     /// reached through device files (DRM's `/dev/dri/*`, NVIDIA's `/dev/nvidia*`, WSL's
-    /// `/dev/dxg`); where none exists, the only adapter wgpu could find is a CPU (Mesa's
+    /// `/dev/dxg`, AMD's `/dev/kfd`); where none exists, the only adapter wgpu could find is a CPU (Mesa's
     /// lavapipe or llvmpipe), so the CPU tiles can be chosen without looking: the look loads
     /// lavapipe, which then holds about 50 MB of LLVM's code for the rest of the run, even
     /// with every wgpu object dropped. Elsewhere, and where a device file exists, true: the

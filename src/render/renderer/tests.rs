@@ -1630,10 +1630,11 @@ fn uneven_levels_are_dropped_least_recently_used_first_past_the_splats_kept() {
 #[test]
 fn a_level_halved_most_along_two_axes_is_made_once_for_a_camera_crossing_one() {
     // The wavy field with slices 4 mm apart, seen from far across the diagonal of x and y
-    // and then across the other diagonal: its x and y voxels fall under a pixel apart, its z
-    // voxels over half a pixel, so both views draw the grid halved along x and y alone. The
-    // view's end of y turns round between them, but that level merges no pair along an axis
-    // by its ends: the second frame makes nothing and draws what a fresh renderer draws.
+    // and then across the other diagonal: its x and y voxels fall nearer together on the
+    // screen than its z voxels, so both views draw the grid halved as much along x as along y
+    // and less along z. The view's end of y turns round between them, but that level merges
+    // no pair along an axis by its ends: the second frame makes nothing and draws what a
+    // fresh renderer draws.
     let (mut scene, id) = wavy_field(96);
     let mut thick = node_of(&scene, id);
     let mut volume = (*thick.volume).clone();
