@@ -463,6 +463,100 @@ volume = { path = "ball.raw", dims = [20, 20, 20], scalar = "u8" }
 }
 
 #[test]
+fn a_batch_looks_for_a_gpu_adapter_only_where_a_picture_needs_one() {
+    let dir = scratch("no-adapter");
+    write_ball(&dir.join("ball.raw"));
+    let manifest = |name: &str, text: &str| {
+        let path = dir.join(name);
+        std::fs::write(&path, text).unwrap();
+        path
+    };
+    let ball = r#"
+[defaults]
+views = ["anterior"]
+sizes = [[48, 48]]
+
+[[job]]
+name = "ball"
+volume = { path = "ball.raw", dims = [20, 20, 20], scalar = "u8" }
+window = [50, 150]
+"#;
+    let volumes = manifest("volumes.toml", ball);
+    let with_meshes = manifest(
+        "meshes.toml",
+        &format!(
+            "{ball}\n[[job]]\nname = \"shoulder\"\nscene = \"{}\"\n",
+            repo("examples/scenes/shoulder.toml").display()
+        ),
+    );
+    // No Vulkan driver at all: any look for an adapter finds none.
+    let run = |manifest: &Path, more: &[&str], out: &Path| {
+        Command::new(env!("CARGO_BIN_EXE_splatscene"))
+            .args(["batch", manifest.to_str().unwrap(), "--out"])
+            .arg(out)
+            .args(more)
+            .env("VK_ICD_FILENAMES", dir.join("no-such-driver.json"))
+            .env("WGPU_BACKEND", "vulkan")
+            .env("NODEVICE_SELECT", "1")
+            .output()
+            .unwrap()
+    };
+    let gpu_device = common::gpu_device_file();
+    // Volumes alone, on the default compositor.
+    let out = dir.join("volumes");
+    let done = run(&volumes, &[], &out);
+    let said = String::from_utf8_lossy(&done.stderr);
+    assert!(done.status.success(), "{said}");
+    let i = index(&out.join("index.json"));
+    assert_eq!(statuses(&i), [("ball".into(), "rendered".into())]);
+    if gpu_device {
+        // `auto` must look, to learn whether an adapter is a CPU; it finds none, says so
+        // before the first job, and draws on the CPU.
+        let looked = said.find("no GPU adapter").expect(&said);
+        assert!(looked < said.find("job 1 (ball)").expect(&said), "{said}");
+        assert_eq!(i["device"], "no GPU adapter");
+    } else {
+        assert!(!said.contains("GPU adapter"), "{said}");
+        assert_eq!(i["device"], "none looked for (volumes on the CPU)");
+    }
+    // The same picture as a batch with the driver there.
+    let usual = dir.join("usual");
+    ok(&[
+        "batch",
+        volumes.to_str().unwrap(),
+        "--out",
+        usual.to_str().unwrap(),
+    ]);
+    let picture = |out: &Path| {
+        image::open(out.join("ball-anterior.png"))
+            .unwrap()
+            .to_rgba8()
+    };
+    assert_eq!(picture(&out), picture(&usual));
+    // With the CPU tiles asked for, the volumes never need an adapter, on any machine; the
+    // job with meshes looks for one when it comes, finds none and fails, saying why, and the
+    // index then says no adapter was found.
+    let out = dir.join("meshes");
+    let done = run(&with_meshes, &["--compositor", "cpu"], &out);
+    let said = String::from_utf8_lossy(&done.stderr);
+    assert!(!done.status.success(), "{said}");
+    let looked = said.find("no GPU adapter").expect(&said);
+    assert!(said.find("job 1 (ball)").expect(&said) < looked, "{said}");
+    let i = index(&out.join("index.json"));
+    assert_eq!(
+        statuses(&i),
+        [
+            ("ball".into(), "rendered".into()),
+            ("shoulder".into(), "failed".into())
+        ]
+    );
+    let error = i["jobs"][1]["error"].as_str().unwrap();
+    assert!(error.contains("need a GPU adapter"), "{error}");
+    assert_eq!(i["device"], "no GPU adapter");
+    assert_eq!(picture(&out), picture(&usual));
+}
+
+#[test]
 fn a_second_process_on_one_index_is_refused() {
     let dir = scratch("lock");
     let manifest = small_manifest(&dir);

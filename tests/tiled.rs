@@ -666,16 +666,7 @@ fn a_volume_renders_without_any_gpu_adapter_and_meshes_say_what_they_need() {
     // The default compositor (auto): on a machine with no GPU device file it looks for no
     // adapter at all and says it draws on the CPU alone; where one exists it looks, finds none
     // and says so before compositing on the CPU.
-    let gpu_device = std::fs::read_dir("/dev").map_or(true, |entries| {
-        entries.flatten().any(|e| {
-            let name = e.file_name().to_string_lossy().into_owned();
-            match name.as_str() {
-                "dri" => std::fs::read_dir(e.path()).map_or(true, |mut d| d.next().is_some()),
-                "dxg" | "kfd" => true,
-                other => other.starts_with("nvidia"),
-            }
-        })
-    });
+    let gpu_device = common::gpu_device_file();
     let volume = block(&out, &[]);
     let said = String::from_utf8_lossy(&volume.stderr);
     assert!(volume.status.success(), "{said}");

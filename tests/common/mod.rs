@@ -24,6 +24,23 @@ use splatscene::scene::{NodeContent, Scene, SceneCamera, SplatSettings, VolumeNo
 use splatscene::splat::reference::{Frame, SplatStyle, SplatVolume, composite};
 use splatscene::volume::CpuVolume;
 
+/// Whether this machine has a GPU device file, by the rule the automatic compositor states
+/// (`GpuContext::hardware_may_exist`), written out again here: anything in `/dev/dri`, or a
+/// `/dev/nvidia*`, `/dev/dxg` or `/dev/kfd`. Where one exists, `--compositor auto` looks for
+/// an adapter even for volumes alone.
+pub fn gpu_device_file() -> bool {
+    std::fs::read_dir("/dev").map_or(true, |entries| {
+        entries.flatten().any(|e| {
+            let name = e.file_name().to_string_lossy().into_owned();
+            match name.as_str() {
+                "dri" => std::fs::read_dir(e.path()).map_or(true, |mut d| d.next().is_some()),
+                "dxg" | "kfd" => true,
+                other => other.starts_with("nvidia"),
+            }
+        })
+    })
+}
+
 /// Nested shells of "bone" in an n^3 grid (denser outside).
 pub fn shells(n: u32, spacing: [f64; 3]) -> CpuVolume {
     let c = (f64::from(n) - 1.0) / 2.0;

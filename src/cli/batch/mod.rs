@@ -159,14 +159,11 @@ pub fn run_batch(args: BatchArgs) -> Result<()> {
     };
     let manifest_bytes = splatscene::input::read_regular(manifest_path, 4 << 20)
         .with_context(|| format!("{}: cannot read", manifest_path.display()))?;
-    let ctx = match GpuContext::headless() {
-        Ok(ctx) => Some(ctx),
-        Err(e @ RenderError::NoAdapter(_)) if args.compositor != Compositor::Gpu => {
-            eprintln!("{e}\njobs without meshes are composited on the CPU; jobs with meshes fail");
-            None
-        }
-        Err(e) => return Err(e.into()),
-    };
+    let gpu = Gpu::new(args.compositor);
+    if !gpu.cpu_alone {
+        // The GPU compositor, or `auto` where a GPU may exist: every job needs the answer.
+        gpu.get()?;
+    }
     let mut index = Index {
         splatscene: env!("CARGO_PKG_VERSION").into(),
         manifest: FileHash {
@@ -179,9 +176,7 @@ pub fn run_batch(args: BatchArgs) -> Result<()> {
         manifest_jobs: total_jobs,
         shard: shard.map(|(k, n)| [k, n]),
         merged_shards: None,
-        device: ctx
-            .as_ref()
-            .map_or("no GPU adapter".into(), GpuContext::describe),
+        device: gpu.describe(),
         compositor: compositor_name(args.compositor).into(),
         jobs: mine
             .iter()
@@ -216,7 +211,7 @@ pub fn run_batch(args: BatchArgs) -> Result<()> {
         level_of_detail: args.lod != LevelOfDetail::Off,
         levels_by_brick: matches!(args.lod, LevelOfDetail::Auto | LevelOfDetail::On),
         levels_for_one_frame: args.lod == LevelOfDetail::Auto,
-        ctx: ctx.as_ref(),
+        gpu: &gpu,
     };
     for (slot, job) in mine.iter().enumerate() {
         bar.set_message(job.name.clone());
@@ -261,6 +256,7 @@ pub fn run_batch(args: BatchArgs) -> Result<()> {
         };
         // The index first: a job said to be done is done on disk.
         index.jobs[slot] = record;
+        index.device = gpu.describe();
         index.count();
         index.write(&index_path)?;
         bar.suspend(|| eprintln!("[{done}/{}] {line}", mine.len()));
@@ -483,7 +479,77 @@ struct Settings<'a> {
     levels_by_brick: bool,
     /// Levels of the pyramid made only where they pay within the picture (`--lod auto`).
     levels_for_one_frame: bool,
-    ctx: Option<&'a GpuContext>,
+    gpu: &'a Gpu,
+}
+
+/// The batch's GPU context, looked for once: before the first job where every job needs the
+/// answer, else at the first job with meshes. A batch of volumes alone composited on the CPU
+/// (`--compositor cpu`, or `auto` on a machine with no GPU device,
+/// [`GpuContext::hardware_may_exist`]) then never loads an adapter: Mesa's lavapipe, once
+/// loaded, holds about 80 MB for the rest of the run.
+struct Gpu {
+    /// The volumes are composited on the CPU whatever adapter is found.
+    cpu_alone: bool,
+    compositor: Compositor,
+    ctx: std::cell::OnceCell<Option<GpuContext>>,
+}
+
+impl Gpu {
+    fn new(compositor: Compositor) -> Self {
+        let cpu_alone = match compositor {
+            Compositor::Cpu => true,
+            Compositor::Auto => !GpuContext::hardware_may_exist(),
+            _ => false,
+        };
+        Self {
+            cpu_alone,
+            compositor,
+            ctx: std::cell::OnceCell::new(),
+        }
+    }
+
+    /// The context, looked for on the first call; none where no adapter is found and the
+    /// compositor may do without one (said once on stderr).
+    fn get(&self) -> Result<Option<&GpuContext>> {
+        if let Some(ctx) = self.ctx.get() {
+            return Ok(ctx.as_ref());
+        }
+        let ctx = match GpuContext::headless() {
+            Ok(ctx) => Some(ctx),
+            Err(e @ RenderError::NoAdapter(_)) if self.compositor != Compositor::Gpu => {
+                eprintln!(
+                    "{e}\njobs without meshes are composited on the CPU; jobs with meshes fail"
+                );
+                None
+            }
+            Err(e) => return Err(e.into()),
+        };
+        Ok(self.ctx.get_or_init(|| ctx).as_ref())
+    }
+
+    /// The context for drawing a scene with `meshes` or not: looked for where it has meshes
+    /// or the volumes are not composited on the CPU alone; none for a scene of volumes alone
+    /// composited on the CPU.
+    fn for_scene(&self, meshes: bool) -> Result<Option<&GpuContext>> {
+        if self.cpu_alone && !meshes {
+            return Ok(None);
+        }
+        self.get()
+    }
+
+    /// The device for the index: the adapter, or what stood in for it.
+    fn describe(&self) -> String {
+        match self.ctx.get() {
+            Some(Some(ctx)) => ctx.describe(),
+            Some(None) => "no GPU adapter".into(),
+            None => "none looked for (volumes on the CPU)".into(),
+        }
+    }
+}
+
+/// Whether `scene` draws meshes (its own, or overlays), which need a GPU adapter.
+fn has_meshes(scene: &Scene) -> bool {
+    scene.meshes().chain(scene.overlays()).next().is_some()
 }
 
 fn failed(job: &PlannedJob, partial: Option<JobRecord>, error: String) -> JobRecord {
@@ -585,7 +651,7 @@ fn render_job(
     timings: &mut Timings,
 ) -> Result<()> {
     let full = &loaded.scene;
-    if settings.ctx.is_none() && full.meshes().next().is_some() {
+    if has_meshes(full) && settings.gpu.for_scene(true)?.is_none() {
         bail!("the job has meshes, which need a GPU adapter, and there is none");
     }
     let parts = match &job.annotate {
@@ -698,7 +764,9 @@ fn render_job(
             preview: false,
         };
         let drawing = Instant::now();
-        let shot = match settings.ctx {
+        // A picture's scene may hold meshes its job's scene did not (the markers of its
+        // measurements), or leave the job's meshes out.
+        let shot = match settings.gpu.for_scene(has_meshes(scene))? {
             Some(ctx) => renderer.screenshot(ctx, scene, &camera, item.size, &options)?,
             None => renderer.screenshot_without_gpu(scene, &camera, item.size, &options)?,
         };
