@@ -96,7 +96,7 @@ fn main() -> Result<()> {
         let made = ms(t.classify + t.levels + t.texels);
         let s = shot.report.tiles.unwrap_or_default();
         println!(
-            "frame {f}: {total:.0} ms (making {made:.0}: classify {:.0}, levels {:.0}, texels {:.0}; look {:.0}, order {:.0}, mesh pass {:.0}, readback {:.0}, project {:.0}, bin {:.0}, tiles {:.0}), {} splats, {} projected, {} drew, {} composited, levels {:?}, refined {:?}, coarse copies {}",
+            "frame {f}: {total:.0} ms (making {made:.0}: classify {:.0}, levels {:.0}, texels {:.0}; look {:.0}, order {:.0}, mesh pass {:.0}, readback {:.0}, project {:.0}, bin {:.0}, tiles {:.0}), {} splats, {} projected, {} drew, {} composited, levels {:?}{}, refined {:?}, coarse copies {}",
             ms(t.classify),
             ms(t.levels),
             ms(t.texels),
@@ -112,6 +112,11 @@ fn main() -> Result<()> {
             s.drew,
             s.composited,
             shot.report.levels,
+            if shot.report.levels_short_of_memory {
+                " (a level short of memory)"
+            } else {
+                ""
+            },
             shot.report.refined,
             shot.report.coarse_copies,
         );

@@ -42,6 +42,15 @@ pub const DRAW_BYTES_PER_VOXEL: u64 = 1;
 /// "Texels written as they are read"); a view that reads every texel holds about 6 more.
 pub const SPLAT_BYTES: u64 = 30;
 
+/// Bytes a splat of a level of detail costs: its colour (5), its texel (8, made as its brick
+/// is first read) and its place in the draw order (4), rounded up. A level is made only where
+/// the memory left holds a splat at this size for each splat of the level it is halved from
+/// (a level has at most as many); the levels a turning view keeps between frames are what
+/// the budget's estimate of one picture leaves out. Measured, the dense ball 512^3 turned 7
+/// degrees a frame for 20 frames held 1.0-1.1 GB against 584 MB for one picture, with about
+/// 27M splats in the levels it kept (BENCHMARKS.md, "Uneven levels kept by their splats").
+pub const LEVEL_SPLAT_BYTES: u64 = 18;
+
 /// The environment variable that sets the memory budget in bytes.
 pub const MEMORY_LIMIT_VAR: &str = "SPLATSCENE_MEMORY_LIMIT";
 
@@ -132,6 +141,28 @@ pub fn memory_budget() -> u64 {
         .unwrap_or(8 << 30)
 }
 
+/// What this process may still take: with [`MEMORY_LIMIT_VAR`] set, that limit less what the
+/// process holds now (its resident set, `VmRSS`); else the available memory, which already
+/// counts what the process holds; else [`memory_budget`]. Asked before memory that a frame
+/// can do without is taken (a level of detail, which a finer level stands in for).
+pub fn headroom() -> u64 {
+    match std::env::var(MEMORY_LIMIT_VAR)
+        .ok()
+        .and_then(|v| parse_bytes(&v))
+    {
+        Some(limit) => limit.saturating_sub(resident_bytes().unwrap_or(0)),
+        None => available_memory().unwrap_or_else(memory_budget),
+    }
+}
+
+/// This process's resident set, from `/proc/self/status` (`None` where there is none).
+pub fn resident_bytes() -> Option<u64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmRSS:"))?;
+    let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    kib.checked_mul(1024)
+}
+
 /// A byte count as [`MEMORY_LIMIT_VAR`] takes it: digits with an optional `K`, `M`, `G` or `T`
 /// (powers of 1024, an optional `iB` or `B` after it).
 pub fn parse_bytes(text: &str) -> Option<u64> {
@@ -210,5 +241,21 @@ mod tests {
         assert!(text.contains("the test's voxels"), "{text}");
         assert!(text.contains(MEMORY_LIMIT_VAR), "{text}");
         assert!(check_memory("a few voxels", 10, 4).is_ok());
+    }
+
+    #[cfg(target_os = "linux")]
+    #[test]
+    fn the_resident_set_counts_memory_just_touched() {
+        // Other tests run beside this one and free what they held: only what this one holds
+        // while it reads is sure to be counted.
+        let touched = vec![1u8; 64 << 20];
+        let resident = resident_bytes().unwrap();
+        assert!(
+            std::hint::black_box(&touched)
+                .iter()
+                .step_by(4096)
+                .all(|&b| b == 1)
+        );
+        assert!(resident >= 64 << 20, "{resident}");
     }
 }

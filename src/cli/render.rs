@@ -628,17 +628,25 @@ pub(crate) fn describe(r: &FrameReport) -> String {
             } else {
                 ""
             };
+            let short = if r.levels_short_of_memory {
+                "; a coarser level not made, the memory left too little"
+            } else {
+                ""
+            };
             match (r.level, r.refined) {
+                (0, None) if r.levels_short_of_memory => {
+                    " (own grid: the memory left holds no level of detail)".into()
+                }
                 (0, None) if r.levels_not_made => {
                     " (own grid: no level of detail pays for one picture; --lod on makes them)"
                         .into()
                 }
                 (0, None) => String::new(),
                 (0, Some([x, y, z])) => format!(" (the grid refined {x}x{y}x{z}{by_brick})"),
-                (_, None) => format!(" (level of detail {level}{by_brick})"),
-                (_, Some([x, y, z])) => {
-                    format!(" (level of detail {level}; a grid refined {x}x{y}x{z}{by_brick})")
-                }
+                (_, None) => format!(" (level of detail {level}{by_brick}{short})"),
+                (_, Some([x, y, z])) => format!(
+                    " (level of detail {level}; a grid refined {x}x{y}x{z}{by_brick}{short})"
+                ),
             }
         },
         ms(r.timings.classify),

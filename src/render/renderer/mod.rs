@@ -121,6 +121,10 @@ pub struct FrameReport {
     /// one or its own grid instead, the level not paying within the frame
     /// ([`Renderer::set_levels_for_one_frame`]).
     pub levels_not_made: bool,
+    /// Whether a level of detail was not made for want of memory, even with the levels kept
+    /// from earlier frames given up: a finer level or the own grid drew instead
+    /// ([`crate::budget::headroom`]).
+    pub levels_short_of_memory: bool,
     /// Volumes drawn brick by brick at more than one level ([`Renderer::set_levels_by_brick`]).
     pub bricks_by_level: usize,
     /// Volumes a preview drew from a coarse copy of their values
@@ -1169,6 +1173,30 @@ const MIX_SAVING: f64 = 1.5;
 /// (BENCHMARKS.md, "Uneven levels kept by their splats").
 const KEPT_UNEVEN_SPLATS: f64 = 2.0;
 
+/// Of the uneven levels kept from earlier frames (each with the frame that last used it and its
+/// splats), those to give up, least recently used first, so that `need` bytes fit `headroom`
+/// and what giving them up frees, at [`crate::budget::LEVEL_SPLAT_BYTES`] a splat (the estimate
+/// `need` is made at, so that a level's true bytes a splat, being fewer, keep the sum sound);
+/// `None`, and none given up, where all of them would not make room.
+fn levels_given_up<K>(mut spare: Vec<(K, u64, u64)>, need: u64, headroom: u64) -> Option<Vec<K>> {
+    spare.sort_by_key(|&(_, used, _)| used);
+    let mut room = headroom;
+    let mut given = Vec::new();
+    for (key, _, splats) in spare {
+        if need <= room {
+            break;
+        }
+        room = room.saturating_add(splats.saturating_mul(crate::budget::LEVEL_SPLAT_BYTES));
+        given.push(key);
+    }
+    (need <= room).then_some(given)
+}
+
+/// Whether `detail` is a level of detail halved along some axes more than others.
+fn is_uneven(detail: Detail) -> bool {
+    matches!(detail, Detail::Level(l, _) if l[0] != l[1] || l[1] != l[2])
+}
+
 /// Of a volume's uneven levels (each with the frame that last drew it or made a level from it
 /// and its splats), those dropped after frame `frame`: least recently used first, until the
 /// rest hold at most [`KEPT_UNEVEN_SPLATS`] times `own_splats`; none that `frame` used.
@@ -1305,6 +1333,8 @@ pub struct Renderer {
     /// Frames whose levels of detail were chosen, counted (to drop levels least recently
     /// used).
     frame: u64,
+    /// The memory levels of detail may take, in place of what the machine has left (tests).
+    headroom_set: Option<u64>,
     /// The targets the CPU tile compositor's screenshots draw their meshes into, kept from
     /// frame to frame for the last two sizes drawn, the latest first.
     layer_targets: Vec<RenderTarget>,
@@ -1378,6 +1408,12 @@ impl Renderer {
             compositor,
             ..Self::default()
         }
+    }
+
+    /// Sets the memory levels of detail may take, in place of what the machine has left.
+    #[cfg(test)]
+    pub(crate) fn set_headroom(&mut self, bytes: Option<u64>) {
+        self.headroom_set = bytes;
     }
 
     /// Whether volumes are drawn at a level of detail (on by default): each volume from the
@@ -2094,6 +2130,8 @@ impl Renderer {
         while let Some(state) = self.volumes.get_mut(&(id, key)) {
             state.used = frame;
             let dims = state.classified.grid.dims();
+            // A level holds at most a splat for each of the level's below it.
+            let below = state.classified.grid.len() as u64;
             let axes: [bool; 3] = std::array::from_fn(|a| level[a] < wanted[a] && dims[a] > 1);
             if axes == [false; 3] {
                 break;
@@ -2114,6 +2152,10 @@ impl Renderer {
                     }),
                     _ => None,
                 };
+                if !self.room_for_level(below, frame) {
+                    report.levels_short_of_memory = true;
+                    break;
+                }
                 let Some(state) = self.volumes.get_mut(&(id, key)) else {
                     break;
                 };
@@ -2133,6 +2175,36 @@ impl Renderer {
             state.used = frame;
         }
         Ok(key)
+    }
+
+    /// Whether a level of `splats` splats at most, at [`crate::budget::LEVEL_SPLAT_BYTES`] each, fits
+    /// the memory left ([`Renderer::headroom`]), once the uneven levels kept from earlier
+    /// frames that [`levels_given_up`] chooses are dropped.
+    fn room_for_level(&mut self, splats: u64, frame: u64) -> bool {
+        let need = splats.saturating_mul(crate::budget::LEVEL_SPLAT_BYTES);
+        let headroom = self.headroom();
+        if need <= headroom {
+            return true;
+        }
+        let spare = (self.volumes.iter())
+            .filter(|((_, d), state)| is_uneven(*d) && state.used != frame)
+            .map(|(&key, state)| (key, state.used, state.classified.grid.len() as u64))
+            .collect();
+        match levels_given_up(spare, need, headroom) {
+            Some(keys) => {
+                for key in keys {
+                    self.volumes.remove(&key);
+                }
+                true
+            }
+            None => false,
+        }
+    }
+
+    /// The memory a level of detail may take: [`crate::budget::headroom`], or the bytes set
+    /// for tests.
+    fn headroom(&self) -> u64 {
+        self.headroom_set.unwrap_or_else(crate::budget::headroom)
     }
 
     /// Classifies volumes whose data, transfer function or threshold changed, chooses the
@@ -2675,11 +2747,9 @@ impl Renderer {
             let uneven: Vec<(Detail, u64, usize)> = self
                 .volumes
                 .iter()
-                .filter_map(|((v, d), state)| match d {
-                    Detail::Level(l, _) if *v == id && (l[0] != l[1] || l[1] != l[2]) => {
-                        Some((*d, state.used, state.classified.grid.len()))
-                    }
-                    _ => None,
+                .filter_map(|((v, d), state)| {
+                    (*v == id && is_uneven(*d))
+                        .then(|| (*d, state.used, state.classified.grid.len()))
                 })
                 .collect();
             let own_splats = (self.volumes.get(&(id, Detail::default())))

@@ -1677,3 +1677,89 @@ fn a_level_halved_most_along_two_axes_is_made_once_for_a_camera_crossing_one() {
     assert_eq!(c.report.levels, b.report.levels);
     assert_eq!(c.frame.pixels, b.frame.pixels);
 }
+
+#[test]
+fn the_levels_given_up_for_a_new_one_are_the_least_recently_used_that_make_room() {
+    let each = crate::budget::LEVEL_SPLAT_BYTES;
+    let spare = || vec![('a', 7, 10), ('b', 3, 20), ('c', 5, 40)];
+    // Room enough already: nothing given up.
+    assert_eq!(levels_given_up(spare(), 100, 100), Some(vec![]));
+    // b (the least recently used) frees 20 splats' bytes, enough.
+    assert_eq!(levels_given_up(spare(), 20 * each, 0), Some(vec!['b']));
+    // b and c, then a too.
+    assert_eq!(
+        levels_given_up(spare(), 20 * each + 1, 0),
+        Some(vec!['b', 'c'])
+    );
+    assert_eq!(
+        levels_given_up(spare(), 70 * each, 0),
+        Some(vec!['b', 'c', 'a'])
+    );
+    // Not even all of them: none given up.
+    assert_eq!(levels_given_up(spare(), 70 * each + 1, 0), None);
+    assert_eq!(levels_given_up(Vec::<(char, u64, u64)>::new(), 1, 0), None);
+}
+
+#[test]
+fn a_level_the_memory_left_cannot_hold_gives_up_levels_kept_or_draws_finer() {
+    // The wavy field seen along x, then along y, near enough that each view wants its own
+    // grid halved once along the view: two uneven levels, each made from the own grid. With
+    // the memory left set just short of what the second needs, even once the first is given
+    // up, nothing is given up and the own grid draws; set at what it needs, the first level
+    // goes and the second is made, the picture a fresh renderer's.
+    let (scene, id) = wavy_field(96);
+    let centre = DVec3::splat(48.0);
+    let seen = |dir: DVec3| SceneCamera {
+        projection: crate::scene::Projection::Perspective {
+            fov_y_degrees: 20.0,
+        },
+        ..SceneCamera::look_at(centre + 300.0 * dir, centre)
+    };
+    let (along_x, along_y) = (seen(DVec3::X), seen(DVec3::Y));
+    let (size, options) = ((48, 48), FrameOptions::default());
+    let levels = |r: &Renderer| {
+        let mut held: Vec<(Detail, usize)> = (r.volumes.iter())
+            .filter(|((v, _), _)| *v == id)
+            .map(|((_, d), s)| (*d, s.classified.grid.len()))
+            .collect();
+        held.sort_by_key(|(d, _)| format!("{d:?}"));
+        held
+    };
+    let shoot = |r: &mut Renderer, camera: &SceneCamera| {
+        r.screenshot_without_gpu(&scene, camera, size, &options)
+            .unwrap()
+    };
+    let mut renderer = Renderer::with_compositor(super::super::Compositor::Cpu);
+    renderer.set_levels_by_brick(false);
+    let a = shoot(&mut renderer, &along_x);
+    assert!(!a.report.levels_short_of_memory);
+    let after_a = levels(&renderer);
+    let own = after_a
+        .iter()
+        .find(|(d, _)| *d == Detail::default())
+        .map(|&(_, n)| n as u64)
+        .unwrap();
+    let uneven: Vec<_> = after_a.iter().filter(|(d, _)| is_uneven(*d)).collect();
+    assert_eq!((after_a.len(), uneven.len()), (2, 1), "{after_a:?}");
+    let first = uneven[0].1 as u64;
+    assert!(first < own, "{after_a:?}");
+    let each = crate::budget::LEVEL_SPLAT_BYTES;
+    renderer.set_headroom(Some((own - first) * each - 1));
+    let short = shoot(&mut renderer, &along_y);
+    assert!(short.report.levels_short_of_memory, "{:?}", short.report);
+    assert_eq!((short.report.levels, short.report.levels_made), ([0; 3], 0));
+    assert_eq!(levels(&renderer), after_a);
+    let mut whole = Renderer::with_compositor(super::super::Compositor::Cpu);
+    whole.set_level_of_detail(false);
+    assert_eq!(short.frame.pixels, shoot(&mut whole, &along_y).frame.pixels);
+    renderer.set_headroom(Some((own - first) * each));
+    let b = shoot(&mut renderer, &along_y);
+    assert!(!b.report.levels_short_of_memory, "{:?}", b.report);
+    assert_eq!(b.report.levels_made, 1, "{:?}", b.report);
+    let after_b = levels(&renderer);
+    assert!(!after_b.contains(uneven[0]), "{after_b:?}");
+    assert_eq!(after_b.iter().filter(|(d, _)| is_uneven(*d)).count(), 1);
+    let mut fresh = Renderer::with_compositor(super::super::Compositor::Cpu);
+    fresh.set_levels_by_brick(false);
+    assert_eq!(b.frame.pixels, shoot(&mut fresh, &along_y).frame.pixels);
+}
