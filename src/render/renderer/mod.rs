@@ -2747,10 +2747,8 @@ impl Renderer {
             let uneven: Vec<(Detail, u64, usize)> = self
                 .volumes
                 .iter()
-                .filter_map(|((v, d), state)| {
-                    (*v == id && is_uneven(*d))
-                        .then(|| (*d, state.used, state.classified.grid.len()))
-                })
+                .filter(|((v, d), _)| *v == id && is_uneven(*d))
+                .map(|((_, d), state)| (*d, state.used, state.classified.grid.len()))
                 .collect();
             let own_splats = (self.volumes.get(&(id, Detail::default())))
                 .map_or(0, |own| own.classified.grid.len());
