@@ -6,7 +6,8 @@
 //! argument asking for a huge image is refused at once with a message that names the size,
 //! instead of wrapping, aborting on an allocation, or swapping for minutes.
 //!
-//! The memory budget is what Linux says it can give without swapping (`MemAvailable`), or the
+//! The memory budget is what Linux says it can give without swapping (`MemAvailable`, or what
+//! the process's control group allows where that is less), or the
 //! number of bytes in `SPLATSCENE_MEMORY_LIMIT` (a plain count, or with a `K`, `M`, `G` or `T`
 //! suffix, powers of 1024) where that is set. A volume is loaded only when drawing it fits:
 //! its value as held (1, 2 or 4 bytes, see [`crate::volume::Voxels`]) and
@@ -14,6 +15,7 @@
 //! voxels is refused from its header rather than inflated first and refused later.
 
 use std::fmt;
+use std::path::{Component, Path, PathBuf};
 
 use thiserror::Error;
 
@@ -123,12 +125,95 @@ pub fn check_image(width: u64, height: u64) -> Result<u64, SizeError> {
     Ok(width * height)
 }
 
-/// Memory Linux can give without swapping (`MemAvailable` in `/proc/meminfo`), if it says.
+/// Memory Linux can give this process without swapping: `MemAvailable` in `/proc/meminfo`, or
+/// less where the process's control group allows less ([`cgroup_room`]): a Slurm job's
+/// allocation or a container's limit, which `MemAvailable` does not see (a job given 8 GiB on a
+/// 256 GiB node is killed at 8 GiB). `None` where neither says.
 pub fn available_memory() -> Option<u64> {
-    let info = std::fs::read_to_string("/proc/meminfo").ok()?;
-    let line = info.lines().find(|l| l.starts_with("MemAvailable:"))?;
-    let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
-    kib.checked_mul(1024)
+    let system = std::fs::read_to_string("/proc/meminfo")
+        .ok()
+        .and_then(|info| {
+            let line = info.lines().find(|l| l.starts_with("MemAvailable:"))?;
+            let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+            kib.checked_mul(1024)
+        });
+    let group = std::fs::read_to_string("/proc/self/cgroup")
+        .ok()
+        .and_then(|groups| cgroup_room(Path::new("/sys/fs/cgroup"), &groups));
+    match (system, group) {
+        (Some(a), Some(b)) => Some(a.min(b)),
+        (a, b) => a.or(b),
+    }
+}
+
+/// What the memory controllers of control groups allow a process still, its groups listed as
+/// `/proc/self/cgroup` lists them (`groups`) and their files under `root` (`/sys/fs/cgroup`):
+/// the least, over its group and every group above it that sets a limit (cgroup v2's
+/// `memory.max`, v1's `memory.limit_in_bytes` under `memory/`), of that limit less what the
+/// group uses (`memory.current`, `memory.usage_in_bytes`), the file cache it can drop
+/// (`inactive_file`, `total_inactive_file` in `memory.stat`) not counted as used. `None` where
+/// no group sets a limit or the files cannot be read. (Read here rather than through a crate:
+/// three small files a level, and the crates that read them bring a process-wide model of
+/// cgroups this one question does not need.)
+pub fn cgroup_room(root: &Path, groups: &str) -> Option<u64> {
+    let mut least: Option<u64> = None;
+    for line in groups.lines() {
+        let mut fields = line.splitn(3, ':');
+        let (Some(_), Some(controllers), Some(path)) =
+            (fields.next(), fields.next(), fields.next())
+        else {
+            continue;
+        };
+        let (dir, files) = if controllers.is_empty() {
+            (root.to_path_buf(), V2_FILES)
+        } else if controllers.split(',').any(|c| c == "memory") {
+            (root.join("memory"), V1_FILES)
+        } else {
+            continue;
+        };
+        let mut group = PathBuf::from(path.trim_start_matches('/'));
+        loop {
+            if group
+                .components()
+                .any(|c| !matches!(c, Component::Normal(_)))
+            {
+                break;
+            }
+            if let Some(room) = group_room(&dir.join(&group), files) {
+                least = Some(least.map_or(room, |l| l.min(room)));
+            }
+            if !group.pop() {
+                break;
+            }
+        }
+    }
+    least
+}
+
+/// A memory controller's files: its limit, its use, and the name of its reclaimable file
+/// cache in `memory.stat`.
+type GroupFiles = (&'static str, &'static str, &'static str);
+const V2_FILES: GroupFiles = ("memory.max", "memory.current", "inactive_file");
+const V1_FILES: GroupFiles = (
+    "memory.limit_in_bytes",
+    "memory.usage_in_bytes",
+    "total_inactive_file",
+);
+
+/// What group `dir` allows still; `None` where it sets no limit (v2's `max`) or says nothing.
+fn group_room(dir: &Path, (limit, usage, cache): GroupFiles) -> Option<u64> {
+    let read = |name: &str| std::fs::read_to_string(dir.join(name)).ok();
+    let limit: u64 = read(limit)?.trim().parse().ok()?;
+    let used: u64 = read(usage)?.trim().parse().ok()?;
+    let cache: u64 = read("memory.stat")
+        .and_then(|stat| {
+            stat.lines().find_map(|l| {
+                let (key, value) = l.split_once(' ')?;
+                (key == cache).then(|| value.trim().parse().ok())?
+            })
+        })
+        .unwrap_or(0);
+    Some(limit.saturating_sub(used.saturating_sub(cache)))
 }
 
 /// The memory budget: [`MEMORY_LIMIT_VAR`] where set and valid, else the available memory,
@@ -241,6 +326,62 @@ mod tests {
         assert!(text.contains("the test's voxels"), "{text}");
         assert!(text.contains(MEMORY_LIMIT_VAR), "{text}");
         assert!(check_memory("a few voxels", 10, 4).is_ok());
+    }
+
+    /// Writes `files` (path under `root`, text) for [`cgroup_room`] to read.
+    fn groups_of(files: &[(&str, &str)]) -> tempfile::TempDir {
+        let root = tempfile::tempdir().unwrap();
+        for (path, text) in files {
+            let path = root.path().join(path);
+            std::fs::create_dir_all(path.parent().unwrap()).unwrap();
+            std::fs::write(path, text).unwrap();
+        }
+        root
+    }
+
+    #[test]
+    fn a_control_groups_limit_above_the_process_bounds_its_memory() {
+        // cgroup v2, as Slurm sets a job's memory: the limit on the job, none on its step;
+        // the job's dropable file cache not counted as used.
+        let root = groups_of(&[
+            ("job_7/memory.max", "8000\n"),
+            ("job_7/memory.current", "3000\n"),
+            (
+                "job_7/memory.stat",
+                "anon 2400\ninactive_file 500\nactive_file 100\n",
+            ),
+            ("job_7/step_0/memory.max", "max\n"),
+            ("job_7/step_0/memory.current", "2000\n"),
+        ]);
+        assert_eq!(cgroup_room(root.path(), "0::/job_7/step_0\n"), Some(5500));
+        // A tighter limit lower down wins.
+        std::fs::write(root.path().join("job_7/step_0/memory.max"), "4000").unwrap();
+        assert_eq!(cgroup_room(root.path(), "0::/job_7/step_0\n"), Some(2000));
+        // Used past the limit: nothing left, not an underflow.
+        std::fs::write(root.path().join("job_7/step_0/memory.max"), "1000").unwrap();
+        assert_eq!(cgroup_room(root.path(), "0::/job_7/step_0\n"), Some(0));
+        // No limit anywhere.
+        let open = groups_of(&[("a/memory.max", "max"), ("a/memory.current", "10")]);
+        assert_eq!(cgroup_room(open.path(), "0::/a\n"), None);
+    }
+
+    #[test]
+    fn a_v1_memory_controller_is_read_beside_the_others() {
+        let root = groups_of(&[
+            ("memory/slurm/uid_0/memory.limit_in_bytes", "4000"),
+            ("memory/slurm/uid_0/memory.usage_in_bytes", "1000"),
+            (
+                "memory/slurm/uid_0/memory.stat",
+                "cache 300\ntotal_inactive_file 100\n",
+            ),
+            ("memory/memory.limit_in_bytes", "9223372036854771712"),
+            ("memory/memory.usage_in_bytes", "50000"),
+        ]);
+        let groups = "9:name=systemd:/\n4:memory:/slurm/uid_0\n1:cpu,cpuacct:/x\n0::/\n";
+        assert_eq!(cgroup_room(root.path(), groups), Some(3100));
+        // Lines that mean nothing, or climb out of the root, are passed over.
+        let odd = "garbage\n4:memory:/../../etc\n::\n4:memory\n";
+        assert_eq!(cgroup_room(root.path(), odd), None);
     }
 
     #[cfg(target_os = "linux")]
