@@ -28,7 +28,8 @@ pub const MAX_PIXELS: u64 = 1 << 26;
 /// Bytes a voxel costs from loading to drawing besides its value, before the significant ones
 /// are known: the significance bitmap and its ranks, the clear-range labels of the slices
 /// being classified, rounded up. What each significant voxel adds ([`SPLAT_BYTES`]) is checked
-/// after classification, so that a large grid that is mostly empty is not refused, and the GPU
+/// after classification against the memory left then ([`check_memory_left`]), so that a large
+/// grid that is mostly empty is not refused, and the GPU
 /// splat pass checks its full-grid texture (8 bytes a voxel) before building it. Measured peaks
 /// of a whole `render` with the CPU tiles, in BENCHMARKS.md ("Values held as stored"): 2.96
 /// bytes a voxel for the 8-bit LIDC2 CT resampled to 512 x 512 x 532 with 5.4M splats (1 for
@@ -272,6 +273,23 @@ pub fn parse_bytes(text: &str) -> Option<u64> {
 pub fn check_memory(what: impl fmt::Display, count: u64, each: u64) -> Result<u64, SizeError> {
     let needed = count.saturating_mul(each);
     let budget = memory_budget();
+    if needed > budget {
+        return Err(SizeError::OverBudget {
+            what: what.to_string(),
+            needed,
+            budget,
+        });
+    }
+    Ok(needed)
+}
+
+/// Checks that `count` items of `each` bytes fit the memory left to the process
+/// ([`headroom`]): what the volume's loading check did not count, asked once the process
+/// holds the volume. With [`MEMORY_LIMIT_VAR`] set, what the process holds counts against
+/// the limit, so that the limit bounds the whole drawing and not each part of it alone.
+pub fn check_memory_left(what: impl fmt::Display, count: u64, each: u64) -> Result<u64, SizeError> {
+    let needed = count.saturating_mul(each);
+    let budget = headroom();
     if needed > budget {
         return Err(SizeError::OverBudget {
             what: what.to_string(),

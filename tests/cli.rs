@@ -681,6 +681,62 @@ fn splats_past_the_memory_budget_are_refused_after_classification() {
 }
 
 #[test]
+fn a_memory_limit_bounds_the_whole_drawing_not_each_part_alone() {
+    // A 128^3 raw volume, every voxel significant: its 2,097,152 splats take 60 MiB at 30
+    // bytes each, which a 64 MiB limit holds alone, but not with what the process holds by
+    // then (the values, 2 MiB, and the program itself, over 10 MiB): refused, the limit left
+    // said. A 160 MiB limit draws it.
+    let dir = scratch("cli-limit");
+    let raw = dir.join("dense128.raw");
+    std::fs::write(&raw, vec![200u8; 128 * 128 * 128]).unwrap();
+    let out = dir.join("dense128.png");
+    let render = |limit: &str| {
+        command()
+            .env("SPLATSCENE_MEMORY_LIMIT", limit)
+            .env("RUST_BACKTRACE", "0")
+            .args([
+                "render",
+                raw.to_str().unwrap(),
+                "--dims",
+                "128,128,128",
+                "--scalar",
+                "u8",
+                "--window",
+                "100,150",
+                "--size",
+                "32x32",
+                "--compositor",
+                "cpu",
+                "--lod",
+                "off",
+                "--out",
+                out.to_str().unwrap(),
+            ])
+            .output()
+            .unwrap()
+    };
+    let refused = render("64M");
+    let said = String::from_utf8_lossy(&refused.stderr);
+    assert!(!refused.status.success(), "{said}");
+    assert!(said.contains("drawing 2097152 splats needs 60.0 MiB"), "{said}");
+    let left = said
+        .split("MiB of memory and ")
+        .nth(1)
+        .and_then(|rest| rest.split(" MiB").next())
+        .and_then(|n| n.parse::<f64>().ok())
+        .expect(&said);
+    assert!(left < 54.0, "{said}");
+    assert!(!out.exists(), "nothing written");
+    let drawn = render("160M");
+    assert!(
+        drawn.status.success(),
+        "{}",
+        String::from_utf8_lossy(&drawn.stderr)
+    );
+    assert!(out.exists());
+}
+
+#[test]
 fn numbers_that_are_not_finite_or_out_of_range_are_refused() {
     for args in [
         &["orderings", "--threshold", "NaN"][..],

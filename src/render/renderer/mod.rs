@@ -2248,7 +2248,7 @@ impl Renderer {
             // What drawing a classification's splats takes, before any of it is made.
             let afford = |result: &Classified| {
                 let splats = result.grid.len() as u64;
-                crate::budget::check_memory(
+                crate::budget::check_memory_left(
                     format!("drawing {splats} splats"),
                     splats,
                     crate::budget::SPLAT_BYTES,
