@@ -271,16 +271,7 @@ pub fn parse_bytes(text: &str) -> Option<u64> {
 /// Checks that `count` items of `each` bytes fit the memory budget; `what` names them in the
 /// error ("the volume file.nii.gz's 4294967296 voxels").
 pub fn check_memory(what: impl fmt::Display, count: u64, each: u64) -> Result<u64, SizeError> {
-    let needed = count.saturating_mul(each);
-    let budget = memory_budget();
-    if needed > budget {
-        return Err(SizeError::OverBudget {
-            what: what.to_string(),
-            needed,
-            budget,
-        });
-    }
-    Ok(needed)
+    check_within(what, count.saturating_mul(each), memory_budget())
 }
 
 /// Checks that `count` items of `each` bytes fit the memory left to the process
@@ -288,8 +279,11 @@ pub fn check_memory(what: impl fmt::Display, count: u64, each: u64) -> Result<u6
 /// holds the volume. With [`MEMORY_LIMIT_VAR`] set, what the process holds counts against
 /// the limit, so that the limit bounds the whole drawing and not each part of it alone.
 pub fn check_memory_left(what: impl fmt::Display, count: u64, each: u64) -> Result<u64, SizeError> {
-    let needed = count.saturating_mul(each);
-    let budget = headroom();
+    check_within(what, count.saturating_mul(each), headroom())
+}
+
+/// `needed` bytes against `budget` bytes: the bytes, or the error naming both.
+fn check_within(what: impl fmt::Display, needed: u64, budget: u64) -> Result<u64, SizeError> {
     if needed > budget {
         return Err(SizeError::OverBudget {
             what: what.to_string(),

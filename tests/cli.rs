@@ -633,37 +633,41 @@ fn a_dense_grid_larger_than_memory_is_refused_before_allocating() {
     assert!(said.contains("needs about 256.5 GiB"), "{said}");
 }
 
+/// A raw `n`^3 u8 volume in `dir`, every voxel significant in the window 100-150, and a
+/// function that renders it at 32 x 32 on the CPU tiles into `out` (with `more` arguments)
+/// under the memory limit it is given.
+fn dense_cube_under<'a>(
+    dir: &std::path::Path,
+    n: usize,
+    out: &'a std::path::Path,
+    more: &'a [&'a str],
+) -> impl Fn(&str) -> std::process::Output + 'a {
+    let raw = dir.join(format!("dense{n}.raw"));
+    std::fs::write(&raw, vec![200u8; n * n * n]).unwrap();
+    let dims = format!("{n},{n},{n}");
+    move |limit: &str| {
+        command()
+            .env("SPLATSCENE_MEMORY_LIMIT", limit)
+            .env("RUST_BACKTRACE", "0")
+            .arg("render")
+            .arg(&raw)
+            .args(["--dims", &dims, "--scalar", "u8", "--window", "100,150"])
+            .args(["--size", "32x32", "--compositor", "cpu"])
+            .args(more)
+            .arg("--out")
+            .arg(out)
+            .output()
+            .unwrap()
+    }
+}
+
 #[test]
 fn splats_past_the_memory_budget_are_refused_after_classification() {
     // A 64^3 raw volume, every voxel significant: the grid fits a 5 MiB budget (2 bytes a
     // voxel, 0.5 MiB), its 262,144 splats (30 bytes each, 7.5 MiB) do not.
     let dir = scratch("cli");
-    let raw = dir.join("dense64.raw");
-    std::fs::write(&raw, vec![200u8; 64 * 64 * 64]).unwrap();
     let out = dir.join("dense64.png");
-    let render = |limit: &str| {
-        command()
-            .env("SPLATSCENE_MEMORY_LIMIT", limit)
-            .env("RUST_BACKTRACE", "0")
-            .args([
-                "render",
-                raw.to_str().unwrap(),
-                "--dims",
-                "64,64,64",
-                "--scalar",
-                "u8",
-                "--window",
-                "100,150",
-                "--size",
-                "32x32",
-                "--compositor",
-                "cpu",
-                "--out",
-                out.to_str().unwrap(),
-            ])
-            .output()
-            .unwrap()
-    };
+    let render = dense_cube_under(&dir, 64, &out, &[]);
     let refused = render("5M");
     let said = String::from_utf8_lossy(&refused.stderr);
     assert!(!refused.status.success());
@@ -687,38 +691,15 @@ fn a_memory_limit_bounds_the_whole_drawing_not_each_part_alone() {
     // then (the values, 2 MiB, and the program itself, over 10 MiB): refused, the limit left
     // said. A 160 MiB limit draws it.
     let dir = scratch("cli-limit");
-    let raw = dir.join("dense128.raw");
-    std::fs::write(&raw, vec![200u8; 128 * 128 * 128]).unwrap();
     let out = dir.join("dense128.png");
-    let render = |limit: &str| {
-        command()
-            .env("SPLATSCENE_MEMORY_LIMIT", limit)
-            .env("RUST_BACKTRACE", "0")
-            .args([
-                "render",
-                raw.to_str().unwrap(),
-                "--dims",
-                "128,128,128",
-                "--scalar",
-                "u8",
-                "--window",
-                "100,150",
-                "--size",
-                "32x32",
-                "--compositor",
-                "cpu",
-                "--lod",
-                "off",
-                "--out",
-                out.to_str().unwrap(),
-            ])
-            .output()
-            .unwrap()
-    };
+    let render = dense_cube_under(&dir, 128, &out, &["--lod", "off"]);
     let refused = render("64M");
     let said = String::from_utf8_lossy(&refused.stderr);
     assert!(!refused.status.success(), "{said}");
-    assert!(said.contains("drawing 2097152 splats needs 60.0 MiB"), "{said}");
+    assert!(
+        said.contains("drawing 2097152 splats needs 60.0 MiB"),
+        "{said}"
+    );
     let left = said
         .split("MiB of memory and ")
         .nth(1)
