@@ -127,7 +127,7 @@ pub fn check_image(width: u64, height: u64) -> Result<u64, SizeError> {
 }
 
 /// Memory Linux can give this process without swapping: `MemAvailable` in `/proc/meminfo`, or
-/// less where the process's control group allows less ([`cgroup_room`]): a Slurm job's
+/// less where the process's control groups allow less (their memory controllers): a Slurm job's
 /// allocation or a container's limit, which `MemAvailable` does not see (a job given 8 GiB on a
 /// 256 GiB node is killed at 8 GiB). `None` where neither says.
 pub fn available_memory() -> Option<u64> {
@@ -151,12 +151,14 @@ pub fn available_memory() -> Option<u64> {
 /// `/proc/self/cgroup` lists them (`groups`) and their files under `root` (`/sys/fs/cgroup`):
 /// the least, over its group and every group above it that sets a limit (cgroup v2's
 /// `memory.max`, v1's `memory.limit_in_bytes` under `memory/`), of that limit less what the
-/// group uses (`memory.current`, `memory.usage_in_bytes`), the file cache it can drop
-/// (`inactive_file`, `total_inactive_file` in `memory.stat`) not counted as used. `None` where
+/// group uses (`memory.current`, `memory.usage_in_bytes`), its page cache (`file`,
+/// `total_cache` in `memory.stat`) not counted as used, as `MemAvailable` counts the cache as
+/// available: a batch that has read many files holds their pages in its group until memory
+/// is wanted. `None` where
 /// no group sets a limit or the files cannot be read. (Read here rather than through a crate:
 /// three small files a level, and the crates that read them bring a process-wide model of
 /// cgroups this one question does not need.)
-pub fn cgroup_room(root: &Path, groups: &str) -> Option<u64> {
+fn cgroup_room(root: &Path, groups: &str) -> Option<u64> {
     let mut least: Option<u64> = None;
     for line in groups.lines() {
         let mut fields = line.splitn(3, ':');
@@ -191,14 +193,14 @@ pub fn cgroup_room(root: &Path, groups: &str) -> Option<u64> {
     least
 }
 
-/// A memory controller's files: its limit, its use, and the name of its reclaimable file
-/// cache in `memory.stat`.
+/// A memory controller's files: its limit, its use, and the name of its page cache in
+/// `memory.stat`.
 type GroupFiles = (&'static str, &'static str, &'static str);
-const V2_FILES: GroupFiles = ("memory.max", "memory.current", "inactive_file");
+const V2_FILES: GroupFiles = ("memory.max", "memory.current", "file");
 const V1_FILES: GroupFiles = (
     "memory.limit_in_bytes",
     "memory.usage_in_bytes",
-    "total_inactive_file",
+    "total_cache",
 );
 
 /// What group `dir` allows still; `None` where it sets no limit (v2's `max`) or says nothing.
@@ -242,7 +244,7 @@ pub fn headroom() -> u64 {
 }
 
 /// This process's resident set, from `/proc/self/status` (`None` where there is none).
-pub fn resident_bytes() -> Option<u64> {
+fn resident_bytes() -> Option<u64> {
     let status = std::fs::read_to_string("/proc/self/status").ok()?;
     let line = status.lines().find(|l| l.starts_with("VmRSS:"))?;
     let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
@@ -354,13 +356,13 @@ mod tests {
     #[test]
     fn a_control_groups_limit_above_the_process_bounds_its_memory() {
         // cgroup v2, as Slurm sets a job's memory: the limit on the job, none on its step;
-        // the job's dropable file cache not counted as used.
+        // the job's page cache not counted as used.
         let root = groups_of(&[
             ("job_7/memory.max", "8000\n"),
             ("job_7/memory.current", "3000\n"),
             (
                 "job_7/memory.stat",
-                "anon 2400\ninactive_file 500\nactive_file 100\n",
+                "anon 2400\nfile 500\nactive_file 100\n",
             ),
             ("job_7/step_0/memory.max", "max\n"),
             ("job_7/step_0/memory.current", "2000\n"),
@@ -384,7 +386,7 @@ mod tests {
             ("memory/slurm/uid_0/memory.usage_in_bytes", "1000"),
             (
                 "memory/slurm/uid_0/memory.stat",
-                "cache 300\ntotal_inactive_file 100\n",
+                "cache 300\ntotal_cache 100\n",
             ),
             ("memory/memory.limit_in_bytes", "9223372036854771712"),
             ("memory/memory.usage_in_bytes", "50000"),
