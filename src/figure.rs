@@ -13,23 +13,16 @@ use crate::scene::patient::NamedView;
 use crate::scene::{Projection, Scene, SceneCamera};
 
 /// The GPU context for drawing `scene`, or none where the CPU can draw the whole scene (volumes
-/// only, with a compositor other than the GPU's) and either the CPU tile compositor is asked
-/// for, or [`Compositor::Auto`] is and the machine has no GPU device
-/// ([`GpuContext::hardware_may_exist`]), or there is no adapter (that fallback is said on
-/// stderr). In the first two cases no adapter is looked for: Mesa's lavapipe, once loaded,
-/// holds about 80 MB and takes 50 ms to start. (Where a GPU device exists,
-/// [`Compositor::Auto`] must look, to learn whether the adapter is a CPU.)
+/// only, with a compositor other than the GPU's) and either no adapter need be looked for
+/// ([`Compositor::volumes_without_adapter`]) or there is none (that fallback is said on
+/// stderr). (Where a GPU device exists, [`Compositor::Auto`] must look, to learn whether the
+/// adapter is a CPU.)
 pub fn context_for(
     compositor: Compositor,
     scene: &Scene,
 ) -> Result<Option<GpuContext>, RenderError> {
     let volumes_only = scene.meshes().chain(scene.overlays()).next().is_none();
-    let cpu_alone = match compositor {
-        Compositor::Cpu => true,
-        Compositor::Auto => !GpuContext::hardware_may_exist(),
-        _ => false,
-    };
-    if volumes_only && cpu_alone {
+    if volumes_only && compositor.volumes_without_adapter() {
         return Ok(None);
     }
     match GpuContext::headless() {

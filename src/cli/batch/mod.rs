@@ -484,9 +484,7 @@ struct Settings<'a> {
 
 /// The batch's GPU context, looked for once: before the first job where every job needs the
 /// answer, else at the first job with meshes. A batch of volumes alone composited on the CPU
-/// (`--compositor cpu`, or `auto` on a machine with no GPU device,
-/// [`GpuContext::hardware_may_exist`]) then never loads an adapter: Mesa's lavapipe, once
-/// loaded, holds about 80 MB for the rest of the run.
+/// ([`Compositor::volumes_without_adapter`]) then never loads an adapter.
 struct Gpu {
     /// The volumes are composited on the CPU whatever adapter is found.
     cpu_alone: bool,
@@ -496,13 +494,8 @@ struct Gpu {
 
 impl Gpu {
     fn new(compositor: Compositor) -> Self {
-        let cpu_alone = match compositor {
-            Compositor::Cpu => true,
-            Compositor::Auto => !GpuContext::hardware_may_exist(),
-            _ => false,
-        };
         Self {
-            cpu_alone,
+            cpu_alone: compositor.volumes_without_adapter(),
             compositor,
             ctx: std::cell::OnceCell::new(),
         }

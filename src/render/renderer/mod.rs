@@ -1235,6 +1235,20 @@ pub enum Compositor {
     GpuTiles,
 }
 
+impl Compositor {
+    /// Whether volumes alone are composited on the CPU with no GPU adapter looked for: the
+    /// CPU tiles asked for, or [`Compositor::Auto`] on a machine with no GPU device
+    /// ([`GpuContext::hardware_may_exist`]), where the only adapter to be found is a CPU.
+    /// Looking loads Mesa's lavapipe, which holds about 80 MB and takes 50 ms to start.
+    pub fn volumes_without_adapter(self) -> bool {
+        match self {
+            Self::Cpu => true,
+            Self::Auto => !GpuContext::hardware_may_exist(),
+            Self::Gpu | Self::GpuTiles => false,
+        }
+    }
+}
+
 impl std::str::FromStr for Compositor {
     type Err = String;
 

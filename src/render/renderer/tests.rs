@@ -1603,6 +1603,19 @@ fn a_levels_key_holds_the_end_of_the_one_axis_whose_pairs_it_merges() {
 }
 
 #[test]
+fn only_the_cpu_tiles_and_auto_draw_volumes_with_no_adapter_looked_for() {
+    use super::super::Compositor;
+    assert!(Compositor::Cpu.volumes_without_adapter());
+    assert!(!Compositor::Gpu.volumes_without_adapter());
+    assert!(!Compositor::GpuTiles.volumes_without_adapter());
+    // Auto looks wherever a GPU may be there to find.
+    assert_eq!(
+        Compositor::Auto.volumes_without_adapter(),
+        !super::super::GpuContext::hardware_may_exist()
+    );
+}
+
+#[test]
 fn uneven_levels_are_dropped_least_recently_used_first_past_the_splats_kept() {
     let level = |x: u8| Detail::Level([x, 1, 0], [0; 3]);
     let (a, b, c, d, e) = (
