@@ -2144,7 +2144,7 @@ impl Renderer {
         while let Some(state) = self.volumes.get_mut(&(id, key)) {
             state.used = frame;
             let dims = state.classified.grid.dims();
-            // A level holds at most a splat for each of the level's below it.
+            // A level holds at most one splat for each splat of the level below it.
             let below = state.classified.grid.len() as u64;
             let axes: [bool; 3] = std::array::from_fn(|a| level[a] < wanted[a] && dims[a] > 1);
             if axes == [false; 3] {
