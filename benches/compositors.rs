@@ -79,7 +79,8 @@ const OPTIONS: FrameOptions = FrameOptions {
     ordering: None,
     background: Some([0.0, 0.0, 0.0]),
     measure: false,
-    preview: false,
+    preview: 0,
+    volume_divisor: 1,
 };
 
 fn median(mut v: Vec<Duration>) -> f64 {

@@ -234,7 +234,7 @@ fn viewer_frames(c: &mut Criterion) {
     let target = RenderTarget::new(&ctx, size.0, size.1).unwrap();
     let mut renderer = Renderer::new();
     let mut group = frame_group(c, "viewer-frame", 10);
-    for (name, preview) in [("shoulder", false), ("shoulder-preview", true)] {
+    for (name, preview) in [("shoulder", 0), ("shoulder-preview", 1)] {
         let options = FrameOptions {
             measure: false,
             preview,

@@ -4,17 +4,21 @@
 //! behind the viewer's full frames in BENCHMARKS.md ("Magnified bricks").
 //!
 //! ```sh
-//! cargo run --release --example scene_frames -- SCENE.toml WxH FRAMES TURN_DEGREES [full|preview|rest|window] [copies|no-copies]
+//! cargo run --release --example scene_frames -- SCENE.toml WxH FRAMES TURN_DEGREES [full|preview[N]|rest|window[N]] [copies|no-copies] [png=PATH] [volumes=D]
 //! ```
 //!
 //! Frames are drawn as the viewer draws them with the CPU tiles on a CPU adapter (lavapipe):
 //! meshes on the GPU adapter, splats by the tile compositor. `full` (the default) draws the
 //! viewer's full frames (no refinement of grids coarser than the pixels), `preview` its
 //! previews while the camera moves (at least one level of detail coarser; drawn here at the
-//! size given), `rest` the refined frame once the camera rests, `window` the previews while a
+//! size given; `previewN`, such as `preview2`, a preview of coarseness N,
+//! `FrameOptions::preview`), `rest` the refined frame once the camera rests, `window` the
+//! previews while a
 //! window is dragged over the values (the camera still, each volume's transfer function
 //! windowed one value further each frame, TURN_DEGREES then ignored). `no-copies`
-//! draws previews without coarse copies (`Renderer::set_preview_copies`).
+//! draws previews without coarse copies (`Renderer::set_preview_copies`). `png=PATH` writes
+//! the last frame to PATH; `volumes=D` composites the volumes at 1/D of the pixels, laid over
+//! the meshes at the size given (`FrameOptions::volume_divisor`).
 
 use anyhow::{Context, Result, bail};
 use splatscene::render::{Compositor, FrameOptions, GpuContext, Renderer};
@@ -22,10 +26,20 @@ use splatscene::scene::NodeContent;
 use splatscene::scene::file::load_scene_file;
 use std::sync::Arc;
 
-const USAGE: &str = "usage: scene_frames SCENE.toml WxH FRAMES TURN_DEGREES [full|preview|rest|window] [copies|no-copies]";
+const USAGE: &str = "usage: scene_frames SCENE.toml WxH FRAMES TURN_DEGREES [full|preview[N]|rest|window[N]] [copies|no-copies] [png=PATH] [volumes=D]";
 
 fn main() -> Result<()> {
-    let args: Vec<String> = std::env::args().skip(1).collect();
+    let mut args: Vec<String> = std::env::args().skip(1).collect();
+    // `png=PATH` anywhere: the last frame written there.
+    let png = args
+        .iter()
+        .position(|a| a.starts_with("png="))
+        .map(|i| args.remove(i)[4..].to_string());
+    // `volumes=D`: the volumes composited at 1/D of the pixels (`FrameOptions::volume_divisor`).
+    let volume_divisor = match args.iter().position(|a| a.starts_with("volumes=")) {
+        Some(i) => args.remove(i)[8..].parse::<u32>().context("volumes=D")?,
+        None => 1,
+    };
     if !(4..=6).contains(&args.len()) {
         bail!("{USAGE}");
     }
@@ -38,12 +52,22 @@ fn main() -> Result<()> {
     let turn: f64 = args[3].parse().context("TURN_DEGREES")?;
     // The viewer's three kinds of frame: previews while the camera moves, full frames once
     // it stops, and the refined frame once it rests.
-    let windowing = args.get(4).is_some_and(|a| a == "window");
+    let windowing = args.get(4).is_some_and(|a| a.starts_with("window"));
+    let coarseness = |rest: &str| match rest {
+        "" => Some(1),
+        n => n.parse::<u8>().ok().filter(|&n| n > 0),
+    };
     let (preview, refined) = match args.get(4).map(String::as_str) {
-        None | Some("full") => (false, false),
-        Some("preview" | "window") => (true, false),
-        Some("rest") => (false, true),
-        Some(other) => bail!("{other:?}: full, preview, rest or window; {USAGE}"),
+        None | Some("full") => (0, false),
+        Some("rest") => (0, true),
+        Some(kind) => match kind
+            .strip_prefix("preview")
+            .or_else(|| kind.strip_prefix("window"))
+            .and_then(coarseness)
+        {
+            Some(n) => (n, false),
+            None => bail!("{kind:?}: full, preview[N], rest or window[N]; {USAGE}"),
+        },
     };
     let mut scene = loaded.scene;
     // Each volume's function and the window its points span, for `window`.
@@ -69,6 +93,7 @@ fn main() -> Result<()> {
     let options = FrameOptions {
         background: loaded.background,
         preview,
+        volume_divisor,
         ..FrameOptions::default()
     };
     let ms = |d: std::time::Duration| d.as_secs_f64() * 1e3;
@@ -122,6 +147,11 @@ fn main() -> Result<()> {
         );
         if f > 0 {
             kept.push(total);
+        }
+        if let (Some(path), true) = (&png, f == frames) {
+            splatscene::render::frame_to_rgba8(&shot.frame)
+                .save(path)
+                .with_context(|| format!("writing {path}"))?;
         }
     }
     kept.sort_by(f64::total_cmp);

@@ -23,7 +23,8 @@ const OPTIONS: FrameOptions = FrameOptions {
     ordering: None,
     background: Some([0.05, 0.05, 0.1]),
     measure: false,
-    preview: false,
+    preview: 0,
+    volume_divisor: 1,
 };
 
 /// Splats a batch of the GPU tiles in these tests.

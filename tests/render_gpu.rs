@@ -53,7 +53,8 @@ const TRANSPARENT: FrameOptions = FrameOptions {
     ordering: None,
     background: None,
     measure: false,
-    preview: false,
+    preview: 0,
+    volume_divisor: 1,
 };
 
 /// The GPU frame of `camera` against the CPU reference compositor of the same order, which
@@ -665,10 +666,7 @@ fn a_preview_frame_draws_an_eighth_of_the_splats_and_keeps_the_look() {
         measure: false,
         ..Default::default()
     };
-    let preview = FrameOptions {
-        preview: true,
-        ..full
-    };
+    let preview = FrameOptions { preview: 1, ..full };
     let size = (160, 120);
     let a = renderer
         .screenshot(&ctx, &scene, &camera, size, &full)
@@ -764,7 +762,7 @@ fn a_preview_after_a_new_transfer_function_draws_a_coarse_copy_on_every_composit
     let (full, preview) = (
         TRANSPARENT,
         FrameOptions {
-            preview: true,
+            preview: 1,
             ..TRANSPARENT
         },
     );

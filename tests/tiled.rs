@@ -25,7 +25,8 @@ const OPTIONS: FrameOptions = FrameOptions {
     ordering: None,
     background: Some([0.05, 0.05, 0.1]),
     measure: false,
-    preview: false,
+    preview: 0,
+    volume_divisor: 1,
 };
 
 fn shoot(
@@ -1026,4 +1027,134 @@ fn the_splat_pass_draws_the_mix_the_tiles_draw() {
         );
         assert_alike(&d, what);
     }
+}
+
+/// A preview whose volumes are composited at fewer pixels (`FrameOptions::volume_divisor`)
+/// is the preview at the frame's own pixels within a little, meshes' silhouettes included:
+/// on both sides of an opaque cube's edges, pixels take the volume of their own side. A plain
+/// bilinear scaling of the preview drawn small (written here) blurs those edges by its
+/// pixels' width. The GPU passes refuse any divisor but 1, and every path refuses 0.
+#[test]
+fn volumes_composited_at_fewer_pixels_keep_the_meshes_edges() {
+    use common::shapes::cube;
+    use glam::{DMat4, DVec3};
+    use splatscene::mesh::Material;
+    use splatscene::scene::MeshNode;
+    use std::sync::Arc;
+    let ctx = context();
+    let mut scene = translucent_blobs();
+    // A cube partly inside the blobs: the volume lies in front of some of it, behind the rest.
+    scene
+        .add(
+            "cube",
+            DMat4::from_translation(DVec3::new(40.0, 80.0, 30.0)),
+            None,
+            NodeContent::Mesh(MeshNode {
+                mesh: Arc::new(cube(46.0)),
+                material: Material {
+                    base_color: [0.2, 0.5, 0.9, 1.0],
+                    ..Default::default()
+                },
+            }),
+        )
+        .unwrap();
+    let camera = across_the_blobs();
+    let size = (192, 160);
+    let options = |volume_divisor| FrameOptions {
+        preview: 1,
+        volume_divisor,
+        ..OPTIONS
+    };
+    let shoot = |size, volume_divisor| {
+        Renderer::with_compositor(Compositor::Cpu)
+            .screenshot(&ctx, &scene, &camera, size, &options(volume_divisor))
+            .unwrap()
+    };
+    let full = shoot(size, 1);
+    // Pixels within 2 of a mesh silhouette (a jump in depth between neighbours).
+    let (w, h) = (size.0 as usize, size.1 as usize);
+    let edge_of = |depth: &[f32]| -> Vec<bool> {
+        let jump = |a: f32, b: f32| (a - b).abs() > 0.02 * a.max(b);
+        let mut edge = vec![false; w * h];
+        for y in 0..h {
+            for x in 0..w {
+                let d = depth[y * w + x];
+                let near = (x + 1 < w && jump(d, depth[y * w + x + 1]))
+                    || (y + 1 < h && jump(d, depth[(y + 1) * w + x]));
+                if near {
+                    for yy in y.saturating_sub(2)..(y + 3).min(h) {
+                        for xx in x.saturating_sub(2)..(x + 3).min(w) {
+                            edge[yy * w + xx] = true;
+                        }
+                    }
+                }
+            }
+        }
+        edge
+    };
+    let edge = edge_of(&full.depth);
+    let at_edges = edge.iter().filter(|&&e| e).count();
+    assert!(at_edges > 300, "{at_edges} pixels by the cube's edges");
+    let mean_off = |a: &Frame, b: &Frame, keep: &dyn Fn(usize) -> bool| {
+        let (sum, n) = (a.pixels.iter().zip(&b.pixels).enumerate())
+            .filter(|(i, _)| keep(*i))
+            .fold((0.0f64, 0usize), |(s, n), (_, (p, q))| {
+                let d: f32 = (0..3).map(|k| (p[k] - q[k]).abs()).sum();
+                (s + f64::from(d) / 3.0, n + 1)
+            });
+        sum / n.max(1) as f64
+    };
+    // A plain bilinear scaling of `small` to the frame's size, pixel centres kept.
+    let scaled_up = |small: &Frame| {
+        let (sw, sh) = (small.width as usize, small.height as usize);
+        let tap = |i: usize, n: usize, s: usize| {
+            let at = ((i as f64 + 0.5) * s as f64 / n as f64 - 0.5).clamp(0.0, (s - 1) as f64);
+            let lo = at.floor() as usize;
+            (lo, (lo + 1).min(s - 1), (at - lo as f64) as f32)
+        };
+        let mut pixels = Vec::with_capacity(w * h);
+        for y in 0..h {
+            let (y0, y1, fy) = tap(y, h, sh);
+            for x in 0..w {
+                let (x0, x1, fx) = tap(x, w, sw);
+                let p = |xx: usize, yy: usize| small.pixels[yy * sw + xx];
+                pixels.push(std::array::from_fn(|k| {
+                    let top = p(x0, y0)[k] * (1.0 - fx) + p(x1, y0)[k] * fx;
+                    let bottom = p(x0, y1)[k] * (1.0 - fx) + p(x1, y1)[k] * fx;
+                    top * (1.0 - fy) + bottom * fy
+                }));
+            }
+        }
+        Frame {
+            width: size.0,
+            height: size.1,
+            pixels,
+        }
+    };
+    for divisor in [2u32, 3] {
+        let fewer = shoot(size, divisor);
+        assert_eq!(fewer.report.levels, full.report.levels, "1/{divisor}");
+        assert_eq!(fewer.depth, full.depth, "1/{divisor}: the meshes' depth");
+        let d = compare(&fewer.frame, &full.frame).unwrap();
+        let edges = mean_off(&fewer.frame, &full.frame, &|i| edge[i]);
+        let small = shoot((size.0.div_ceil(divisor), size.1.div_ceil(divisor)), 1);
+        let plain = mean_off(&scaled_up(&small.frame), &full.frame, &|i| edge[i]);
+        eprintln!("1/{divisor}: {d:?}, by the edges {edges:.4} (scaled up {plain:.4})");
+        assert!(d.rmse < 0.02, "1/{divisor}: {d:?}");
+        assert!(
+            edges < 0.5 * plain,
+            "1/{divisor}: {edges} by the edges, scaled up {plain}"
+        );
+    }
+    // Refused: 0 anywhere, and any other divisor than 1 on the GPU passes.
+    let refused = |compositor, divisor| {
+        Renderer::with_compositor(compositor)
+            .screenshot(&ctx, &scene, &camera, size, &options(divisor))
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_default()
+    };
+    assert!(refused(Compositor::Cpu, 0).contains("volume_divisor 0"));
+    assert!(refused(Compositor::Gpu, 0).contains("volume_divisor 0"));
+    assert!(refused(Compositor::Gpu, 2).contains("volume_divisor 2"));
 }

@@ -479,7 +479,8 @@ impl Scene {
                     state.loaded.background
                 },
                 measure: true,
-                preview: false,
+                preview: 0,
+                volume_divisor: 1,
             };
             let shot = match state.ctx.as_ref().and_then(Option::as_ref) {
                 Some(ctx) => state

@@ -275,7 +275,8 @@ pub fn run_render(args: RenderArgs) -> Result<()> {
             loaded.background
         },
         measure: true,
-        preview: false,
+        preview: 0,
+        volume_divisor: 1,
     };
     let parts = args.annotate.parts()?;
     let has_meshes = loaded.scene.meshes().next().is_some();

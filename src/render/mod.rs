@@ -23,7 +23,7 @@ pub use output::{encode_png, encode_png_with_text, frame_to_rgba8};
 pub use renderer::{
     Compositor, Detail, FrameOptions, FrameReport, FrameTimings, LevelOfDetail, MAX_DEPTH_LEVELS,
     MAX_LEVEL, MAX_REFINE, MAX_REFINED_VOXELS, PREVIEW_COPY_SPACING_MM, REFINE_TO, Renderer,
-    Screenshot, detail_for, pixels_apart,
+    Screenshot, detail_for, pixels_apart, preview_level,
 };
 pub use target::{DEPTH_FORMAT, RenderTarget, color_format, read_texture};
 pub use view::ViewSetup;
@@ -69,6 +69,9 @@ pub enum RenderError {
     /// The camera is unusable.
     #[error("camera: {0}")]
     BadCamera(String),
+    /// A frame option that cannot mean anything, or none where it stands.
+    #[error("frame options: {0}")]
+    Options(String),
     /// A volume is larger than the adapter's 3D textures.
     #[error("volume of {dims:?} voxels exceeds the adapter's 3D texture side of {max}")]
     VolumeTooLarge {

@@ -360,7 +360,8 @@ pub fn measure_views_with(
                         ordering: Some(ordering),
                         background: None,
                         measure: true,
-                        preview: false,
+                        preview: 0,
+                        volume_divisor: 1,
                     };
                     let shot =
                         renderer.screenshot(ctx, scene, &scene_camera, settings.size, &options)?;

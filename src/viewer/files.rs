@@ -166,7 +166,8 @@ impl App {
             ordering: Some(self.ordering),
             background: Some(self.options.background),
             measure: false,
-            preview: false,
+            preview: 0,
+            volume_divisor: 1,
         };
         // The renderer back from a refined frame under way (the frame is drawn again after).
         self.cancel_frame();

@@ -45,11 +45,12 @@ impl App {
             return Ok(());
         };
         let preview = self.previewing();
-        let options = FrameOptions {
+        let mut options = FrameOptions {
             ordering: Some(self.ordering),
             background: Some(self.options.background),
             measure: false,
-            preview,
+            preview: u8::from(preview),
+            volume_divisor: 1,
         };
         let started = std::time::Instant::now();
         // Time spent drawing this frame on the frame thread ([`worker`]).
@@ -190,21 +191,19 @@ impl App {
             }
         };
         let mut overlay = image::RgbaImage::new(window_size.0, window_size.1);
-        // A preview in one pane on the CPU tiles is drawn at half the window's size (or a
-        // third or a quarter, where previews are slow) and scaled up: a quarter of the pixels
-        // or fewer to composite, read back and convert, and coarser splats.
+        // A preview in one pane on the CPU tiles composites its volumes at half the window's
+        // size (or a third or a quarter, where previews are slow), a quarter of the pixels or
+        // fewer and coarser splats, and lays them over the meshes drawn at the window's size.
         let small = preview && on_cpu && self.panes.is_none();
+        if small {
+            options.volume_divisor = self.preview_divisor.max(1);
+        }
         if reshown {
             // The picture is in the texture still: the text over it is drawn anew.
             annotate_3d(&mut overlay, &mut self.annotations_on);
         } else if on_cpu {
             // The tile compositor's frame, shown through the present pass like the GPU's.
-            let size = if small {
-                let d = self.preview_divisor.max(1);
-                (view.size.0.div_ceil(d), view.size.1.div_ceil(d))
-            } else {
-                view.size
-            };
+            let size = view.size;
             let shot = match drawn_frame {
                 Some(frame) => {
                     // The thread's time is the frame's.
@@ -217,9 +216,6 @@ impl App {
             };
             self.last = shot.report;
             let mut image = frame_to_rgba8(&shot.frame);
-            if small {
-                image = upscale(&image, view.size);
-            }
             if self.panes.is_some() {
                 annotate_3d(&mut image, &mut self.annotations_on);
                 let background = self
@@ -347,8 +343,14 @@ impl App {
             elapsed.as_secs_f64() * 1e3,
             self.last.timings.order.as_secs_f64() * 1e3,
             self.last.splats,
-            match (options.preview, self.last.refined, self.sharpen.is_some()) {
-                (true, _, _) if small => format!(" (preview at 1/{} size)", preview_divisor),
+            match (
+                options.preview > 0,
+                self.last.refined,
+                self.sharpen.is_some()
+            ) {
+                (true, _, _) if small => {
+                    format!(" (preview, volumes at 1/{} size)", preview_divisor)
+                }
                 (true, _, _) => " (preview)".to_string(),
                 (false, Some([x, y, z]), _) => format!(" (refined {x}x{y}x{z})"),
                 (false, None, true) => " (refining)".to_string(),
@@ -886,76 +888,5 @@ mod tests {
         let outside = ClipPlane::through(DVec3::splat(5.0), DVec3::X, false);
         assert!(plane_outline(&outside, DVec3::ZERO, DVec3::ONE).is_empty());
         assert_eq!(box_edges(DVec3::ZERO, DVec3::ONE).len(), 12);
-    }
-}
-
-/// `image` scaled to `size` by bilinear interpolation of its pixels (their centres kept in
-/// place), for previews drawn small. Written here rather than with `image::imageops::resize`,
-/// whose general filter weighs every output pixel anew in floating point: this takes each
-/// row's and column's two source pixels and 8-bit weights once, in integers, rows in
-/// parallel.
-pub(super) fn upscale(image: &image::RgbaImage, size: (u32, u32)) -> image::RgbaImage {
-    use rayon::prelude::*;
-    let (sw, sh) = image.dimensions();
-    let (w, h) = size;
-    if sw == 0 || sh == 0 || w == 0 || h == 0 {
-        return image::RgbaImage::new(w, h);
-    }
-    // Per output column (and row): the two source pixels and the second one's weight of 256.
-    let taps = |n: u32, source: u32| -> Vec<(usize, usize, u32)> {
-        (0..n)
-            .map(|i| {
-                let at = ((f64::from(i) + 0.5) * f64::from(source) / f64::from(n) - 0.5)
-                    .clamp(0.0, f64::from(source - 1));
-                let lo = at.floor() as u32;
-                let hi = (lo + 1).min(source - 1);
-                let weight = ((at - f64::from(lo)) * 256.0).round() as u32;
-                (lo as usize, hi as usize, weight)
-            })
-            .collect()
-    };
-    let (columns, rows) = (taps(w, sw), taps(h, sh));
-    let src = image.as_raw();
-    let stride = sw as usize * 4;
-    let mut out = vec![0u8; w as usize * h as usize * 4];
-    out.par_chunks_exact_mut(w as usize * 4)
-        .zip(rows.par_iter())
-        .for_each(|(row, &(y0, y1, fy))| {
-            let (top, bottom) = (&src[y0 * stride..][..stride], &src[y1 * stride..][..stride]);
-            for (px, &(x0, x1, fx)) in row.chunks_exact_mut(4).zip(&columns) {
-                let (a, b) = (&top[x0 * 4..x0 * 4 + 4], &top[x1 * 4..x1 * 4 + 4]);
-                let (c, d) = (&bottom[x0 * 4..x0 * 4 + 4], &bottom[x1 * 4..x1 * 4 + 4]);
-                for k in 0..4 {
-                    let upper = u32::from(a[k]) * (256 - fx) + u32::from(b[k]) * fx;
-                    let lower = u32::from(c[k]) * (256 - fx) + u32::from(d[k]) * fx;
-                    px[k] = ((upper * (256 - fy) + lower * fy + 32768) >> 16) as u8;
-                }
-            }
-        });
-    image::RgbaImage::from_raw(w, h, out).unwrap_or_else(|| image::RgbaImage::new(w, h))
-}
-
-#[cfg(test)]
-mod upscale_tests {
-    use super::upscale;
-
-    /// Doubling keeps a flat image flat, puts each source pixel's value where its centre
-    /// lands, and halfway values between two pixels; odd sizes and a 1x1 image work.
-    #[test]
-    fn doubling_interpolates_between_pixel_centres() {
-        let flat = image::RgbaImage::from_pixel(3, 2, image::Rgba([10, 20, 30, 255]));
-        let up = upscale(&flat, (6, 4));
-        assert!(up.pixels().all(|p| p.0 == [10, 20, 30, 255]));
-        // Two pixels, 0 and 200: doubled, the outer halves keep them, the inner two lie a
-        // quarter and three quarters of the way.
-        let mut pair = image::RgbaImage::new(2, 1);
-        pair.put_pixel(0, 0, image::Rgba([0, 0, 0, 255]));
-        pair.put_pixel(1, 0, image::Rgba([200, 0, 0, 255]));
-        let up = upscale(&pair, (4, 1));
-        let reds: Vec<u8> = up.pixels().map(|p| p.0[0]).collect();
-        assert_eq!(reds, [0, 50, 150, 200]);
-        let one = image::RgbaImage::from_pixel(1, 1, image::Rgba([1, 2, 3, 4]));
-        assert!(upscale(&one, (5, 3)).pixels().all(|p| p.0 == [1, 2, 3, 4]));
-        assert_eq!(upscale(&flat, (7, 5)).dimensions(), (7, 5));
     }
 }

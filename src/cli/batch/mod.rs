@@ -754,7 +754,8 @@ fn render_job(
                 loaded.background
             },
             measure: true,
-            preview: false,
+            preview: 0,
+            volume_divisor: 1,
         };
         let drawing = Instant::now();
         // A picture's scene may hold meshes its job's scene did not (the markers of its

@@ -253,6 +253,18 @@ pub(super) fn level_facing(levels: [u8; 3], facing: [i8; 3]) -> Detail {
     )
 }
 
+/// The level a preview of coarseness `preview` ([`FrameOptions::preview`]) draws along an axis
+/// where the view calls for `level`: `preview - 1` levels coarser, at least `preview` above
+/// the own grid, at most [`MAX_LEVEL`]; `level` itself for a full frame (0). Adding the same
+/// to every axis, and flooring all at one value, never widens the gap between two axes' levels
+/// ([`MAX_DEPTH_LEVELS`]).
+pub fn preview_level(level: u8, preview: u8) -> u8 {
+    match preview {
+        0 => level,
+        n => level.saturating_add(n - 1).max(n).min(MAX_LEVEL),
+    }
+}
+
 /// Side, in voxels, of the bricks whose occupancy tells where a volume's content comes
 /// nearest the eye ([`Occupied`]).
 pub(super) const BRICK: u32 = 16;
@@ -758,7 +770,7 @@ pub(super) fn refine_factors(dims: [u32; 3], apart: [f64; 3], within: Within) ->
 /// and sight lines, the rule a volume's level follows at its nearest brick: a level of its
 /// pyramid, or its grid refined where its voxels fall more than [`REFINE_TO`] pixels apart. A
 /// brick the eye is in is seen from the splats' near cut; a `preview` draws every brick at
-/// least a level coarser. With each brick comes the level, halved once more along the axes
+/// the level [`preview_level`] makes of it. With each brick comes the level, halved once more along the axes
 /// halved least (and at most once more along the others), it may be drawn at where its
 /// content is smooth ([`SMOOTH_COARSEN_TO`]; `None` for a preview, a brick drawn refined, or
 /// one whose voxels would fall too far apart). A brick whose voxels fall more than
@@ -771,7 +783,7 @@ pub(super) fn brick_details(
     geometry: &VolumeGeometry,
     view: &ViewSetup,
     occupied: &Occupied,
-    preview: bool,
+    preview: u8,
     refine_from: f64,
 ) -> Vec<BrickWant> {
     let dims = geometry.dims();
@@ -802,13 +814,9 @@ pub(super) fn brick_details(
                 Some(Detail::Level(levels, facing)) => (levels, facing),
                 _ => ([0; 3], [0; 3]),
             };
-            let levels = if preview {
-                levels.map(|l| l.max(1))
-            } else {
-                levels
-            };
+            let levels = levels.map(|l| preview_level(l, preview));
             let smooth = match (wanted, preview) {
-                (Some(Detail::Level(..)), false) => {
+                (Some(Detail::Level(..)), 0) => {
                     apart.and_then(|apart| {
                         // Halved once more along each axis halved least (those across the
                         // view), and at most once more along the others.
@@ -852,7 +860,7 @@ pub(super) fn brick_details(
             let shown =
                 !(centre.is_finite() && grown.is_finite() && off_image(view, (centre, grown)));
             let detail = match wanted {
-                Some(Detail::Refined(factors)) if !preview => Detail::Refined(factors),
+                Some(Detail::Refined(factors)) if preview == 0 => Detail::Refined(factors),
                 _ => level_facing(levels, facing),
             };
             shown.then_some(BrickWant {

@@ -25,12 +25,13 @@ use crate::splat::tiled::{Run, SplatTexels, TileStats, TiledCompositor};
 use crate::volume::CpuVolume;
 
 mod detail;
+mod fewer_pixels;
 mod seen;
 
 use detail::*;
 pub use detail::{
     Detail, MAX_DEPTH_LEVELS, MAX_LEVEL, MAX_REFINE, MAX_REFINED_VOXELS, REFINE_TO, detail_for,
-    pixels_apart,
+    pixels_apart, preview_level,
 };
 use seen::seen_bricks;
 
@@ -44,11 +45,19 @@ pub struct FrameOptions {
     /// Wait for the GPU after each stage so that [`FrameTimings`] splits the frame (costs a
     /// little throughput; screenshots and benchmarks want it, a window does not).
     pub measure: bool,
-    /// Draw every volume at least one level of detail coarser than its own grid (see
-    /// [`Renderer::set_level_of_detail`]): about an eighth of the splats, each twice as large.
-    /// For frames while the camera moves; each level is made once and kept beside the full
-    /// grid.
-    pub preview: bool,
+    /// A preview's coarseness: 0 for a full frame; `n` draws every volume `n - 1` levels of
+    /// detail coarser than the view calls for, and at least `n` above its own grid (see
+    /// [`Renderer::set_level_of_detail`], [`preview_level`]), never refined. Each level is
+    /// about an eighth of the splats of the one below it, each twice as large: a frame whose
+    /// grid is finer than its pixels costs about half as much a level. For frames while the
+    /// camera moves; each level is made once and kept beside the full grid.
+    pub preview: u8,
+    /// The volumes composited at the frame's size divided by this (rounded up; 1, the
+    /// default, for the frame's own pixels), their levels of detail chosen for those pixels,
+    /// and laid over the meshes, drawn at the frame's size, by their depth: the meshes' edges
+    /// stay sharp at a fraction of the splats' cost. For previews of the CPU tile compositor
+    /// (the GPU passes refuse any other value than 1); 0 is refused.
+    pub volume_divisor: u32,
 }
 
 impl Default for FrameOptions {
@@ -57,7 +66,8 @@ impl Default for FrameOptions {
             ordering: None,
             background: Some([0.06, 0.07, 0.09]),
             measure: true,
-            preview: false,
+            preview: 0,
+            volume_divisor: 1,
         }
     }
 }
@@ -437,6 +447,17 @@ fn region_covers(made: Option<&Region>, wanted: Option<&Region>) -> bool {
         (None, _) => true,
         (Some(made), Some(wanted)) => made.contains(wanted),
         (Some(made), None) => made.is_whole(),
+    }
+}
+
+/// [`FrameOptions::volume_divisor`] where it can mean something (at least 1).
+fn check_volume_divisor(divisor: u32) -> Result<u32, RenderError> {
+    match divisor {
+        0 => Err(RenderError::Options(
+            "volume_divisor 0: the volumes' pixels are the frame's divided by it, at least 1"
+                .into(),
+        )),
+        d => Ok(d),
     }
 }
 
@@ -1579,6 +1600,12 @@ impl Renderer {
         depth: &wgpu::TextureView,
         options: &FrameOptions,
     ) -> Result<FrameReport, RenderError> {
+        if options.volume_divisor != 1 {
+            return Err(RenderError::Options(format!(
+                "volume_divisor {}: the GPU passes draw volumes at the frame's own pixels (1); only the CPU tile compositor's screenshots take fewer",
+                options.volume_divisor
+            )));
+        }
         let mut report = FrameReport::default();
         self.sync_meshes(ctx, scene);
         let started = Instant::now();
@@ -1686,11 +1713,27 @@ impl Renderer {
         crate::splat::reference::check_frame_size(size.0, size.1)
             .map_err(|e| RenderError::BadCamera(e.to_string()))?;
         let view = ViewSetup::new(camera, size, scene.bounds())?;
+        // The view the volumes are composited in: the frame's, or its camera at fewer pixels.
+        let divisor = check_volume_divisor(options.volume_divisor)?;
+        let volume_view = match divisor {
+            1 => view,
+            d => ViewSetup::new(
+                camera,
+                (size.0.div_ceil(d), size.1.div_ceil(d)),
+                scene.bounds(),
+            )?,
+        };
         let mut report = FrameReport::default();
         let started = Instant::now();
         let by_brick = !self.one_level;
-        report.classified =
-            self.sync_volumes(scene, &view, options.preview, by_brick, false, &mut report)?;
+        report.classified = self.sync_volumes(
+            scene,
+            &volume_view,
+            options.preview,
+            by_brick,
+            false,
+            &mut report,
+        )?;
         // Levels, texels and the look for bricks shown made on the way have their own timings.
         report.timings.classify = started
             .elapsed()
@@ -1698,7 +1741,7 @@ impl Renderer {
         if self.cancelled() {
             return Err(RenderError::Cancelled);
         }
-        let ordered = self.order_volumes(scene, &view, options, &mut report)?;
+        let ordered = self.order_volumes(scene, &volume_view, options, &mut report)?;
         if self.cancelled() {
             return Err(RenderError::Cancelled);
         }
@@ -1745,7 +1788,26 @@ impl Renderer {
             }
         };
         let started = Instant::now();
-        let (tiles, texels) = self.composite_tiles(scene, &view, &ordered, &depth, &mut frame);
+        let (tiles, texels) = if divisor == 1 {
+            self.composite_tiles(scene, &view, &ordered, &depth, &mut frame)
+        } else {
+            // Composited over nothing at the fewer pixels, against the meshes' nearest depth
+            // in each, then laid over the meshes at the frame's size.
+            let scale = fewer_pixels::scale_between(&view, &volume_view);
+            let coarse = volume_view.size;
+            let coarse_depth = fewer_pixels::coarse_depth(&depth, size, coarse, scale);
+            let mut volumes = Frame {
+                width: coarse.0,
+                height: coarse.1,
+                pixels: vec![[0.0; 4]; coarse.0 as usize * coarse.1 as usize],
+            };
+            let done =
+                self.composite_tiles(scene, &volume_view, &ordered, &coarse_depth, &mut volumes);
+            if !done.0.cancelled {
+                fewer_pixels::lay_volume_over(&mut frame, &depth, &volumes, &coarse_depth, scale);
+            }
+            done
+        };
         if tiles.cancelled {
             // The mesh layers' targets go back for the next frame.
             if let Some((_, target)) = target {
@@ -2232,7 +2294,7 @@ impl Renderer {
         &mut self,
         scene: &Scene,
         view: &ViewSetup,
-        preview: bool,
+        preview: u8,
         by_brick: bool,
         dense: bool,
         report: &mut FrameReport,
@@ -2271,7 +2333,7 @@ impl Renderer {
             };
             let own = (id, Detail::default());
             let stale = self.volumes.get(&own).is_none_or(|v| v.key != key);
-            if preview && stale && !self.full_grid && !self.no_preview_copies {
+            if preview > 0 && stale && !self.full_grid && !self.no_preview_copies {
                 // The level the preview would draw of the own grid, the same for every axis:
                 // the least it wants along any (where its content lay before, or its box).
                 let geometry =
@@ -2282,6 +2344,7 @@ impl Renderer {
                     Detail::Level(levels, _) => levels.into_iter().min().unwrap_or(0),
                     Detail::Refined(_) => 0,
                 };
+                let least = preview_level(least, preview);
                 let halvings = copy_halvings(geometry.spacing(), geometry.dims(), least);
                 if halvings > 0 {
                     let (detail, classified) = self.classify_coarse_copy(
@@ -2364,10 +2427,12 @@ impl Renderer {
                 detail_at(geometry.dims(), apart, within)
             };
             let mut wanted = match wanted {
-                Detail::Level(level, facing) if preview => {
-                    level_facing(level.map(|l| l.max(1)), facing)
+                Detail::Level(level, facing) if preview > 0 => {
+                    level_facing(level.map(|l| preview_level(l, preview)), facing)
                 }
-                Detail::Refined(_) if preview => Detail::Level([1; 3], [0; 3]),
+                Detail::Refined(_) if preview > 0 => {
+                    Detail::Level([preview_level(0, preview); 3], [0; 3])
+                }
                 Detail::Refined(_) if self.no_refinement => {
                     report.unrefined = true;
                     Detail::default()

@@ -417,7 +417,7 @@ fn bricks_far_from_the_eye_draw_coarser_levels_and_those_off_the_image_none() {
         ..SceneCamera::look_at(DVec3::new(64.0, 64.0, -30.0), DVec3::new(64.0, 64.0, 64.0))
     };
     let view = ViewSetup::new(&camera, (96, 96), WORLD).unwrap();
-    let bricks = brick_details(&geometry, &view, &occupied, false, REFINE_TO);
+    let bricks = brick_details(&geometry, &view, &occupied, 0, REFINE_TO);
     let level = |d: &Detail| match d {
         Detail::Level(l, _) => l.iter().copied().max().unwrap_or(0),
         Detail::Refined(_) => 0,
@@ -597,7 +597,7 @@ fn smooth_bricks_draw_a_level_coarser_and_detailed_ones_their_own() {
         .as_ref()
         .unwrap();
     let geometry = VolumeGeometry::new([n; 3], glam::DAffine3::from_scale(DVec3::ONE)).unwrap();
-    let wants = brick_details(&geometry, &shot.view, occupied, false, REFINE_TO);
+    let wants = brick_details(&geometry, &shot.view, occupied, 0, REFINE_TO);
     let half = n / 2 / BRICK;
     let last = n / BRICK - 1;
     let mut inner = 0;
@@ -1307,7 +1307,7 @@ fn previews_of_a_volume_windowed_anew_draw_a_coarse_copy_until_a_full_frame() {
     let (full, preview) = (
         FrameOptions::default(),
         FrameOptions {
-            preview: true,
+            preview: 1,
             ..FrameOptions::default()
         },
     );
@@ -1422,7 +1422,7 @@ fn a_previews_coarse_copy_is_classified_within_the_bricks_on_the_image() {
         close(DVec3::new(-10.0, 24.0, 24.0)),
     );
     let preview = FrameOptions {
-        preview: true,
+        preview: 1,
         ..FrameOptions::default()
     };
     let shoot = |r: &mut Renderer, scene: &Scene, camera: &SceneCamera, options: &FrameOptions| {
@@ -1775,4 +1775,30 @@ fn a_level_the_memory_left_cannot_hold_gives_up_levels_kept_or_draws_finer() {
     let mut fresh = Renderer::with_compositor(super::super::Compositor::Cpu);
     fresh.set_levels_by_brick(false);
     assert_eq!(b.frame.pixels, shoot(&mut fresh, &along_y).frame.pixels);
+}
+
+#[test]
+fn a_coarser_preview_draws_a_level_coarser_where_the_view_wants_one_and_floors_all_axes() {
+    // A full frame: what the view wants.
+    assert_eq!(preview_level(2, 0), 2);
+    // The viewer's previews: at least a level above the own grid.
+    assert_eq!(preview_level(0, 1), 1);
+    assert_eq!(preview_level(2, 1), 2);
+    // Coarser previews: a level coarser than the view wants for each step past the first,
+    // at least their coarseness above the own grid, within the pyramid.
+    assert_eq!(preview_level(0, 2), 2);
+    assert_eq!(preview_level(1, 2), 2);
+    assert_eq!(preview_level(2, 2), 3);
+    assert_eq!(preview_level(MAX_LEVEL, 3), MAX_LEVEL);
+    assert_eq!(preview_level(u8::MAX, 2), MAX_LEVEL);
+    // The gap between two axes' levels never widens (a level halved along the view stays
+    // within MAX_DEPTH_LEVELS of the others).
+    for n in 0..=MAX_LEVEL + 1 {
+        for a in 0..=MAX_LEVEL {
+            for b in a..=(a + MAX_DEPTH_LEVELS).min(MAX_LEVEL) {
+                let (pa, pb) = (preview_level(a, n), preview_level(b, n));
+                assert!(pa <= pb && pb - pa <= b - a, "{a} {b} at {n}: {pa} {pb}");
+            }
+        }
+    }
 }
