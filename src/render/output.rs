@@ -22,11 +22,15 @@ pub fn frame_to_rgba8(frame: &Frame) -> RgbaImage {
         out.par_chunks_exact_mut(w * 4)
             .zip(frame.pixels.par_chunks(w))
             .for_each(|(row, pixels)| {
+                // Every pixel written, a clear one's colour chosen as 0 rather than branched
+                // over, so that the loop can run in vectors.
                 for (px, p) in row.chunks_exact_mut(4).zip(pixels) {
                     let a = p[3].clamp(0.0, 1.0);
-                    if a > 0.0 {
-                        px.copy_from_slice(&[q(p[0] / a), q(p[1] / a), q(p[2] / a), q(a)]);
-                    }
+                    let (d, keep) = if a > 0.0 { (a, 1.0) } else { (1.0, 0.0) };
+                    px[0] = q(keep * (p[0] / d));
+                    px[1] = q(keep * (p[1] / d));
+                    px[2] = q(keep * (p[2] / d));
+                    px[3] = q(a);
                 }
             });
     }

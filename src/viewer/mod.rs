@@ -58,10 +58,12 @@ pub struct ViewerOptions {
     pub background: [f32; 3],
     /// While the camera is dragged or zoomed and a full frame takes longer than 50 ms (20
     /// frames a second), draw the volumes at a coarser level of detail
-    /// ([`crate::render::FrameOptions::preview`]) into a smaller image scaled up to the window:
-    /// half its size, or a third or a quarter where previews take longer than 40 ms; the full
-    /// frame follows when the button is released, or a quarter second after the last
-    /// wheel step.
+    /// ([`crate::render::FrameOptions::preview`]), with the CPU tiles composited at fewer
+    /// pixels and laid over the meshes drawn at the window's size
+    /// ([`crate::render::FrameOptions::volume_divisor`]): half its size, or a third or a
+    /// quarter, then a level coarser, where previews take longer than 40 ms
+    /// ([`PREVIEW_STEPS`]); the full frame follows when the button is released, or a quarter
+    /// second after the last wheel step.
     pub preview_while_moving: bool,
     /// The scene file the scene was loaded from, with absolute paths: the screenshot key
     /// saves it beside each screenshot with the camera of the moment, so that `render` of
@@ -125,30 +127,47 @@ const PRESETS: [&str; 4] = TransferFunction::PRESETS;
 /// A drag or a zoom draws preview frames when a full frame took longer than this.
 const PREVIEW_ABOVE: Duration = Duration::from_millis(50);
 
-/// What a preview frame may take: past it, the next preview is drawn smaller
-/// ([`next_preview_divisor`]).
+/// What a preview frame may take: past it, the next preview is drawn cheaper
+/// ([`next_preview_step`]).
 const PREVIEW_BUDGET: Duration = Duration::from_millis(40);
 
-/// Previews are drawn at the window's size divided by 2 to this.
-const MOST_PREVIEW_DIVISOR: u32 = 4;
+/// How previews are drawn, cheapest last: the window's size divided by the first number is
+/// what the volumes are composited at ([`crate::render::FrameOptions::volume_divisor`], the
+/// meshes drawn at the window's size), the second is the coarseness of their levels of detail
+/// ([`crate::render::FrameOptions::preview`]). Past a quarter of the window's size a level
+/// coarser: its splats lie twice as far apart, about four of those pixels, so the pixels still
+/// hold what they draw.
+const PREVIEW_STEPS: [(u32, u8); 4] = [(2, 1), (3, 1), (4, 1), (4, 2)];
 
-/// The divisor of the window's size the next preview is drawn at, from the last preview's
-/// `divisor` and how long that frame took: one more where it took longer than
-/// [`PREVIEW_BUDGET`] (up to [`MOST_PREVIEW_DIVISOR`]), one less where the larger preview
-/// would still fit within the budget by its share of pixels (a frame's cost goes with its
-/// pixels at least: fewer pixels also draw a coarser level of detail), never under 2. The
-/// gap between the two rules keeps a preview near the budget from changing size every frame.
-fn next_preview_divisor(divisor: u32, took: Duration) -> u32 {
-    let divisor = divisor.clamp(2, MOST_PREVIEW_DIVISOR);
+/// What a preview step costs, relative to another, by the model [`next_preview_step`]
+/// follows: a frame's cost goes with the pixels its volumes are composited at, and halves
+/// with each level coarser (its splats an eighth, each twice as large, with half the layers
+/// before a pixel is opaque).
+fn preview_cost(step: usize) -> f64 {
+    let (divisor, coarseness) = PREVIEW_STEPS[step.min(PREVIEW_STEPS.len() - 1)];
+    f64::from(divisor).powi(-2) * 0.5f64.powi(i32::from(coarseness) - 1)
+}
+
+/// The step of [`PREVIEW_STEPS`] the next preview is drawn at, from the last preview's `step`
+/// and how long that frame took: one cheaper where it took longer than [`PREVIEW_BUDGET`]
+/// (up to the last), one dearer where that one would still fit within the budget by the
+/// model of [`preview_cost`] (a frame's cost goes with its pixels at least: fewer pixels also
+/// draw a coarser level of detail). The gap between the two rules keeps a preview near the
+/// budget from changing step every frame.
+fn next_preview_step(step: usize, took: Duration) -> usize {
+    let step = step.min(PREVIEW_STEPS.len() - 1);
     if took > PREVIEW_BUDGET {
-        return (divisor + 1).min(MOST_PREVIEW_DIVISOR);
+        return (step + 1).min(PREVIEW_STEPS.len() - 1);
     }
-    let d = f64::from(divisor);
-    let larger = took.as_secs_f64() * (d / (d - 1.0)).powi(2);
-    if divisor > 2 && larger < 0.8 * PREVIEW_BUDGET.as_secs_f64() {
-        divisor - 1
-    } else {
-        divisor
+    let dearer = step.checked_sub(1);
+    match dearer {
+        Some(d)
+            if took.as_secs_f64() * preview_cost(d) / preview_cost(step)
+                < 0.8 * PREVIEW_BUDGET.as_secs_f64() =>
+        {
+            d
+        }
+        _ => step,
     }
 }
 
@@ -201,7 +220,7 @@ pub fn run(scene: Scene, options: ViewerOptions) -> Result<(), ViewerError> {
         last: FrameReport::default(),
         full_frame: Duration::ZERO,
         this_frame: Duration::ZERO,
-        preview_divisor: 2,
+        preview_step: 0,
         settle: None,
         sharpen: None,
         sharp_at: None,
@@ -306,8 +325,8 @@ struct App {
     full_frame: Duration,
     /// How long the frame on screen took to draw (what the on-screen text and title say).
     this_frame: Duration,
-    /// Previews are drawn at the window's size divided by this ([`next_preview_divisor`]).
-    preview_divisor: u32,
+    /// The step of [`PREVIEW_STEPS`] previews are drawn at ([`next_preview_step`]).
+    preview_step: usize,
     /// When a zoom drawn as previews gets its full frame.
     settle: Option<Instant>,
     /// When a full frame drawn without refining a volume that wanted it gets its refined
@@ -1013,28 +1032,34 @@ mod tests {
     use super::*;
 
     #[test]
-    fn previews_shrink_while_over_their_budget_and_grow_back_with_room_to_spare() {
+    fn previews_grow_cheaper_while_over_their_budget_and_dearer_with_room_to_spare() {
         let ms = Duration::from_millis;
-        // Over 40 ms: a third, then a quarter, no smaller.
-        assert_eq!(next_preview_divisor(2, ms(55)), 3);
-        assert_eq!(next_preview_divisor(3, ms(41)), 4);
-        assert_eq!(next_preview_divisor(4, ms(90)), 4);
-        // Within it: one size larger where that would still take under 32 ms by its
-        // pixels, never larger than half the window.
-        assert_eq!(next_preview_divisor(2, ms(10)), 2);
-        assert_eq!(next_preview_divisor(3, ms(12)), 2); // 12 x (3/2)^2 = 27 ms
-        assert_eq!(next_preview_divisor(3, ms(20)), 3); // 20 x (3/2)^2 = 45 ms
-        assert_eq!(next_preview_divisor(4, ms(15)), 3); // 15 x (4/3)^2 = 26.7 ms
-        assert_eq!(next_preview_divisor(4, ms(20)), 4); // 20 x (4/3)^2 = 35.6 ms
-        assert_eq!(next_preview_divisor(1, ms(10)), 2);
-        // A preview that had to shrink because the larger one took over the budget does
-        // not grow back while the model holds: at the smaller size it takes over
-        // 40 x (2/3)^2 = 17.8 ms, which grows to over 40 ms, past the 32 ms the rule allows.
-        for over in [41, 50, 80] {
-            let shrunk = next_preview_divisor(2, ms(over));
-            let took = over as f64 * (2.0f64 / 3.0).powi(2);
-            let again = next_preview_divisor(shrunk, Duration::from_secs_f64(took / 1e3));
-            assert_eq!(again, shrunk, "{over} ms");
+        // Over 40 ms: a third, a quarter, then a level coarser, no cheaper.
+        assert_eq!(next_preview_step(0, ms(55)), 1);
+        assert_eq!(next_preview_step(1, ms(41)), 2);
+        assert_eq!(next_preview_step(2, ms(60)), 3);
+        assert_eq!(next_preview_step(3, ms(90)), 3);
+        assert_eq!(PREVIEW_STEPS[3], (4, 2));
+        // Within it: one step dearer where that would still take under 32 ms by the model,
+        // never dearer than half the window's size at one level coarser.
+        assert_eq!(next_preview_step(0, ms(10)), 0);
+        assert_eq!(next_preview_step(1, ms(12)), 0); // 12 x (3/2)^2 = 27 ms
+        assert_eq!(next_preview_step(1, ms(20)), 1); // 20 x (3/2)^2 = 45 ms
+        assert_eq!(next_preview_step(2, ms(15)), 1); // 15 x (4/3)^2 = 26.7 ms
+        assert_eq!(next_preview_step(2, ms(20)), 2); // 20 x (4/3)^2 = 35.6 ms
+        assert_eq!(next_preview_step(3, ms(15)), 2); // 15 x 2 = 30 ms
+        assert_eq!(next_preview_step(3, ms(17)), 3); // 17 x 2 = 34 ms
+        assert_eq!(next_preview_step(9, ms(10)), 2);
+        // A preview that had to get cheaper because the dearer one took over the budget does
+        // not grow back while the model holds: it takes over 40 ms times the ratio of their
+        // costs, which grows back to over 40 ms, past the 32 ms the rule allows.
+        for step in 0..PREVIEW_STEPS.len() - 1 {
+            for over in [41, 50, 80] {
+                let cheaper = next_preview_step(step, ms(over));
+                let took = over as f64 * preview_cost(cheaper) / preview_cost(step);
+                let again = next_preview_step(cheaper, Duration::from_secs_f64(took / 1e3));
+                assert_eq!(again, cheaper, "step {step}, {over} ms");
+            }
         }
     }
 }

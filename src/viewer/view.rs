@@ -8,7 +8,7 @@ use glam::DVec3;
 
 use super::action::{KEYS, STEP};
 use super::look::contact_ticks;
-use super::{App, PREVIEW_ABOVE, SETTLE, ViewerError, next_preview_divisor, worker};
+use super::{App, PREVIEW_ABOVE, PREVIEW_STEPS, SETTLE, ViewerError, next_preview_step, worker};
 use crate::annotate::{Anchor, Label, Painter, Rect, annotate_image_clear_of, colour_bar};
 use crate::pick::measure::{MarkerStyle, Measurement, annotate, draw_scene_measurements};
 use crate::pick::paint::value_colour;
@@ -195,8 +195,10 @@ impl App {
         // size (or a third or a quarter, where previews are slow), a quarter of the pixels or
         // fewer and coarser splats, and lays them over the meshes drawn at the window's size.
         let small = preview && on_cpu && self.panes.is_none();
+        let (divisor, coarseness) = PREVIEW_STEPS[self.preview_step.min(PREVIEW_STEPS.len() - 1)];
         if small {
-            options.volume_divisor = self.preview_divisor.max(1);
+            options.volume_divisor = divisor;
+            options.preview = coarseness;
         }
         if reshown {
             // The picture is in the texture still: the text over it is drawn anew.
@@ -308,7 +310,7 @@ impl App {
             self.full_frame = started.elapsed() + drawn_before;
         }
         // The size this preview was drawn at (the title's), and the next one's.
-        let preview_divisor = self.preview_divisor;
+        let preview_step = (divisor, coarseness);
         if small {
             // By what a preview costs frame after frame: not what this one spent making a
             // classification, a level or texels the next ones reuse.
@@ -316,7 +318,7 @@ impl App {
             let steady = started
                 .elapsed()
                 .saturating_sub(t.classify + t.levels + t.texels);
-            self.preview_divisor = next_preview_divisor(self.preview_divisor, steady);
+            self.preview_step = next_preview_step(self.preview_step, steady);
         }
         // (Not while the frame for a later change is drawn: it is shown first.)
         self.sharpen = (!preview && self.last.unrefined && self.frame_job.is_none())
@@ -348,9 +350,14 @@ impl App {
                 self.last.refined,
                 self.sharpen.is_some()
             ) {
-                (true, _, _) if small => {
-                    format!(" (preview, volumes at 1/{} size)", preview_divisor)
-                }
+                (true, _, _) if small => format!(
+                    " (preview, volumes at 1/{} size{})",
+                    preview_step.0,
+                    match preview_step.1 {
+                        1 => String::new(),
+                        n => format!(", {} level{} coarser", n - 1, if n > 2 { "s" } else { "" }),
+                    }
+                ),
                 (true, _, _) => " (preview)".to_string(),
                 (false, Some([x, y, z]), _) => format!(" (refined {x}x{y}x{z})"),
                 (false, None, true) => " (refining)".to_string(),

@@ -115,6 +115,10 @@ pub(super) fn lay_volume_over(
                     (j1 * cw + i0, (1.0 - tx) * ty),
                     (j1 * cw + i1, tx * ty),
                 ];
+                // Most of a frame lies where the volume is clear: nothing to lay over.
+                if around.iter().all(|&(k, _)| volume.pixels[k][3] <= 0.0) {
+                    continue;
+                }
                 let gap = |k: usize| (volume_depth[k] - d).abs();
                 let same = |k: usize| gap(k) <= SAME_SURFACE * volume_depth[k].max(d);
                 let mut sum = [0.0f32; 4];

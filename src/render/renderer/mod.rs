@@ -2410,9 +2410,10 @@ impl Renderer {
                 // the viewer's screenshot would not be `render`'s picture of its scene file).
                 // A refinement classified within the occupied bricks on the image (the CPU
                 // tiles') may count those alone, its splats bounded by the pixels; else the
-                // whole grid ([`refine_factors`]).
+                // whole grid ([`refine_factors`]). A preview draws no refinement: the bricks
+                // on the image are not looked for.
                 let within = match (&full.occupied, dense || self.refine_whole) {
-                    (Some(occupied), false) => {
+                    (Some(occupied), false) if preview == 0 => {
                         let shown = on_image(&geometry, view);
                         let (voxels, splats) =
                             on_image_within(geometry.dims(), occupied, shown.as_ref());
