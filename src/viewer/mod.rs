@@ -1058,7 +1058,13 @@ mod tests {
                 let cheaper = next_preview_step(step, ms(over));
                 let took = over as f64 * preview_cost(cheaper) / preview_cost(step);
                 let again = next_preview_step(cheaper, Duration::from_secs_f64(took / 1e3));
-                assert_eq!(again, cheaper, "step {step}, {over} ms");
+                // (Still over the budget, it rightly gets cheaper again.)
+                let want = if took > 40.0 {
+                    (cheaper + 1).min(3)
+                } else {
+                    cheaper
+                };
+                assert_eq!(again, want, "step {step}, {over} ms");
             }
         }
     }
