@@ -61,8 +61,7 @@ pub struct ViewerOptions {
     /// ([`crate::render::FrameOptions::preview`]), with the CPU tiles composited at fewer
     /// pixels and laid over the meshes drawn at the window's size
     /// ([`crate::render::FrameOptions::volume_divisor`]): half its size, or a third or a
-    /// quarter, then a level coarser, where previews take longer than 40 ms
-    /// ([`PREVIEW_STEPS`]); the full frame follows when the button is released, or a quarter
+    /// quarter, then a level coarser, where previews take longer than 40 ms; the full frame follows when the button is released, or a quarter
     /// second after the last wheel step.
     pub preview_while_moving: bool,
     /// The scene file the scene was loaded from, with absolute paths: the screenshot key

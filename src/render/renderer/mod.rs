@@ -1859,7 +1859,8 @@ impl Renderer {
             report.read_back += rect.pixels();
         }
         if let Some((_, target)) = target {
-            // The last two sizes (the viewer's previews and its full frames) are kept.
+            // The last two sizes drawn are kept: the viewer's previews and full frames share the
+            // window's, and a caller alternating two sizes draws into kept targets.
             self.layer_targets.insert(0, target);
             self.layer_targets.truncate(2);
         }
