@@ -328,7 +328,7 @@ impl App {
             return Ok(());
         };
         gpu.window.set_title(&format!(
-            "splatscene: {}{}{} | {preset} | frame {:.0} ms, order {:.1} ms | {} splats{}",
+            "splatscene: {}{}{} | {preset} | frame {:.0} ms, order {:.1} ms | {} splats{}{}",
             self.ordering,
             if on_cpu && self.panes.is_none() {
                 " (CPU tiles)"
@@ -362,6 +362,11 @@ impl App {
                 (false, Some([x, y, z]), _) => format!(" (refined {x}x{y}x{z})"),
                 (false, None, true) => " (refining)".to_string(),
                 (false, None, false) => String::new(),
+            },
+            if self.last.levels_short_of_memory {
+                " (a coarser level not made: memory short)"
+            } else {
+                ""
             }
         ));
         Ok(())

@@ -2347,14 +2347,15 @@ impl Renderer {
                 };
                 let least = preview_level(least, preview);
                 let halvings = copy_halvings(geometry.spacing(), geometry.dims(), least);
-                if halvings > 0 {
-                    let (detail, classified) = self.classify_coarse_copy(
+                if halvings > 0
+                    && let Some((detail, classified)) = self.classify_coarse_copy(
                         (id, node, world),
                         view,
                         (key, &options),
                         halvings,
                         &fail,
-                    )?;
+                    )?
+                {
                     if let Some(state) = self.volumes.get(&(id, detail)) {
                         afford(&state.classified)?;
                     }
@@ -2846,7 +2847,9 @@ impl Renderer {
     /// For a preview of volume `id` (placed by `world`) whose own grid is not classified for
     /// `key`, its coarse copy halved `halvings` times (at least once), classified for `key`
     /// (the copy made now where it was not): the detail its grid is held at in `volumes`, and
-    /// whether it was classified now. The copy is classified only within its bricks whose
+    /// whether it was classified now; `None` where the memory left cannot hold a copy not yet
+    /// made (the preview then draws the own grid, as a full frame would: a copy is an eighth
+    /// of the values, and a sparse volume's classified grid can take less). The copy is classified only within its bricks whose
     /// splats can land on `view`'s image ([`on_image`]), unless refinements are classified
     /// whole ([`Renderer::set_refinement_on_image_only`]); a view that shows a brick the
     /// classification left out classifies it anew.
@@ -2857,8 +2860,9 @@ impl Renderer {
         (key, options): (ClassKey, &ClassifyOptions),
         halvings: u8,
         fail: &dyn Fn(String) -> RenderError,
-    ) -> Result<(Detail, bool), RenderError> {
+    ) -> Result<Option<(Detail, bool)>, RenderError> {
         let halvings = usize::from(halvings.max(1));
+        let headroom = self.headroom();
         let copies = self.coarse_copies.entry(id).or_insert_with(|| CoarseCopy {
             of: Arc::downgrade(&node.volume),
             halved: Vec::new(),
@@ -2874,12 +2878,10 @@ impl Renderer {
                 None => ([0; 3], Arc::clone(&node.volume)),
             };
             let dims = above.dims.map(|n| u64::from(n.div_ceil(2)));
-            crate::budget::check_memory(
-                "a coarse copy of the volume for previews",
-                dims.iter().product(),
-                crate::volume::Voxels::held_bytes(above.values.scalar_type()) as u64,
-            )
-            .map_err(|e| fail(e.to_string()))?;
+            let bytes = crate::volume::Voxels::held_bytes(above.values.scalar_type()) as u64;
+            if dims.iter().product::<u64>().saturating_mul(bytes) > headroom {
+                return Ok(None);
+            }
             let levels = [0, 1, 2].map(|a| levels[a] + u8::from(above.dims[a] > 1));
             let halved = above
                 .halved_unless_cancelled(self.tiles.cancel.as_deref())
@@ -2902,7 +2904,7 @@ impl Renderer {
         let same_function = (self.volumes.get(&(id, detail)))
             .filter(|s| s.key == key && Arc::ptr_eq(&s.volume, &copy));
         if same_function.is_some_and(|s| region_covers(s.region.as_ref(), region.as_ref())) {
-            return Ok((detail, false));
+            return Ok(Some((detail, false)));
         }
         // The function stands and the camera moves (the camera turned before the own grid was
         // classified): the next views would want other bricks again, and the whole copy,
@@ -2925,7 +2927,7 @@ impl Renderer {
         let mut state = VolumeState::new(key, copy, [1; 3], classified, orderer, ids);
         state.region = region;
         self.volumes.insert((id, detail), state);
-        Ok((detail, true))
+        Ok(Some((detail, true)))
     }
 
     /// Orders every volume's splats for this view; returns the volumes far to near.

@@ -1404,6 +1404,46 @@ fn previews_of_a_volume_windowed_anew_draw_a_coarse_copy_until_a_full_frame() {
 }
 
 #[test]
+fn a_preview_whose_coarse_copy_the_memory_left_cannot_hold_draws_the_own_grid() {
+    // The wavy field windowed anew: its preview would copy it halved once (48^3 values). With
+    // the memory left one byte short of that copy, the preview classifies the own grid, as a
+    // full frame would, instead of failing; with exactly the copy's bytes left it copies.
+    let (mut scene, id) = wavy_field_half_mm();
+    let camera = SceneCamera::look_at(DVec3::new(10.0, 35.0, -75.0), DVec3::splat(24.0));
+    let preview = FrameOptions {
+        preview: 1,
+        ..FrameOptions::default()
+    };
+    let mut v = node_of(&scene, id);
+    let copy_bytes =
+        48u64.pow(3) * crate::volume::Voxels::held_bytes(v.volume.values.scalar_type()) as u64;
+    v.transfer = Arc::new(v.transfer.windowed(350.0, 200.0));
+    scene
+        .set_content(id, crate::scene::NodeContent::Volume(v))
+        .unwrap();
+    let shoot = |headroom: u64| {
+        let mut r = Renderer::with_compositor(super::super::Compositor::Cpu);
+        r.set_headroom(Some(headroom));
+        r.screenshot_without_gpu(&scene, &camera, (64, 64), &preview)
+    };
+    let short = shoot(copy_bytes - 1).expect("a preview with no room for a copy is drawn");
+    assert_eq!(
+        (short.report.coarse_copies, short.report.classified),
+        (0, 1),
+        "{:?}",
+        short.report
+    );
+    assert!(short.report.splats > 0);
+    let room = shoot(copy_bytes).unwrap();
+    assert_eq!(
+        (room.report.coarse_copies, room.report.classified),
+        (1, 1),
+        "{:?}",
+        room.report
+    );
+}
+
+#[test]
 fn a_previews_coarse_copy_is_classified_within_the_bricks_on_the_image() {
     // The wavy field of 96^3 voxels 0.5 mm apart seen close up, a part of it on the image. A
     // preview after a new window classifies its coarse copy within the copy's bricks on the
