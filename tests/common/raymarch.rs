@@ -125,6 +125,51 @@ pub fn march(volume: &Volume<'_>, camera: &Pinhole, step_mm: f64) -> Vec<[f32; 4
     let up = right.cross(forward);
     let (w, h) = camera.size;
     let focal = 0.5 * f64::from(h) / (0.5 * camera.fov_y_degrees.to_radians()).tan();
+    march_rays(volume, (w, h), forward, step_mm, |x, y| {
+        (
+            camera.eye,
+            (forward * focal + right * x + up * y).normalize(),
+        )
+    })
+}
+
+/// A camera of parallel rays: pixel `(i, j)`'s ray runs along `target - eye` from the plane
+/// through `eye` square to it, at the pixel centre's place on that plane.
+#[derive(Debug, Clone, Copy)]
+pub struct Parallel {
+    /// A point of the plane the rays leave, world millimetres (in front of the volume).
+    pub eye: DVec3,
+    /// A point on the view axis.
+    pub target: DVec3,
+    /// Roughly up on screen (not parallel to the view axis).
+    pub up: DVec3,
+    /// The height the image spans, millimetres.
+    pub height_mm: f64,
+    /// Image size in pixels.
+    pub size: (u32, u32),
+}
+
+/// [`march`] with parallel rays.
+pub fn march_parallel(volume: &Volume<'_>, camera: &Parallel, step_mm: f64) -> Vec<[f32; 4]> {
+    let forward = (camera.target - camera.eye).normalize();
+    let right = forward.cross(camera.up).normalize();
+    let up = right.cross(forward);
+    let mm = camera.height_mm / f64::from(camera.size.1);
+    march_rays(volume, camera.size, forward, step_mm, |x, y| {
+        (camera.eye + (right * x + up * y) * mm, forward)
+    })
+}
+
+/// Each pixel's ray as `ray_of` gives it (origin and unit direction) from the pixel centre's
+/// offset from the image centre, in pixels (x right, y up), marched front to back.
+fn march_rays(
+    volume: &Volume<'_>,
+    (w, h): (u32, u32),
+    forward: DVec3,
+    step_mm: f64,
+    ray_of: impl Fn(f64, f64) -> (DVec3, DVec3) + Sync,
+) -> Vec<[f32; 4]> {
+    let ray_of = &ray_of;
     let rows: Vec<Vec<[f32; 4]>> = std::thread::scope(|scope| {
         let threads = std::thread::available_parallelism().map_or(2, |n| n.get());
         let handles: Vec<_> = (0..threads)
@@ -137,8 +182,8 @@ pub fn march(volume: &Volume<'_>, camera: &Pinhole, step_mm: f64) -> Vec<[f32; 4
                                 .map(|i| {
                                     let x = f64::from(i) + 0.5 - 0.5 * f64::from(w);
                                     let y = 0.5 * f64::from(h) - (j as f64 + 0.5);
-                                    let d = (forward * focal + right * x + up * y).normalize();
-                                    ray(volume, camera.eye, d, forward, step_mm)
+                                    let (origin, d) = ray_of(x, y);
+                                    ray(volume, origin, d, forward, step_mm)
                                 })
                                 .collect::<Vec<_>>()
                         })
