@@ -267,6 +267,30 @@ fn check(what: &str, d: &ImageDifference, limit: f64) {
     assert!(d.rmse <= limit, "{what}: {d:?}");
 }
 
+/// Checks the thick and the thin grid's pictures (`grids`) against the marcher's `reference`
+/// and against each other, each RMSE at most `limit`, once `reference` is shown to cover more
+/// than `coverage` pixels (the phantom fills the view); `what` names the view.
+fn check_grids(
+    what: &str,
+    reference: &Frame,
+    (thick, thin): (&Frame, &Frame),
+    (coverage, limit): (usize, f64),
+) {
+    let covered = reference.pixels.iter().filter(|p| p[3] > 0.5).count();
+    assert!(
+        covered > coverage,
+        "{what}: the phantom fills the view ({covered})"
+    );
+    let pairs = [
+        ("1.5 x 1.5 x 3 mm against the marcher", thick, reference),
+        ("0.6 mm against the marcher", thin, reference),
+        ("the two grids", thick, thin),
+    ];
+    for (pair, a, b) in pairs {
+        check(&format!("{what}{pair}"), &compare(a, b).unwrap(), limit);
+    }
+}
+
 #[test]
 fn thick_and_thin_slices_draw_the_ray_marchers_picture() {
     let thick = sampled([1.5, 1.5, 3.0]);
@@ -280,27 +304,14 @@ fn thick_and_thin_slices_draw_the_ray_marchers_picture() {
         ("along z", camera(DVec3::new(0.0, 0.05, -1.0), DVec3::Y)),
     ] {
         let reference = marched(&camera);
-        let coverage = reference.pixels.iter().filter(|p| p[3] > 0.5).count();
-        assert!(
-            coverage > 3000,
-            "{name}: the phantom fills the view ({coverage})"
-        );
-        let thick = splats(thick.clone(), &camera);
-        let thin = splats(thin.clone(), &camera);
-        check(
-            &format!("{name}, 1.5 x 1.5 x 3 mm against the marcher"),
-            &compare(&thick, &reference).unwrap(),
-            0.03,
-        );
-        check(
-            &format!("{name}, 0.6 mm against the marcher"),
-            &compare(&thin, &reference).unwrap(),
-            0.03,
-        );
-        check(
-            &format!("{name}, the two grids"),
-            &compare(&thick, &thin).unwrap(),
-            0.03,
+        check_grids(
+            &format!("{name}, "),
+            &reference,
+            (
+                &splats(thick.clone(), &camera),
+                &splats(thin.clone(), &camera),
+            ),
+            (3000, 0.03),
         );
     }
 }
@@ -348,27 +359,14 @@ fn thick_and_thin_slices_seen_with_parallel_rays_draw_the_ray_marchers_picture()
             height: SIZE.1,
             pixels: raymarch::march_parallel(&volume, &parallel, 0.1),
         };
-        let coverage = reference.pixels.iter().filter(|p| p[3] > 0.5).count();
-        assert!(
-            coverage > 6000,
-            "{name}: the phantom fills the view ({coverage})"
-        );
-        let thick = splats(thick.clone(), &camera);
-        let thin = splats(thin.clone(), &camera);
-        check(
-            &format!("{name}, parallel, 1.5 x 1.5 x 3 mm against the marcher"),
-            &compare(&thick, &reference).unwrap(),
-            TIGHT,
-        );
-        check(
-            &format!("{name}, parallel, 0.6 mm against the marcher"),
-            &compare(&thin, &reference).unwrap(),
-            TIGHT,
-        );
-        check(
-            &format!("{name}, parallel, the two grids"),
-            &compare(&thick, &thin).unwrap(),
-            TIGHT,
+        check_grids(
+            &format!("{name}, parallel, "),
+            &reference,
+            (
+                &splats(thick.clone(), &camera),
+                &splats(thin.clone(), &camera),
+            ),
+            (6000, TIGHT),
         );
     }
 }
@@ -416,27 +414,14 @@ fn thick_and_thin_slices_of_an_oblique_scan_draw_the_ray_marchers_picture() {
             height: SIZE.1,
             pixels: raymarch::march(&volume, &pinhole(&camera, SIZE), 0.1),
         };
-        let coverage = reference.pixels.iter().filter(|p| p[3] > 0.5).count();
-        assert!(
-            coverage > 3000,
-            "{name}: the phantom fills the view ({coverage})"
-        );
-        let thick = splats(thick.clone(), &camera);
-        let thin = splats(thin.clone(), &camera);
-        check(
-            &format!("{name}, turned scan, 1.5 x 1.5 x 3 mm against the marcher"),
-            &compare(&thick, &reference).unwrap(),
-            TIGHT,
-        );
-        check(
-            &format!("{name}, turned scan, 0.6 mm against the marcher"),
-            &compare(&thin, &reference).unwrap(),
-            TIGHT,
-        );
-        check(
-            &format!("{name}, turned scan, the two grids"),
-            &compare(&thick, &thin).unwrap(),
-            TIGHT,
+        check_grids(
+            &format!("{name}, turned scan, "),
+            &reference,
+            (
+                &splats(thick.clone(), &camera),
+                &splats(thin.clone(), &camera),
+            ),
+            (3000, TIGHT),
         );
     }
 }
