@@ -2849,9 +2849,10 @@ impl Renderer {
     /// (the copy made now where it was not): the detail its grid is held at in `volumes`, and
     /// whether it was classified now; `None` where the memory left cannot hold a copy not yet
     /// made (the preview then draws the own grid, as a full frame would: a copy is an eighth
-    /// of the values, and a sparse volume's classified grid can take less). The copy is classified only within its bricks whose
-    /// splats can land on `view`'s image ([`on_image`]), unless refinements are classified
-    /// whole ([`Renderer::set_refinement_on_image_only`]); a view that shows a brick the
+    /// of the values, and a sparse volume's classified grid can take less). The copy is
+    /// classified only within its bricks whose splats can land on `view`'s image
+    /// ([`on_image`]), unless refinements are classified whole
+    /// ([`Renderer::set_refinement_on_image_only`]); a view that shows a brick the
     /// classification left out classifies it anew.
     fn classify_coarse_copy(
         &mut self,
