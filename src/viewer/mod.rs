@@ -61,8 +61,8 @@ pub struct ViewerOptions {
     /// ([`crate::render::FrameOptions::preview`]), with the CPU tiles composited at fewer
     /// pixels and laid over the meshes drawn at the window's size
     /// ([`crate::render::FrameOptions::volume_divisor`]): half its size, or a third or a
-    /// quarter, then a level coarser, where previews take longer than 40 ms; the full frame follows when the button is released, or a quarter
-    /// second after the last wheel step.
+    /// quarter, then a level coarser, where previews take longer than 40 ms; the full frame
+    /// follows when the button is released, or a quarter second after the last wheel step.
     pub preview_while_moving: bool,
     /// The scene file the scene was loaded from, with absolute paths: the screenshot key
     /// saves it beside each screenshot with the camera of the moment, so that `render` of
@@ -1058,8 +1058,8 @@ mod tests {
                 let took = over as f64 * preview_cost(cheaper) / preview_cost(step);
                 let again = next_preview_step(cheaper, Duration::from_secs_f64(took / 1e3));
                 // (Still over the budget, it rightly gets cheaper again.)
-                let want = if took > 40.0 {
-                    (cheaper + 1).min(3)
+                let want = if took > PREVIEW_BUDGET.as_secs_f64() * 1e3 {
+                    (cheaper + 1).min(PREVIEW_STEPS.len() - 1)
                 } else {
                     cheaper
                 };
