@@ -62,7 +62,7 @@ use thiserror::Error;
 
 pub use crate::geometry::{GeometryError, VolumeGeometry};
 use crate::grid::{GridError, SparseGrid};
-use traverse::{Collect, Inner, Plan, walk};
+use traverse::{Collect, CollectKept, Inner, Plan, walk};
 pub use view::{AxisCase, AxisView, CaseKind, ViewCase};
 
 /// Why an ordering could not be computed.
@@ -277,6 +277,32 @@ impl Orderer {
         out: &mut Vec<u32>,
         ends: &mut Vec<usize>,
     ) -> Result<bool, OrderError> {
+        type Keep = fn(usize, [u32; 3]) -> bool;
+        Self::order_boxes_kept(
+            grid,
+            view,
+            (ordering, options),
+            boxes,
+            None::<&Keep>,
+            out,
+            ends,
+        )
+    }
+
+    /// [`Orderer::order_boxes`] that keeps, of box `i`'s voxels, only those `k` for which
+    /// `keep(i, k)` holds (every one where `keep` is `None`), in the same order: the boxes'
+    /// walks test each voxel as they write it, so nothing they leave out is written and no
+    /// pass over the ids follows. (The bricks of a level drawn as one run are walked over the
+    /// least box holding them, and the box's other bricks left out.)
+    pub fn order_boxes_kept<F: Fn(usize, [u32; 3]) -> bool + Sync>(
+        grid: &SparseGrid,
+        view: &ViewCase,
+        (ordering, options): (Ordering, &OrderOptions),
+        boxes: &[[(u32, u32); 3]],
+        keep: Option<&F>,
+        out: &mut Vec<u32>,
+        ends: &mut Vec<usize>,
+    ) -> Result<bool, OrderError> {
         use rayon::prelude::*;
         let explicit = match ordering {
             Ordering::IpPbtfImplicit => false,
@@ -305,10 +331,11 @@ impl Orderer {
         const BOXES_A_TASK: usize = 64;
         let parts: Vec<(Vec<u32>, Vec<usize>)> = boxes
             .par_chunks(BOXES_A_TASK)
-            .map(|chunk| {
+            .enumerate()
+            .map(|(task, chunk)| {
                 let (mut ids, mut chunk_ends) = (Vec::new(), Vec::with_capacity(chunk.len()));
                 let (mut s0, mut s1, mut s2) = (Vec::new(), Vec::new(), Vec::new());
-                for range in chunk {
+                for (at, range) in (task * BOXES_A_TASK..).zip(chunk) {
                     let within = |a: usize| {
                         let (lo, hi) = range[a];
                         (lo.min(grid.dims()[a]), hi.min(grid.dims()[a]))
@@ -345,7 +372,12 @@ impl Orderer {
                             })
                         });
                         let cull = if in_front { None } else { cull };
-                        walk(grid, &plan, cull, &mut Collect(&mut ids));
+                        match keep {
+                            Some(keep) => {
+                                walk(grid, &plan, cull, &mut CollectKept::new(&mut ids, keep, at))
+                            }
+                            None => walk(grid, &plan, cull, &mut Collect(&mut ids)),
+                        }
                     }
                     chunk_ends.push(ids.len());
                 }
@@ -651,6 +683,38 @@ mod box_tests {
                                 out[start..end],
                                 expected[..],
                                 "{ordering:?} eye {f:?} cull {cull} box {range:?}"
+                            );
+                            start = end;
+                        }
+                        assert_eq!(start, out.len());
+                        // With some of each box's voxels left out as they are walked: the
+                        // whole order's others, in its order.
+                        let keep = |at: usize, k: [u32; 3]| {
+                            !(k[0] + 2 * k[1] + k[2] + at as u32).is_multiple_of(3)
+                        };
+                        Orderer::order_boxes_kept(
+                            &grid,
+                            &view,
+                            (ordering, &options),
+                            &boxes,
+                            Some(&keep),
+                            &mut out,
+                            &mut ends,
+                        )
+                        .unwrap();
+                        assert_eq!(ends.len(), boxes.len());
+                        let mut start = 0;
+                        for (at, (range, &end)) in boxes.iter().zip(&ends).enumerate() {
+                            let kept = |id: &u32| {
+                                let k = grid.coords(*id);
+                                (0..3).all(|a| k[a] >= range[a].0 && k[a] < range[a].1)
+                                    && keep(at, k)
+                            };
+                            let expected: Vec<u32> = whole.iter().copied().filter(kept).collect();
+                            assert_eq!(
+                                out[start..end],
+                                expected[..],
+                                "kept: {ordering:?} eye {f:?} cull {cull} box {range:?}"
                             );
                             start = end;
                         }

@@ -65,6 +65,47 @@ impl Sink for Collect<'_> {
     }
 }
 
+/// Appends the ids of the voxels `keep` holds for box `at` to a list: a walk and a filter in
+/// one pass, so that the voxels a box's walk leaves out are never written.
+pub(crate) struct CollectKept<'a, F> {
+    pub out: &'a mut Vec<u32>,
+    pub keep: &'a F,
+    /// The box walked.
+    pub at: usize,
+    /// The row's coordinates (set by [`Sink::row`]) and its axis.
+    k: [u32; 3],
+    axis: usize,
+}
+
+impl<'a, F> CollectKept<'a, F> {
+    /// Collects into `out` the voxels of box `at` that `keep` holds.
+    pub fn new(out: &'a mut Vec<u32>, keep: &'a F, at: usize) -> Self {
+        Self {
+            out,
+            keep,
+            at,
+            k: [0; 3],
+            axis: 0,
+        }
+    }
+}
+
+impl<F: Fn(usize, [u32; 3]) -> bool> Sink for CollectKept<'_, F> {
+    #[inline]
+    fn row(&mut self, k: [u32; 3], inner_axis: usize) {
+        (self.k, self.axis) = (k, inner_axis);
+    }
+
+    #[inline]
+    fn voxel(&mut self, id: u32, k: u32) {
+        let mut at = self.k;
+        at[self.axis] = k;
+        if (self.keep)(self.at, at) {
+            self.out.push(id);
+        }
+    }
+}
+
 /// How the inner axis of each row is walked.
 #[derive(Debug, Clone, Copy)]
 pub(crate) enum Inner<'a> {

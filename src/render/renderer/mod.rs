@@ -429,7 +429,6 @@ impl VolumeState {
         {
             keep_within(
                 &mut self.ids,
-                None,
                 self.classified.grid.dims(),
                 self.factors,
                 within,
@@ -672,6 +671,11 @@ impl BrickOf {
         }
     }
 
+    /// The brick of the grid's voxel at `k`.
+    fn at(&self, k: [u32; 3]) -> [u32; 3] {
+        std::array::from_fn(|a| self.tables[a][k[a] as usize])
+    }
+
     /// The brick of voxel `id` (x fastest) of the grid.
     fn of(&self, id: u32) -> [u32; 3] {
         let (x, y, z) = (
@@ -684,56 +688,6 @@ impl BrickOf {
             self.tables[1][y as usize],
             self.tables[2][z as usize],
         ]
-    }
-}
-
-/// Leaves out of `ids` (voxel ids of a grid of `dims`, a level or refinement of the own grid
-/// as `(halvings, factors)` say, box after box, `ends` one past each box's last) the splats
-/// whose brick is not in box `i`'s run, the run in place `box_runs[i]` of the draw order
-/// (`in_run`: per brick of a grid of `bricks`, its run's place, [`bricks_in_runs`]), keeping
-/// the order of the rest and moving `ends` to match.
-fn keep_in_runs(
-    ids: &mut Vec<u32>,
-    ends: &mut [usize],
-    dims: [u32; 3],
-    (halvings, factors): ([u32; 3], [u32; 3]),
-    (in_run, box_runs): (&[u32], &[u32]),
-    bricks: [u32; 3],
-) {
-    let brick_of = BrickOf::new(dims, (halvings, factors), BRICK);
-    let [bx, by, _] = bricks;
-    let run_of = |id: u32| {
-        let b = brick_of.of(id);
-        in_run
-            .get((b[0] + bx * (b[1] + by * b[2])) as usize)
-            .copied()
-            .unwrap_or(u32::MAX)
-    };
-    // Each box filtered apart (in parallel), then joined in order.
-    let mut start = 0;
-    let spans: Vec<(u32, std::ops::Range<usize>)> = ends
-        .iter()
-        .zip(box_runs)
-        .map(|(&end, &r)| {
-            let span = (r, start..end);
-            start = end;
-            span
-        })
-        .collect();
-    let kept: Vec<Vec<u32>> = spans
-        .par_iter()
-        .map(|(r, span)| {
-            ids[span.clone()]
-                .iter()
-                .copied()
-                .filter(|&id| run_of(id) == *r)
-                .collect()
-        })
-        .collect();
-    ids.clear();
-    for (end, k) in ends.iter_mut().zip(kept) {
-        ids.extend_from_slice(&k);
-        *end = ids.len();
     }
 }
 
@@ -780,34 +734,38 @@ fn order_mix(
             .iter()
             .map(|run| bricks_voxels(run.lo, run.hi, (halvings, factors)))
             .collect();
+        // A run's box may hold bricks of other runs, and a refinement bricks the view does
+        // not show: the walk leaves their voxels out as it goes.
+        let dims = state.classified.grid.dims();
+        let in_runs = level_runs.iter().any(|r| !r.fills_its_box()).then(|| {
+            (
+                BrickOf::new(dims, (halvings, factors), BRICK),
+                bricks_in_runs(&mix.bricks, &runs, own_bricks, detail),
+            )
+        });
+        let within = (state.within.as_ref())
+            .map(|within| (BrickOf::new(dims, ([0; 3], factors), REGION_BRICK), within));
+        let [bx, by, _] = own_bricks;
+        let keep = |at: usize, k: [u32; 3]| {
+            in_runs.as_ref().is_none_or(|(brick_of, in_run)| {
+                let b = brick_of.at(k);
+                in_run.get((b[0] + bx * (b[1] + by * b[2])) as usize) == places.get(at)
+            }) && within
+                .as_ref()
+                .is_none_or(|(brick_of, within)| within.covers_brick(brick_of.at(k)))
+        };
+        let keep = (in_runs.is_some() || within.is_some()).then_some(&keep);
         let (mut ids, mut ends) = (Vec::new(), Vec::new());
-        let walked = Orderer::order_boxes(
+        let walked = Orderer::order_boxes_kept(
             &state.classified.grid,
             &case,
-            ordering,
-            options,
+            (ordering, options),
             &boxes,
+            keep,
             &mut ids,
             &mut ends,
         )
         .map_err(|e| e.to_string())?;
-        if walked && level_runs.iter().any(|r| !r.fills_its_box()) {
-            let dims = state.classified.grid.dims();
-            let in_run = bricks_in_runs(&mix.bricks, &runs, own_bricks, detail);
-            keep_in_runs(
-                &mut ids,
-                &mut ends,
-                dims,
-                (halvings, factors),
-                (&in_run, &places),
-                own_bricks,
-            );
-        }
-        if walked && let Some(within) = &state.within {
-            // A refinement drawn within the bricks the view shows.
-            let dims = state.classified.grid.dims();
-            keep_within(&mut ids, Some(&mut ends), dims, factors, within);
-        }
         if !walked {
             return order_mix_from_whole_levels(
                 volumes,
@@ -859,42 +817,17 @@ fn bricks_voxels(
 }
 
 /// Leaves out of `ids` (voxel ids of a grid of `dims`, refined by `factors` from the own
-/// grid) the splats outside the own grid's bricks `within`, keeping the order of the rest;
-/// `ends` (one past each box's last splat in `ids`), where given, moved to match.
-fn keep_within(
-    ids: &mut Vec<u32>,
-    ends: Option<&mut Vec<usize>>,
-    dims: [u32; 3],
-    factors: [u32; 3],
-    within: &Region,
-) {
+/// grid) the splats outside the own grid's bricks `within`, keeping the order of the rest.
+fn keep_within(ids: &mut Vec<u32>, dims: [u32; 3], factors: [u32; 3], within: &Region) {
     let brick_of = BrickOf::new(dims, ([0; 3], factors), REGION_BRICK);
     let inside = |id: u32| within.covers_brick(brick_of.of(id));
-    match ends {
-        None => {
-            let kept: Vec<Vec<u32>> = ids
-                .par_chunks(1 << 20)
-                .map(|c| c.iter().copied().filter(|&id| inside(id)).collect())
-                .collect();
-            ids.clear();
-            for k in kept {
-                ids.extend_from_slice(&k);
-            }
-        }
-        Some(ends) => {
-            let (mut kept, mut start) = (0, 0);
-            for end in ends.iter_mut() {
-                for i in start..*end {
-                    if inside(ids[i]) {
-                        ids[kept] = ids[i];
-                        kept += 1;
-                    }
-                }
-                start = *end;
-                *end = kept;
-            }
-            ids.truncate(kept);
-        }
+    let kept: Vec<Vec<u32>> = ids
+        .par_chunks(1 << 20)
+        .map(|c| c.iter().copied().filter(|&id| inside(id)).collect())
+        .collect();
+    ids.clear();
+    for k in kept {
+        ids.extend_from_slice(&k);
     }
 }
 
