@@ -520,14 +520,17 @@ fn marker_yellow(p: [u8; 3]) -> bool {
 /// The next stdout line of the viewer that starts with `prefix`.
 fn line(lines: &Receiver<String>, prefix: &str) -> String {
     let deadline = Instant::now() + Duration::from_secs(60);
+    // The lines passed over, said where the one looked for never comes.
+    let mut passed = Vec::new();
     loop {
         let left = deadline.saturating_duration_since(Instant::now());
-        let line = lines
-            .recv_timeout(left)
-            .unwrap_or_else(|_| panic!("no '{prefix}' line from the viewer"));
+        let line = lines.recv_timeout(left).unwrap_or_else(|_| {
+            panic!("no '{prefix}' line from the viewer; the lines before it: {passed:?}")
+        });
         if let Some(rest) = line.strip_prefix(prefix) {
             return rest.trim().to_owned();
         }
+        passed.push(line);
     }
 }
 
