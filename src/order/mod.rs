@@ -670,25 +670,33 @@ mod box_tests {
                         )
                         .unwrap();
                         assert!(done);
-                        assert_eq!(ends.len(), boxes.len());
                         let whole = reference::order(&grid, &view, ordering, cull);
-                        let mut start = 0;
-                        for (range, &end) in boxes.iter().zip(&ends) {
-                            let inside = |id: &u32| {
-                                let k = grid.coords(*id);
-                                (0..3).all(|a| k[a] >= range[a].0 && k[a] < range[a].1)
-                            };
-                            let expected: Vec<u32> = whole.iter().copied().filter(inside).collect();
-                            assert_eq!(
-                                out[start..end],
-                                expected[..],
-                                "{ordering:?} eye {f:?} cull {cull} box {range:?}"
-                            );
-                            start = end;
-                        }
-                        assert_eq!(start, out.len());
-                        // With some of each box's voxels left out as they are walked: the
-                        // whole order's others, in its order.
+                        // Each box's voxels that `keep` holds: the whole order's, in its order.
+                        let check = |out: &[u32],
+                                     ends: &[usize],
+                                     keep: &dyn Fn(usize, [u32; 3]) -> bool,
+                                     what: &str| {
+                            assert_eq!(ends.len(), boxes.len());
+                            let mut start = 0;
+                            for (at, (range, &end)) in boxes.iter().zip(ends).enumerate() {
+                                let inside = |id: &u32| {
+                                    let k = grid.coords(*id);
+                                    (0..3).all(|a| k[a] >= range[a].0 && k[a] < range[a].1)
+                                        && keep(at, k)
+                                };
+                                let expected: Vec<u32> =
+                                    whole.iter().copied().filter(inside).collect();
+                                assert_eq!(
+                                    out[start..end],
+                                    expected[..],
+                                    "{what}{ordering:?} eye {f:?} cull {cull} box {range:?}"
+                                );
+                                start = end;
+                            }
+                            assert_eq!(start, out.len());
+                        };
+                        check(&out, &ends, &|_, _| true, "");
+                        // With some of each box's voxels left out as they are walked.
                         let keep = |at: usize, k: [u32; 3]| {
                             !(k[0] + 2 * k[1] + k[2] + at as u32).is_multiple_of(3)
                         };
@@ -702,23 +710,7 @@ mod box_tests {
                             &mut ends,
                         )
                         .unwrap();
-                        assert_eq!(ends.len(), boxes.len());
-                        let mut start = 0;
-                        for (at, (range, &end)) in boxes.iter().zip(&ends).enumerate() {
-                            let kept = |id: &u32| {
-                                let k = grid.coords(*id);
-                                (0..3).all(|a| k[a] >= range[a].0 && k[a] < range[a].1)
-                                    && keep(at, k)
-                            };
-                            let expected: Vec<u32> = whole.iter().copied().filter(kept).collect();
-                            assert_eq!(
-                                out[start..end],
-                                expected[..],
-                                "kept: {ordering:?} eye {f:?} cull {cull} box {range:?}"
-                            );
-                            start = end;
-                        }
-                        assert_eq!(start, out.len());
+                        check(&out, &ends, &keep, "kept: ");
                     }
                 }
             }

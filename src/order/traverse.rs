@@ -68,10 +68,10 @@ impl Sink for Collect<'_> {
 /// Appends the ids of the voxels `keep` holds for box `at` to a list: a walk and a filter in
 /// one pass, so that the voxels a box's walk leaves out are never written.
 pub(crate) struct CollectKept<'a, F> {
-    pub out: &'a mut Vec<u32>,
-    pub keep: &'a F,
+    out: &'a mut Vec<u32>,
+    keep: &'a F,
     /// The box walked.
-    pub at: usize,
+    at: usize,
     /// The row's coordinates (set by [`Sink::row`]) and its axis.
     k: [u32; 3],
     axis: usize,
