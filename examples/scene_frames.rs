@@ -121,7 +121,7 @@ fn main() -> Result<()> {
         let made = ms(t.classify + t.levels + t.texels);
         let s = shot.report.tiles.unwrap_or_default();
         println!(
-            "frame {f}: {total:.0} ms (making {made:.0}: classify {:.0}, levels {:.0}, texels {:.0}; look {:.0}, order {:.0}, mesh pass {:.0}, readback {:.0}, project {:.0}, bin {:.0}, tiles {:.0}), {} splats, {} projected, {} drew, {} composited, levels {:?}{}, refined {:?}, coarse copies {}",
+            "frame {f}: {total:.0} ms (making {made:.0}: classify {:.0}, levels {:.0}, texels {:.0}; look {:.0}, order {:.0}, mesh pass {:.0}, readback {:.0}, project {:.0}, bin {:.0}, tiles {:.0}), {} splats, {} projected, {} culled, {} off image, {} drew, {} composited, levels {:?}{}, refined {:?}, coarse copies {}",
             ms(t.classify),
             ms(t.levels),
             ms(t.texels),
@@ -134,6 +134,8 @@ fn main() -> Result<()> {
             ms(s.tiles),
             shot.report.splats,
             s.projected,
+            s.culled,
+            s.off_image,
             s.drew,
             s.composited,
             shot.report.levels,
