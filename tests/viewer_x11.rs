@@ -26,6 +26,10 @@ use common::{have, scratch};
 /// display number.
 static ONE_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
 
+/// The folder of the standard error of the viewer started last (`viewer.log`), kept until the
+/// next viewer starts, and told when a title waited for never comes.
+static VIEWER_LOG: std::sync::Mutex<Option<common::Scratch>> = std::sync::Mutex::new(None);
+
 /// Kills the child when dropped, so a failed assertion leaves no X server or viewer behind.
 struct Guard(Child);
 
@@ -571,6 +575,7 @@ fn open_viewer(display: &str, args: &[&str]) -> (Guard, Receiver<String>, String
         }
         std::thread::sleep(Duration::from_millis(100));
     };
+    *VIEWER_LOG.lock().unwrap_or_else(|e| e.into_inner()) = Some(logs);
     (viewer, lines, window)
 }
 
@@ -585,9 +590,33 @@ fn title(display: &str, window: &str, text: &str) -> String {
 /// refined (a full frame of a volume coarser than the pixels is followed by its refined
 /// frame once the camera rests: "(refining)" until then), and returns it.
 fn title_where(display: &str, window: &str, what: &str, check: impl Fn(&str) -> bool) -> String {
-    let title = wait_for(what, 60, || {
-        xdo(display, &["getwindowname", window]).filter(|t| check(t) && !t.contains("(refining)"))
-    });
+    // The last title seen, told if the one waited for never comes.
+    let mut last = None::<String>;
+    let started = Instant::now();
+    let title = loop {
+        let got = xdo(display, &["getwindowname", window]);
+        if let Some(t) = got
+            .as_ref()
+            .filter(|t| check(t) && !t.contains("(refining)"))
+        {
+            break t.clone();
+        }
+        if got.is_some() {
+            last = got;
+        }
+        if started.elapsed() > Duration::from_secs(60) {
+            let said = VIEWER_LOG
+                .lock()
+                .unwrap_or_else(|e| e.into_inner())
+                .as_ref()
+                .and_then(|dir| std::fs::read_to_string(dir.join("viewer.log")).ok());
+            panic!(
+                "timed out waiting for {what}; the last title was {last:?}; the viewer's \
+                 standard error: {said:?}"
+            );
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    };
     // The title is set after the frame is presented; give the X server a moment to show it.
     std::thread::sleep(Duration::from_millis(300));
     title
