@@ -1830,9 +1830,18 @@ fn four_panes_show_slices_that_follow_the_crosshair_and_move_the_implant_in_thei
     );
     title(&display, &window, " splats");
     xdo(&display, &["windowfocus", "--sync", &window]);
-    xdo(&display, &["key", "v"]).expect("v");
+    // V held down past the X server's autorepeat delay (660 ms): four panes once, not on
+    // and off with every repeat of the key.
+    xdo(&display, &["keydown", "v"]).expect("v down");
+    std::thread::sleep(Duration::from_millis(1500));
+    xdo(&display, &["keyup", "v"]).expect("v up");
     assert!(line(&lines, "four panes").starts_with(':'));
     title(&display, &window, "(four panes)");
+    let toggled: Vec<String> = lines
+        .try_iter()
+        .filter(|l| l.starts_with("one 3D view") || l.starts_with("four panes"))
+        .collect();
+    assert!(toggled.is_empty(), "V held down toggled again: {toggled:?}");
     // 3D Slicer's four-up: the axial pane (red border) top left, sagittal (yellow) bottom
     // left, coronal (green) bottom right, the 3D view top right.
     let (red, green, yellow) = ([241, 89, 70], [110, 176, 75], [237, 214, 80]);

@@ -213,6 +213,24 @@ pub enum Action {
     MeshColour,
 }
 
+impl Action {
+    /// Whether a key held down repeats the action, as the system's key repeat sends it again:
+    /// steps that move something (a mesh, the clip plane, the crop box's sides) and undo and
+    /// redo. Every other action is taken once a press: a toggle held down would flicker (four
+    /// panes on and off with every repeat), and a held S or P would save plan after plan.
+    pub fn repeats(&self) -> bool {
+        matches!(
+            self,
+            Action::Nudge { .. }
+                | Action::Turn { .. }
+                | Action::MoveClip(_)
+                | Action::GrowCrop(_)
+                | Action::Undo
+                | Action::Redo
+        )
+    }
+}
+
 /// The action of `key` pressed with `modifiers` held; `None` for a key that does nothing.
 /// (Typing a label takes the keys before this: see [`super::edit::LabelKey`].)
 pub fn key_action(key: &Key, modifiers: ModifiersState) -> Option<Action> {
@@ -395,6 +413,31 @@ mod tests {
                 mm: 1.0
             })
         );
+    }
+
+    #[test]
+    fn a_held_key_repeats_moves_and_undo_but_no_toggle_save_or_quit() {
+        for moves in [
+            named(NamedKey::ArrowLeft, NONE),
+            named(NamedKey::ArrowUp, CTRL),
+            press("-", NONE),
+            press("z", CTRL),
+            press("y", CTRL),
+        ] {
+            assert!(moves.is_some_and(|a| a.repeats()), "{moves:?}");
+        }
+        for once in [
+            press("v", NONE),
+            press("s", NONE),
+            press("s", CTRL),
+            press("Q", SHIFT),
+            press("h", NONE),
+            named(NamedKey::Escape, NONE),
+            named(NamedKey::Delete, NONE),
+            named(NamedKey::F5, NONE),
+        ] {
+            assert!(once.is_some_and(|a| !a.repeats()), "{once:?}");
+        }
     }
 
     #[test]

@@ -540,12 +540,20 @@ impl App {
 
     /// Typing a label: characters go into it, Enter keeps it, Escape drops it.
     /// A key pressed: typed into the label being edited, else its [`Action`] carried out.
+    /// `repeat`: the system's repeat of a key held down, which types into a line and repeats
+    /// the actions that [`Action::repeats`], and answers no question.
     pub(super) fn key(
         &mut self,
         event_loop: &ActiveEventLoop,
         key: &Key,
         text: Option<&str>,
+        repeat: bool,
     ) -> Result<(), ViewerError> {
+        if repeat && self.prompt.is_some() {
+            // An answer is a key pressed for it, not one held from before the question.
+            self.text_only = true;
+            return Ok(());
+        }
         // Answers to a prompt change the text on screen, bar restoring an autosave.
         let restoring = matches!(self.prompt, Some(guard::Prompt::Restore(_)))
             && matches!(key, Key::Character(c) if c.eq_ignore_ascii_case("r"));
@@ -574,8 +582,10 @@ impl App {
             self.tell(notice);
             return Ok(());
         }
-        let Some(action) = key_action(key, self.modifiers) else {
-            // A key that does nothing (a modifier alone) changes nothing drawn.
+        let Some(action) = key_action(key, self.modifiers).filter(|a| !repeat || a.repeats())
+        else {
+            // A key that does nothing (a modifier alone, a toggle's repeat) changes nothing
+            // drawn.
             self.text_only = true;
             return Ok(());
         };
@@ -755,7 +765,12 @@ impl App {
             WindowEvent::Resized(size) => self.resize(size)?,
             WindowEvent::RedrawRequested => return self.redraw(),
             WindowEvent::KeyboardInput { event, .. } if event.state == ElementState::Pressed => {
-                self.key(event_loop, &event.logical_key, event.text.as_deref())?;
+                self.key(
+                    event_loop,
+                    &event.logical_key,
+                    event.text.as_deref(),
+                    event.repeat,
+                )?;
             }
             WindowEvent::ModifiersChanged(modifiers) => {
                 self.modifiers = modifiers.state();
