@@ -2634,3 +2634,42 @@ fn a_refined_close_up_gives_way_to_drags_and_edits_and_stays_under_new_text() {
     let clipped = title(&display, &window, "(refined ");
     eprintln!("while keyed: {while_keyed:?}\nclipped: {clipped}");
 }
+
+#[test]
+fn an_arrow_held_down_moves_the_implant_step_after_step_and_each_step_undoes() {
+    // The other half of a held V toggling once: a held arrow repeats its move, as the
+    // system's key repeat sends it (after 660 ms, 25 a second in Xvfb), each step an edit.
+    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    if !x11_tools() {
+        return;
+    }
+    let (_xvfb, display) = start_xvfb();
+    let dir = scratch("held-arrow");
+    let scene_path = shoulder_copy(&dir);
+    let (_viewer, lines, window) = open_viewer(
+        &display,
+        &["view", scene_path.to_str().unwrap(), "--size", "640x480"],
+    );
+    title(&display, &window, " splats");
+    xdo(&display, &["windowfocus", "--sync", &window]);
+    let (x, y) = (PICKED.0.to_string(), PICKED.1.to_string());
+    xdo(
+        &display,
+        &["mousemove", "--window", &window, &x, &y, "click", "1"],
+    )
+    .expect("click");
+    assert_eq!(line(&lines, "selected"), "prosthesis");
+    xdo(&display, &["keydown", "Right"]).expect("right down");
+    std::thread::sleep(Duration::from_millis(1500));
+    xdo(&display, &["keyup", "Right"]).expect("right up");
+    // The first move, then the repeats: each a line, read until they stop coming.
+    line(&lines, "moved prosthesis");
+    let mut moves = 1;
+    while let Ok(l) = lines.recv_timeout(Duration::from_secs(3)) {
+        moves += usize::from(l.starts_with("moved prosthesis"));
+    }
+    assert!(moves >= 3, "a held arrow moved the implant {moves} times");
+    // Each step one edit: Ctrl+Z takes back one of them.
+    xdo(&display, &["key", "ctrl+z"]).expect("ctrl+z");
+    assert_eq!(line(&lines, "undo"), "move prosthesis");
+}
