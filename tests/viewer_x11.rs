@@ -1823,13 +1823,7 @@ fn four_panes_show_slices_that_follow_the_crosshair_and_move_the_implant_in_thei
     let dir = scratch("panes");
     eprintln!("screenshots in {}", dir.display());
     // A copy, so that the plan's autosave lands in the scratch folder.
-    let scene_path = shoulder_copy(&dir);
-    let (_viewer, lines, window) = open_viewer(
-        &display,
-        &["view", scene_path.to_str().unwrap(), "--size", "640x480"],
-    );
-    title(&display, &window, " splats");
-    xdo(&display, &["windowfocus", "--sync", &window]);
+    let (scene_path, _viewer, lines, window) = view_shoulder(&display, &dir);
     // V held down past the X server's autorepeat delay (660 ms): four panes once, not on
     // and off with every repeat of the key.
     xdo(&display, &["keydown", "v"]).expect("v down");
@@ -2159,13 +2153,7 @@ fn a_dragged_measurement_point_undoes_and_an_implant_to_bone_distance_follows_th
     }
     let (_xvfb, display) = start_xvfb();
     let dir = scratch("points");
-    let scene = shoulder_copy(&dir);
-    let (_viewer, lines, window) = open_viewer(
-        &display,
-        &["view", scene.to_str().unwrap(), "--size", "640x480"],
-    );
-    title(&display, &window, " splats");
-    xdo(&display, &["windowfocus", "--sync", &window]);
+    let (_, _viewer, lines, window) = view_shoulder(&display, &dir);
     // A distance from the prosthesis head to its stem, both points on the implant.
     xdo(&display, &["key", "m"]).expect("m");
     let stem = ((STEM.x0 + STEM.x1) / 2, (STEM.y0 + STEM.y1) / 2);
@@ -2278,6 +2266,19 @@ fn shoulder_copy(dir: &Path) -> PathBuf {
     let copy = dir.join("shoulder.toml");
     std::fs::copy(&original, &copy).unwrap();
     copy
+}
+
+/// The viewer on a copy of the shoulder scene in `dir` (its path returned: the plan's autosave
+/// lands beside it), at 640x480, its first frame drawn and the window focused.
+fn view_shoulder(display: &str, dir: &Path) -> (PathBuf, Guard, Receiver<String>, String) {
+    let scene = shoulder_copy(dir);
+    let (viewer, lines, window) = open_viewer(
+        display,
+        &["view", scene.to_str().unwrap(), "--size", "640x480"],
+    );
+    title(display, &window, " splats");
+    xdo(display, &["windowfocus", "--sync", &window]);
+    (scene, viewer, lines, window)
 }
 
 /// The viewer on a 32x32x32 raw u8 volume `ct` with the OBJ `mesh`, at 640x480, with the
@@ -2645,13 +2646,7 @@ fn an_arrow_held_down_moves_the_implant_step_after_step_and_each_step_undoes() {
     }
     let (_xvfb, display) = start_xvfb();
     let dir = scratch("held-arrow");
-    let scene_path = shoulder_copy(&dir);
-    let (_viewer, lines, window) = open_viewer(
-        &display,
-        &["view", scene_path.to_str().unwrap(), "--size", "640x480"],
-    );
-    title(&display, &window, " splats");
-    xdo(&display, &["windowfocus", "--sync", &window]);
+    let (_, _viewer, lines, window) = view_shoulder(&display, &dir);
     let (x, y) = (PICKED.0.to_string(), PICKED.1.to_string());
     xdo(
         &display,
