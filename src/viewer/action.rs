@@ -217,7 +217,8 @@ impl Action {
     /// Whether a key held down repeats the action, as the system's key repeat sends it again:
     /// steps that move something (a mesh, the clip plane, the crop box's sides) and undo and
     /// redo. Every other action is taken once a press: a toggle held down would flicker (four
-    /// panes on and off with every repeat), and a held S or P would save plan after plan.
+    /// panes on and off with every repeat), a held S would save screenshot after screenshot and
+    /// a held Ctrl+S plan after plan.
     pub fn repeats(&self) -> bool {
         matches!(
             self,
