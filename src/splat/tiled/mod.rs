@@ -37,6 +37,8 @@ mod bin;
 mod mask;
 mod project;
 mod simd;
+#[cfg(target_arch = "x86_64")]
+mod simd512;
 #[cfg(test)]
 mod tests;
 mod texels;

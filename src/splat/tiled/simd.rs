@@ -36,14 +36,20 @@ pub(super) fn project_group(
 }
 
 /// Composites a batch's splats touching tile `t` (its top-left pixel at `origin`), nearest
-/// first, under what the tile holds: 8 lanes wide where the processor has AVX2 and FMA, else
-/// the portable loop.
+/// first, under what the tile holds: 16 lanes wide where the processor has AVX-512
+/// (`simd512`), 8 where it has AVX2 and FMA, else the portable loop.
 pub(super) fn composite_tile(
     tile: &mut TilePixels,
     t: usize,
     origin: (usize, usize),
     batch: Batch<'_>,
 ) {
+    #[cfg(target_arch = "x86_64")]
+    if super::simd512::has_avx512() {
+        #[allow(unsafe_code)]
+        // SAFETY: the processor has the features the function is built for, checked above.
+        return unsafe { super::simd512::composite_tile(tile, t, origin, batch) };
+    }
     #[cfg(target_arch = "x86_64")]
     if has_avx2() {
         #[allow(unsafe_code)]
@@ -90,7 +96,7 @@ pub(super) mod avx2 {
     /// vector.
     #[target_feature(enable = "avx2,fma,popcnt")]
     #[inline]
-    fn composite_splat(
+    pub(in crate::splat::tiled) fn composite_splat(
         tile: &mut TilePixels,
         origin: (usize, usize),
         p: &Projected,
@@ -159,7 +165,7 @@ pub(super) mod avx2 {
 
     /// Columns a footprint spans at most for [`composite_splat`] to take two of its rows a
     /// vector: half its lanes.
-    const HALF: usize = LANES / 2;
+    pub(in crate::splat::tiled) const HALF: usize = LANES / 2;
 
     /// A splat's values in every lane, for [`Broadcast::under`].
     struct Broadcast {

@@ -626,3 +626,63 @@ fn a_draw_order_cut_into_runs_of_several_sources_composites_as_one_order() {
         assert!(one.drew > 1000, "{} splats drew", one.drew);
     }
 }
+
+/// The AVX-512 loop does each lane's arithmetic as the AVX2 loop does, so it leaves the same
+/// bits: footprints 2 to 14 pixels wide (the AVX2 loop's two rows of 4, the AVX-512 loop's
+/// two rows of 8 and its whole rows), some past the tile's edges and the image's bottom,
+/// partly behind meshes, with pixels stopping at 0.9 and at the compositor's own opacity.
+#[test]
+fn the_avx512_kernel_gives_the_bits_of_the_avx2_kernel() {
+    #[cfg(target_arch = "x86_64")]
+    if super::simd512::has_avx512() {
+        let mut splats = splats_of(0x1234_5679, 1500, (0.05, 0.6));
+        splats.extend(splats_of(0x7f4a_7c15, 600, (0.3, 4.0)));
+        let widths = |lo: i32, hi: i32| {
+            splats
+                .iter()
+                .filter(|p| (lo..=hi).contains(&(p.x1 - p.x0 + 1)))
+                .count()
+        };
+        for (lo, hi) in [(1, 4), (5, 8), (9, 16)] {
+            assert!(
+                widths(lo, hi) > 150,
+                "{} footprints {lo}-{hi} wide",
+                widths(lo, hi)
+            );
+        }
+        for (depth, opaque) in [(narrow_depth(), 0.9), (narrow_depth(), OPAQUE)] {
+            let bins = [one_list(splats.len())];
+            let run = |kernel: unsafe fn(&mut TilePixels, usize, (usize, usize), Batch<'_>)| {
+                let mut tile = fresh_tile(&depth);
+                #[allow(unsafe_code)]
+                // SAFETY: the processor has AVX-512, and so AVX2, checked above.
+                unsafe {
+                    kernel(
+                        &mut tile,
+                        0,
+                        (16, 32),
+                        Batch {
+                            opaque,
+                            ..batch(&splats, &bins)
+                        },
+                    )
+                };
+                tile
+            };
+            let (wide, narrow) = (
+                run(super::simd512::composite_tile),
+                run(avx2::composite_tile),
+            );
+            assert_eq!(wide.rows, narrow.rows);
+            assert_eq!(wide.open, narrow.open);
+            assert_eq!(wide.composited, narrow.composited);
+            let bits = |t: &TilePixels| [&t.r, &t.g, &t.b, &t.a].map(|p| p.map(f32::to_bits));
+            assert!(bits(&wide) == bits(&narrow), "the planes' bits differ");
+            let covered = narrow.a.iter().filter(|&&a| a > 0.5).count();
+            assert!(covered > 80, "{covered} pixels covered");
+            assert!(narrow.open < 8 * 16 - 8, "{} pixels open", narrow.open);
+        }
+    } else {
+        eprintln!("no AVX-512 here: the AVX-512 kernel is not tested");
+    }
+}

@@ -9,10 +9,11 @@ use super::project::Projected;
 
 /// Pixels in a tile.
 pub(super) const PIXELS: usize = TILE * TILE;
-/// A plane of a tile's pixels, with room for a group of lanes starting at the last pixel
-/// (lanes past a row's end fall on the next row, or here, and are never open), rounded up to
+/// A plane of a tile's pixels, with room for a group of lanes starting at the last pixel, as
+/// wide as a row for the AVX-512 loop (lanes past a row's end fall on the next row, or here,
+/// and are never open), rounded up to
 /// whole cache lines so that every plane of a [`TilePixels`] starts on one.
-pub(super) const PLANE: usize = (PIXELS + LANES).next_multiple_of(16);
+pub(super) const PLANE: usize = (PIXELS + 2 * LANES).next_multiple_of(16);
 
 /// One tile's pixels as planes (premultiplied red, green, blue, alpha, and the meshes' reversed
 /// depth), so that a row of pixels is a few vector registers. Aligned to a cache line: a row
