@@ -4,10 +4,12 @@
 //! that are open and those that turn opaque held in mask registers. A footprint 5 to 8
 //! pixels wide takes two rows a vector, a wider one a whole row from its left edge; a
 //! narrower one goes to the AVX2 loop, which takes two rows of 4 pixels a vector, where 16
-//! lanes would be half empty. Where a footprint is about 8 pixels wide (the voxels about 2.5
-//! pixels apart) a frame's tiles took about a fifth less time than with the AVX2 loop on a
-//! processor that runs 512-bit operations as two 256-bit halves; with footprints of 4 to 6
-//! pixels, about the same (BENCHMARKS.md, "The pixel loop in AVX-512 vectors").
+//! lanes would be half empty. Where the footprints are about 8 pixels wide (voxels about 2.5
+//! pixels apart) a frame's tiles took a quarter to two fifths less time than with the AVX2
+//! loop, on a processor that runs 512-bit operations as two 256-bit halves; with footprints
+//! of 3 to 6 pixels, about the same (BENCHMARKS.md, "The pixel loop in AVX-512 vectors").
+//! The splat's broadcast values and the exponential are written again for 512-bit vectors
+//! rather than shared through a trait over both widths: the intrinsics differ in every call.
 
 use std::arch::x86_64::*;
 
