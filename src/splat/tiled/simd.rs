@@ -1,6 +1,7 @@
-//! The choice between the tile compositor's portable loops and its AVX2 and FMA code, made at
-//! run time from the processor (and [`SIMD_VAR`]), and that AVX2 code: projection eight splats
-//! a vector, and the pixel loop eight pixels a vector.
+//! The choice between the tile compositor's portable loops, its AVX2 and FMA code and its
+//! AVX-512 pixel loop (`simd512`), made at run time from the processor (and [`SIMD_VAR`]),
+//! and that AVX2 code: projection eight splats a vector, and the pixel loop eight pixels a
+//! vector.
 
 use super::project::{Group, Projected};
 #[cfg(target_arch = "x86_64")]
