@@ -1,4 +1,4 @@
-// The tile compositor (src/splat/tiled/) as two compute passes, appended to
+// The tile compositor (src/splat/tiled/) as three compute passes, appended to
 // shaders/footprint.wgsl and shaders/splat.wgsl (whose uniforms `u`, texels and helpers it
 // shares; src/render/tile_pass.rs builds it).
 //
@@ -10,10 +10,12 @@
 //   premultiplied colour, reversed depth and pixel rectangle, exactly as `tiled::project`
 //   does), one thread a splat, and writes the rectangle that holds the footprints of every 32
 //   consecutive splats (a span);
+// - `bound_blocks` writes the rectangle that holds the spans of every 64 consecutive spans (a
+//   block);
 // - `composite` runs one workgroup an 8x8-pixel tile, one thread a pixel. Binning is done in
-//   two levels inside the workgroup, keeping the draw order: the spans whose rectangle meets
-//   the tile, in order, then, two such spans at a time, their splats that meet the tile, in
-//   order. Each
+//   three levels inside the workgroup, keeping the draw order: the blocks whose rectangle
+//   meets the tile, in order, then a block at a time its spans that meet the tile, then, two
+//   such spans at a time, their splats that meet the tile, in order. Each
 //   pixel takes them front to back with the "under" operator `C += (1 - A) c; A += (1 - A) a`
 //   and stops at the opacity `batch.opaque`; a tile whose pixels have all stopped stops.
 // The accumulated layer (premultiplied RGBA a pixel) persists across batches; src/render/
@@ -34,6 +36,11 @@ const SPAN: u32 = 32u;
 const SPANS: u32 = GROUP / SPAN;
 // Spans a compositing round takes, one splat a thread.
 const ROUND_SPANS: u32 = LANES / SPAN;
+// Spans a block's rectangle bounds (`BLOCK_SPANS` in src/render/tile_pass.rs): one a thread
+// of a compositing workgroup, so that a tile tests a block's spans in one round. Without
+// blocks every tile tested every span's rectangle; on an NVIDIA H200 the blocks took the
+// engine's splat stage at its own grid from 4.1 to 3.5 ms (BENCHMARKS.md).
+const BLOCK_SPANS: u32 = LANES;
 
 // A splat on the screen (`Projected` in src/splat/tiled/project.rs).
 struct Projected {
@@ -191,8 +198,34 @@ fn project(
     }
 }
 
+// One thread a block of the batch: the rectangle of its spans' rectangles (an empty one where
+// none of them is drawn).
+@group(0) @binding(15) var<storage, read> block_spans: array<vec4<i32>>;
+@group(0) @binding(16) var<storage, read_write> block_bounds: array<vec4<i32>>;
+@group(0) @binding(17) var<uniform> blocking: Batch;
+
+@compute @workgroup_size(64)
+fn bound_blocks(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let b = gid.x;
+    let first = b * BLOCK_SPANS;
+    if first >= blocking.spans {
+        return;
+    }
+    var lo = vec2<i32>(0x3fffffff);
+    var hi = vec2<i32>(-1);
+    for (var g = first; g < min(first + BLOCK_SPANS, blocking.spans); g++) {
+        let r = block_spans[g];
+        if r.x <= r.z && r.y <= r.w {
+            lo = min(lo, r.xy);
+            hi = max(hi, r.zw);
+        }
+    }
+    block_bounds[b] = vec4<i32>(lo, hi);
+}
+
 @group(0) @binding(8) var<storage, read> splats: array<Projected>;
 @group(0) @binding(9) var<storage, read> rects: array<vec4<i32>>;
+@group(0) @binding(18) var<storage, read> blocks: array<vec4<i32>>;
 @group(0) @binding(10) var<storage, read_write> layer: array<vec4<f32>>;
 @group(0) @binding(11) var mesh_depth: texture_depth_2d;
 @group(0) @binding(12) var<uniform> tiles: Batch;
@@ -200,6 +233,7 @@ fn project(
 var<workgroup> scan: array<u32, LANES>;
 var<workgroup> total: u32;
 var<workgroup> picked: array<u32, LANES>;
+var<workgroup> picked_blocks: array<u32, LANES>;
 var<workgroup> tile_splats: array<Projected, LANES>;
 var<workgroup> open_pixels: atomic<u32>;
 var<workgroup> still_open: u32;
@@ -274,53 +308,68 @@ fn composite(
     var open = inside && acc.w < tiles.opaque;
     let centre = vec2<f32>(px) + 0.5;
     var done = count_open(li, open) == 0u;
-    for (var base = 0u; base < tiles.spans && !done; base += LANES) {
-        // The spans of this stretch that meet the tile, in order.
-        let g = base + li;
-        var hit = 0u;
-        if g < tiles.spans && meets(rects[g], origin) {
-            hit = 1u;
+    let block_count = (tiles.spans + BLOCK_SPANS - 1u) / BLOCK_SPANS;
+    for (var base = 0u; base < block_count && !done; base += LANES) {
+        // The blocks of this stretch that meet the tile, in order.
+        let b = base + li;
+        var block_hit = 0u;
+        if b < block_count && meets(blocks[b], origin) {
+            block_hit = 1u;
         }
-        let slot = prefix(li, hit);
-        if hit == 1u {
-            picked[slot - 1u] = g;
+        let block_slot = prefix(li, block_hit);
+        if block_hit == 1u {
+            picked_blocks[block_slot - 1u] = b;
         }
-        let spans = workgroupUniformLoad(&total);
-        for (var j = 0u; j < spans && !done; j += ROUND_SPANS) {
-            // The splats of the next two such spans that meet the tile, in order.
-            let which = j + li / SPAN;
-            var splat = left_out();
-            var touch = 0u;
-            if which < spans {
-                let s = picked[which] * SPAN + li % SPAN;
-                if s < tiles.count {
-                    splat = splats[s];
-                    if meets(rect_of(splat), origin) {
-                        touch = 1u;
+        let met = workgroupUniformLoad(&total);
+        for (var m = 0u; m < met && !done; m++) {
+            // The spans of the block that meet the tile, in order.
+            let g = workgroupUniformLoad(&picked_blocks[m]) * BLOCK_SPANS + li;
+            var hit = 0u;
+            if g < tiles.spans && meets(rects[g], origin) {
+                hit = 1u;
+            }
+            let slot = prefix(li, hit);
+            if hit == 1u {
+                picked[slot - 1u] = g;
+            }
+            let spans = workgroupUniformLoad(&total);
+            for (var j = 0u; j < spans && !done; j += ROUND_SPANS) {
+                // The splats of the next two such spans that meet the tile, in order.
+                let which = j + li / SPAN;
+                var splat = left_out();
+                var touch = 0u;
+                if which < spans {
+                    let s = picked[which] * SPAN + li % SPAN;
+                    if s < tiles.count {
+                        splat = splats[s];
+                        if meets(rect_of(splat), origin) {
+                            touch = 1u;
+                        }
                     }
                 }
-            }
-            let place = prefix(li, touch);
-            if touch == 1u {
-                tile_splats[place - 1u] = splat;
-            }
-            let n = workgroupUniformLoad(&total);
-            for (var k = 0u; k < n; k++) {
-                let sp = tile_splats[k];
-                let r = rect_of(sp);
-                let p = vec2<i32>(px);
-                if open && p.x >= r.x && p.x <= r.z && p.y >= r.y && p.y <= r.w {
-                    let dx = centre.x - sp.a.x;
-                    let dy = centre.y - sp.a.y;
-                    let q = (sp.a.z * dx + 2.0 * sp.a.w * dy) * dx + bitcast<f32>(sp.b.x) * dy * dy;
-                    if q <= tiles.cutoff && bitcast<f32>(sp.b.y) >= mesh {
-                        let weight = (1.0 - acc.w) * exp(-0.5 * q);
-                        acc += weight * sp.color;
-                        open = acc.w < tiles.opaque;
+                let place = prefix(li, touch);
+                if touch == 1u {
+                    tile_splats[place - 1u] = splat;
+                }
+                let n = workgroupUniformLoad(&total);
+                for (var k = 0u; k < n; k++) {
+                    let sp = tile_splats[k];
+                    let r = rect_of(sp);
+                    let p = vec2<i32>(px);
+                    if open && p.x >= r.x && p.x <= r.z && p.y >= r.y && p.y <= r.w {
+                        let dx = centre.x - sp.a.x;
+                        let dy = centre.y - sp.a.y;
+                        let q = (sp.a.z * dx + 2.0 * sp.a.w * dy) * dx
+                            + bitcast<f32>(sp.b.x) * dy * dy;
+                        if q <= tiles.cutoff && bitcast<f32>(sp.b.y) >= mesh {
+                            let weight = (1.0 - acc.w) * exp(-0.5 * q);
+                            acc += weight * sp.color;
+                            open = acc.w < tiles.opaque;
+                        }
                     }
                 }
+                done = count_open(li, open) == 0u;
             }
-            done = count_open(li, open) == 0u;
         }
     }
     if inside {

@@ -16,9 +16,11 @@
 //! both back first.
 //!
 //! Binning differs in form from the CPU's counting sort, not in result: a GPU workgroup (a
-//! tile) gathers, in order, the spans of [`SPAN`] consecutive splats whose rectangle meets it
-//! and then, two such spans at a time, their splats that meet it, by prefix sums in workgroup
-//! memory, so that every tile takes its splats in the draw order without a global sort.
+//! tile) gathers, in order, the blocks of [`BLOCK_SPANS`] spans whose rectangle meets it, then
+//! a block at a time the spans of [`SPAN`] consecutive splats whose rectangle meets it, and
+//! then, two such spans at a time, their splats that meet it, by prefix sums in workgroup
+//! memory, so that every tile takes its splats in the draw order without a global sort. A
+//! dispatch between projection and compositing bounds each block's spans.
 
 use bytemuck::{Pod, Zeroable};
 
@@ -34,6 +36,10 @@ const GROUP: usize = 256;
 /// Consecutive splats whose footprints one rectangle bounds, the rectangles the tiles test
 /// (`SPAN` in `shaders/tiles.wgsl`).
 const SPAN: usize = 32;
+/// Consecutive spans whose rectangles one block's rectangle bounds (`BLOCK_SPANS` in
+/// `shaders/tiles.wgsl`): a tile tests the blocks' rectangles first and a block's spans only
+/// where its rectangle meets the tile.
+const BLOCK_SPANS: usize = 64;
 /// Tile side in pixels, as `shaders/tiles.wgsl` has it.
 const TILE: u32 = 8;
 /// Bytes of a projected splat (`Projected` in `shaders/tiles.wgsl`).
@@ -67,12 +73,15 @@ const TILES_WGSL: &str = concat!(
 #[derive(Debug)]
 pub(crate) struct TilePass {
     project: wgpu::ComputePipeline,
+    bound_blocks: wgpu::ComputePipeline,
     composite: wgpu::ComputePipeline,
     cover: wgpu::RenderPipeline,
     /// Projected splats of one batch.
     projected: Option<wgpu::Buffer>,
     /// The span rectangles of one batch.
     rects: Option<wgpu::Buffer>,
+    /// The block rectangles of one batch.
+    blocks: Option<wgpu::Buffer>,
     /// The accumulated layer, premultiplied RGBA as f32 a pixel.
     layer: Option<wgpu::Buffer>,
     /// The uniforms: a slot for each piece, one for each batch, then the image's.
@@ -198,10 +207,12 @@ impl TilePass {
         });
         Self {
             project: compute("project"),
+            bound_blocks: compute("bound_blocks"),
             composite: compute("composite"),
             cover,
             projected: None,
             rects: None,
+            blocks: None,
             layer: None,
             batches: None,
             batch: MAX_BATCH,
@@ -301,6 +312,13 @@ impl TilePass {
             storage,
             "span rectangles",
         );
+        let blocks = ensure(
+            ctx,
+            &mut self.blocks,
+            (largest / SPAN).div_ceil(BLOCK_SPANS) as u64 * 16,
+            storage,
+            "block rectangles",
+        );
         let layer = ensure(ctx, &mut self.layer, layer_bytes, storage, "tile layer");
         // A uniform slot a piece, then one a batch, then the image's.
         let pieces: usize = batches.iter().map(|b| b.pieces.len()).sum();
@@ -370,6 +388,7 @@ impl TilePass {
         {
             let mut pass = encoder.begin_compute_pass(&Default::default());
             let project_layout = self.project.get_bind_group_layout(0);
+            let blocks_layout = self.bound_blocks.get_bind_group_layout(0);
             let composite_layout = self.composite.get_bind_group_layout(0);
             let mut slot = 0;
             for b in &batches {
@@ -403,6 +422,19 @@ impl TilePass {
                     pass.set_bind_group(0, &project, &[]);
                     pass.dispatch_workgroups((p.end - p.begin).div_ceil(GROUP) as u32, 1, 1);
                 }
+                let bound = device.create_bind_group(&wgpu::BindGroupDescriptor {
+                    label: Some("tile blocks"),
+                    layout: &blocks_layout,
+                    entries: &[
+                        entry(15, rects.as_entire_binding()),
+                        entry(16, blocks.as_entire_binding()),
+                        entry(17, wgpu::BindingResource::Buffer(slot_binding(slot))),
+                    ],
+                });
+                pass.set_pipeline(&self.bound_blocks);
+                pass.set_bind_group(0, &bound, &[]);
+                let block_count = (b.len / SPAN).div_ceil(BLOCK_SPANS) as u32;
+                pass.dispatch_workgroups(block_count.div_ceil(64), 1, 1);
                 let composite = device.create_bind_group(&wgpu::BindGroupDescriptor {
                     label: Some("tile compositing"),
                     layout: &composite_layout,
@@ -412,6 +444,7 @@ impl TilePass {
                         entry(10, layer.as_entire_binding()),
                         entry(11, wgpu::BindingResource::TextureView(depth)),
                         entry(12, wgpu::BindingResource::Buffer(slot_binding(slot))),
+                        entry(18, blocks.as_entire_binding()),
                     ],
                 });
                 slot += 1;
