@@ -40,10 +40,61 @@ struct Splat {
 }
 
 @group(0) @binding(0) var<uniform> u: Splat;
-// Per voxel the tile compositor's 8-byte texel (src/tiled.rs, `texel`): x holds straight RGB8
-// and the gradient's x, y holds its y and z (snorm8, all zero where undefined) and the density
-// as an f16 in its high half. Only significant voxels are ever read.
-@group(0) @binding(1) var texels: texture_3d<u32>;
+// Per significant voxel, in id order, the tile compositor's 8-byte texel (src/splat/tiled/
+// texels.rs): x holds straight RGB8 and the gradient's x, y holds its y and z (snorm8, all zero
+// where undefined) and the density as an f16 in its high half. This and the bitmap below are
+// lists held row by row in 2-D textures: a storage buffer holds less on some adapters (128 MiB
+// on lavapipe, 16M texels).
+@group(0) @binding(1) var texels: texture_2d<u32>;
+// The grid's bitmap with its rank index (`PagedBits::to_gpu_words` in src/grid/pages.rs): three
+// offsets (page ranks, word ranks, words), the page table, then those three.
+@group(0) @binding(7) var bitmap: texture_2d<u32>;
+
+// Element `i` of a list held row by row in `t`.
+fn at(t: texture_2d<u32>, i: u32) -> vec4<u32> {
+    let w = textureDimensions(t).x;
+    return textureLoad(t, vec2<u32>(i % w, i / w), 0);
+}
+
+// Word `i` of the bitmap's list.
+fn word(i: u32) -> u32 {
+    return at(bitmap, i).x;
+}
+
+// Words of 64 voxels a page of the bitmap (`PAGE_WORDS` in src/grid/pages.rs).
+const PAGE_WORDS: u32 = 16u;
+
+// The texel of voxel `id`: its rank among the significant voxels from the bitmap, as
+// `PagedBits::rank` finds it. Zero (no density, so left out) for a voxel that is not
+// significant; the orders hold only significant ones.
+fn texel_of(id: u32) -> vec2<u32> {
+    let w = id / 64u;
+    let page = 3u + w / PAGE_WORDS;
+    if page >= word(0u) {
+        return vec2<u32>(0u);
+    }
+    let slot = word(page);
+    if slot == 0xffffffffu {
+        return vec2<u32>(0u);
+    }
+    let i = slot * PAGE_WORDS + w % PAGE_WORDS;
+    let lo = word(word(2u) + 2u * i);
+    let hi = word(word(2u) + 2u * i + 1u);
+    let bit = id % 64u;
+    var below = 0u;
+    var found = false;
+    if bit < 32u {
+        below = countOneBits(lo & ((1u << bit) - 1u));
+        found = ((lo >> bit) & 1u) == 1u;
+    } else {
+        below = countOneBits(lo) + countOneBits(hi & ((1u << (bit - 32u)) - 1u));
+        found = ((hi >> (bit - 32u)) & 1u) == 1u;
+    }
+    if !found {
+        return vec2<u32>(0u);
+    }
+    return at(texels, word(word(0u) + slot) + word(word(1u) + i) + below).xy;
+}
 
 // A non-negative IEEE half, given by its bits, as f32 (written out: `unpack2x16float` needs a
 // capability not every device has). Infinity and NaN (never written) come out as 2^17, which
@@ -81,7 +132,7 @@ fn discarded() -> VsOut {
 fn vs_main(@builtin(vertex_index) corner: u32, @location(0) id: u32) -> VsOut {
     let n = u.dims.xyz;
     let k = vec3<u32>(id % n.x, (id / n.x) % n.y, id / (n.x * n.y));
-    let texel = textureLoad(texels, k, 0).xy;
+    let texel = texel_of(id);
     let density = half_bits_to_f32(texel.y >> 16u);
     let peak = 1.0 - exp(-density * u.depth.w);
     let d = vec3<f32>(k) - u.eye.xyz;

@@ -126,7 +126,7 @@ fn project_splat(id: u32) -> Projected {
     if x0 > x1 || y0 > y1 {
         return left_out();
     }
-    let texel = textureLoad(texels, k, 0).xy;
+    let texel = texel_of(id);
     let peak = peak_alpha[texel.y >> 16u];
     if !(peak > 0.0) {
         return left_out();

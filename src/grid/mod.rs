@@ -529,6 +529,12 @@ impl SparseGrid {
         self.bits.rank(id)
     }
 
+    /// The bitmap and its rank index laid out for the GPU passes, which find a voxel's rank,
+    /// and so its texel, from its id (`texel_of` in `shaders/splat.wgsl`).
+    pub(crate) fn rank_words(&self) -> Vec<u32> {
+        self.bits.to_gpu_words()
+    }
+
     /// Index coordinates of voxel `id`.
     #[inline]
     pub fn coords(&self, id: u32) -> [u32; 3] {

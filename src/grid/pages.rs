@@ -169,6 +169,27 @@ impl PagedBits {
         Some(self.page_rank[i / PAGE_WORDS] + u32::from(self.word_rank[i]) + below.count_ones())
     }
 
+    /// The bitmap and its rank index as one list of 32-bit words, as the GPU passes read it
+    /// (`texel_of` in `shaders/splat.wgsl`): three offsets (of the page ranks, the word ranks
+    /// and the words), then the page table, the page ranks, the word ranks (one a word) and
+    /// the stored words (low half first).
+    pub(super) fn to_gpu_words(&self) -> Vec<u32> {
+        let ranks = 3 + self.table.len();
+        let word_ranks = ranks + self.page_rank.len();
+        let words = word_ranks + self.word_rank.len();
+        let mut out = Vec::with_capacity(words + 2 * self.words.len());
+        out.extend([ranks, word_ranks, words].map(|o| o as u32));
+        out.extend_from_slice(&self.table);
+        out.extend_from_slice(&self.page_rank);
+        out.extend(self.word_rank.iter().map(|&r| u32::from(r)));
+        out.extend(
+            self.words
+                .iter()
+                .flat_map(|&w| [w as u32, (w >> 32) as u32]),
+        );
+        out
+    }
+
     /// The stored pages in order: the flat index of each one's first word, and its words (a
     /// last page past the bitmap's end padded with zeros).
     pub(super) fn pages(&self) -> impl Iterator<Item = (usize, &[u64])> + '_ {
@@ -247,6 +268,47 @@ mod tests {
             words[id as usize / 64] |= 1 << (id % 64);
         }
         words
+    }
+
+    /// The GPU's list gives every id the rank `rank` gives (and none where no bit is set),
+    /// read as `texel_of` in shaders/splat.wgsl reads it, 32-bit halves and all: pages not
+    /// stored, bits in either half of a word, the last page padded.
+    #[test]
+    fn the_gpu_words_rank_as_the_bitmap_does() {
+        let len = 5 * PAGE_WORDS + 3;
+        let mut ids = vec![0, 31, 32, 33, 63, 64, 1000];
+        // Page 1 empty; pages 2 and 3 dense in stretches; the last, short page set at its end.
+        ids.extend((2 * PAGE_BITS as u32..2 * PAGE_BITS as u32 + 700).filter(|i| i % 3 != 0));
+        ids.extend(3 * PAGE_BITS as u32 + 5..3 * PAGE_BITS as u32 + 90);
+        ids.push(64 * len as u32 - 1);
+        let bits = PagedBits::from_flat(flat(len, &ids));
+        let list = bits.to_gpu_words();
+        let word = |i: u32| list[i as usize];
+        let gpu_rank = |id: u32| -> Option<u32> {
+            let w = id / 64;
+            let page = 3 + w / PAGE_WORDS as u32;
+            if page >= word(0) || word(page) == u32::MAX {
+                return None;
+            }
+            let slot = word(page);
+            let i = slot * PAGE_WORDS as u32 + w % PAGE_WORDS as u32;
+            let (lo, hi) = (word(word(2) + 2 * i), word(word(2) + 2 * i + 1));
+            let bit = id % 64;
+            let (below, found) = if bit < 32 {
+                ((lo & ((1 << bit) - 1)).count_ones(), lo >> bit & 1 == 1)
+            } else {
+                let b = bit - 32;
+                (
+                    lo.count_ones() + (hi & ((1 << b) - 1)).count_ones(),
+                    hi >> b & 1 == 1,
+                )
+            };
+            found.then(|| word(word(0) + slot) + word(word(1) + i) + below)
+        };
+        for id in 0..64 * len as u32 + 200 {
+            assert_eq!(gpu_rank(id), bits.rank(id), "id {id}");
+        }
+        assert_eq!(gpu_rank(64 * len as u32 - 1), Some(ids.len() as u32 - 1));
     }
 
     #[test]

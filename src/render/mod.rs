@@ -72,15 +72,7 @@ pub enum RenderError {
     /// A frame option that cannot mean anything, or none where it stands.
     #[error("frame options: {0}")]
     Options(String),
-    /// A volume is larger than the adapter's 3D textures.
-    #[error("volume of {dims:?} voxels exceeds the adapter's 3D texture side of {max}")]
-    VolumeTooLarge {
-        /// Grid size.
-        dims: [u32; 3],
-        /// Largest side.
-        max: u32,
-    },
-    /// The draw order does not fit in one GPU buffer.
+    /// The draw order, or the splats' texels, do not fit in one GPU buffer.
     #[error("{splats} splats exceed the adapter's largest buffer of {max_bytes} bytes")]
     TooManySplats {
         /// Splats in the draw order.

@@ -1,9 +1,10 @@
 //! The splat pass: one instanced quad per significant voxel, drawn in the order the `order`
 //! module gives, premultiplied "over", depth-tested against the meshes without writing depth.
 //!
-//! Per volume the GPU holds a 3D texture of the tile compositor's 8-byte texels (straight RGB8
-//! colour, snorm8 gradient, f16 density; uploaded when the volume or its transfer function
-//! changes) and the draw order as an instance vertex buffer of u32 voxel
+//! Per volume the GPU holds the tile compositor's 8-byte texels of its significant voxels in id
+//! order (straight RGB8 colour, snorm8 gradient, f16 density; uploaded when the volume or its
+//! transfer function changes) with the grid's bitmap and rank index, from which a shader finds
+//! a voxel's texel by its id, and the draw order as an instance vertex buffer of u32 voxel
 //! ids, the one thing uploaded per frame. Vertex buffers are not bound by the 128 MiB storage
 //! binding ceiling: their size is limited only by the adapter's `max_buffer_size`.
 
@@ -51,8 +52,10 @@ pub(crate) struct SplatPass {
 pub(crate) struct GpuVolume {
     pub(super) uniforms: wgpu::Buffer,
     group: wgpu::BindGroup,
-    /// The texels, for the tile pass's projection.
+    /// The texels of the significant voxels in id order, and the grid's bitmap with its rank
+    /// index (`texel_of` in `shaders/splat.wgsl`), for the tile pass's projection.
     pub(super) texels: wgpu::TextureView,
+    pub(super) bitmap: wgpu::TextureView,
     /// The draw order (a vertex buffer for the splat pass, a storage buffer for the tile
     /// pass).
     pub(super) order: Option<wgpu::Buffer>,
@@ -66,84 +69,142 @@ pub(crate) struct GpuVolume {
     pub(super) alpha: Option<(u32, wgpu::Buffer)>,
 }
 
-fn texture_3d(
-    ctx: &GpuContext,
-    dims: [u32; 3],
-    format: wgpu::TextureFormat,
-    texels: &[u8],
-    label: &str,
-) -> wgpu::Texture {
-    let size = wgpu::Extent3d {
-        width: dims[0],
-        height: dims[1],
-        depth_or_array_layers: dims[2],
-    };
-    let texture = ctx.device.create_texture(&wgpu::TextureDescriptor {
-        label: Some(label),
-        size,
-        mip_level_count: 1,
-        sample_count: 1,
-        dimension: wgpu::TextureDimension::D3,
-        format,
-        usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
-        view_formats: &[],
-    });
-    ctx.queue.write_texture(
-        texture.as_image_copy(),
-        texels,
-        wgpu::TexelCopyBufferLayout {
-            offset: 0,
-            bytes_per_row: Some(8 * dims[0]),
-            rows_per_image: Some(dims[1]),
-        },
-        size,
-    );
-    texture
-}
-
 fn texture_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
     wgpu::BindGroupLayoutEntry {
         binding,
         visibility: wgpu::ShaderStages::VERTEX,
         ty: wgpu::BindingType::Texture {
             sample_type: wgpu::TextureSampleType::Uint,
-            view_dimension: wgpu::TextureViewDimension::D3,
+            view_dimension: wgpu::TextureViewDimension::D2,
             multisampled: false,
         },
         count: None,
     }
 }
 
-/// The 8-byte texel of every voxel of the grid (zero where not significant), as the tile
-/// compositor stores them ([`crate::splat::tiled::SplatTexels`]): the splat pass's one texture. One
-/// z-slice a task, walking the slice's x rows, so only significant voxels are visited.
+/// The 8-byte texel of every significant voxel in id order, as the tile compositor stores
+/// them ([`crate::splat::tiled::SplatTexels`]). A dense 3-D texture held 8 bytes a voxel of
+/// the grid, significant or not, and a temporary as large on the CPU: drawing the 0.7 mm
+/// LIDC2 CT peaked at 2.5 GB with either GPU pass on lavapipe, against 0.56-0.63 GB so
+/// (BENCHMARKS.md). One z-slice a task, walking the slice's x rows, so only significant voxels
+/// are visited and each task writes its own stretch.
 fn splat_texels(
     classified: &Classified,
     texel: &(dyn Fn([u32; 3], usize) -> [u8; 8] + Sync),
 ) -> Vec<u8> {
     let grid = &classified.grid;
-    let [nx, ny, nz] = grid.dims().map(|n| n as usize);
-    let mut texels = vec![0u8; nx * ny * nz * 8];
+    let [_, ny, nz] = grid.dims();
     // The x rows are read from every task below: made first, not by the first task.
     grid.prepare_rows(0);
-    texels
-        .par_chunks_mut((nx * ny * 8).max(1))
+    let counts: Vec<usize> = (0..nz)
+        .into_par_iter()
+        .map(|z| {
+            (0..ny)
+                .flat_map(|y| grid.row(0, y, z))
+                .map(|run| run.len as usize)
+                .sum()
+        })
+        .collect();
+    let mut texels = vec![0u8; grid.len() * 8];
+    let mut slices = Vec::with_capacity(counts.len());
+    let (mut rest, mut first) = (texels.as_mut_slice(), 0usize);
+    for &count in &counts {
+        let (slice, tail) = rest.split_at_mut(count * 8);
+        slices.push((first, slice));
+        (rest, first) = (tail, first + count);
+    }
+    slices
+        .into_par_iter()
         .enumerate()
-        .for_each(|(z, slice)| {
+        .for_each(|(z, (first, slice))| {
+            let mut rank = first;
+            let mut out = slice.chunks_exact_mut(8);
             for y in 0..ny {
-                for run in grid.row(0, y as u32, z as u32) {
+                for run in grid.row(0, y, z as u32) {
                     for x in run.start..run.end() {
-                        let id = x + (nx * (y + ny * z)) as u32;
-                        if let Some(rank) = grid.rank(id) {
-                            let k = [x, y as u32, z as u32];
-                            let i = (x as usize + nx * y) * 8;
-                            slice[i..i + 8].copy_from_slice(&texel(k, rank as usize));
+                        let k = [x, y, z as u32];
+                        if let Some(place) = out.next() {
+                            place.copy_from_slice(&texel(k, rank));
                         }
+                        rank += 1;
                     }
                 }
             }
         });
     texels
+}
+
+/// A list of `bytes.len() / texel_bytes` texels of `format` as a 2-D texture read row by row
+/// (`at` in `shaders/splat.wgsl`): rows as wide as the adapter allows, the last one padded.
+/// A storage buffer would be plainer, but some adapters bind less of one than a volume's
+/// texels take (lavapipe 128 MiB: 16M splats). `None` where the list is longer than the
+/// adapter's largest 2-D texture holds.
+fn list_texture(
+    ctx: &GpuContext,
+    bytes: &[u8],
+    format: wgpu::TextureFormat,
+    texel_bytes: usize,
+    label: &str,
+) -> Option<wgpu::TextureView> {
+    let n = bytes.len() / texel_bytes;
+    let max = ctx.device.limits().max_texture_dimension_2d as usize;
+    let width = n.clamp(1, max.max(1));
+    let rows = n.div_ceil(width).max(1);
+    if rows > max {
+        return None;
+    }
+    let size = wgpu::Extent3d {
+        width: width as u32,
+        height: rows as u32,
+        depth_or_array_layers: 1,
+    };
+    let texture = ctx.device.create_texture(&wgpu::TextureDescriptor {
+        label: Some(label),
+        size,
+        mip_level_count: 1,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D2,
+        format,
+        usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+        view_formats: &[],
+    });
+    let row_bytes = width * texel_bytes;
+    let whole = (n / width) * row_bytes;
+    let layout = |rows: usize| wgpu::TexelCopyBufferLayout {
+        offset: 0,
+        bytes_per_row: Some(row_bytes as u32),
+        rows_per_image: Some(rows as u32),
+    };
+    if whole > 0 {
+        ctx.queue.write_texture(
+            texture.as_image_copy(),
+            &bytes[..whole],
+            layout(n / width),
+            wgpu::Extent3d {
+                height: (n / width) as u32,
+                ..size
+            },
+        );
+    }
+    // The last row, padded with zeros.
+    if whole < bytes.len() {
+        let mut last = bytes[whole..].to_vec();
+        last.resize(row_bytes, 0);
+        ctx.queue.write_texture(
+            wgpu::TexelCopyTextureInfo {
+                origin: wgpu::Origin3d {
+                    x: 0,
+                    y: (n / width) as u32,
+                    z: 0,
+                },
+                ..texture.as_image_copy()
+            },
+            &last,
+            layout(1),
+            wgpu::Extent3d { height: 1, ..size },
+        );
+    }
+    Some(texture.create_view(&Default::default()))
 }
 
 /// Whether the adapter runs compute shaders (every Vulkan, Metal and D3D12 adapter does; some
@@ -183,6 +244,7 @@ impl SplatPass {
                     count: None,
                 },
                 texture_entry(1),
+                texture_entry(7),
             ],
         });
         let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
@@ -228,36 +290,48 @@ impl SplatPass {
         Self { pipeline, layout }
     }
 
-    /// Uploads a classified volume's texels as a dense 3D texture.
+    /// Uploads a classified volume's texels, one a significant voxel, with its grid's bitmap
+    /// and rank index, from which the passes find a voxel's texel by its id.
     pub(crate) fn upload(
         &self,
         ctx: &GpuContext,
         classified: &Classified,
         texel: &(dyn Fn([u32; 3], usize) -> [u8; 8] + Sync),
     ) -> Result<GpuVolume, RenderError> {
-        let dims = classified.grid.dims();
-        let max = ctx.device.limits().max_texture_dimension_3d;
-        if dims.iter().any(|&n| n > max) {
-            return Err(RenderError::VolumeTooLarge { dims, max });
-        }
-        // The texture is dense: 8 bytes a voxel of the grid, significant or not (a refined
-        // grid's included), held once on the CPU while it is written.
-        let voxels: u64 = dims.iter().map(|&n| u64::from(n)).product();
-        crate::budget::check_memory(format!("a {voxels}-voxel splat texture"), voxels, 8)?;
-        let texels = texture_3d(
+        let splats = classified.grid.len();
+        // Held once on the CPU while it is written: 8 bytes a splat.
+        crate::budget::check_memory(format!("the texels of {splats} splats"), splats as u64, 8)?;
+        let texels = list_texture(
             ctx,
-            dims,
-            wgpu::TextureFormat::Rg32Uint,
             &splat_texels(classified, texel),
+            wgpu::TextureFormat::Rg32Uint,
+            8,
             "splat texels",
-        );
+        )
+        .ok_or_else(|| {
+            let side = u64::from(ctx.device.limits().max_texture_dimension_2d);
+            RenderError::TooManySplats {
+                splats,
+                max_bytes: side * side * 8,
+            }
+        })?;
+        let bitmap = list_texture(
+            ctx,
+            bytemuck::cast_slice(&classified.grid.rank_words()),
+            wgpu::TextureFormat::R32Uint,
+            4,
+            "splat bitmap",
+        )
+        .ok_or_else(|| RenderError::Unsupported {
+            adapter: ctx.describe(),
+            what: "hold this grid's bitmap in one 2-D texture",
+        })?;
         let uniforms = ctx.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("splat uniforms"),
             size: size_of::<SplatUniforms>() as u64,
             usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
-        let texels = texels.create_view(&Default::default());
         let group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("splat"),
             layout: &self.layout,
@@ -270,12 +344,17 @@ impl SplatPass {
                     binding: 1,
                     resource: wgpu::BindingResource::TextureView(&texels),
                 },
+                wgpu::BindGroupEntry {
+                    binding: 7,
+                    resource: wgpu::BindingResource::TextureView(&bitmap),
+                },
             ],
         });
         Ok(GpuVolume {
             uniforms,
             group,
             texels,
+            bitmap,
             order: None,
             count: 0,
             step_mm: 0.0,

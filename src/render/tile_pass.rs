@@ -411,6 +411,7 @@ impl TilePass {
                         entries: &[
                             entry(0, volume.uniforms.as_entire_binding()),
                             entry(1, wgpu::BindingResource::TextureView(&volume.texels)),
+                            entry(7, wgpu::BindingResource::TextureView(&volume.bitmap)),
                             entry(2, wgpu::BindingResource::Buffer(order_range)),
                             entry(3, alpha.as_entire_binding()),
                             entry(4, projected.as_entire_binding()),

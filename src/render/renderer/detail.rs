@@ -106,8 +106,8 @@ pub const MAX_REFINE: u32 = 8;
 /// on the image ([`Renderer::set_refinement_on_image_only`]), it may instead count the fine
 /// voxels of the own grid's occupied bricks on the image alone, its splats then bounded by
 /// the pixels (64 a pixel), where that refines further: so that a close-up of a thin-slice CT
-/// is refined as its thick-slice original is. The GPU passes hold a grid as a dense texture
-/// and count the whole grid's.
+/// is refined as its thick-slice original is. The GPU passes count the whole grid's (set when
+/// they held a grid as a dense texture; they now hold its significant voxels alone).
 pub const MAX_REFINED_VOXELS: u64 = 1 << 28;
 
 /// The most voxels a refined grid spans in all, classified or not (2^31). What spans the
@@ -143,7 +143,8 @@ pub(super) fn most_refined_splats(size: (u32, u32)) -> u64 {
         .max(MIN_REFINED_SPLATS)
 }
 
-/// The most voxels a refined grid has along an axis (the 3D texture size GPUs take).
+/// The most voxels a refined grid has along an axis (the side of the 3-D textures the GPU
+/// passes once held a grid in; kept so that the compositors refine alike).
 pub(super) const MAX_REFINED_DIM: u64 = 2048;
 
 /// The detail a volume placed as `geometry` is drawn at in `view`, from how many pixels apart

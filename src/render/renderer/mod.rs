@@ -2222,8 +2222,8 @@ impl Renderer {
     /// the levels up to it that are missing (counted in `report.levels_made`); returns how
     /// many classifications were made. With `by_brick`, a volume drawn at a level has its
     /// bricks on the image drawn each at its own ([`Renderer::set_levels_by_brick`]) where
-    /// they want more than one. A `dense` frame (the GPU passes, which hold a grid as a dense
-    /// texture) counts a refinement's voxels over its whole grid ([`MAX_REFINED_VOXELS`]).
+    /// they want more than one. A `dense` frame (the GPU passes) counts a refinement's voxels
+    /// over its whole grid ([`MAX_REFINED_VOXELS`]).
     fn sync_volumes(
         &mut self,
         scene: &Scene,
