@@ -30,7 +30,7 @@ pub const MAX_PIXELS: u64 = 1 << 26;
 /// being classified, rounded up. What each significant voxel adds ([`SPLAT_BYTES`]) is checked
 /// after classification against the memory left then ([`check_memory_left`]), so that a large
 /// grid that is mostly empty is not refused, and the GPU
-/// splat pass checks its full-grid texture (8 bytes a voxel) before building it. Measured peaks
+/// passes check their texels (8 bytes a splat) before building them. Measured peaks
 /// of a whole `render` with the CPU tiles, in BENCHMARKS.md ("Values held as stored"): 2.96
 /// bytes a voxel for the 8-bit LIDC2 CT resampled to 512 x 512 x 532 with 5.4M splats (1 for
 /// the value, 1.2 for the splats at [`SPLAT_BYTES`] each).
