@@ -102,12 +102,11 @@ pub const MAX_REFINE: u32 = 8;
 
 /// The most fine voxels a refinement is classified in (2^28, a 645^3 grid; the LIDC2 CT's
 /// 256 x 256 x 133 grid refined 2 x 1 x 3 at 512 x 512 has 52M): past it the factors are
-/// lowered, largest first. Where the CPU tiles draw a refinement classified within the bricks
-/// on the image ([`Renderer::set_refinement_on_image_only`]), it may instead count the fine
+/// lowered, largest first. Where a refinement is classified within the bricks on the image
+/// ([`Renderer::set_refinement_on_image_only`]), it may instead count the fine
 /// voxels of the own grid's occupied bricks on the image alone, its splats then bounded by
 /// the pixels (64 a pixel), where that refines further: so that a close-up of a thin-slice CT
-/// is refined as its thick-slice original is. The GPU passes count the whole grid's (set when
-/// they held a grid as a dense texture; they now hold its significant voxels alone).
+/// is refined as its thick-slice original is.
 pub const MAX_REFINED_VOXELS: u64 = 1 << 28;
 
 /// The most voxels a refined grid spans in all, classified or not (2^31). What spans the
@@ -155,9 +154,8 @@ pub(super) const MAX_REFINED_DIM: u64 = 2048;
 /// - Where a voxel's edge along some axis spans more than [`REFINE_TO`] (1.5) pixels at that
 ///   distance (whether it lies across the view or along it), its own grid refined along each
 ///   such axis until they span at most that ([`Detail::Refined`], at most [`MAX_REFINE`]
-///   times an axis and [`MAX_REFINED_VOXELS`] over the whole grid; a renderer drawing with
-///   the CPU tiles may count the occupied bricks on the image alone, the splats bounded by
-///   the pixels): splats a coarse voxel wide are far softer than the trilinear field a ray
+///   times an axis and [`MAX_REFINED_VOXELS`] over the whole grid, or counted in the occupied
+///   bricks on the image alone, the splats bounded by the pixels): splats a coarse voxel wide are far softer than the trilinear field a ray
 ///   caster samples. On the LIDC2 CT's 1.4 x 1.4 x 2.5
 ///   mm grid at 512 x 512 (voxels 2.2 and 3.9 pixels apart) refining it 2 x 2 x 3 brought the
 ///   picture to 0.029-0.031 of the reference ray marcher, from 0.049-0.053 (BENCHMARKS.md,

@@ -1542,14 +1542,8 @@ impl Renderer {
         let mut report = FrameReport::default();
         self.sync_meshes(ctx, scene);
         let started = Instant::now();
-        report.classified = self.sync_volumes(
-            scene,
-            view,
-            options.preview,
-            !self.one_level,
-            true,
-            &mut report,
-        )?;
+        report.classified =
+            self.sync_volumes(scene, view, options.preview, !self.one_level, &mut report)?;
         // Levels, texels and the look for bricks shown made on the way have their own timings.
         report.timings.classify = started
             .elapsed()
@@ -1659,14 +1653,8 @@ impl Renderer {
         let mut report = FrameReport::default();
         let started = Instant::now();
         let by_brick = !self.one_level;
-        report.classified = self.sync_volumes(
-            scene,
-            &volume_view,
-            options.preview,
-            by_brick,
-            false,
-            &mut report,
-        )?;
+        report.classified =
+            self.sync_volumes(scene, &volume_view, options.preview, by_brick, &mut report)?;
         // Levels, texels and the look for bricks shown made on the way have their own timings.
         report.timings.classify = started
             .elapsed()
@@ -2222,15 +2210,13 @@ impl Renderer {
     /// the levels up to it that are missing (counted in `report.levels_made`); returns how
     /// many classifications were made. With `by_brick`, a volume drawn at a level has its
     /// bricks on the image drawn each at its own ([`Renderer::set_levels_by_brick`]) where
-    /// they want more than one. A `dense` frame (the GPU passes) counts a refinement's voxels
-    /// over its whole grid ([`MAX_REFINED_VOXELS`]).
+    /// they want more than one.
     fn sync_volumes(
         &mut self,
         scene: &Scene,
         view: &ViewSetup,
         preview: u8,
         by_brick: bool,
-        dense: bool,
         report: &mut FrameReport,
     ) -> Result<usize, RenderError> {
         let mut live = Vec::new();
@@ -2343,11 +2329,11 @@ impl Renderer {
                 // other factors is not kept while its voxels stay near enough a pixel apart, as
                 // it once was, since the picture would then depend on the views before it (and
                 // the viewer's screenshot would not be `render`'s picture of its scene file).
-                // A refinement classified within the occupied bricks on the image (the CPU
-                // tiles') may count those alone, its splats bounded by the pixels; else the
-                // whole grid ([`refine_factors`]). A preview draws no refinement: the bricks
+                // A refinement classified within the occupied bricks on the image may count
+                // those alone, its splats bounded by the pixels; else the whole grid
+                // ([`refine_factors`]). A preview draws no refinement: the bricks
                 // on the image are not looked for.
-                let within = match (&full.occupied, dense || self.refine_whole) {
+                let within = match (&full.occupied, self.refine_whole) {
                     (Some(occupied), false) if preview == 0 => {
                         let shown = on_image(&geometry, view);
                         let (voxels, splats) =
