@@ -4,7 +4,7 @@
 //! behind the viewer's full frames in BENCHMARKS.md ("Magnified bricks").
 //!
 //! ```sh
-//! cargo run --release --example scene_frames -- SCENE.toml WxH FRAMES TURN_DEGREES [full|preview[N]|rest|window[N]] [copies|no-copies] [png=PATH] [volumes=D]
+//! cargo run --release --example scene_frames -- SCENE.toml WxH FRAMES TURN_DEGREES [full|preview[N]|rest|window[N]] [copies|no-copies] [png=PATH] [volumes=D] [compositor=C]
 //! ```
 //!
 //! Frames are drawn as the viewer draws them with the CPU tiles on a CPU adapter (lavapipe):
@@ -18,7 +18,9 @@
 //! windowed one value further each frame, TURN_DEGREES then ignored). `no-copies`
 //! draws previews without coarse copies (`Renderer::set_preview_copies`). `png=PATH` writes
 //! the last frame to PATH; `volumes=D` composites the volumes at 1/D of the pixels, laid over
-//! the meshes at the size given (`FrameOptions::volume_divisor`).
+//! the meshes at the size given (`FrameOptions::volume_divisor`). `compositor=gpu` or
+//! `compositor=gpu-tiles` draws the splats with a GPU pass instead (its upload and splat
+//! stage then on each line).
 
 use anyhow::{Context, Result, bail};
 use splatscene::render::{Compositor, FrameOptions, GpuContext, Renderer};
@@ -26,7 +28,7 @@ use splatscene::scene::NodeContent;
 use splatscene::scene::file::load_scene_file;
 use std::sync::Arc;
 
-const USAGE: &str = "usage: scene_frames SCENE.toml WxH FRAMES TURN_DEGREES [full|preview[N]|rest|window[N]] [copies|no-copies] [png=PATH] [volumes=D]";
+const USAGE: &str = "usage: scene_frames SCENE.toml WxH FRAMES TURN_DEGREES [full|preview[N]|rest|window[N]] [copies|no-copies] [png=PATH] [volumes=D] [compositor=cpu|gpu|gpu-tiles]";
 
 fn main() -> Result<()> {
     let mut args: Vec<String> = std::env::args().skip(1).collect();
@@ -36,6 +38,15 @@ fn main() -> Result<()> {
         .position(|a| a.starts_with("png="))
         .map(|i| args.remove(i)[4..].to_string());
     // `volumes=D`: the volumes composited at 1/D of the pixels (`FrameOptions::volume_divisor`).
+    let compositor = match args.iter().position(|a| a.starts_with("compositor=")) {
+        Some(i) => match &args.remove(i)[11..] {
+            "cpu" => Compositor::Cpu,
+            "gpu" => Compositor::Gpu,
+            "gpu-tiles" => Compositor::GpuTiles,
+            other => bail!("compositor={other}: cpu, gpu or gpu-tiles; {USAGE}"),
+        },
+        None => Compositor::Cpu,
+    };
     let volume_divisor = match args.iter().position(|a| a.starts_with("volumes=")) {
         Some(i) => args.remove(i)[8..].parse::<u32>().context("volumes=D")?,
         None => 1,
@@ -83,7 +94,7 @@ fn main() -> Result<()> {
         .collect();
     let camera = scene.camera.context("the scene has no camera")?;
     let ctx = GpuContext::headless()?;
-    let mut renderer = Renderer::with_compositor(Compositor::Cpu);
+    let mut renderer = Renderer::with_compositor(compositor);
     renderer.set_refinement(refined);
     match args.get(5).map(String::as_str) {
         None | Some("copies") => {}
@@ -121,12 +132,14 @@ fn main() -> Result<()> {
         let made = ms(t.classify + t.levels + t.texels);
         let s = shot.report.tiles.unwrap_or_default();
         println!(
-            "frame {f}: {total:.0} ms (making {made:.0}: classify {:.0}, levels {:.0}, texels {:.0}; look {:.0}, order {:.0}, mesh pass {:.0}, readback {:.0}, project {:.0}, bin {:.0}, tiles {:.0}), {} splats, {} projected, {} culled, {} off image, {} drew, {} composited, levels {:?}{}, refined {:?}, coarse copies {}",
+            "frame {f}: {total:.0} ms (making {made:.0}: classify {:.0}, levels {:.0}, texels {:.0}; look {:.0}, order {:.0}, upload {:.0}, splat pass {:.0}, mesh pass {:.0}, readback {:.0}, project {:.0}, bin {:.0}, tiles {:.0}), {} splats, {} projected, {} culled, {} off image, {} drew, {} composited, levels {:?}{}, refined {:?}, coarse copies {}",
             ms(t.classify),
             ms(t.levels),
             ms(t.texels),
             ms(t.seen),
             ms(t.order),
+            ms(t.upload),
+            ms(t.splat_pass),
             ms(t.mesh_pass),
             ms(t.readback),
             ms(s.project),
